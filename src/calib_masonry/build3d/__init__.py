@@ -1,0 +1,1 @@
+"""build3d stage of calib_masonry."""

@@ -1,0 +1,106 @@
+"""Assembly: wall polygons in metres -> placed, bonded, extruded bricks (a Structure3D)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+
+from ..spec import StructureSpec
+from .bond import CornerTolerances, corner_clip_planes, find_end_faces
+from .extrude import Polyhedron, clip_plan, polygon_area, prism
+from .place import Corner, WallFrame, closure_gap, corners, wall_frames
+
+__all__ = ["WallPolygons", "Brick", "Structure3D", "assemble", "simple_polygon"]
+
+
+@dataclass(frozen=True)
+class WallPolygons:
+    """One wall's outer-face polygons in wall metres, with per-polygon labels and scores."""
+
+    wall: int
+    ids: tuple[int, ...]
+    polygons_m: tuple[np.ndarray, ...]
+    dice: tuple[float, ...] = ()
+    traced_vertices: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True)
+class Brick:
+    id: int  # global, 0-based, in wall order
+    wall: int
+    label: int  # the brick's id within its wall (mask label or truth index)
+    polygon_m: np.ndarray  # (k, 2) outer face, wall metres (x, z), counter-clockwise
+    solid: Polyhedron
+    dice: float = float("nan")
+    traced_vertices: int = 0
+
+    @property
+    def volume(self) -> float:
+        return self.solid.volume
+
+
+@dataclass(frozen=True)
+class Structure3D:
+    spec: StructureSpec
+    frames: tuple[WallFrame, ...]
+    corners: tuple[Corner, ...]
+    bricks: tuple[Brick, ...]
+    removed: tuple[tuple[int, ...], ...]  # per wall: labels of corner end-face pieces removed
+    closure_gap_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    @property
+    def closure_error_m(self) -> float:
+        return float(np.linalg.norm(self.closure_gap_xy))
+
+    def bricks_of(self, wall: int) -> list[Brick]:
+        return [b for b in self.bricks if b.wall == wall]
+
+
+def simple_polygon(poly: np.ndarray) -> np.ndarray:
+    """``poly`` ``(k, 2)`` made simple and counter-clockwise (largest part if it self-crosses)."""
+    poly = np.asarray(poly, dtype=np.float64)
+    g = shapely.Polygon(poly)
+    if not g.is_valid:
+        fixed = shapely.make_valid(g)
+        parts = [p for p in getattr(fixed, "geoms", [fixed]) if isinstance(p, shapely.Polygon)]
+        if parts:
+            g = max(parts, key=lambda p: p.area)
+            poly = np.asarray(g.exterior.coords)[:-1]
+    if polygon_area(poly) < 0:
+        poly = poly[::-1]
+    return poly
+
+
+def assemble(spec: StructureSpec, walls: list[WallPolygons], *, end_faces: list[set[int]] | None = None,
+             tolerances: CornerTolerances = CornerTolerances()) -> Structure3D:
+    """Remove corner end faces, extrude every brick by its wall's thickness and place it.
+
+    ``end_faces`` (indices into each wall's polygons) overrides the detection, e.g. for truth.
+    """
+    frames = wall_frames(spec)
+    cs = corners(spec)
+    polys = [[simple_polygon(p) for p in w.polygons_m] for w in walls]
+    if end_faces is None:
+        end_faces = find_end_faces(polys, frames, cs, tolerances)
+    bricks: list[Brick] = []
+    removed = []
+    for w, wp in enumerate(walls):
+        removed.append(tuple(wp.ids[i] for i in sorted(end_faces[w])))
+        for i, poly in enumerate(polys[w]):
+            if i in end_faces[w] or abs(polygon_area(poly)) <= 0:
+                continue
+            ext_poly, planes = corner_clip_planes(poly, w, frames, cs)
+            solid: Polyhedron | None = prism(ext_poly, frames[w])
+            for point, normal in planes:
+                solid = clip_plan(solid, point, normal)
+                if solid is None:
+                    break
+            if solid is None:
+                continue
+            bricks.append(Brick(id=len(bricks), wall=w, label=int(wp.ids[i]), polygon_m=poly, solid=solid,
+                                dice=float(wp.dice[i]) if wp.dice else float("nan"),
+                                traced_vertices=int(wp.traced_vertices[i]) if wp.traced_vertices else 0))
+    return Structure3D(spec=spec, frames=tuple(frames), corners=tuple(cs), bricks=tuple(bricks),
+                       removed=tuple(removed), closure_gap_xy=closure_gap(spec))

@@ -1,0 +1,163 @@
+"""Writing a Structure3D: model.stl, bricks.json, and the figures (outer walls, 3D model).
+
+Exporters are chosen from a table by file suffix (``.stl``, ``.glb``, ``.ply``, ``.obj``); the
+outputs are deterministic for the same structure (same bytes for the same input).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from ..errors import InputError
+from ..io import write_json
+from .assemble import Structure3D
+
+__all__ = ["EXPORTERS", "export_mesh", "bricks_json", "bricks_from_json", "write_bricks_json", "plot_walls", "plot_model", "structure_mesh"]
+
+EXPORTERS = {".stl": "stl", ".glb": "glb", ".ply": "ply", ".obj": "obj"}
+
+
+def structure_mesh(structure: Structure3D) -> trimesh.Trimesh:
+    verts, faces, offset = [], [], 0
+    for b in structure.bricks:
+        verts.append(b.solid.vertices)
+        faces.append(b.solid.faces + offset)
+        offset += len(b.solid.vertices)
+    return trimesh.Trimesh(np.vstack(verts), np.vstack(faces), process=False)
+
+
+def export_mesh(structure: Structure3D, path: Path) -> None:
+    kind = EXPORTERS.get(Path(path).suffix.lower())
+    if kind is None:
+        raise InputError(f"{path}: unknown mesh format; use one of {sorted(EXPORTERS)}")
+    mesh = structure_mesh(structure)
+    if kind == "glb":
+        scene = trimesh.Scene()
+        for b in structure.bricks:
+            scene.add_geometry(b.solid.to_trimesh(), node_name=f"brick_{b.id:05d}",
+                               geom_name=f"brick_{b.id:05d}")
+        data = scene.export(file_type="glb")
+    else:
+        data = mesh.export(file_type=kind)
+    Path(path).write_bytes(data if isinstance(data, bytes) else data.encode())
+
+
+def bricks_json(structure: Structure3D) -> dict:
+    """Per brick: wall, id, outer polygon (wall metres), 3D mesh, volume, centroid, Dice."""
+    names = [w.name for w in structure.spec.walls]
+    return {
+        "structure": structure.spec.name,
+        "walls": [{"name": w.name, "width_m": w.width_m, "height_m": w.height_m, "theta_deg": w.theta_deg,
+                   "thickness_m": w.thickness_m, "origin_xy": f.origin_xy.tolist(),
+                   "removed_corner_pieces": list(structure.removed[i])}
+                  for i, (w, f) in enumerate(zip(structure.spec.walls, structure.frames))],
+        "bricks": [{"id": b.id, "wall": names[b.wall], "wall_index": b.wall, "label": b.label,
+                    "polygon_wall_m": b.polygon_m.tolist(), "vertices": b.solid.vertices.tolist(),
+                    "faces": b.solid.faces.tolist(), "volume_m3": b.volume,
+                    "centroid": b.solid.centroid.tolist(),
+                    "dice": None if not np.isfinite(b.dice) else b.dice,
+                    "traced_vertices": b.traced_vertices}
+                   for b in structure.bricks],
+    }
+
+
+def write_bricks_json(structure: Structure3D, path: Path) -> None:
+    write_json(path, bricks_json(structure))
+
+
+def _mpl():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_walls(structure: Structure3D, path: Path, *, removed_polygons: list[list[np.ndarray]] | None = None,
+               title: str = "") -> None:
+    """The outer wall surfaces side by side (the method's Fig. 8), bricks coloured by Dice."""
+    plt = _mpl()
+    from matplotlib.collections import PolyCollection
+
+    spec = structure.spec
+    widths = [w.width_m for w in spec.walls]
+    fig, axes = plt.subplots(1, len(spec.walls), figsize=(min(24, 2.2 + 1.6 * sum(widths)), 6),
+                             gridspec_kw={"width_ratios": widths}, squeeze=False)
+    cmap = plt.get_cmap("viridis")
+    for w, ax in enumerate(axes[0]):
+        own = structure.bricks_of(w)
+        dice = np.array([b.dice for b in own])
+        colours = [cmap(0.5) if not np.isfinite(d) else cmap(np.clip((d - 0.9) / 0.1, 0, 1)) for d in dice]
+        ax.add_collection(PolyCollection([b.polygon_m for b in own], facecolors=colours,
+                                         edgecolors="k", linewidths=0.2))
+        if removed_polygons:
+            ax.add_collection(PolyCollection(removed_polygons[w], facecolors="none", edgecolors="r",
+                                             linewidths=0.6, hatch="///"))
+        wall = spec.walls[w]
+        ax.set_xlim(0, wall.width_m)
+        ax.set_ylim(0, wall.height_m)
+        ax.set_aspect("equal")
+        ax.set_title(f"{wall.name}\n{wall.width_m:g} x {wall.height_m:g} m, {wall.theta_deg:g} deg", fontsize=8)
+        ax.tick_params(labelsize=6)
+    fig.suptitle(title or f"{spec.name}: outer wall surfaces (colour: Dice 0.9-1; red hatched: corner end faces removed)",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_model(structure: Structure3D, path: Path) -> None:
+    """An axonometric view of the 3D brick model."""
+    plt = _mpl()
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    fig = plt.figure(figsize=(8, 8))
+    ax = fig.add_subplot(projection="3d")
+    tris = []
+    shade = []
+    light = np.array([0.4, -0.6, 0.7])
+    light /= np.linalg.norm(light)
+    for b in structure.bricks:
+        v = b.solid.vertices[b.solid.faces]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        norm = np.linalg.norm(n, axis=1, keepdims=True)
+        n = n / np.where(norm > 0, norm, 1)
+        tris.append(v)
+        shade.append(0.35 + 0.6 * np.clip(n @ light, 0, 1))
+    tris_all = np.concatenate(tris)
+    s = np.concatenate(shade)
+    colours = np.column_stack([0.75 * s, 0.45 * s, 0.32 * s, np.ones_like(s)])
+    ax.add_collection3d(Poly3DCollection(tris_all, facecolors=colours, linewidths=0))
+    allv = np.concatenate([b.solid.vertices for b in structure.bricks])
+    lo, hi = allv.min(axis=0), allv.max(axis=0)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_zlim(lo[2], hi[2])
+    ax.set_box_aspect(np.maximum(hi - lo, 1e-3))
+    ax.view_init(elev=22, azim=-60)
+    ax.set_xlabel("X (m)")
+    ax.set_ylabel("Y (m)")
+    ax.set_zlabel("Z (m)")
+    ax.set_title(f"{structure.spec.name}: {len(structure.bricks)} bricks")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def bricks_from_json(data: dict) -> list:
+    """The bricks of a ``bricks.json`` document (as written by :func:`bricks_json`)."""
+    from .assemble import Brick
+    from .extrude import Polyhedron
+
+    out = []
+    for b in data["bricks"]:
+        solid = Polyhedron(np.asarray(b["vertices"], dtype=np.float64), np.asarray(b["faces"], dtype=np.int64))
+        out.append(Brick(id=int(b["id"]), wall=int(b["wall_index"]), label=int(b["label"]),
+                         polygon_m=np.asarray(b["polygon_wall_m"], dtype=np.float64), solid=solid,
+                         dice=float("nan") if b.get("dice") is None else float(b["dice"]),
+                         traced_vertices=int(b.get("traced_vertices", 0))))
+    return out

@@ -1,0 +1,117 @@
+"""Placement of walls on the footprint (the method's Eqs. 2-3) and the corners between them.
+
+Convention: wall ``n`` starts at the plan point ``P_n = sum_{k<n} W_k (cos theta_k, sin theta_k)``
+and runs along ``d_n = (cos theta_n, sin theta_n)``. Its outer face lies on that line; its brick
+thickness extends to the left of ``d_n`` (inward for a footprint walked counter-clockwise), along
+``n_n = (-sin theta_n, cos theta_n)``. Wall coordinates ``(x, y, z)``: x along the wall from its
+lower-left corner as seen from outside, y into the wall (0 on the outer face), z up. The frame
+``(d_n, n_n, up)`` is right-handed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..spec import StructureSpec
+
+__all__ = ["WallFrame", "Corner", "wall_frames", "closure_gap", "footprint_is_closed", "corners",
+           "MIN_CORNER_TURN_RAD"]
+
+#: Turns smaller than this (in either sense) are treated as collinear walls that just abut.
+MIN_CORNER_TURN_RAD = math.radians(10.0)
+
+
+@dataclass(frozen=True)
+class WallFrame:
+    """Where one wall sits in the global frame."""
+
+    index: int
+    origin_xy: np.ndarray  # (2,) P_n, global plan metres
+    theta_rad: float
+    width_m: float
+    height_m: float
+    thickness_m: float
+
+    @property
+    def direction(self) -> np.ndarray:
+        return np.array([math.cos(self.theta_rad), math.sin(self.theta_rad)])
+
+    @property
+    def inward(self) -> np.ndarray:
+        return np.array([-math.sin(self.theta_rad), math.cos(self.theta_rad)])
+
+    def global_from_wall(self, xyz: np.ndarray) -> np.ndarray:
+        """Wall points ``(..., 3)`` as (x along, y inward, z up) to global ``(..., 3)`` (X, Y, Z)."""
+        xyz = np.asarray(xyz, dtype=np.float64)
+        plan = (self.origin_xy + xyz[..., :1] * self.direction + xyz[..., 1:2] * self.inward)
+        return np.concatenate([plan, xyz[..., 2:3]], axis=-1)
+
+    def wall_from_global_plan(self, xy: np.ndarray) -> np.ndarray:
+        """Global plan points ``(..., 2)`` to wall ``(x, y)``."""
+        rel = np.asarray(xy, dtype=np.float64) - self.origin_xy
+        return np.stack([rel @ self.direction, rel @ self.inward], axis=-1)
+
+
+@dataclass(frozen=True)
+class Corner:
+    """The junction where wall ``a`` ends and wall ``b`` starts.
+
+    ``turn_rad`` is the signed turn from ``a``'s direction to ``b``'s, in (-pi, pi]. A convex corner
+    (a left turn, seen from outside) is where the walls interlock: in alternate courses the photo
+    of one wall shows the end face of the other wall's brick, ``end_width_on_a`` wide on wall a
+    (at its end) and ``end_width_on_b`` wide on wall b (at its start).
+    """
+
+    a: int
+    b: int
+    turn_rad: float
+
+    @property
+    def convex(self) -> bool:
+        return MIN_CORNER_TURN_RAD < self.turn_rad < math.pi - MIN_CORNER_TURN_RAD
+
+    def end_width_on(self, thickness_other: float) -> float:
+        return thickness_other / math.sin(self.turn_rad)
+
+
+def wall_frames(spec: StructureSpec) -> list[WallFrame]:
+    """Frames of all walls, each starting at the previous walls' cumulative width (Eqs. 2-3)."""
+    frames = []
+    origin = np.zeros(2)
+    for i, w in enumerate(spec.walls):
+        frames.append(WallFrame(i, origin.copy(), w.theta_rad, w.width_m, w.height_m, w.thickness_m))
+        origin = origin + w.width_m * np.array([math.cos(w.theta_rad), math.sin(w.theta_rad)])
+    return frames
+
+
+def closure_gap(spec: StructureSpec) -> np.ndarray:
+    """``sum_n W_n (cos theta_n, sin theta_n)``: zero for a footprint that closes."""
+    return sum((w.width_m * np.array([math.cos(w.theta_rad), math.sin(w.theta_rad)])
+                for w in spec.walls), start=np.zeros(2))
+
+
+def footprint_is_closed(spec: StructureSpec) -> bool:
+    """Declared by ``closed`` in the file, else closed when the gap is under 5 % of the perimeter."""
+    if spec.closed is not None:
+        return spec.closed
+    if len(spec.walls) < 3:
+        return False
+    perimeter = sum(w.width_m for w in spec.walls)
+    return float(np.linalg.norm(closure_gap(spec))) <= 0.05 * perimeter
+
+
+def _wrap(angle: float) -> float:
+    a = (angle + math.pi) % (2 * math.pi) - math.pi
+    return math.pi if a == -math.pi else a
+
+
+def corners(spec: StructureSpec) -> list[Corner]:
+    """All junctions between consecutive walls (and last-to-first when the footprint is closed)."""
+    n = len(spec.walls)
+    pairs = [(i, i + 1) for i in range(n - 1)]
+    if footprint_is_closed(spec) and n >= 3:
+        pairs.append((n - 1, 0))
+    return [Corner(a, b, _wrap(spec.walls[b].theta_rad - spec.walls[a].theta_rad)) for a, b in pairs]

@@ -1,0 +1,203 @@
+"""``calib-masonry``: a thin command line over the library.
+
+Every sub-command parses its flags into the library's dataclasses and calls one library function.
+A user's mistake ends in one line ``error: ...`` and exit code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+from .errors import CalibMasonryError, InputError
+
+__all__ = ["main"]
+
+
+def _print_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"warning: {message}", file=sys.stderr)
+
+
+def _cmd_synth(args) -> int:
+    from .spec import load_structure
+    from .synthetic.truth import synthesize
+
+    spec = load_structure(args.scenario, require_sources=False)
+    if spec.synthetic is None:
+        raise InputError(f"{args.scenario}: no [synthetic] table; add one (layout, px_per_m, seed, ...) to make a data set")
+    truth = synthesize(spec, args.out, figures=not args.no_figures)
+    print(f"synth: {spec.name}: {len(truth['walls'])} walls, {truth['bricks']} bricks, "
+          f"{truth['end_faces']} corner end faces -> {args.out}")
+    return 0
+
+
+def _cmd_trace(args) -> int:
+    from .io import read_mask, staged_file, write_json
+    from .wall2d.figures import plot_trace
+    from .wall2d.trace import TraceConfig, trace_mask
+
+    config = TraceConfig(vertices=args.vertices, target_dice=args.target_dice) if args.vertices or args.target_dice \
+        else TraceConfig()
+    if args.vertices and args.target_dice:
+        raise InputError("trace: give --vertices or --target-dice, not both")
+    mask = read_mask(args.mask, field="MASK")
+    t0 = time.perf_counter()
+    result = trace_mask(mask, config)
+    if not result.bricks:
+        raise InputError(f"MASK {args.mask}: no bricks found (no white regions); bricks must be white on black")
+    seconds = time.perf_counter() - t0
+    out = Path(args.out)
+    figure = Path(args.figure) if args.figure else out.with_suffix(".png")
+    with staged_file(out) as tmp_json, staged_file(figure) as tmp_png:
+        doc = result.to_json()
+        doc["mask"] = str(args.mask)
+        doc["vertices"] = args.vertices
+        doc["target_dice"] = args.target_dice
+        write_json(tmp_json, doc)
+        if not args.no_figures:
+            plot_trace(mask, result, tmp_png, title=f"{Path(args.mask).name}")
+    if args.no_figures:
+        figure.unlink(missing_ok=True)
+    print(f"trace: {len(result.bricks)} bricks, mean Dice {result.mean_dice:.4f}, "
+          f"mean vertices {sum(len(b.vertices_xy) for b in result.bricks) / len(result.bricks):.2f}, "
+          f"{seconds:.2f} s -> {out}")
+    return 0
+
+
+def _cmd_build(args) -> int:
+    from .pipeline import build_to_folder
+    from .spec import load_structure
+
+    spec = load_structure(args.structure)
+    summary = build_to_folder(spec, args.out, figures=not args.no_figures)
+    _print_build(summary, args.out)
+    return 0
+
+
+def _print_build(summary: dict, out) -> None:
+    print(f"build: {summary['structure']}: {summary['bricks']} bricks "
+          f"({summary['corner_pieces_removed']} corner pieces removed), mean Dice {summary['mean_dice']:.4f}, "
+          f"closure error {summary['closure_error_m'] * 1000:.2f} mm, "
+          f"max interpenetration {summary['max_interpenetration_m3']:.2e} m^3 -> {out}")
+    for w in summary["walls"]:
+        print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, mean Dice {w['mean_dice']:.4f}, "
+              f"{w['corner_pieces_removed']} corner pieces removed")
+
+
+def _cmd_compare(args) -> int:
+    from .io import staged_file, write_json
+    from .study.compare import compare_dirs
+
+    metrics = compare_dirs(args.run_dir, args.truth_dir)
+    out = Path(args.out) if args.out else Path(args.run_dir) / "compare.json"
+    with staged_file(out) as tmp:
+        write_json(tmp, metrics)
+    _print_compare(metrics, out)
+    return 0
+
+
+def _print_compare(m: dict, out) -> None:
+    print(f"compare: precision {m['precision']:.4f}, recall {m['recall']:.4f}, "
+          f"Dice vs truth min {m['dice']['min']:.4f} / median {m['dice']['median']:.4f}, "
+          f"centroid error mean {m['centroid_error_mm']['mean']:.2f} mm (max {m['centroid_error_mm']['max']:.2f}), "
+          f"volume error {m['total_volume_m3']['relative_error']:+.2%}, "
+          f"max interpenetration {m['max_interpenetration_m3']:.2e} m^3 -> {out}")
+
+
+def _find_demo_data(explicit: str | None) -> Path:
+    candidates = [Path(explicit)] if explicit else [
+        Path.cwd() / "data_synthetic" / "paper_example",
+        Path(__file__).resolve().parents[2] / "data_synthetic" / "paper_example",
+    ]
+    for c in candidates:
+        if (c / "structure.toml").is_file():
+            return c
+    raise InputError("demo: data_synthetic/paper_example/structure.toml not found; run from the project folder "
+                     "or give --data DIR (re-create it with `calib-masonry synth data_synthetic/paper_example/scenario.toml "
+                     "--out data_synthetic/paper_example`)")
+
+
+def _cmd_demo(args) -> int:
+    from .io import write_json
+    from .pipeline import build_to_folder
+    from .spec import load_structure
+    from .study.compare import compare_dirs
+
+    data = _find_demo_data(args.data)
+    spec = load_structure(data / "structure.toml")
+    t0 = time.perf_counter()
+    summary = build_to_folder(spec, args.out, figures=True)
+    _print_build(summary, args.out)
+    metrics = compare_dirs(args.out, data / "truth")
+    write_json(Path(args.out) / "compare.json", metrics)
+    _print_compare(metrics, Path(args.out) / "compare.json")
+    checks = {
+        "precision == 1": metrics["precision"] == 1.0,
+        "recall == 1": metrics["recall"] == 1.0,
+        "every brick's Dice vs truth >= 0.98": (metrics["dice"]["min"] or 0) >= 0.98,
+        "closure error < 1 mm": summary["closure_error_m"] < 1e-3,
+        "max interpenetration <= 1e-6 m^3": metrics["max_interpenetration_m3"] <= 1e-6,
+    }
+    for name, ok in checks.items():
+        print(f"  [{'ok' if ok else 'FAIL'}] {name}")
+    print(f"demo: {time.perf_counter() - t0:.1f} s; model in {Path(args.out) / 'model.stl'}, "
+          f"figures {Path(args.out) / 'walls.png'} and {Path(args.out) / 'model.png'}")
+    return 0 if all(checks.values()) else 1
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="calib-masonry", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("synth", help="make masks and exact truth from a scenario TOML")
+    s.add_argument("scenario")
+    s.add_argument("--out", required=True)
+    s.add_argument("--no-figures", action="store_true")
+    s.set_defaults(func=_cmd_synth)
+
+    t = sub.add_parser("trace", help="mask -> brick polygons with Dice (polygons.json)")
+    t.add_argument("mask")
+    t.add_argument("--vertices", type=int, default=None, help="vertices per brick (default 5)")
+    t.add_argument("--target-dice", type=float, default=None, help="fewest vertices reaching this Dice instead")
+    t.add_argument("--out", default="polygons.json")
+    t.add_argument("--figure", default=None, help="overlay PNG (default: beside --out)")
+    t.add_argument("--no-figures", action="store_true")
+    t.set_defaults(func=_cmd_trace)
+
+    b = sub.add_parser("build", help="structure TOML with masks -> 3D brick model")
+    b.add_argument("structure")
+    b.add_argument("--out", default="out/build")
+    b.add_argument("--no-figures", action="store_true")
+    b.set_defaults(func=_cmd_build)
+
+    c = sub.add_parser("compare", help="metrics of a build against synthetic truth")
+    c.add_argument("run_dir")
+    c.add_argument("truth_dir")
+    c.add_argument("--out", default=None, help="metrics JSON (default RUN_DIR/compare.json)")
+    c.set_defaults(func=_cmd_compare)
+
+    d = sub.add_parser("demo", help="build the paper example from its masks and compare with its truth")
+    d.add_argument("--out", default="out/demo")
+    d.add_argument("--data", default=None, help="folder with structure.toml and truth/ (default data_synthetic/paper_example)")
+    d.set_defaults(func=_cmd_demo)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    warnings.showwarning = _print_warning
+    try:
+        return int(args.func(args) or 0)
+    except CalibMasonryError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted; nothing was written", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

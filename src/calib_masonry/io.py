@@ -1,0 +1,166 @@
+"""File input and output shared by every stage: masks, JSON, and all-or-nothing output folders.
+
+Convention: images are arrays of shape ``(rows, cols)``; the pixel at ``[r, c]`` has its centre at
+image coordinates ``(x, y) = (c, r)``, origin top-left.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import tempfile
+import warnings
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+from PIL import Image, UnidentifiedImageError
+
+from .errors import InputError
+
+__all__ = ["read_mask", "write_mask", "write_json", "read_json", "staged_output", "staged_file",
+           "xy_from_rc", "rc_from_xy", "warn"]
+
+
+def warn(message: str) -> None:
+    """A user-facing warning (printed on one line by the CLI)."""
+    warnings.warn(message, UserWarning, stacklevel=2)
+
+
+def xy_from_rc(rc: np.ndarray) -> np.ndarray:
+    """scikit-image ``(row, col)`` points, shape ``(M, 2)``, to image ``(x, y)`` = ``(col, row)``."""
+    rc = np.asarray(rc, dtype=np.float64)
+    return rc[..., ::-1].copy()
+
+
+def rc_from_xy(xy: np.ndarray) -> np.ndarray:
+    """Image ``(x, y)`` points to scikit-image ``(row, col)``."""
+    return xy_from_rc(xy)
+
+
+def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float = 0.05) -> np.ndarray:
+    """Read a binary-like mask (bricks white, mortar black) as a boolean array ``(rows, cols)``.
+
+    Grey levels are allowed on edges (anti-aliasing), but if more than ``max_gray_fraction`` of
+    the pixels lie between 20 % and 80 % of the intensity range the file is refused as not a mask.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{field} {path}: file not found; check the path")
+    try:
+        with Image.open(path) as im:
+            im.load()
+            mode = im.mode
+            arr = np.asarray(im.convert("RGB") if mode in ("P", "PA") else im)
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        raise InputError(f"{field} {path}: cannot be read as an image ({exc}); give a PNG or TIFF mask") from None
+    arr = np.asarray(arr)
+    if arr.ndim == 3:
+        chans = arr[..., :3].astype(np.float64)
+        if arr.shape[-1] == 4 and arr[..., 3].min() < arr[..., 3].max():
+            pass  # alpha ignored
+        spread = np.ptp(chans, axis=-1)
+        if np.mean(spread > 0.2 * max(1.0, float(chans.max()))) > max_gray_fraction:
+            raise InputError(f"{field} {path}: looks like a colour photo, not a mask; give a binary "
+                             "mask (bricks white, mortar black)")
+        arr = chans.mean(axis=-1)
+    arr = arr.astype(np.float64)
+    if arr.size == 0 or min(arr.shape) < 2:
+        raise InputError(f"{field} {path}: image is empty ({arr.shape}); give a real mask")
+    lo, hi = float(arr.min()), float(arr.max())
+    if hi <= lo:
+        raise InputError(f"{field} {path}: image is a single flat value; it holds no bricks")
+    norm = (arr - lo) / (hi - lo)
+    grey = np.mean((norm > 0.2) & (norm < 0.8))
+    if grey > max_gray_fraction:
+        raise InputError(f"{field} {path}: not a binary-like mask ({grey:.0%} of pixels are mid-grey); "
+                         "threshold it to black mortar and white bricks first")
+    return norm >= 0.5
+
+
+def write_mask(path: Path, mask: np.ndarray) -> None:
+    """Write a boolean mask as an 8-bit PNG (255 = brick)."""
+    Image.fromarray(np.where(mask, 255, 0).astype(np.uint8), mode="L").save(path, optimize=True)
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.floating,)):
+        return float(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
+    if isinstance(obj, Path):
+        return obj.as_posix()
+    if isinstance(obj, float):
+        return round(obj, 10) if np.isfinite(obj) else None
+    return obj
+
+
+def write_json(path: Path, obj: Any) -> None:
+    """Deterministic JSON: sorted floats rounded to 1e-10, two-space indent."""
+    Path(path).write_text(json.dumps(_jsonable(obj), indent=1) + "\n", encoding="utf-8")
+
+
+def read_json(path: str | Path, *, field: str = "file") -> Any:
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{field} {path}: not found; check the path")
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{field} {path}: not valid JSON ({exc}); re-create it") from None
+
+
+@contextlib.contextmanager
+def staged_output(out_dir: str | Path) -> Iterator[Path]:
+    """Yield an empty staging folder; on success move its entries into ``out_dir``.
+
+    Entries of ``out_dir`` that the stage does not write are left alone; entries it does write
+    replace the old ones. On any exception the staging folder is removed and ``out_dir`` is
+    untouched, so a failed run never leaves half a result.
+    """
+    out_dir = Path(out_dir)
+    parent = out_dir.resolve().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=parent))
+    try:
+        yield stage
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for entry in sorted(stage.iterdir()):
+            target = out_dir / entry.name
+            if target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target)
+            elif target.exists() or target.is_symlink():
+                target.unlink()
+            os.replace(entry, target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def staged_file(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success only."""
+    path = Path(path)
+    path.resolve().parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", dir=path.resolve().parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+    except BaseException:
+        tmp_path.unlink(missing_ok=True)
+        raise
+    os.replace(tmp_path, path)

@@ -1,0 +1,150 @@
+"""Masks and the parameter table to a 3D brick model, as one call (and its output folder)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from .build3d.assemble import Structure3D, WallPolygons, assemble
+from .build3d.contacts import max_interpenetration
+from .build3d.export import export_mesh, plot_model, plot_walls, write_bricks_json
+from .build3d.place import footprint_is_closed
+from .build3d.scale import aspect_mismatch, wall_from_image
+from .errors import InputError
+from .io import read_mask, staged_output, warn, write_json
+from .spec import StructureSpec, WallSpec
+from .wall2d.trace import TraceConfig, TraceResult, trace_mask
+
+__all__ = ["BuildResult", "trace_wall", "model_from_masks", "build_to_folder", "closure_warning"]
+
+#: A declared or detected closed footprint whose gap exceeds this gets a warning.
+CLOSURE_WARN_M = 1e-3
+
+
+@dataclass(frozen=True)
+class BuildResult:
+    structure: Structure3D
+    traces: tuple[TraceResult, ...]
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def trace_wall(wall: WallSpec, spec: StructureSpec) -> TraceResult:
+    """Read, check and trace one wall's mask."""
+    if wall.mask is None:
+        raise InputError(f"wall '{wall.name}': no mask given; add mask = 'PATH' to its [[wall]] table")
+    mask = read_mask(wall.mask, field=f"wall '{wall.name}' mask")
+    mismatch = aspect_mismatch(mask.shape, wall.width_m, wall.height_m)
+    if mismatch > spec.aspect_tolerance:
+        rows, cols = mask.shape
+        raise InputError(
+            f"wall '{wall.name}' mask {wall.mask}: aspect ratio {cols}/{rows} = {cols / rows:.3f} disagrees with "
+            f"width_m/height_m = {wall.width_m:g}/{wall.height_m:g} = {wall.width_m / wall.height_m:.3f} by "
+            f"{mismatch:.1%} (tolerance {spec.aspect_tolerance:.0%}); check W and H or crop the mask to the wall")
+    config = TraceConfig(vertices=wall.vertices, target_dice=wall.target_dice if wall.vertices is None else None)
+    result = trace_mask(mask, config)
+    if not result.bricks:
+        raise InputError(f"wall '{wall.name}' mask {wall.mask}: no bricks found (no white regions); "
+                         "bricks must be white on black mortar")
+    return result
+
+
+def closure_warning(spec: StructureSpec, gap_xy: np.ndarray) -> str | None:
+    gap = float(np.linalg.norm(gap_xy))
+    if spec.closed is False or gap <= CLOSURE_WARN_M:
+        return None
+    if spec.closed is None and not footprint_is_closed(spec):
+        return (f"footprint is open: its end is {gap:.3f} m (dx {gap_xy[0]:+.3f}, dy {gap_xy[1]:+.3f}) from its start; "
+                "set closed = false in [structure] if that is intended, else check width_m and theta_deg")
+    return (f"footprint does not close: gap {gap * 1000:.1f} mm (dx {gap_xy[0] * 1000:+.1f}, dy {gap_xy[1] * 1000:+.1f} mm); "
+            "check the walls' width_m and theta_deg")
+
+
+def model_from_masks(spec: StructureSpec, *, progress: bool | None = None) -> BuildResult:
+    """Trace every wall's mask, scale to metres (Eq. 1), place, bond and extrude (Eqs. 2-4)."""
+    seconds: dict[str, float] = {}
+    t0 = time.perf_counter()
+    traces = []
+    for wall in tqdm(spec.walls, desc="trace walls", unit="wall", disable=None if progress is None else not progress,
+                     leave=False):
+        traces.append(trace_wall(wall, spec))
+    seconds["trace"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    walls = []
+    for w, (wall, tr) in enumerate(zip(spec.walls, traces)):
+        polys = tuple(wall_from_image(b.vertices_xy, tr.image_shape, wall.width_m, wall.height_m) for b in tr.bricks)
+        walls.append(WallPolygons(wall=w, ids=tuple(b.id for b in tr.bricks), polygons_m=polys,
+                                  dice=tuple(b.dice for b in tr.bricks),
+                                  traced_vertices=tuple(b.traced_vertices for b in tr.bricks)))
+    seconds["scale"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    structure = assemble(spec, walls)
+    seconds["assemble"] = time.perf_counter() - t0
+    message = closure_warning(spec, structure.closure_gap_xy)
+    if message:
+        warn(message)
+    return BuildResult(structure=structure, traces=tuple(traces), seconds=seconds)
+
+
+def _summary(result: BuildResult, interpenetration) -> dict:
+    s = result.structure
+    spec = s.spec
+    walls = []
+    for w, (wall, tr) in enumerate(zip(spec.walls, result.traces)):
+        own = s.bricks_of(w)
+        walls.append({
+            "name": wall.name, "width_m": wall.width_m, "height_m": wall.height_m, "theta_deg": wall.theta_deg,
+            "thickness_m": wall.thickness_m, "mask": wall.mask, "image_shape": list(tr.image_shape),
+            "vertices": wall.vertices, "target_dice": wall.target_dice,
+            "traced_pieces": len(tr.bricks), "bricks": len(own), "corner_pieces_removed": len(s.removed[w]),
+            "mean_dice": float(np.mean([b.dice for b in own])) if own else None,
+            "mean_dice_all_pieces": tr.mean_dice,
+            "mean_vertices": float(np.mean([len(b.polygon_m) for b in own])) if own else None,
+        })
+    return {
+        "structure": spec.name,
+        "walls": walls,
+        "bricks": len(s.bricks),
+        "corner_pieces_removed": int(sum(len(r) for r in s.removed)),
+        "mean_dice": float(np.mean([b.dice for b in s.bricks])),
+        "total_volume_m3": float(sum(b.volume for b in s.bricks)),
+        "closed_footprint": footprint_is_closed(spec),
+        "closure_error_m": s.closure_error_m,
+        "closure_gap_xy_m": s.closure_gap_xy.tolist(),
+        "max_interpenetration_m3": interpenetration.max_volume_m3,
+        "worst_pair": interpenetration.pair,
+        "seconds": {k: round(v, 4) for k, v in result.seconds.items()},
+    }
+
+
+def build_to_folder(spec: StructureSpec, out: str | Path, *, figures: bool = True,
+                    progress: bool | None = None) -> dict:
+    """Build and write ``model.stl``, ``bricks.json``, ``summary.json`` and figures into ``out``."""
+    result = model_from_masks(spec, progress=progress)
+    s = result.structure
+    t0 = time.perf_counter()
+    inter = max_interpenetration(s.bricks)
+    result.seconds["interpenetration_check"] = time.perf_counter() - t0
+    with staged_output(out) as stage:
+        t0 = time.perf_counter()
+        export_mesh(s, stage / "model.stl")
+        write_bricks_json(s, stage / "bricks.json")
+        result.seconds["export"] = time.perf_counter() - t0
+        if figures:
+            t0 = time.perf_counter()
+            removed = []
+            for w, (wall, tr) in enumerate(zip(spec.walls, result.traces)):
+                gone = set(s.removed[w])
+                removed.append([wall_from_image(b.vertices_xy, tr.image_shape, wall.width_m, wall.height_m)
+                                for b in tr.bricks if b.id in gone])
+            plot_walls(s, stage / "walls.png", removed_polygons=removed)
+            plot_model(s, stage / "model.png")
+            result.seconds["figures"] = time.perf_counter() - t0
+        summary = _summary(result, inter)
+        write_json(stage / "summary.json", summary)
+    return summary

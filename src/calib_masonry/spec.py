@@ -1,0 +1,308 @@
+"""Structure descriptions: frozen dataclasses, read from and written to TOML.
+
+A structure file has one ``[structure]`` table and one ``[[wall]]`` table per photo or mask, in the
+order the walls follow the footprint (each wall starts where the previous one ends)::
+
+    [structure]
+    name = "paper_example"
+    thickness_m = 0.18        # default brick thickness t of every wall
+    vertices = 5              # default target number of polygon vertices (or target_dice = 0.98)
+
+    [[wall]]
+    name = "wall1"
+    mask = "masks/wall1.png"  # relative to this file
+    width_m = 5.73
+    height_m = 6.07
+    theta_deg = 0.0           # counter-clockwise from global X
+
+Units are SI inside; degrees appear only in the file (``theta_deg``). A scenario file for
+``calib-masonry synth`` has the same tables plus a ``[synthetic]`` table (see
+:class:`SyntheticSpec`) and needs no mask paths.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from .errors import InputError
+
+__all__ = [
+    "WallSpec",
+    "SyntheticSpec",
+    "StructureSpec",
+    "load_structure",
+    "structure_to_toml",
+    "LAYOUTS",
+]
+
+LAYOUTS = ("stretcher", "stones")
+
+
+@dataclass(frozen=True)
+class WallSpec:
+    """One wall: its photo or mask and the method's input row (W, H, theta, t, N)."""
+
+    name: str
+    width_m: float
+    height_m: float
+    theta_rad: float
+    thickness_m: float
+    mask: Path | None = None
+    image: Path | None = None
+    vertices: int | None = None
+    target_dice: float | None = None
+
+    @property
+    def theta_deg(self) -> float:
+        return math.degrees(self.theta_rad)
+
+
+@dataclass(frozen=True)
+class SyntheticSpec:
+    """How ``synth`` lays out and rasterises the walls of a scenario.
+
+    ``layout`` is ``"stretcher"`` (rectangular bricks of ``brick_length_m`` x ``brick_height_m``
+    in stretcher bond) or ``"stones"`` (irregular, roughly rectangular stones in courses whose
+    heights and lengths are drawn from the given ranges; ``irregularity`` in [0, 1] scales how far
+    corners are chamfered and edges tilted). ``edge_blur_px`` and ``edge_noise`` roughen the mask
+    edges (a Gaussian blur of that sigma plus that much uniform noise before thresholding).
+    """
+
+    layout: str = "stretcher"
+    px_per_m: float = 200.0
+    seed: int = 0
+    mortar_m: float = 0.01
+    brick_length_m: float = 0.40
+    brick_height_m: float = 0.18
+    stone_length_m: tuple[float, float] = (0.5, 0.9)
+    stone_height_m: tuple[float, float] = (0.35, 0.55)
+    irregularity: float = 0.5
+    edge_blur_px: float = 0.0
+    edge_noise: float = 0.0
+
+
+@dataclass(frozen=True)
+class StructureSpec:
+    """A whole structure: walls in footprint order plus defaults and tolerances."""
+
+    name: str
+    walls: tuple[WallSpec, ...]
+    thickness_m: float
+    vertices: int | None = 5
+    target_dice: float | None = None
+    closed: bool | None = None
+    aspect_tolerance: float = 0.03
+    synthetic: SyntheticSpec | None = None
+    source: Path | None = field(default=None, compare=False)
+
+    def with_walls(self, walls: tuple[WallSpec, ...]) -> "StructureSpec":
+        return replace(self, walls=walls)
+
+
+# ----------------------------------------------------------------------------------------------
+# reading
+
+
+def _where(path: Path | None, table: str) -> str:
+    return f"{path.name if path else '<structure>'}: {table}"
+
+
+def _num(tbl: dict, key: str, where: str, *, default: Any = None, required: bool = False) -> Any:
+    if key not in tbl:
+        if required:
+            raise InputError(f"{where}: field '{key}' is missing; add it (a number)")
+        return default
+    value = tbl[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"{where}: field '{key}' must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise InputError(f"{where}: field '{key}' must be finite, got {value!r}")
+    return value
+
+
+def _vertices_or_dice(tbl: dict, where: str, default_n: int | None, default_d: float | None):
+    n = tbl.get("vertices", None)
+    d = tbl.get("target_dice", None)
+    if n is not None:
+        if isinstance(n, bool) or not isinstance(n, int):
+            raise InputError(f"{where}: 'vertices' must be a whole number, got {n!r}")
+        if n < 3:
+            raise InputError(f"{where}: 'vertices' = {n} is too few; a polygon needs at least 3")
+    if d is not None:
+        d = _num(tbl, "target_dice", where)
+        if not 0.0 < d < 1.0:
+            raise InputError(f"{where}: 'target_dice' = {d} must lie between 0 and 1 (e.g. 0.98)")
+    if n is None and d is None:
+        return default_n, default_d
+    return n, d
+
+
+def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
+    known = set(SyntheticSpec.__dataclass_fields__)
+    unknown = sorted(set(tbl) - known)
+    if unknown:
+        raise InputError(f"{where}: unknown field(s) {unknown}; valid fields are {sorted(known)}")
+    kwargs: dict[str, Any] = {}
+    for key, value in tbl.items():
+        if key == "layout":
+            if value not in LAYOUTS:
+                raise InputError(f"{where}: layout = {value!r}; choose one of {list(LAYOUTS)}")
+            kwargs[key] = value
+        elif key == "seed":
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise InputError(f"{where}: 'seed' must be a whole number, got {value!r}")
+            kwargs[key] = value
+        elif key in ("stone_length_m", "stone_height_m"):
+            if (not isinstance(value, list) or len(value) != 2
+                    or not all(isinstance(v, (int, float)) for v in value) or not 0 < value[0] <= value[1]):
+                raise InputError(f"{where}: '{key}' must be [min, max] in metres with 0 < min <= max, got {value!r}")
+            kwargs[key] = (float(value[0]), float(value[1]))
+        else:
+            kwargs[key] = float(_num(tbl, key, where))
+    spec = SyntheticSpec(**kwargs)
+    for key in ("px_per_m", "mortar_m", "brick_length_m", "brick_height_m"):
+        if getattr(spec, key) <= 0:
+            raise InputError(f"{where}: '{key}' must be > 0, got {getattr(spec, key)}")
+    if not 0.0 <= spec.irregularity <= 1.0:
+        raise InputError(f"{where}: 'irregularity' must lie in [0, 1], got {spec.irregularity}")
+    mortar_px = spec.mortar_m * spec.px_per_m
+    if mortar_px < 2.0:
+        raise InputError(
+            f"{where}: the mortar joint ({spec.mortar_m} m) is only {mortar_px:.1f} px at "
+            f"px_per_m = {spec.px_per_m:g}; bricks would merge. Raise px_per_m to at least "
+            f"{math.ceil(2.0 / spec.mortar_m)} or widen mortar_m")
+    return spec
+
+
+def load_structure(path: str | Path, *, require_sources: bool = True) -> StructureSpec:
+    """Read and validate a structure (or scenario) TOML file.
+
+    Parameters
+    ----------
+    path : path of the TOML file; mask and image paths inside it are relative to its folder.
+    require_sources : if True every wall must name a ``mask`` (or ``image``) that exists.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: structure file not found; give the path of a .toml file")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not valid TOML ({exc}); fix the syntax") from None
+    base = path.parent
+    st = data.get("structure")
+    if not isinstance(st, dict):
+        raise InputError(f"{path}: the [structure] table is missing; add one with name and thickness_m")
+    where = _where(path, "[structure]")
+    name = st.get("name", path.parent.name)
+    t_default = _num(st, "thickness_m", where, default=None)
+    if t_default is not None and t_default <= 0:
+        raise InputError(f"{where}: 'thickness_m' must be > 0, got {t_default}")
+    n_default, d_default = _vertices_or_dice(st, where, 5, None)
+    closed = st.get("closed", None)
+    if closed is not None and not isinstance(closed, bool):
+        raise InputError(f"{where}: 'closed' must be true or false, got {closed!r}")
+    aspect_tol = float(_num(st, "aspect_tolerance", where, default=0.03))
+    if aspect_tol <= 0:
+        raise InputError(f"{where}: 'aspect_tolerance' must be > 0, got {aspect_tol}")
+    synthetic = None
+    if "synthetic" in data:
+        synthetic = _synthetic_from(data["synthetic"], _where(path, "[synthetic]"))
+
+    walls_tbl = data.get("wall")
+    if not isinstance(walls_tbl, list) or not walls_tbl:
+        raise InputError(f"{path}: no [[wall]] tables; add one per wall photo or mask")
+    walls: list[WallSpec] = []
+    names: set[str] = set()
+    for i, w in enumerate(walls_tbl, start=1):
+        wname = str(w.get("name", f"wall{i}"))
+        where = _where(path, f"[[wall]] {i} ({wname})")
+        if wname in names:
+            raise InputError(f"{where}: duplicate wall name; give every wall its own name")
+        names.add(wname)
+        width = _num(w, "width_m", where, required=True)
+        height = _num(w, "height_m", where, required=True)
+        theta_deg = _num(w, "theta_deg", where, default=0.0)
+        t = _num(w, "thickness_m", where, default=t_default)
+        if width <= 0:
+            raise InputError(f"{where}: width_m = {width} must be > 0 (metres)")
+        if height <= 0:
+            raise InputError(f"{where}: height_m = {height} must be > 0 (metres)")
+        if t is None:
+            raise InputError(f"{where}: no thickness; set thickness_m here or in [structure]")
+        if t <= 0:
+            raise InputError(f"{where}: thickness_m = {t} must be > 0 (metres)")
+        if t >= width:
+            raise InputError(f"{where}: thickness_m = {t} is not smaller than width_m = {width}; check both")
+        n, d = _vertices_or_dice(w, where, n_default, d_default)
+        mask = image = None
+        for key in ("mask", "image"):
+            if key in w:
+                p = Path(w[key])
+                p = p if p.is_absolute() else base / p
+                if require_sources and not p.is_file():
+                    raise InputError(f"{where}: {key} file {p} not found; fix the path (relative to {path.name})")
+                if key == "mask":
+                    mask = p
+                else:
+                    image = p
+        if require_sources and mask is None and image is None:
+            raise InputError(f"{where}: neither 'mask' nor 'image' is given; name the wall's mask file")
+        if require_sources and mask is None:
+            raise InputError(f"{where}: only a photo is given; this version builds from masks, so add mask = 'PATH'")
+        walls.append(WallSpec(name=wname, width_m=float(width), height_m=float(height),
+                              theta_rad=math.radians(theta_deg), thickness_m=float(t), mask=mask,
+                              image=image, vertices=n, target_dice=d))
+    return StructureSpec(name=str(name), walls=tuple(walls),
+                         thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),
+                         vertices=n_default, target_dice=d_default, closed=closed,
+                         aspect_tolerance=aspect_tol, synthetic=synthetic, source=path)
+
+
+# ----------------------------------------------------------------------------------------------
+# writing
+
+
+def _clean(value: float) -> float:
+    return float(round(value, 12))
+
+
+def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
+                      include_synthetic: bool = False) -> str:
+    """TOML text of ``spec``; paths are written relative to ``relative_to`` when given."""
+    st: dict[str, Any] = {"name": spec.name, "thickness_m": _clean(spec.thickness_m)}
+    if spec.vertices is not None:
+        st["vertices"] = spec.vertices
+    if spec.target_dice is not None:
+        st["target_dice"] = spec.target_dice
+    if spec.closed is not None:
+        st["closed"] = spec.closed
+    st["aspect_tolerance"] = spec.aspect_tolerance
+    doc: dict[str, Any] = {"structure": st}
+    if include_synthetic and spec.synthetic is not None:
+        syn = {k: (list(v) if isinstance(v, tuple) else v)
+               for k, v in spec.synthetic.__dict__.items()}
+        doc["synthetic"] = syn
+    walls = []
+    for w in spec.walls:
+        row: dict[str, Any] = {"name": w.name}
+        for key in ("mask", "image"):
+            p = getattr(w, key)
+            if p is not None:
+                row[key] = (Path(p).relative_to(relative_to).as_posix() if relative_to
+                            else Path(p).as_posix())
+        row.update(width_m=_clean(w.width_m), height_m=_clean(w.height_m),
+                   theta_deg=_clean(w.theta_deg), thickness_m=_clean(w.thickness_m))
+        if w.vertices is not None and w.vertices != spec.vertices:
+            row["vertices"] = w.vertices
+        if w.target_dice is not None and w.target_dice != spec.target_dice:
+            row["target_dice"] = w.target_dice
+        walls.append(row)
+    doc["wall"] = walls
+    return tomli_w.dumps(doc)

@@ -1,0 +1,1 @@
+"""wall2d stage of calib_masonry."""

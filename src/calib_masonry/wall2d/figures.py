@@ -1,0 +1,40 @@
+"""Figures of the 2D stage: fitted polygons drawn over the mask."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .trace import TraceResult
+
+__all__ = ["plot_trace"]
+
+
+def plot_trace(mask: np.ndarray, result: TraceResult, path: Path, *, title: str = "") -> None:
+    """The mask in grey with every brick's polygon and vertices, coloured by its Dice."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    rows, cols = mask.shape
+    scale = 9.0 / max(rows, cols)
+    fig, ax = plt.subplots(figsize=(max(3.0, cols * scale) + 1.2, max(3.0, rows * scale)))
+    ax.imshow(mask, cmap="gray", vmin=-0.6, vmax=1.3, interpolation="nearest")
+    cmap = plt.get_cmap("plasma")
+    dice = np.array([b.dice for b in result.bricks])
+    coll = PolyCollection([b.vertices_xy for b in result.bricks], facecolors="none",
+                          edgecolors=[cmap(np.clip((d - 0.9) / 0.1, 0, 1)) for d in dice], linewidths=1.0)
+    ax.add_collection(coll)
+    pts = np.concatenate([b.vertices_xy for b in result.bricks])
+    ax.plot(pts[:, 0], pts[:, 1], ".", ms=2, color="c")
+    sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0.9, 1.0))
+    fig.colorbar(sm, ax=ax, fraction=0.046, pad=0.02, label="Dice")
+    ax.set_xlim(-0.5, cols - 0.5)
+    ax.set_ylim(rows - 0.5, -0.5)
+    ax.set_title(f"{title}  {len(result.bricks)} bricks, mean Dice {result.mean_dice:.4f}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,42 @@
+"""Shared fixtures: small synthetic scenarios written to temporary folders."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "data_synthetic"
+SWAT = ROOT.parent / "shared" / "data" / "external" / "swat" / "WR2_250_new.png"
+
+
+def scenario_text(walls: list[tuple[float, float, float]], *, layout: str = "stretcher", t: float = 0.18,
+                  vertices: int = 5, px_per_m: float = 200, seed: int = 7, closed: bool | None = None,
+                  extra: str = "") -> str:
+    lines = ["[structure]", 'name = "test"', f"thickness_m = {t}", f"vertices = {vertices}"]
+    if closed is not None:
+        lines.append(f"closed = {'true' if closed else 'false'}")
+    lines += ["", "[synthetic]", f'layout = "{layout}"', f"px_per_m = {px_per_m}", f"seed = {seed}"]
+    if layout == "stones":
+        lines += ["mortar_m = 0.025", "stone_length_m = [0.55, 0.95]", "stone_height_m = [0.35, 0.55]"]
+    lines.append(extra)
+    for i, (w, h, th) in enumerate(walls):
+        lines += ["", "[[wall]]", f'name = "w{i}"', f"width_m = {w}", f"height_m = {h}", f"theta_deg = {th}"]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.fixture
+def make_scenario(tmp_path):
+    """Write a scenario and run synth on it; returns the data folder."""
+    from calib_masonry.spec import load_structure
+    from calib_masonry.synthetic.truth import synthesize
+
+    def make(walls, name="data", **kw) -> Path:
+        sc = tmp_path / f"{name}_scenario.toml"
+        sc.write_text(scenario_text(walls, **kw))
+        out = tmp_path / name
+        synthesize(load_structure(sc, require_sources=False), out, figures=False)
+        return out
+
+    return make

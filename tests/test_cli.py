@@ -1,0 +1,103 @@
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from calib_masonry.cli import main
+
+from .conftest import DATA, SWAT, scenario_text
+
+
+def _run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "calib_masonry", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd)
+
+
+def test_trace_cli_writes_polygons_json(tmp_path):
+    out = tmp_path / "polygons.json"
+    assert main(["trace", str(SWAT), "--vertices", "8", "--out", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["image_shape"] == [1013, 843]
+    assert len(doc["bricks"]) == 45 and doc["mean_dice"] >= 0.98
+    b = doc["bricks"][0]
+    assert {"id", "vertices_xy", "traced_vertices", "dice"} <= set(b)
+    assert (tmp_path / "polygons.png").is_file()
+
+
+def _structure(tmp_path, mask_name="m.png", width=2.0, height=1.0, vertices=5):
+    p = tmp_path / "s.toml"
+    p.write_text(f'[structure]\nthickness_m = 0.18\nvertices = {vertices}\n[[wall]]\nname = "a"\nmask = "{mask_name}"\n'
+                 f"width_m = {width}\nheight_m = {height}\ntheta_deg = 0\n")
+    return p
+
+
+@pytest.mark.parametrize("case, expect", [
+    ("missing_mask", "not found"),
+    ("corrupt", "cannot be read"),
+    ("grey", "not a binary-like mask"),
+    ("empty", "flat value"),
+    ("aspect", "aspect ratio"),
+    ("negative_width", "width_m"),
+    ("t_ge_w", "thickness_m"),
+    ("vertices", "vertices"),
+])
+def test_build_bad_input_one_line_exit_2(tmp_path, case, expect):
+    a = np.zeros((100, 200), np.uint8)
+    a[10:40, 10:90] = 255
+    Image.fromarray(a).save(tmp_path / "m.png")
+    kw = {}
+    if case == "missing_mask":
+        kw["mask_name"] = "gone.png"
+    elif case == "corrupt":
+        (tmp_path / "bad.png").write_bytes(b"garbage")
+        kw["mask_name"] = "bad.png"
+    elif case == "grey":
+        Image.fromarray(np.random.default_rng(0).integers(0, 255, (100, 200), dtype=np.uint8)).save(tmp_path / "g.png")
+        kw["mask_name"] = "g.png"
+    elif case == "empty":
+        Image.fromarray(np.zeros((100, 200), np.uint8)).save(tmp_path / "e.png")
+        kw["mask_name"] = "e.png"
+    elif case == "aspect":
+        kw["width"] = 3.0
+    elif case == "negative_width":
+        kw["width"] = -2.0
+    elif case == "t_ge_w":
+        kw["width"] = 0.1
+    elif case == "vertices":
+        kw["vertices"] = 2
+    s = _structure(tmp_path, **kw)
+    out = tmp_path / "out"
+    r = _run("build", s, "--out", out)
+    assert r.returncode == 2, r.stderr
+    lines = [l for l in r.stderr.splitlines() if l.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and expect in lines[0], r.stderr
+    assert not out.exists()
+    assert not any(p.name.startswith(".out") for p in tmp_path.iterdir())
+
+
+def test_trace_missing_and_compare_bad_dirs(tmp_path):
+    r = _run("trace", tmp_path / "none.png", "--out", tmp_path / "p.json")
+    assert r.returncode == 2 and "not found" in r.stderr and not (tmp_path / "p.json").exists()
+    r = _run("compare", tmp_path / "nope", tmp_path / "nada")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+
+
+def test_synth_without_synthetic_table(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text('[structure]\nthickness_m = 0.18\n[[wall]]\nwidth_m = 2\nheight_m = 1\n')
+    r = _run("synth", p, "--out", tmp_path / "d")
+    assert r.returncode == 2 and "[synthetic]" in r.stderr
+
+
+@pytest.mark.slow
+def test_demo_from_project_folder(tmp_path):
+    r = _run("demo", "--out", tmp_path / "demo", cwd=DATA.parent)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "FAIL" not in r.stdout
+    m = json.loads((tmp_path / "demo" / "compare.json").read_text())
+    assert m["precision"] == 1.0 and m["recall"] == 1.0

@@ -1,0 +1,76 @@
+import math
+
+import pytest
+
+from calib_masonry.errors import InputError
+from calib_masonry.spec import load_structure, structure_to_toml
+
+from .conftest import DATA, scenario_text
+
+
+def test_paper_example_table1():
+    spec = load_structure(DATA / "paper_example" / "structure.toml")
+    assert [w.width_m for w in spec.walls] == [5.73, 4.10, 3.07, 1.23, 2.66, 5.33]
+    assert [round(w.theta_deg) for w in spec.walls] == [0, 90, 180, 90, 180, 270]
+    assert all(w.thickness_m == 0.18 and w.vertices == 5 for w in spec.walls)
+    assert all(w.mask.is_file() for w in spec.walls)
+
+
+def test_roundtrip(tmp_path):
+    spec = load_structure(DATA / "stylite" / "structure.toml")
+    text = structure_to_toml(spec, relative_to=spec.source.parent)
+    p = spec.source.parent / "roundtrip_tmp.toml"
+    try:
+        p.write_text(text)
+        again = load_structure(p)
+    finally:
+        p.unlink()
+    assert again.walls == spec.walls
+    assert again.vertices == 8
+
+
+@pytest.mark.parametrize("walls, extra, field", [
+    ([(-1.0, 2.0, 0)], "", "width_m"),
+    ([(1.0, 0.0, 0)], "", "height_m"),
+    ([(0.15, 2.0, 0)], "", "thickness_m"),
+])
+def test_impossible_dimensions(tmp_path, walls, extra, field):
+    p = tmp_path / "s.toml"
+    p.write_text(scenario_text(walls, extra=extra))
+    with pytest.raises(InputError, match=field):
+        load_structure(p, require_sources=False)
+
+
+def test_vertices_too_few(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text(scenario_text([(2.0, 2.0, 0)], vertices=2))
+    with pytest.raises(InputError, match="vertices"):
+        load_structure(p, require_sources=False)
+
+
+def test_missing_mask_named(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text('[structure]\nthickness_m = 0.2\n[[wall]]\nname = "a"\nmask = "nope.png"\nwidth_m = 2\nheight_m = 2\n')
+    with pytest.raises(InputError, match=r"nope\.png.*not found"):
+        load_structure(p)
+
+
+def test_thin_mortar_refused(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text(scenario_text([(2.0, 2.0, 0)], px_per_m=100))
+    with pytest.raises(InputError, match="px_per_m"):
+        load_structure(p, require_sources=False)
+
+
+def test_bad_toml(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text("[structure\n")
+    with pytest.raises(InputError, match="not valid TOML"):
+        load_structure(p)
+
+
+def test_degrees_only_at_edges(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_text(scenario_text([(2.0, 2.0, 30.0)]))
+    spec = load_structure(p, require_sources=False)
+    assert math.isclose(spec.walls[0].theta_rad, math.radians(30.0))

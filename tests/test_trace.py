@@ -1,0 +1,101 @@
+import numpy as np
+import pytest
+
+from calib_masonry.io import read_mask
+from calib_masonry.wall2d.dice import dice_polygon_region, rasterise_polygon
+from calib_masonry.wall2d.segment import label_bricks
+from calib_masonry.wall2d.split import farthest_pair, split_outline
+from calib_masonry.wall2d.trace import TraceConfig, trace_mask, trace_outline
+
+from .conftest import SWAT
+
+
+def _rect_mask(shape, r0, r1, c0, c1):
+    m = np.zeros(shape, bool)
+    m[r0:r1 + 1, c0:c1 + 1] = True
+    return m
+
+
+@pytest.mark.parametrize("r0, r1, c0, c1", [(3, 20, 5, 44), (0, 9, 0, 30), (7, 7, 2, 12), (10, 39, 50, 59)])
+def test_rectangle_traces_to_its_four_corners(r0, r1, c0, c1):
+    m = _rect_mask((40, 60), r0, r1, c0, c1)
+    res = trace_mask(m, TraceConfig(vertices=4))
+    (b,) = res.bricks
+    expected = {(c0 - 0.5, r0 - 0.5), (c1 + 0.5, r0 - 0.5), (c1 + 0.5, r1 + 0.5), (c0 - 0.5, r1 + 0.5)}
+    got = {tuple(v) for v in b.vertices_xy}
+    assert got == expected  # exact, so certainly within a pixel
+    assert b.dice == 1.0
+    assert b.traced_vertices == 4
+
+
+def test_rotated_rectangle_within_a_pixel():
+    # a rectangle rotated by 20 degrees, rasterised by pixel centres
+    ang = np.radians(20)
+    rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
+    corners = (np.array([[-30, -12], [30, -12], [30, 12], [-30, 12]]) @ rot.T) + [50, 40]
+    m = rasterise_polygon(corners, (80, 100))
+    (b,) = trace_mask(m, TraceConfig(vertices=4)).bricks
+    d = np.linalg.norm(b.vertices_xy[:, None, :] - corners[None, :, :], axis=-1)
+    assert d.min(axis=0).max() < 1.0
+    assert b.dice > 0.97
+
+
+def test_outline_area_equals_pixel_count():
+    rng = np.random.default_rng(3)
+    blob = np.zeros((30, 30), bool)
+    blob[5:25, 5:25] = True
+    blob[rng.integers(5, 25, 40), rng.integers(5, 25, 40)] = False
+    labels = label_bricks(blob)
+    region = labels == labels[15, 15]
+    outline = trace_outline(region)
+    x, y = outline[:, 0], outline[:, 1]
+    area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    assert area == region.sum()
+    assert dice_polygon_region(outline, region) == 1.0
+
+
+def test_border_bricks_kept_specks_dropped_holes_filled():
+    m = np.zeros((50, 80), bool)
+    m[0:20, 0:30] = True       # touches the top-left border
+    m[25:50, 40:80] = True     # touches bottom and right borders
+    m[30, 10] = True           # a speck
+    m[35:38, 55:57] = False    # a hole inside a brick
+    res = trace_mask(m, TraceConfig(vertices=4))
+    assert len(res.bricks) == 2
+    assert {b.area_px for b in res.bricks} == {600, 1000}
+    assert res.mean_dice == 1.0
+
+
+def test_farthest_pair_exact():
+    rng = np.random.default_rng(1)
+    pts = rng.normal(size=(200, 2))
+    i, j = farthest_pair(pts)
+    d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+    assert np.isclose(np.linalg.norm(pts[i] - pts[j]), d.max())
+
+
+def test_split_vertices_on_outline_in_order():
+    t = np.linspace(0, 2 * np.pi, 300, endpoint=False)
+    outline = np.column_stack([40 * np.cos(t), 25 * np.sin(t)])
+    idx = split_outline(outline, 8)
+    assert len(idx) == 8 and np.all(np.diff(idx) > 0)
+
+
+def test_target_dice_mode_reaches_target_with_fewest():
+    t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    poly = np.column_stack([60 + 40 * np.cos(t), 50 + 30 * np.sin(t)])
+    m = rasterise_polygon(poly, (100, 120))
+    res = trace_mask(m, TraceConfig(vertices=None, target_dice=0.97))
+    (b,) = res.bricks
+    assert b.dice >= 0.97
+    n = len(b.vertices_xy)
+    fewer = trace_mask(m, TraceConfig(vertices=n - 1)).bricks[0]
+    assert fewer.dice < 0.97
+
+
+def test_swat_real_mask_eight_vertices():
+    m = read_mask(SWAT)
+    res = trace_mask(m, TraceConfig(vertices=8))
+    assert len(res.bricks) == 45
+    assert res.mean_dice >= 0.98
+    assert all(len(b.vertices_xy) == 8 for b in res.bricks)

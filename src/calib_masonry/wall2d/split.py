@@ -14,7 +14,7 @@ from typing import Iterator
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-__all__ = ["farthest_pair", "splitting_sequence", "split_outline"]
+__all__ = ["farthest_pair", "splitting_sequence", "split_outline", "visvalingam"]
 
 
 def farthest_pair(points: np.ndarray) -> tuple[int, int]:
@@ -78,3 +78,40 @@ def split_outline(points: np.ndarray, n_vertices: int) -> np.ndarray:
     for last in splitting_sequence(points, n_vertices):
         pass
     return last
+
+
+def visvalingam(points: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Sorted indices of ``n_vertices`` outline points kept by Visvalingam-Whyatt simplification.
+
+    Repeatedly drops the point whose triangle with its two neighbours has the smallest area (the
+    least area lost). Used as a second starting polygon for refinement: it spreads vertices by
+    area, where splitting spreads them by distance.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    m = len(pts)
+    if m <= n_vertices:
+        return np.arange(m)
+    prev = np.roll(np.arange(m), 1)
+    nxt = np.roll(np.arange(m), -1)
+    alive = np.ones(m, bool)
+
+    def area(i: int) -> float:
+        a, b, c = pts[prev[i]], pts[i], pts[nxt[i]]
+        return 0.5 * abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+
+    stamp = np.zeros(m, dtype=np.int64)
+    heap = [(area(i), i, 0) for i in range(m)]
+    heapq.heapify(heap)
+    count = m
+    while count > n_vertices and heap:
+        a, i, st = heapq.heappop(heap)
+        if not alive[i] or st != stamp[i]:
+            continue
+        alive[i] = False
+        count -= 1
+        p, q = prev[i], nxt[i]
+        nxt[p], prev[q] = q, p
+        for j in (p, q):
+            stamp[j] += 1
+            heapq.heappush(heap, (area(j), j, int(stamp[j])))
+    return np.flatnonzero(alive)

@@ -10,6 +10,7 @@ centres at integers). The traced outline is scikit-image's iso-line at level 0.5
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import ndimage
@@ -19,7 +20,10 @@ from ..errors import InputError
 from ..io import xy_from_rc
 from .dice import dice_polygon_region
 from .segment import SegmentConfig, label_bricks
-from .split import splitting_sequence
+from .split import splitting_sequence, visvalingam
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .refine import RefineConfig
 
 __all__ = ["TraceConfig", "TracedBrick", "TraceResult", "trace_mask", "trace_outline"]
 
@@ -33,6 +37,7 @@ class TraceConfig:
     target_dice: float | None = None
     max_vertices: int = 64
     segment: SegmentConfig = SegmentConfig()
+    refine: "RefineConfig | None" = None  # soft-Dice vertex refinement (wall2d.refine) when set
 
     def __post_init__(self) -> None:
         if self.vertices is None and self.target_dice is None:
@@ -50,6 +55,9 @@ class TracedBrick:
     traced_vertices: int  # corners of the traced outline (collinear steps removed)
     dice: float  # against the brick's own pixel region
     area_px: int
+    dice_splitting: float | None = None  # the splitting method's Dice, when refined
+    refined: bool = False
+    note: str = ""
 
 
 @dataclass(frozen=True)
@@ -65,10 +73,21 @@ class TraceResult:
         return {
             "image_shape": list(self.image_shape),
             "bricks": [{"id": b.id, "vertices_xy": b.vertices_xy.tolist(),
-                        "traced_vertices": b.traced_vertices, "dice": b.dice, "area_px": b.area_px}
+                        "traced_vertices": b.traced_vertices, "dice": b.dice, "area_px": b.area_px,
+                        **({"dice_splitting": b.dice_splitting, "refined": b.refined, "note": b.note}
+                           if b.dice_splitting is not None else {})}
                        for b in self.bricks],
             "mean_dice": self.mean_dice,
+            **({"mean_dice_splitting": self.mean_dice_splitting} if self.refined else {}),
         }
+
+    @property
+    def refined(self) -> bool:
+        return any(b.dice_splitting is not None for b in self.bricks)
+
+    @property
+    def mean_dice_splitting(self) -> float:
+        return float(np.mean([b.dice if b.dice_splitting is None else b.dice_splitting for b in self.bricks]))
 
 
 def _corner_count(outline: np.ndarray) -> int:
@@ -125,17 +144,80 @@ def _simplify(outline: np.ndarray, region: np.ndarray, config: TraceConfig) -> t
 
 
 def trace_mask(mask: np.ndarray, config: TraceConfig = TraceConfig()) -> TraceResult:
-    """Label the bricks of ``mask`` ``(rows, cols)`` and simplify each to a polygon."""
+    """Label the bricks of ``mask`` ``(rows, cols)`` and simplify each to a polygon.
+
+    With ``config.refine`` set, the polygons are then refined by soft Dice (all bricks at once):
+    for a fixed count, from the better of the splitting and Visvalingam-Whyatt polygons; for a
+    target Dice, count by count from 3 vertices, each brick stopping at the first count whose
+    refined polygon reaches the target.
+    """
     labels = label_bricks(mask, config.segment)
     slices = ndimage.find_objects(labels)
-    bricks = []
+    items = []
     for k, slc in enumerate(slices, start=1):
         if slc is None:
             continue
         region = labels[slc] == k
         outline = trace_outline(region)
-        poly, dice = _simplify(outline, region, config)
         offset = np.array([slc[1].start, slc[0].start], dtype=np.float64)
-        bricks.append(TracedBrick(id=k, vertices_xy=poly + offset, traced_vertices=_corner_count(outline),
-                                  dice=float(dice), area_px=int(region.sum())))
+        items.append((k, region, outline, offset))
+    if config.refine is not None:
+        bricks = _refined(labels, items, config)
+    else:
+        bricks = []
+        for k, region, outline, offset in items:
+            poly, dice = _simplify(outline, region, config)
+            bricks.append(TracedBrick(id=k, vertices_xy=poly + offset, traced_vertices=_corner_count(outline),
+                                      dice=float(dice), area_px=int(region.sum())))
     return TraceResult(image_shape=tuple(int(s) for s in mask.shape), bricks=tuple(bricks))
+
+
+def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[TracedBrick]:
+    from .refine import refine_polygons
+
+    counts = ([config.vertices] if config.vertices is not None
+              else list(range(3, config.max_vertices + 1)))
+    best: dict[int, tuple] = {}
+    pending = list(range(len(items)))
+    for n in counts:
+        if not pending:
+            break
+        ids, starts, alts, split_dice, usable = [], [], [], [], []
+        for i in pending:
+            k, region, outline, offset = items[i]
+            if len(outline) < n and n > 3:
+                continue
+            m = min(n, len(outline))
+            idx = dense = None
+            for j, seq in enumerate(splitting_sequence(outline, max(m, min(4 * m, len(outline))))):
+                if len(seq) == m:
+                    idx = seq
+                dense = seq
+            ids.append(k)
+            starts.append(outline[idx] + offset)
+            # a second start: Visvalingam-Whyatt from a 4N-vertex splitting down to N
+            alts.append(outline[dense[visvalingam(outline[dense], m)]] + offset)
+            split_dice.append(dice_polygon_region(outline[idx], region))
+            usable.append(i)
+        if not ids:
+            break
+        results = refine_polygons(labels, ids, starts, config.refine, alternatives=alts)
+        still = []
+        for i, r, sd in zip(usable, results, split_dice):
+            k, region, outline, offset = items[i]
+            prev = best.get(i)
+            if prev is None or r.dice > prev[1] + 1e-12:
+                best[i] = (r.vertices_xy, r.dice, sd, r.refined, r.reason)
+            if config.target_dice is not None and r.dice < config.target_dice:
+                still.append(i)
+        pending = still
+    out = []
+    for i, (k, region, outline, offset) in enumerate(items):
+        if i not in best:  # a tiny outline: use it whole
+            d = dice_polygon_region(outline, region)
+            best[i] = (outline + offset, d, d, False, "outline shorter than the vertex count")
+        v, d, sd, refined, note = best[i]
+        out.append(TracedBrick(id=k, vertices_xy=v, traced_vertices=_corner_count(outline), dice=float(d),
+                               area_px=int(region.sum()), dice_splitting=float(sd), refined=bool(refined),
+                               note=note))
+    return out

@@ -39,10 +39,15 @@ def _cmd_trace(args) -> int:
     from .wall2d.figures import plot_trace
     from .wall2d.trace import TraceConfig, trace_mask
 
-    config = TraceConfig(vertices=args.vertices, target_dice=args.target_dice) if args.vertices or args.target_dice \
-        else TraceConfig()
     if args.vertices and args.target_dice:
         raise InputError("trace: give --vertices or --target-dice, not both")
+    refine = None
+    if args.refine:
+        from .wall2d.refine import RefineConfig
+
+        refine = RefineConfig()
+    config = TraceConfig(vertices=args.vertices if args.vertices or args.target_dice else 5,
+                         target_dice=args.target_dice, refine=refine)
     mask = read_mask(args.mask, field="MASK")
     t0 = time.perf_counter()
     result = trace_mask(mask, config)
@@ -61,17 +66,22 @@ def _cmd_trace(args) -> int:
             plot_trace(mask, result, tmp_png, title=f"{Path(args.mask).name}")
     if args.no_figures:
         figure.unlink(missing_ok=True)
-    print(f"trace: {len(result.bricks)} bricks, mean Dice {result.mean_dice:.4f}, "
+    before = f"splitting {result.mean_dice_splitting:.4f} -> refined " if result.refined else ""
+    print(f"trace: {len(result.bricks)} bricks, mean Dice {before}{result.mean_dice:.4f}, "
           f"mean vertices {sum(len(b.vertices_xy) for b in result.bricks) / len(result.bricks):.2f}, "
           f"{seconds:.2f} s -> {out}")
     return 0
 
 
 def _cmd_build(args) -> int:
+    from dataclasses import replace
+
     from .pipeline import build_to_folder
     from .spec import load_structure
 
     spec = load_structure(args.structure)
+    if args.refine:
+        spec = replace(spec, refine=True, walls=tuple(replace(w, refine=True) for w in spec.walls))
     summary = build_to_folder(spec, args.out, figures=not args.no_figures)
     _print_build(summary, args.out)
     return 0
@@ -83,7 +93,8 @@ def _print_build(summary: dict, out) -> None:
           f"closure error {summary['closure_error_m'] * 1000:.2f} mm, "
           f"max interpenetration {summary['max_interpenetration_m3']:.2e} m^3 -> {out}")
     for w in summary["walls"]:
-        print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, mean Dice {w['mean_dice']:.4f}, "
+        ref = f" (splitting {w['mean_dice_splitting']:.4f})" if "mean_dice_splitting" in w else ""
+        print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, mean Dice {w['mean_dice']:.4f}{ref}, "
               f"{w['corner_pieces_removed']} corner pieces removed")
 
 
@@ -162,6 +173,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("mask")
     t.add_argument("--vertices", type=int, default=None, help="vertices per brick (default 5)")
     t.add_argument("--target-dice", type=float, default=None, help="fewest vertices reaching this Dice instead")
+    t.add_argument("--refine", action="store_true", help="refine the vertices by soft Dice after splitting")
     t.add_argument("--out", default="polygons.json")
     t.add_argument("--figure", default=None, help="overlay PNG (default: beside --out)")
     t.add_argument("--no-figures", action="store_true")
@@ -171,6 +183,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("structure")
     b.add_argument("--out", default="out/build")
     b.add_argument("--no-figures", action="store_true")
+    b.add_argument("--refine", action="store_true", help="soft-Dice refinement for every wall (as refine = true)")
     b.set_defaults(func=_cmd_build)
 
     c = sub.add_parser("compare", help="metrics of a build against synthetic truth")

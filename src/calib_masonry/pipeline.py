@@ -44,7 +44,13 @@ def trace_wall(wall: WallSpec, spec: StructureSpec) -> TraceResult:
             f"wall '{wall.name}' mask {wall.mask}: aspect ratio {cols}/{rows} = {cols / rows:.3f} disagrees with "
             f"width_m/height_m = {wall.width_m:g}/{wall.height_m:g} = {wall.width_m / wall.height_m:.3f} by "
             f"{mismatch:.1%} (tolerance {spec.aspect_tolerance:.0%}); check W and H or crop the mask to the wall")
-    config = TraceConfig(vertices=wall.vertices, target_dice=wall.target_dice if wall.vertices is None else None)
+    refine = None
+    if wall.refine:
+        from .wall2d.refine import RefineConfig
+
+        refine = RefineConfig()
+    config = TraceConfig(vertices=wall.vertices, target_dice=wall.target_dice if wall.vertices is None else None,
+                         refine=refine)
     result = trace_mask(mask, config)
     if not result.bricks:
         raise InputError(f"wall '{wall.name}' mask {wall.mask}: no bricks found (no white regions); "
@@ -104,6 +110,9 @@ def _summary(result: BuildResult, interpenetration) -> dict:
             "traced_pieces": len(tr.bricks), "bricks": len(own), "corner_pieces_removed": len(s.removed[w]),
             "mean_dice": float(np.mean([b.dice for b in own])) if own else None,
             "mean_dice_all_pieces": tr.mean_dice,
+            "refine": wall.refine,
+            **({"mean_dice_splitting": float(np.mean([b.dice_splitting for b in tr.bricks if b.id in {x.label for x in own}])),
+                "bricks_refined": int(sum(b.refined for b in tr.bricks))} if tr.refined else {}),
             "mean_vertices": float(np.mean([len(b.polygon_m) for b in own])) if own else None,
         })
     return {

@@ -57,6 +57,7 @@ class WallSpec:
     image: Path | None = None
     vertices: int | None = None
     target_dice: float | None = None
+    refine: bool = False  # soft-Dice vertex refinement after splitting
 
     @property
     def theta_deg(self) -> float:
@@ -98,6 +99,7 @@ class StructureSpec:
     target_dice: float | None = None
     closed: bool | None = None
     aspect_tolerance: float = 0.03
+    refine: bool = False
     synthetic: SyntheticSpec | None = None
     source: Path | None = field(default=None, compare=False)
 
@@ -123,6 +125,13 @@ def _num(tbl: dict, key: str, where: str, *, default: Any = None, required: bool
         raise InputError(f"{where}: field '{key}' must be a number, got {value!r}")
     if not math.isfinite(value):
         raise InputError(f"{where}: field '{key}' must be finite, got {value!r}")
+    return value
+
+
+def _flag(tbl: dict, key: str, where: str, default: bool) -> bool:
+    value = tbl.get(key, default)
+    if not isinstance(value, bool):
+        raise InputError(f"{where}: '{key}' must be true or false, got {value!r}")
     return value
 
 
@@ -208,6 +217,7 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
     closed = st.get("closed", None)
     if closed is not None and not isinstance(closed, bool):
         raise InputError(f"{where}: 'closed' must be true or false, got {closed!r}")
+    refine_default = _flag(st, "refine", where, False)
     aspect_tol = float(_num(st, "aspect_tolerance", where, default=0.03))
     if aspect_tol <= 0:
         raise InputError(f"{where}: 'aspect_tolerance' must be > 0, got {aspect_tol}")
@@ -258,11 +268,12 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
             raise InputError(f"{where}: only a photo is given; this version builds from masks, so add mask = 'PATH'")
         walls.append(WallSpec(name=wname, width_m=float(width), height_m=float(height),
                               theta_rad=math.radians(theta_deg), thickness_m=float(t), mask=mask,
-                              image=image, vertices=n, target_dice=d))
+                              image=image, vertices=n, target_dice=d,
+                              refine=_flag(w, "refine", where, refine_default)))
     return StructureSpec(name=str(name), walls=tuple(walls),
                          thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),
                          vertices=n_default, target_dice=d_default, closed=closed,
-                         aspect_tolerance=aspect_tol, synthetic=synthetic, source=path)
+                         aspect_tolerance=aspect_tol, refine=refine_default, synthetic=synthetic, source=path)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -284,6 +295,8 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
     if spec.closed is not None:
         st["closed"] = spec.closed
     st["aspect_tolerance"] = spec.aspect_tolerance
+    if spec.refine:
+        st["refine"] = True
     doc: dict[str, Any] = {"structure": st}
     if include_synthetic and spec.synthetic is not None:
         syn = {k: (list(v) if isinstance(v, tuple) else v)
@@ -303,6 +316,8 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
             row["vertices"] = w.vertices
         if w.target_dice is not None and w.target_dice != spec.target_dice:
             row["target_dice"] = w.target_dice
+        if w.refine != spec.refine:
+            row["refine"] = w.refine
         walls.append(row)
     doc["wall"] = walls
     return tomli_w.dumps(doc)

@@ -28,6 +28,10 @@ def plot_trace(mask: np.ndarray, result: TraceResult, path: Path, *, title: str 
     coll = PolyCollection([b.vertices_xy for b in result.bricks], facecolors="none",
                           edgecolors=[cmap(np.clip((d - 0.9) / 0.1, 0, 1)) for d in dice], linewidths=1.0)
     ax.add_collection(coll)
+    if result.refined:
+        ax.add_collection(PolyCollection([b.splitting_xy for b in result.bricks if b.splitting_xy is not None],
+                                         facecolors="none", edgecolors="c", linewidths=0.6, linestyles="--"))
+        title = (f"{title}  splitting (dashed) mean Dice {result.mean_dice_splitting:.4f} -> refined (solid)").strip()
     pts = np.concatenate([b.vertices_xy for b in result.bricks])
     ax.plot(pts[:, 0], pts[:, 1], ".", ms=2, color="c")
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0.9, 1.0))

@@ -58,6 +58,7 @@ class TracedBrick:
     dice_splitting: float | None = None  # the splitting method's Dice, when refined
     refined: bool = False
     note: str = ""
+    splitting_xy: np.ndarray | None = None  # the splitting polygon, when refined
 
 
 @dataclass(frozen=True)
@@ -74,7 +75,8 @@ class TraceResult:
             "image_shape": list(self.image_shape),
             "bricks": [{"id": b.id, "vertices_xy": b.vertices_xy.tolist(),
                         "traced_vertices": b.traced_vertices, "dice": b.dice, "area_px": b.area_px,
-                        **({"dice_splitting": b.dice_splitting, "refined": b.refined, "note": b.note}
+                        **({"dice_splitting": b.dice_splitting, "refined": b.refined, "note": b.note,
+                    "splitting_vertices_xy": b.splitting_xy.tolist()}
                            if b.dice_splitting is not None else {})}
                        for b in self.bricks],
             "mean_dice": self.mean_dice,
@@ -207,7 +209,7 @@ def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[Trace
             k, region, outline, offset = items[i]
             prev = best.get(i)
             if prev is None or r.dice > prev[1] + 1e-12:
-                best[i] = (r.vertices_xy, r.dice, sd, r.refined, r.reason)
+                best[i] = (r.vertices_xy, r.dice, sd, r.refined, r.reason, starts[usable.index(i)])
             if config.target_dice is not None and r.dice < config.target_dice:
                 still.append(i)
         pending = still
@@ -215,9 +217,9 @@ def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[Trace
     for i, (k, region, outline, offset) in enumerate(items):
         if i not in best:  # a tiny outline: use it whole
             d = dice_polygon_region(outline, region)
-            best[i] = (outline + offset, d, d, False, "outline shorter than the vertex count")
-        v, d, sd, refined, note = best[i]
+            best[i] = (outline + offset, d, d, False, "outline shorter than the vertex count", outline + offset)
+        v, d, sd, refined, note, sp = best[i]
         out.append(TracedBrick(id=k, vertices_xy=v, traced_vertices=_corner_count(outline), dice=float(d),
                                area_px=int(region.sum()), dice_splitting=float(sd), refined=bool(refined),
-                               note=note))
+                               note=note, splitting_xy=sp))
     return out

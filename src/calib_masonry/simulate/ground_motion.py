@@ -1,0 +1,187 @@
+"""Ground motion: synthetic accelerograms (Kanai-Tajimi) or recorded ones, and the plate's motion.
+
+A synthetic record is white noise filtered by the Kanai-Tajimi soil filter
+``H(w) = (wg^2 + 2 i zg wg w) / (wg^2 - w^2 + 2 i zg wg w)``, shaped by a trapezoid-exponential
+envelope (rise, strong phase, exponential decay), high-passed (fourth-order, ``highpass_hz``) so
+that velocity and displacement return to rest, and scaled so that its peak equals the PGA. The
+plate's displacement is the record integrated twice in the frequency domain, and the acceleration
+that is actually applied is recomputed from the sampled displacement, so the two always agree.
+
+Units: seconds, metres, m/s^2; ``pga_g`` is in g at the edges only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["G", "GroundMotion", "KanaiTajimi", "synthetic_motion", "read_accelerogram", "constant_acceleration",
+           "motion_from_acceleration"]
+
+G = 9.80665
+
+
+@dataclass(frozen=True)
+class KanaiTajimi:
+    """Firm-soil defaults: ``wg`` = 5 pi rad/s (2.5 Hz), ``zg`` = 0.6."""
+
+    omega_g: float = 5.0 * math.pi
+    zeta_g: float = 0.6
+    rise_s: float = 1.5
+    strong_s: float = 4.0
+    decay_per_s: float = 0.5
+    highpass_hz: float = 0.15
+
+
+@dataclass(frozen=True)
+class GroundMotion:
+    """The plate's motion sampled every ``dt`` seconds: ``displacement`` ``(T, 2)`` (X, Y) in m and
+    the matching ``acceleration`` ``(T, 2)`` in m/s^2 (second differences of the displacement)."""
+
+    dt: float
+    displacement: np.ndarray
+    acceleration: np.ndarray
+    source: str = "synthetic"
+
+    @property
+    def time(self) -> np.ndarray:
+        return np.arange(len(self.displacement)) * self.dt
+
+    @property
+    def duration(self) -> float:
+        return (len(self.displacement) - 1) * self.dt
+
+    @property
+    def pga(self) -> float:
+        return float(np.abs(self.acceleration).max())
+
+    def displacement_at(self, t: np.ndarray) -> np.ndarray:
+        """Linear interpolation of the displacement at times ``t`` ``(K,)`` -> ``(K, 2)``."""
+        tt = self.time
+        return np.column_stack([np.interp(t, tt, self.displacement[:, k]) for k in range(2)])
+
+
+def _second_difference(x: np.ndarray, dt: float) -> np.ndarray:
+    a = np.zeros_like(x)
+    a[1:-1] = (x[2:] - 2 * x[1:-1] + x[:-2]) / dt**2
+    return a
+
+
+def motion_from_acceleration(acc: np.ndarray, dt: float, *, highpass_hz: float = 0.0, source: str = "") -> GroundMotion:
+    """Integrate an acceleration record ``(T,)`` or ``(T, 2)`` twice (frequency domain, zero padded)."""
+    acc = np.asarray(acc, dtype=np.float64)
+    if acc.ndim == 1:
+        acc = np.column_stack([acc, np.zeros_like(acc)])
+    n = len(acc)
+    pad = 1 << int(math.ceil(math.log2(4 * n)))
+    f = np.fft.rfftfreq(pad, dt)
+    w = 2 * math.pi * f
+    spec = np.fft.rfft(acc, n=pad, axis=0)
+    if highpass_hz > 0:
+        r = (f / highpass_hz) ** 4
+        spec *= (r / (1 + r))[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disp_spec = np.where(w[:, None] > 0, -spec / (w[:, None] ** 2), 0.0)
+    disp = np.fft.irfft(disp_spec, n=pad, axis=0)[:n]
+    disp -= disp[0]
+    return GroundMotion(dt=dt, displacement=disp, acceleration=_second_difference(disp, dt), source=source)
+
+
+def synthetic_motion(pga_g: float, duration_s: float, *, seed: int, dt: float = 0.005, components: int = 1,
+                     model: KanaiTajimi = KanaiTajimi(), direction_deg: float = 0.0) -> GroundMotion:
+    """A seeded Kanai-Tajimi accelerogram scaled to ``pga_g`` (one or two horizontal components).
+
+    With one component the motion is along ``direction_deg`` (from global X).
+    """
+    if not pga_g >= 0:
+        raise InputError(f"--pga {pga_g}: the peak ground acceleration must be >= 0 (in g)")
+    if not duration_s > 0:
+        raise InputError(f"--duration {duration_s}: must be > 0 seconds")
+    if components not in (1, 2):
+        raise InputError(f"components = {components}: choose 1 or 2 horizontal components")
+    n = int(round(duration_s / dt)) + 1
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    env = np.where(t < model.rise_s, (t / model.rise_s) ** 2,
+                   np.where(t < model.rise_s + model.strong_s, 1.0,
+                            np.exp(-model.decay_per_s * (t - model.rise_s - model.strong_s))))
+    f = np.fft.rfftfreq(n, dt)
+    w = 2 * math.pi * f
+    h = (model.omega_g**2 + 2j * model.zeta_g * model.omega_g * w) / (
+        model.omega_g**2 - w**2 + 2j * model.zeta_g * model.omega_g * w)
+    comps = []
+    for _ in range(components):
+        noise = rng.standard_normal(n)
+        filtered = np.fft.irfft(np.fft.rfft(noise) * h, n=n)
+        comps.append(filtered * env)
+    acc = np.column_stack(comps)
+    if components == 1:
+        d = math.radians(direction_deg)
+        acc = np.column_stack([acc[:, 0] * math.cos(d), acc[:, 0] * math.sin(d)])
+    motion = motion_from_acceleration(acc, dt, highpass_hz=model.highpass_hz, source="Kanai-Tajimi")
+    peak = motion.pga
+    scale = 0.0 if peak == 0 else pga_g * G / peak
+    return GroundMotion(dt=dt, displacement=motion.displacement * scale, acceleration=motion.acceleration * scale,
+                        source=f"Kanai-Tajimi seed {seed}, PGA {pga_g:g} g")
+
+
+def constant_acceleration(a: float, duration_s: float, *, dt: float = 0.001, direction_deg: float = 0.0,
+                          ramp_s: float = 0.0) -> GroundMotion:
+    """The plate accelerates at a constant ``a`` (m/s^2) from rest: ``x = a t^2 / 2``."""
+    n = int(round(duration_s / dt)) + 1
+    t = np.arange(n) * dt
+    if ramp_s > 0:
+        # jerk-limited start: acceleration rises linearly over ramp_s
+        acc = a * np.minimum(t / ramp_s, 1.0)
+        vel = np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * dt)])
+        x = np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt)])
+    else:
+        x = 0.5 * a * t**2
+    d = math.radians(direction_deg)
+    disp = np.column_stack([x * math.cos(d), x * math.sin(d)])
+    return GroundMotion(dt=dt, displacement=disp, acceleration=_second_difference(disp, dt),
+                        source=f"constant {a:.4g} m/s^2")
+
+
+def read_accelerogram(path: str | Path, *, units: str = "g", highpass_hz: float = 0.1) -> GroundMotion:
+    """A CSV of ``time, acceleration[, acceleration_y]`` (header lines allowed), in g or m/s^2."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"--accelerogram {path}: file not found; give a CSV of time, acceleration")
+    if units not in ("g", "m/s2"):
+        raise InputError(f"accelerogram units {units!r}: choose 'g' or 'm/s2'")
+    rows = []
+    try:
+        for line in path.read_text(encoding="utf-8", errors="strict").splitlines():
+            parts = [p for p in line.replace(";", ",").replace("\t", ",").split(",") if p.strip()]
+            if not parts:
+                continue
+            try:
+                rows.append([float(p) for p in parts])
+            except ValueError:
+                if rows:
+                    raise
+                continue  # header
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise InputError(f"--accelerogram {path}: unreadable ({exc}); give numbers as time, acceleration per line") from None
+    if len(rows) < 3 or len({len(r) for r in rows}) != 1 or len(rows[0]) not in (2, 3):
+        raise InputError(f"--accelerogram {path}: expected at least 3 rows of 'time, acceleration[, acceleration_y]'")
+    data = np.asarray(rows)
+    t = data[:, 0]
+    dts = np.diff(t)
+    if not np.all(dts > 0):
+        raise InputError(f"--accelerogram {path}: time must increase from row to row")
+    dt = float(np.median(dts))
+    if np.abs(dts - dt).max() > 1e-6 + 1e-3 * dt:
+        grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
+        acc = np.column_stack([np.interp(grid, t, data[:, k]) for k in range(1, data.shape[1])])
+    else:
+        acc = data[:, 1:]
+    if units == "g":
+        acc = acc * G
+    return motion_from_acceleration(acc, dt, highpass_hz=highpass_hz, source=path.name)

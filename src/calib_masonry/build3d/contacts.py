@@ -78,3 +78,101 @@ def max_interpenetration(bricks: Sequence[Brick], eps: float = 1e-9) -> Interpen
         if v > worst:
             worst, worst_pair = v, (bricks[i].id, bricks[j].id)
     return Interpenetration(max_volume_m3=worst, pair=worst_pair, pairs_checked=len(pairs))
+
+
+# ----------------------------------------------------------------------------------------------
+# contact patches between neighbouring bricks (for mortar bonds)
+
+
+@dataclass(frozen=True)
+class ContactPatch:
+    """Two facing faces of bricks ``a`` and ``b`` (global ids) across a joint ``gap_m`` wide.
+
+    ``normal`` points from a to b; ``centroid`` is the middle of the joint over the overlap of the
+    two faces projected on a's face plane; ``area_m2`` is that overlap's area.
+    """
+
+    a: int
+    b: int
+    normal: np.ndarray
+    centroid: np.ndarray
+    area_m2: float
+    gap_m: float
+
+
+def _planar_faces(p: Polyhedron, angle_tol: float = 1e-3) -> list[tuple[np.ndarray, float, shapely.Geometry, np.ndarray]]:
+    """Planar faces of a polyhedron: (unit normal, offset n.x, polygon in the plane's 2D basis, basis)."""
+    v = p.vertices[p.faces]
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    area2 = np.linalg.norm(n, axis=1)
+    ok = area2 > 1e-15
+    n = n[ok] / area2[ok, None]
+    v = v[ok]
+    d = np.einsum("ij,ij->i", n, v[:, 0])
+    groups: dict[tuple, list[int]] = {}
+    for i, (ni, di) in enumerate(zip(n, d)):
+        key = (round(ni[0] / angle_tol), round(ni[1] / angle_tol), round(ni[2] / angle_tol), round(di * 1e5))
+        groups.setdefault(key, []).append(i)
+    out = []
+    for idx in groups.values():
+        normal = n[idx].mean(axis=0)
+        normal /= np.linalg.norm(normal)
+        offset = float(np.mean(d[idx]))
+        basis = _plane_basis(normal)
+        tris = [shapely.Polygon(t @ basis.T) for t in v[idx]]
+        poly = shapely.union_all([t for t in tris if t.area > 0])
+        out.append((normal, offset, poly, basis))
+    return out
+
+
+def _plane_basis(normal: np.ndarray) -> np.ndarray:
+    """Two orthonormal vectors ``(2, 3)`` spanning the plane with this normal."""
+    helper = np.array([0.0, 0.0, 1.0]) if abs(normal[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u)
+    w = np.cross(normal, u)
+    return np.vstack([u, w])
+
+
+def contact_patches(bricks: Sequence[Brick], *, max_gap_m: float = 0.03, min_area_m2: float = 1e-4,
+                    angle_deg: float = 10.0) -> list[ContactPatch]:
+    """Patches where two bricks' faces face each other across at most ``max_gap_m``.
+
+    Any orientation: faces are matched by anti-parallel normals (within ``angle_deg``) and plane
+    distance, and the patch is the exact overlap of the two faces projected on a common plane.
+    """
+    faces = [_planar_faces(b.solid) for b in bricks]
+    lo = np.array([b.solid.vertices.min(axis=0) for b in bricks]) - max_gap_m
+    hi = np.array([b.solid.vertices.max(axis=0) for b in bricks]) + max_gap_m
+    cos_tol = np.cos(np.radians(angle_deg))
+    order = np.argsort(lo[:, 0], kind="stable")
+    out: list[ContactPatch] = []
+    for pos, i in enumerate(order):
+        for j in order[pos + 1:]:
+            if lo[j, 0] > hi[i, 0]:
+                break
+            if not np.all(np.minimum(hi[i], hi[j]) >= np.maximum(lo[i], lo[j])):
+                continue
+            a, b = (i, j) if i < j else (j, i)
+            best = None
+            for na, da, pa, basis in faces[a]:
+                for nb, db, pb, basis_b in faces[b]:
+                    if float(na @ nb) > -cos_tol:
+                        continue
+                    gap = -db - da  # distance from a's plane to b's plane along na (nb ~ -na)
+                    if gap < -1e-4 or gap > max_gap_m:
+                        continue
+                    # b's face in 3D, projected on a's plane basis
+                    inter = pa.intersection(shapely.transform(pb, lambda xy: (xy @ basis_b + db * nb) @ basis.T))
+                    if inter.area < min_area_m2:
+                        continue
+                    if best is None or inter.area > best[0]:
+                        c2 = np.asarray(inter.centroid.coords[0])
+                        c3 = c2 @ basis + (da + 0.5 * gap) * na
+                        best = (inter.area, na, c3, gap)
+            if best is not None:
+                area, normal, centroid, gap = best
+                out.append(ContactPatch(a=bricks[a].id, b=bricks[b].id, normal=normal, centroid=centroid,
+                                        area_m2=float(area), gap_m=float(gap)))
+    out.sort(key=lambda c: (c.a, c.b))
+    return out

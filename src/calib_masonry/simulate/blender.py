@@ -1,0 +1,276 @@
+"""The Blender (bpy) adapter: realise a :class:`~calib_masonry.simulate.scene.Scene` in Bullet and step it.
+
+This is the only module that imports ``bpy``, lazily, so everything else works without Blender.
+Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
+
+* bodies and constraints are added by linking objects into the rigid-body world's collections
+  (no operators besides ``rigidbody.world_add``); each mesh is built around its centroid;
+* convex hulls use ``use_margin = True`` with ``collision_margin = 0`` (a positive margin rounds
+  the corners and blocks rock over early); the ground plate uses the BOX shape;
+* the world is stepped with ``scene.frame_set(f)`` frame by frame, the point cache covering the run;
+* Bullet never reports a broken constraint to Python: breaking is detected afterwards from the
+  drift of each bonded pair at its patch centroid (see ``results.bond_breaks``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from ..errors import BackendMissing
+from .scene import Scene
+
+__all__ = ["RunOutput", "run", "require_bpy"]
+
+
+def require_bpy():
+    try:
+        import bpy  # noqa: PLC0415 - the one place bpy is imported
+    except ImportError as exc:
+        raise BackendMissing("simulate: Blender's bpy module is not installed; install it with "
+                             "pip install -c constraints.txt 'bpy==5.0.*' (Python 3.11 only)") from exc
+    return bpy
+
+
+@dataclass(frozen=True)
+class RunOutput:
+    """Poses at every frame (frame 0 is the initial state): ``positions`` ``(F, B, 3)``,
+    ``quaternions`` ``(F, B, 4)`` (w, x, y, z), ``plate`` ``(F, 3)``, ``time`` ``(F,)`` seconds from
+    the start of the warm-up; ``seconds_stepping`` is the wall time of the stepping loop."""
+
+    time: np.ndarray
+    positions: np.ndarray
+    quaternions: np.ndarray
+    plate: np.ndarray
+    seconds_build: float
+    seconds_stepping: float
+
+
+def _reset(bpy) -> None:
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def _mesh_object(bpy, name: str, vertices: np.ndarray, faces: np.ndarray, location, collection):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([tuple(v) for v in vertices.tolist()], [], [tuple(f) for f in faces.tolist()])
+    me.validate(clean_customdata=False)
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    ob.location = tuple(float(x) for x in location)
+    collection.objects.link(ob)
+    return ob
+
+
+def _box(size) -> tuple[np.ndarray, np.ndarray]:
+    sx, sy, sz = (s / 2 for s in size)
+    v = np.array([(-sx, -sy, -sz), (sx, -sy, -sz), (sx, sy, -sz), (-sx, sy, -sz),
+                  (-sx, -sy, sz), (sx, -sy, sz), (sx, sy, sz), (-sx, sy, sz)])
+    f = np.array([(0, 3, 2), (0, 2, 1), (4, 5, 6), (4, 6, 7), (0, 1, 5), (0, 5, 4), (1, 2, 6), (1, 6, 5),
+                  (2, 3, 7), (2, 7, 6), (3, 0, 4), (3, 4, 7)])
+    return v, f
+
+
+def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:
+    """Quaternion (w, x, y, z) of a frame whose z axis is ``normal``."""
+    z = np.asarray(normal, dtype=np.float64)
+    z = z / np.linalg.norm(z)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    m = np.column_stack([x, y, z])
+    w = np.sqrt(max(0.0, 1.0 + m[0, 0] + m[1, 1] + m[2, 2])) / 2.0
+    if w > 1e-6:
+        return (w, (m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w))
+    i = int(np.argmax(np.diag(m)))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    r = np.sqrt(max(0.0, 1.0 + m[i, i] - m[j, j] - m[k, k]))
+    q = [0.0, 0.0, 0.0, 0.0]
+    q[1 + i] = r / 2
+    q[1 + j] = (m[j, i] + m[i, j]) / (2 * r)
+    q[1 + k] = (m[k, i] + m[i, k]) / (2 * r)
+    q[0] = (m[k, j] - m[j, k]) / (2 * r)
+    return tuple(q)
+
+
+def build_scene(scene: Scene, *, breaking: bool = True):
+    """Create the Blender scene; returns (bpy, body objects, plate object, constraint objects)."""
+    bpy = require_bpy()
+    _reset(bpy)
+    sc = bpy.context.scene
+    s = scene.solver
+    frames = scene.frames
+    sc.render.fps = s.fps
+    sc.render.fps_base = 1.0
+    sc.frame_start = 1
+    sc.frame_end = frames + 1
+    sc.gravity = (0.0, 0.0, -scene.gravity)
+    sc.use_gravity = True
+    bpy.ops.rigidbody.world_add()
+    rw = sc.rigidbody_world
+    rw.substeps_per_frame = s.substeps
+    rw.solver_iterations = s.iterations
+    rw.use_split_impulse = scene.solver.split_impulse
+    rw.point_cache.frame_start = 1
+    rw.point_cache.frame_end = frames + 1
+    bodies_col = bpy.data.collections.new("Bricks")
+    sc.collection.children.link(bodies_col)
+    rb_col = bpy.data.collections.new("RigidBodyWorld")
+    rw.collection = rb_col
+
+    # ground plate: a passive BOX, kinematic (keyed frame by frame) when the ground moves
+    pv, pf = _box(scene.plate.size)
+    plate_loc = (scene.plate.centre[0], scene.plate.centre[1], scene.plate.top_z - scene.plate.size[2] / 2)
+    plate = _mesh_object(bpy, "ground_plate", pv, pf, plate_loc, sc.collection)
+    plate.rotation_euler = (0.0, np.radians(scene.plate.tilt_deg), 0.0)
+    rb_col.objects.link(plate)
+    prb = plate.rigid_body
+    prb.type = "PASSIVE"
+    prb.collision_shape = "BOX"
+    prb.friction = scene.plate.friction
+    prb.restitution = 0.0
+    prb.use_margin = True
+    prb.collision_margin = 0.0
+    if scene.motion is not None:
+        prb.kinematic = True
+        prefs = bpy.context.preferences.edit
+        old = prefs.keyframe_new_interpolation_type
+        prefs.keyframe_new_interpolation_type = "LINEAR"
+        warm = int(round(s.warmup_s * s.fps))
+        t = (np.arange(frames + 1) - warm) / s.fps
+        disp = scene.motion.displacement_at(np.clip(t, 0.0, scene.motion.duration))
+        for f in range(frames + 1):
+            plate.location = (plate_loc[0] + disp[f, 0], plate_loc[1] + disp[f, 1], plate_loc[2])
+            plate.keyframe_insert("location", frame=f + 1)
+        prefs.keyframe_new_interpolation_type = old
+
+    objects = []
+    for b in scene.bodies:
+        ob = _mesh_object(bpy, b.name, b.vertices, b.faces, b.location, bodies_col)
+        ob.rotation_mode = "QUATERNION"
+        ob.rotation_quaternion = tuple(float(x) for x in b.rotation)
+        rb_col.objects.link(ob)
+        rb = ob.rigid_body
+        rb.type = "ACTIVE"
+        rb.collision_shape = "CONVEX_HULL"
+        rb.use_margin = True
+        rb.collision_margin = 0.0
+        rb.mass = float(b.mass)
+        rb.friction = float(b.friction)
+        rb.restitution = float(b.restitution)
+        rb.linear_damping = 0.0
+        rb.angular_damping = 0.0
+        rb.use_deactivation = False
+        objects.append(ob)
+
+    constraints = []
+    if scene.bonds:
+        ccol = bpy.data.collections.new("RigidBodyConstraints")
+        sc.collection.children.link(ccol)
+        rw.constraints = ccol
+        big = 1e3
+        for k, bond in enumerate(scene.bonds):
+            rot = _frame_quaternion(bond.normal)
+            for kind, thr in (("C", bond.compression_ns), ("T", bond.tension_ns), ("S", bond.shear_ns)):
+                e = bpy.data.objects.new(f"bond_{k:05d}_{kind}", None)
+                e.location = tuple(float(x) for x in bond.location)
+                e.rotation_mode = "QUATERNION"
+                e.rotation_quaternion = rot
+                e.empty_display_size = 0.02
+                ccol.objects.link(e)
+                c = e.rigid_body_constraint
+                c.type = "GENERIC"
+                c.object1 = objects[bond.a]
+                c.object2 = objects[bond.b]
+                c.disable_collisions = False
+                c.use_breaking = breaking
+                c.breaking_threshold = float(thr)
+                if kind == "S":
+                    for ax in "xy":
+                        setattr(c, f"use_limit_lin_{ax}", True)
+                        setattr(c, f"limit_lin_{ax}_lower", 0.0)
+                        setattr(c, f"limit_lin_{ax}_upper", 0.0)
+                    for ax in "xyz":
+                        setattr(c, f"use_limit_ang_{ax}", True)
+                        setattr(c, f"limit_ang_{ax}_lower", 0.0)
+                        setattr(c, f"limit_ang_{ax}_upper", 0.0)
+                else:
+                    c.use_limit_lin_z = True
+                    c.limit_lin_z_lower, c.limit_lin_z_upper = (0.0, big) if kind == "C" else (-big, 0.0)
+                constraints.append(e)
+    return bpy, objects, plate, constraints
+
+
+def _run_once(scene: Scene, *, breaking: bool, progress, record: bool, desc: str):
+    t0 = time.perf_counter()
+    bpy, objects, plate, _ = build_scene(scene, breaking=breaking)
+    sc = bpy.context.scene
+    seconds_build = time.perf_counter() - t0
+    frames = scene.frames
+    nb = len(objects)
+    n = frames + 1 if record else 1
+    pos = np.zeros((n, nb, 3))
+    quat = np.zeros((n, nb, 4))
+    plate_pos = np.zeros((n, 3))
+
+    def grab(i: int) -> None:
+        for j, ob in enumerate(objects):
+            m = ob.matrix_world
+            pos[i, j] = m.translation
+            quat[i, j] = m.to_quaternion()
+        plate_pos[i] = plate.matrix_world.translation
+
+    t1 = time.perf_counter()
+    sc.frame_set(1)
+    if record:
+        grab(0)
+    for f in tqdm(range(2, frames + 2), desc=desc, unit="frame", disable=None if progress is None else not progress,
+                  leave=False):
+        sc.frame_set(f)
+        if record:
+            grab(f - 1)
+    seconds_stepping = time.perf_counter() - t1
+    if not record:
+        grab(0)  # the final state only
+    return bpy, pos, quat, plate_pos, seconds_build, seconds_stepping
+
+
+def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None = None, record: bool = True
+        ) -> RunOutput:
+    """Simulate ``scene``: a warm-up under gravity with bonds unbreakable, then the ground motion.
+
+    Bullet cannot have a constraint's breaking switched on mid-run from Python (Blender crashes),
+    so a bonded scene settles in a first run and the settled poses start a second one with
+    breaking on. With ``record=False`` only the stepping is done (the bare-Bullet baseline).
+    """
+    s = scene.solver
+    warm = int(round(s.warmup_s * s.fps))
+    segments = []
+    build = step = 0.0
+    main = scene
+    if scene.bonds and warm > 0:
+        warm_scene = replace(scene, motion=None, duration_s=0.0)
+        _, p1, q1, pl1, b1, s1 = _run_once(warm_scene, breaking=False, progress=progress, record=record,
+                                           desc="settle")
+        build += b1
+        step += s1
+        segments.append((p1, q1, pl1))
+        bodies = tuple(replace(b, location=p1[-1, j].copy(), rotation=tuple(float(x) for x in q1[-1, j]))
+                       for j, b in enumerate(scene.bodies))
+        main = replace(scene, bodies=bodies, solver=replace(s, warmup_s=0.0))
+    bpy, p2, q2, pl2, b2, s2 = _run_once(main, breaking=True, progress=progress, record=record, desc="simulate")
+    build += b2
+    step += s2
+    if segments:
+        p1, q1, pl1 = segments[0]
+        if record:
+            p2, q2, pl2 = (np.concatenate([p1, p2[1:]]), np.concatenate([q1, q2[1:]]), np.concatenate([pl1, pl2[1:]]))
+    if blend_path is not None:
+        bpy.context.scene.frame_set(1)
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), check_existing=False, compress=True)
+    return RunOutput(time=np.arange(len(p2)) / s.fps, positions=p2, quaternions=q2, plate=pl2,
+                     seconds_build=build, seconds_stepping=step)

@@ -1,0 +1,169 @@
+"""Results of a simulation: collapse metrics, bond breaks, figures and the output folder.
+
+Displacements are measured relative to the ground plate (a brick carried rigidly by the ground has
+not moved) and from the end of the gravity warm-up. A bond counts as broken at the first frame
+where the two bricks' copies of its patch centroid (each carried by its own brick) are more than
+``drift_break_m`` apart: Bullet does not tell Python when a constraint breaks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .blender import RunOutput
+from .scene import Scene
+
+__all__ = ["Metrics", "rotations", "bond_breaks", "metrics", "plot_histories", "plot_ground_motion",
+           "render_frames"]
+
+
+def rotations(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (w, x, y, z)."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+@dataclass(frozen=True)
+class Metrics:
+    start_frame: int  # end of the warm-up: displacements are measured from here
+    moved_fraction: np.ndarray  # (F,)
+    roof_drift_m: np.ndarray  # (F,) mean horizontal displacement of the top bricks
+    max_displacement_m: np.ndarray  # (B,) over the whole run
+    bond_break_time_s: np.ndarray  # (n_bonds,) NaN where intact
+    broken_fraction: np.ndarray  # (F,)
+    collapse_time_s: float | None  # first time half the bricks have moved
+
+
+def bond_breaks(scene: Scene, out: RunOutput, start: int) -> np.ndarray:
+    if not scene.bonds:
+        return np.zeros(0)
+    a = np.array([b.a for b in scene.bonds])
+    b = np.array([b.b for b in scene.bonds])
+    c = np.array([bd.location for bd in scene.bonds])
+    R = rotations(out.quaternions)  # (F, B, 3, 3)
+    p = out.positions
+    # the bond point in each brick's frame at the start, then carried by each brick
+    qa = np.einsum("nji,nj->ni", R[start, a], c - p[start, a])
+    qb = np.einsum("nji,nj->ni", R[start, b], c - p[start, b])
+    times = np.full(len(a), np.nan)
+    for f in range(start, len(p)):
+        pa = np.einsum("nij,nj->ni", R[f, a], qa) + p[f, a]
+        pb = np.einsum("nij,nj->ni", R[f, b], qb) + p[f, b]
+        gap = np.linalg.norm(pa - pb, axis=1)
+        new = np.isnan(times) & (gap > scene.solver.drift_break_m)
+        times[new] = out.time[f] - out.time[start]
+    return times
+
+
+def metrics(scene: Scene, out: RunOutput) -> Metrics:
+    s = scene.solver
+    start = min(int(round(s.warmup_s * s.fps)), len(out.time) - 1)
+    rel = out.positions - out.positions[start] - (out.plate - out.plate[start])[:, None, :]
+    dist = np.linalg.norm(rel, axis=2)
+    dist[:start] = 0.0
+    moved = (dist > s.moved_threshold_m).mean(axis=1)
+    z0 = out.positions[start, :, 2]
+    top = z0 >= z0.min() + 0.9 * (z0.max() - z0.min())
+    drift = np.linalg.norm(rel[:, top, :2].mean(axis=1), axis=1)
+    breaks = bond_breaks(scene, out, start)
+    t_rel = out.time - out.time[start]
+    broken = (np.array([(breaks <= t).sum() for t in t_rel]) / max(1, len(breaks))) if len(breaks) else np.zeros(len(t_rel))
+    idx = np.flatnonzero(moved >= 0.5)
+    collapse = float(t_rel[idx[0]]) if idx.size else None
+    return Metrics(start_frame=start, moved_fraction=moved, roof_drift_m=drift, max_displacement_m=dist.max(axis=0),
+                   bond_break_time_s=breaks, broken_fraction=broken, collapse_time_s=collapse)
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_ground_motion(scene: Scene, path: Path) -> None:
+    plt = _plt()
+    m = scene.motion
+    fig, ax = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+    if m is not None:
+        ax[0].plot(m.time, m.acceleration[:, 0] / 9.80665, lw=0.7, label="X")
+        ax[0].plot(m.time, m.acceleration[:, 1] / 9.80665, lw=0.7, label="Y")
+        ax[1].plot(m.time, m.displacement[:, 0] * 1000, lw=0.9, label="X")
+        ax[1].plot(m.time, m.displacement[:, 1] * 1000, lw=0.9, label="Y")
+        ax[0].set_title(f"ground motion: {m.source}, PGA {m.pga / 9.80665:.3f} g", fontsize=9)
+    ax[0].set_ylabel("acceleration (g)")
+    ax[1].set_ylabel("plate displacement (mm)")
+    ax[1].set_xlabel("time (s)")
+    ax[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_histories(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> None:
+    plt = _plt()
+    t = out.time - out.time[m.start_frame]
+    fig, ax = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    ax[0].plot(t, m.roof_drift_m * 1000, color="C3")
+    ax[0].set_ylabel("roof drift (mm)")
+    ax[1].plot(t, m.moved_fraction * 100, color="C0")
+    ax[1].set_ylabel(f"bricks moved > {scene.solver.moved_threshold_m * 100:g} cm (%)")
+    ax[2].plot(t, m.broken_fraction * 100, color="C2")
+    ax[2].set_ylabel("bonds broken (%)")
+    ax[2].set_xlabel("time since the ground started moving (s)")
+    for a in ax:
+        a.axvline(0.0, color="k", lw=0.5, ls=":")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) -> list[Path]:
+    """The collapse sequence: ``count`` axonometric views of the bricks at evenly spaced times."""
+    plt = _plt()
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    folder.mkdir(parents=True, exist_ok=True)
+    R = rotations(out.quaternions)
+    allv = np.concatenate([b.vertices + b.location for b in scene.bodies])
+    lo, hi = allv.min(axis=0), allv.max(axis=0)
+    pad = 0.3 * float((hi - lo)[:2].max())
+    light = np.array([0.4, -0.6, 0.7])
+    light /= np.linalg.norm(light)
+    frames = np.unique(np.linspace(0, len(out.time) - 1, count).round().astype(int))
+    paths = []
+    for k, f in enumerate(frames):
+        fig = plt.figure(figsize=(6, 6))
+        ax = fig.add_subplot(projection="3d")
+        tris = []
+        for j, b in enumerate(scene.bodies):
+            v = b.vertices @ R[f, j].T + out.positions[f, j]
+            tris.append(v[b.faces])
+        tri = np.concatenate(tris)
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        sh = 0.35 + 0.6 * np.clip(n @ light, 0, 1)
+        ax.add_collection3d(Poly3DCollection(tri, facecolors=np.column_stack([0.75 * sh, 0.45 * sh, 0.32 * sh,
+                                                                            np.ones_like(sh)]), linewidths=0))
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        ax.set_zlim(min(lo[2], 0.0), hi[2])
+        ax.set_box_aspect((hi[0] - lo[0] + 2 * pad, hi[1] - lo[1] + 2 * pad, hi[2] - min(lo[2], 0.0)))
+        ax.view_init(elev=20, azim=-60)
+        ax.set_title(f"t = {out.time[f]:.2f} s (ground moves from {out.time[0] + scene.solver.warmup_s:.2f} s)",
+                     fontsize=9)
+        p = folder / f"frame_{k:03d}.png"
+        fig.tight_layout()
+        fig.savefig(p, dpi=90)
+        plt.close(fig)
+        paths.append(p)
+    return paths

@@ -1,0 +1,126 @@
+"""``simulate``: a built model folder + ground motion -> Bullet run -> results folder."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..build3d.export import bricks_from_json
+from ..build3d.place import corners, wall_frames
+from ..errors import InputError
+from ..io import read_json, staged_output, write_json
+from ..spec import StructureSpec, WallSpec
+from .ground_motion import GroundMotion, read_accelerogram, synthetic_motion
+from .scene import MASONRY, Material, Scene, SolverSettings, scene_from_bricks
+
+__all__ = ["SimulationConfig", "load_model", "scene_for_model", "simulate_to_folder"]
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    pga_g: float = 0.3
+    duration_s: float = 10.0
+    seed: int = 0
+    accelerogram: Path | None = None
+    components: int = 1
+    direction_deg: float = 0.0
+    solver: SolverSettings = SolverSettings()
+    material: Material = MASONRY
+    frames_png: int = 6
+    figures: bool = True
+
+
+def load_model(model_dir: str | Path):
+    """Bricks, wall frames and corners of a ``build`` output folder."""
+    model_dir = Path(model_dir)
+    if not model_dir.is_dir():
+        raise InputError(f"MODEL_DIR {model_dir}: not a folder; give the --out folder of `calib-masonry build`")
+    if not (model_dir / "bricks.json").is_file():
+        raise InputError(f"MODEL_DIR {model_dir}: has no bricks.json; run `calib-masonry build STRUCTURE.toml --out {model_dir}` first")
+    data = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
+    try:
+        bricks = bricks_from_json(data)
+        walls = tuple(WallSpec(name=w["name"], width_m=w["width_m"], height_m=w["height_m"],
+                               theta_rad=math.radians(w["theta_deg"]), thickness_m=w["thickness_m"])
+                      for w in data["walls"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"MODEL_DIR {model_dir}: bricks.json is not a build output ({exc}); re-run build") from None
+    if not bricks:
+        raise InputError(f"MODEL_DIR {model_dir}: bricks.json holds no bricks; nothing to simulate")
+    closed = None
+    if (model_dir / "summary.json").is_file():
+        closed = read_json(model_dir / "summary.json").get("closed_footprint")
+    spec = StructureSpec(name=data.get("structure", model_dir.name), walls=walls, thickness_m=walls[0].thickness_m,
+                         closed=closed)
+    return bricks, wall_frames(spec), corners(spec), spec
+
+
+def motion_for(config: SimulationConfig) -> GroundMotion:
+    if config.accelerogram is not None:
+        return read_accelerogram(config.accelerogram)
+    return synthetic_motion(config.pga_g, config.duration_s, seed=config.seed, components=config.components,
+                            direction_deg=config.direction_deg)
+
+
+def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
+    if config.pga_g < 0 or not math.isfinite(config.pga_g):
+        raise InputError(f"--pga {config.pga_g}: the peak ground acceleration must be >= 0 (in g)")
+    if config.duration_s <= 0:
+        raise InputError(f"--duration {config.duration_s}: must be > 0 seconds")
+    bricks, frames, cs, _ = load_model(model_dir)
+    motion = motion_for(config)
+    return scene_from_bricks(bricks, frames, cs, motion=motion, duration_s=motion.duration,
+                             material=config.material, solver=config.solver)
+
+
+def simulate_to_folder(model_dir: str | Path, out: str | Path, config: SimulationConfig = SimulationConfig(), *,
+                       progress: bool | None = None) -> dict:
+    """Run the simulation and write summary.json, poses.npz, scene.blend, figures and frames/."""
+    from .blender import require_bpy, run
+    from .results import metrics, plot_ground_motion, plot_histories, render_frames
+
+    require_bpy()
+    t0 = time.perf_counter()
+    scene = scene_for_model(model_dir, config)
+    t_scene = time.perf_counter() - t0
+    with staged_output(out) as stage:
+        result = run(scene, progress=progress, blend_path=stage / "scene.blend")
+        m = metrics(scene, result)
+        np.savez_compressed(stage / "poses.npz", time=result.time, positions=result.positions.astype(np.float32),
+                            quaternions=result.quaternions.astype(np.float32), plate=result.plate.astype(np.float32),
+                            bond_break_time_s=m.bond_break_time_s)
+        t1 = time.perf_counter()
+        if config.figures:
+            plot_ground_motion(scene, stage / "ground_motion.png")
+            plot_histories(scene, result, m, stage / "histories.png")
+            render_frames(scene, result, stage / "frames", count=config.frames_png)
+        t_fig = time.perf_counter() - t1
+        s = scene.solver
+        summary = {
+            "model": str(model_dir), "bricks": len(scene.bodies), "bonds": len(scene.bonds),
+            "ground_motion": {"source": scene.motion.source if scene.motion else None,
+                              "pga_g": scene.motion.pga / 9.80665 if scene.motion else 0.0,
+                              "duration_s": scene.motion.duration if scene.motion else 0.0},
+            "solver": {"fps": s.fps, "substeps": s.substeps, "iterations": s.iterations, "warmup_s": s.warmup_s},
+            "mortar": {"fill_m": scene.notes.get("mortar_fill_m"), "strengths_pa": scene.notes.get("strengths_pa"),
+                       "max_hull_volume_change": scene.notes.get("max_hull_volume_change")},
+            "moved_fraction_final": float(m.moved_fraction[-1]),
+            "moved_threshold_m": s.moved_threshold_m,
+            "max_roof_drift_m": float(m.roof_drift_m.max()),
+            "collapse_time_s": m.collapse_time_s,
+            "bonds_broken": int(np.isfinite(m.bond_break_time_s).sum()),
+            "bonds_broken_fraction": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
+            "max_brick_displacement_m": float(m.max_displacement_m.max()),
+            "outcome": ("collapsed" if m.moved_fraction[-1] >= 0.5 else
+                        "damaged" if m.moved_fraction[-1] > 0.01 else "standing"),
+            "seconds": {"scene": round(t_scene, 3), "blender_build": round(result.seconds_build, 3),
+                        "stepping": round(result.seconds_stepping, 3), "figures": round(t_fig, 3),
+                        "per_frame": round(result.seconds_stepping / max(1, len(result.time) - 1), 4)},
+        }
+        write_json(stage / "summary.json", summary)
+    return summary

@@ -1,0 +1,195 @@
+"""The simulation scene as plain data: bodies, mortar bonds, the ground plate and solver settings.
+
+Nothing here imports Blender: :mod:`calib_masonry.simulate.blender` realises a :class:`Scene` in
+Bullet through ``bpy``, and any other engine could read the same description.
+
+Mortar model (re-derived from the Bullet Constraints Builder's masonry preset). The mortar joint
+between two bricks is partly folded into the bricks: each brick's outer-face polygon is grown by
+half the narrowest joints (``mortar_fill``, the 5th percentile of the gaps), so most neighbours
+touch and, once a joint has cracked, bricks bear on each other with Coulomb friction. Each contact
+patch of area ``A`` (between the two bricks' facing faces, any orientation) becomes three
+constraints at the patch centroid, in a frame whose z axis is the patch normal:
+
+* compression: one-sided, keeps b from approaching a along the normal, fails at ``f_c A``;
+* tension: one-sided, keeps b from leaving a along the normal, fails at ``f_t A``;
+* shear: locks sliding in the joint plane and all rotations, fails at ``f_s A``.
+
+Bullet breaks a constraint when the impulse it applies within one solver substep exceeds its
+threshold, so a joint component that fails at the force ``F = f A`` gets the threshold
+
+    ``J = f A dt_sub``,  with  ``dt_sub = 1 / (fps x substeps)``
+
+in N s (A in m^2, f in Pa). Defaults as the add-on's masonry preset: f_c = 10, f_t = 0.2,
+f_s = 0.5 N/mm^2, density 1800 kg/m^3.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+import shapely
+
+from ..build3d.assemble import Brick
+from ..build3d.bond import corner_clip_planes
+from ..build3d.contacts import ContactPatch, contact_patches
+from ..build3d.extrude import Polyhedron, clip_plan, prism
+from ..build3d.place import Corner, WallFrame
+from ..errors import InputError
+from .ground_motion import GroundMotion
+
+__all__ = ["Material", "SolverSettings", "Body", "Bond", "Plate", "Scene", "scene_from_bricks", "MASONRY"]
+
+
+@dataclass(frozen=True)
+class Material:
+    """Masonry defaults as in the Bullet Constraints Builder preset (strengths in Pa)."""
+
+    density: float = 1800.0
+    friction: float = 0.6  # brick-on-brick Coulomb friction (Bullet multiplies the two bodies' values)
+    restitution: float = 0.0
+    compressive_strength: float = 10e6
+    tensile_strength: float = 0.2e6
+    shear_strength: float = 0.5e6
+
+
+MASONRY = Material()
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Bullet settings, set explicitly: tall bonded walls need far more iterations than Blender's 10."""
+
+    fps: int = 25
+    substeps: int = 5
+    iterations: int = 50
+    split_impulse: bool = False
+    warmup_s: float = 0.5  # gravity only, bonds unbreakable
+    drift_break_m: float = 0.002  # a bond whose relative pose drifts this far is counted as broken
+    moved_threshold_m: float = 0.05  # a brick displaced this far (beyond the plate) counts as moved
+
+    def __post_init__(self) -> None:
+        if self.fps <= 0 or self.substeps <= 0 or self.iterations <= 0:
+            raise InputError(f"solver settings: fps, substeps and iterations must be > 0 (got {self.fps}, "
+                             f"{self.substeps}, {self.iterations})")
+
+    @property
+    def dt_substep(self) -> float:
+        return 1.0 / (self.fps * self.substeps)
+
+
+@dataclass(frozen=True)
+class Body:
+    name: str
+    vertices: np.ndarray  # (V, 3) around the centroid (body frame)
+    faces: np.ndarray  # (F, 3)
+    location: np.ndarray  # (3,) centroid, global
+    mass: float
+    friction: float
+    restitution: float = 0.0
+    volume: float = 0.0
+    hull_volume_change: float = 0.0  # relative change from taking the convex hull
+    rotation: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # initial orientation (w, x, y, z)
+
+
+@dataclass(frozen=True)
+class Bond:
+    """A mortar joint: three one-sided or locked constraints at the patch centroid, each breaking
+    at its own impulse per substep (N s): compression, tension (along ``normal``, a -> b) and shear
+    (in the joint plane, with the rotations locked)."""
+
+    a: int  # body indices
+    b: int
+    location: np.ndarray  # (3,) patch centroid
+    normal: np.ndarray
+    area_m2: float
+    compression_ns: float
+    tension_ns: float
+    shear_ns: float
+
+
+@dataclass(frozen=True)
+class Plate:
+    """The ground: a passive box, kinematic when it moves. ``tilt_deg`` about global Y (for tests)."""
+
+    size: tuple[float, float, float] = (20.0, 20.0, 0.5)
+    centre: tuple[float, float] = (0.0, 0.0)
+    top_z: float = 0.0
+    friction: float = 0.6
+    tilt_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class Scene:
+    bodies: tuple[Body, ...]
+    bonds: tuple[Bond, ...] = ()
+    plate: Plate = Plate()
+    motion: GroundMotion | None = None
+    duration_s: float = 1.0
+    solver: SolverSettings = SolverSettings()
+    gravity: float = 9.80665
+    notes: dict = field(default_factory=dict)
+
+    @property
+    def frames(self) -> int:
+        return int(round((self.solver.warmup_s + self.duration_s) * self.solver.fps))
+
+
+def body_from_polyhedron(name: str, solid: Polyhedron, material: Material, *, mass_volume: float | None = None) -> Body:
+    c = solid.centroid
+    vol = solid.volume if mass_volume is None else mass_volume
+    return Body(name=name, vertices=solid.vertices - c, faces=solid.faces, location=c,
+                mass=material.density * vol, friction=math.sqrt(material.friction),
+                restitution=material.restitution, volume=vol)
+
+
+def _grown_solid(brick: Brick, frames: list[WallFrame], corners: list[Corner], grow: float) -> tuple[Polyhedron, float]:
+    """The brick's convex hull in wall 2D, grown by ``grow`` (mitred), extruded and cut at corners."""
+    poly = shapely.Polygon(brick.polygon_m)
+    hull = poly.convex_hull
+    change = hull.area / poly.area - 1.0 if poly.area > 0 else 0.0
+    if grow > 0:
+        hull = hull.buffer(grow, join_style="mitre", mitre_limit=3.0)
+    pts = np.asarray(hull.exterior.coords)[:-1]
+    ext, planes = corner_clip_planes(pts, brick.wall, frames, corners)
+    solid: Polyhedron | None = prism(ext, frames[brick.wall])
+    for point, normal in planes:
+        solid = clip_plan(solid, point, normal) if solid is not None else None
+    return (solid if solid is not None else brick.solid), change
+
+
+def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners: list[Corner], *,
+                      motion: GroundMotion | None, duration_s: float, material: Material = MASONRY,
+                      solver: SolverSettings = SolverSettings(), mortar_fill: bool = True,
+                      max_gap_m: float = 0.06) -> Scene:
+    """Bodies and bonds of a built structure (see the module docstring for the mortar model)."""
+    if not bricks:
+        raise InputError("model: it has no bricks; build it first with `calib-masonry build`")
+    patches: list[ContactPatch] = contact_patches(bricks, max_gap_m=max_gap_m, angle_deg=15.0)
+    index = {b.id: i for i, b in enumerate(bricks)}
+    gaps = np.array([p.gap_m for p in patches if p.gap_m > 0])
+    grow = 0.5 * float(np.percentile(gaps, 5)) if (mortar_fill and gaps.size) else 0.0
+    bodies = []
+    worst_hull = 0.0
+    for b in bricks:
+        solid, change = _grown_solid(b, frames, corners, grow)
+        worst_hull = max(worst_hull, change)
+        body = body_from_polyhedron(f"brick_{b.id:05d}", solid, material, mass_volume=b.volume)
+        bodies.append(Body(**{**body.__dict__, "hull_volume_change": change}))
+    dt = solver.dt_substep
+    bonds = tuple(Bond(a=index[p.a], b=index[p.b], location=p.centroid, normal=p.normal, area_m2=p.area_m2,
+                       compression_ns=material.compressive_strength * p.area_m2 * dt,
+                       tension_ns=material.tensile_strength * p.area_m2 * dt,
+                       shear_ns=material.shear_strength * p.area_m2 * dt) for p in patches)
+    lo = np.min([b.location + b.vertices.min(axis=0) for b in bodies], axis=0)
+    hi = np.max([b.location + b.vertices.max(axis=0) for b in bodies], axis=0)
+    span = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    plate = Plate(size=(span + 40.0, span + 40.0, 0.5), centre=(float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2)),
+                  top_z=float(lo[2]), friction=math.sqrt(material.friction))
+    notes = {"mortar_fill_m": grow, "bonds": len(bonds), "max_hull_volume_change": worst_hull,
+             "strengths_pa": {"compression": material.compressive_strength, "tension": material.tensile_strength,
+                              "shear": material.shear_strength}}
+    return Scene(bodies=tuple(bodies), bonds=bonds, plate=plate, motion=motion, duration_s=duration_s,
+                 solver=solver, notes=notes)

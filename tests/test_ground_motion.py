@@ -1,0 +1,64 @@
+import numpy as np
+import pytest
+
+from calib_masonry.errors import InputError
+from calib_masonry.simulate.ground_motion import (G, constant_acceleration, read_accelerogram,
+                                                  synthetic_motion)
+
+
+def test_synthetic_scaled_to_pga_and_seeded():
+    a = synthetic_motion(0.3, 10.0, seed=4)
+    b = synthetic_motion(0.3, 10.0, seed=4)
+    c = synthetic_motion(0.3, 10.0, seed=5)
+    assert np.isclose(a.pga, 0.3 * G, rtol=1e-9)
+    assert np.array_equal(a.displacement, b.displacement)
+    assert not np.allclose(a.displacement, c.displacement)
+    assert np.isclose(a.duration, 10.0)
+
+
+def test_acceleration_is_second_difference_of_displacement():
+    m = synthetic_motion(0.2, 5.0, seed=1, components=2)
+    d = m.displacement
+    acc = (d[2:] - 2 * d[1:-1] + d[:-2]) / m.dt**2
+    np.testing.assert_allclose(m.acceleration[1:-1], acc)
+    assert np.abs(m.acceleration[:, 1]).max() > 0  # two components
+
+
+def test_baseline_corrected_plate_returns_near_rest():
+    m = synthetic_motion(0.5, 20.0, seed=2)
+    peak = np.abs(m.displacement).max()
+    assert np.abs(m.displacement[-1]).max() < 0.2 * peak
+    v = np.diff(m.displacement, axis=0) / m.dt
+    assert np.abs(v[-50:]).max() < 0.1 * np.abs(v).max()
+
+
+def test_constant_acceleration_is_exact():
+    m = constant_acceleration(2.0, 1.0, dt=0.01)
+    np.testing.assert_allclose(m.acceleration[1:-1, 0], 2.0)
+    assert np.isclose(m.displacement[-1, 0], 1.0)
+
+
+def test_accelerogram_csv(tmp_path):
+    t = np.arange(0, 5, 0.01)
+    a = 0.1 * np.sin(2 * np.pi * 2.0 * t) * np.minimum(t, 1.0)
+    p = tmp_path / "rec.csv"
+    p.write_text("time,acc_g\n" + "\n".join(f"{x:.3f},{y:.6f}" for x, y in zip(t, a)))
+    m = read_accelerogram(p)
+    assert np.isclose(m.dt, 0.01)
+    assert 0.05 * G < m.pga < 0.15 * G
+
+
+@pytest.mark.parametrize("text, msg", [("", "at least 3 rows"), ("t,a\n0,1\n0,2\n0,3\n", "time must increase"),
+                                       ("0,1\n1,x\n2,3\n", "unreadable")])
+def test_accelerogram_errors(tmp_path, text, msg):
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(InputError, match=msg):
+        read_accelerogram(p)
+    with pytest.raises(InputError, match="not found"):
+        read_accelerogram(tmp_path / "none.csv")
+
+
+def test_negative_pga_refused():
+    with pytest.raises(InputError, match="pga"):
+        synthetic_motion(-0.1, 5.0, seed=0)

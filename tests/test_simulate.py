@@ -1,0 +1,149 @@
+"""Bullet through bpy against analytic answers (each within 5 % or one frame)."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("bpy")
+
+from calib_masonry.simulate.blender import _box, run  # noqa: E402
+from calib_masonry.simulate.ground_motion import G, constant_acceleration  # noqa: E402
+from calib_masonry.simulate.scene import Body, Bond, Plate, Scene, SolverSettings  # noqa: E402
+
+from .conftest import DATA  # noqa: E402
+
+FPS = 100
+
+
+def _block(size, loc, mu=0.6, rotation=(1.0, 0.0, 0.0, 0.0)):
+    v, f = _box(size)
+    vol = float(np.prod(size))
+    return Body("block", v, f, np.asarray(loc, float), 1800 * vol, math.sqrt(mu), 0.0, vol, rotation=rotation)
+
+
+def _solver(warmup=0.0):
+    return SolverSettings(fps=FPS, substeps=10, iterations=20, warmup_s=warmup)
+
+
+@pytest.mark.parametrize("h", [1.0, 3.0])
+def test_free_fall_time(h):
+    scene = Scene(bodies=(_block((0.2, 0.2, 0.2), (0, 0, h + 0.1)),), duration_s=1.2, solver=_solver())
+    out = run(scene, progress=False)
+    # first frame within a centimetre of resting on the plate (Bullet bounces back a few mm)
+    landed = int(np.argmax(out.positions[:, 0, 2] <= 0.1 + 0.01))
+    expected = math.sqrt(2 * h / G)
+    assert landed > 0
+    assert abs(out.time[landed] - expected) <= max(0.05 * expected, 1.0 / FPS)
+
+
+@pytest.mark.parametrize("tilt_deg, slides", [(40.0, True), (36.0, True), (25.0, False)])
+def test_block_on_tilted_plane(tilt_deg, slides):
+    # atan(0.5) = 26.6 degrees. Measured here: Bullet's sliding friction matches mu within 4 %, but
+    # a block at rest only starts to slide at 31-34 degrees (its static friction is 0.6-0.67), so
+    # the "slides" cases sit clear of that band (see the issue note).
+    mu = 0.5
+    th = math.radians(tilt_deg)
+    plate = Plate(size=(6.0, 2.0, 0.2), top_z=0.0, friction=math.sqrt(mu), tilt_deg=tilt_deg)
+    # the plate turns about its centre (0, 0, -0.1): its top passes through this point
+    top = np.array([0.0, 0.0, -0.1]) + 0.1 * np.array([math.sin(th), 0.0, math.cos(th)])
+    normal = np.array([math.sin(th), 0.0, math.cos(th)])
+    rot = (math.cos(th / 2), 0.0, math.sin(th / 2), 0.0)
+    block = _block((0.3, 0.3, 0.2), top + 0.1 * normal, mu=mu, rotation=rot)
+    out = run(Scene(bodies=(block,), plate=plate, duration_s=1.0, solver=_solver()), progress=False)
+    path = np.linalg.norm(out.positions[:, 0] - out.positions[0, 0], axis=1)
+    if slides:
+        # down the slope at a = g (sin - mu cos): fit s = s0 + v0 t + a t^2 / 2 once sliding is under way
+        keep = out.time >= 0.3
+        a_fit = 2 * np.polyfit(out.time[keep], path[keep], 2)[0]
+        a = G * (math.sin(th) - mu * math.cos(th))
+        assert path[-1] > 0.05
+        if tilt_deg >= 40:  # nearer the threshold a is too sensitive to mu for a 5 % check
+            assert a_fit == pytest.approx(a, rel=0.05)
+    else:
+        assert path.max() < 0.002
+
+
+@pytest.mark.parametrize("factor, overturns", [(1.05, True), (0.9, False)])
+def test_rocking_block_threshold(factor, overturns):
+    b, h = 0.1, 0.5  # half-width and half-height: threshold g b / h = 0.2 g
+    a = factor * G * b / h
+    motion = constant_acceleration(a, 1.5, dt=0.001)
+    block = _block((2 * b, 0.6, 2 * h), (0, 0, h), mu=0.8)
+    out = run(Scene(bodies=(block,), plate=Plate(friction=math.sqrt(0.8)), motion=motion, duration_s=1.5,
+                    solver=_solver(warmup=0.1)), progress=False)
+    w = np.abs(out.quaternions[:, 0, 0]).clip(0, 1)
+    tilt = np.degrees(2 * np.arccos(w)).max()
+    if overturns:
+        assert tilt > 60
+    else:
+        assert tilt < 1.0
+
+
+def test_bond_holds_a_cantilever_and_breaks_when_weak():
+    base = _block((0.4, 0.4, 0.4), (0, 0, 0.2))
+    arm = _block((0.4, 0.4, 0.2), (0.41, 0, 0.3))
+    strong = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e6, 1e6, 1e6)
+    weak = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e-3, 1e-3, 1e-3)
+    drops = []
+    for bond in (strong, weak):
+        out = run(Scene(bodies=(base, arm), bonds=(bond,), duration_s=1.0, solver=_solver(warmup=0.0)),
+                  progress=False)
+        drops.append(out.positions[0, 1, 2] - out.positions[-1, 1, 2])
+    assert drops[0] < 0.001
+    assert drops[1] > 0.05
+
+
+@pytest.fixture(scope="module")
+def small_model(tmp_path_factory):
+    from calib_masonry.pipeline import build_to_folder
+    from calib_masonry.spec import load_structure
+    from calib_masonry.synthetic.truth import synthesize
+
+    from .conftest import scenario_text
+
+    root = tmp_path_factory.mktemp("sim")
+    sc = root / "s.toml"
+    sc.write_text(scenario_text([(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)]))
+    synthesize(load_structure(sc, require_sources=False), root / "data", figures=False)
+    build_to_folder(load_structure(root / "data" / "structure.toml"), root / "model", figures=False, progress=False)
+    return root
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "calib_masonry", *map(str, args)], capture_output=True, text=True)
+
+
+def test_simulate_cli_outputs(small_model):
+    out = small_model / "sim"
+    r = _cli("simulate", small_model / "model", "--pga", "0.05", "--duration", "1", "--frames", "2", "--out", out)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["bricks"] > 30 and s["bonds"] > s["bricks"]
+    for f in ("poses.npz", "scene.blend", "ground_motion.png", "histories.png", "frames/frame_000.png"):
+        assert (out / f).is_file(), f
+    poses = np.load(out / "poses.npz")
+    assert poses["positions"].shape[1] == s["bricks"]
+
+
+@pytest.mark.parametrize("case, msg", [("nobricks", "no bricks.json"), ("negative", "--pga"),
+                                       ("badcsv", "accelerogram")])
+def test_simulate_bad_input(small_model, tmp_path, case, msg):
+    model = small_model / "model"
+    args = ["simulate", model, "--duration", "1", "--out", tmp_path / "o"]
+    if case == "nobricks":
+        (tmp_path / "empty").mkdir()
+        args[1] = tmp_path / "empty"
+    elif case == "negative":
+        args += ["--pga", "-0.2"]
+    else:
+        (tmp_path / "x.csv").write_text("garbage\n")
+        args += ["--accelerogram", tmp_path / "x.csv"]
+    r = _cli(*args)
+    assert r.returncode == 2
+    lines = [l for l in r.stderr.splitlines() if l.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and msg in lines[0], r.stderr
+    assert not (tmp_path / "o").exists()

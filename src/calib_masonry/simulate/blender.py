@@ -74,6 +74,17 @@ def _box(size) -> tuple[np.ndarray, np.ndarray]:
     return v, f
 
 
+def _quaternions(r: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w, x, y, z) ``(..., 4)`` of rotation matrices ``(..., 3, 3)`` (w >= 0)."""
+    from scipy.spatial.transform import Rotation
+
+    shape = r.shape[:-2]
+    q = Rotation.from_matrix(r.reshape(-1, 3, 3)).as_quat()  # x, y, z, w
+    q = np.column_stack([q[:, 3], q[:, :3]])
+    q *= np.where(q[:, :1] < 0, -1.0, 1.0)
+    return q.reshape(*shape, 4)
+
+
 def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:
     """Quaternion (w, x, y, z) of a frame whose z axis is ``normal``."""
     z = np.asarray(normal, dtype=np.float64)
@@ -217,11 +228,15 @@ def _run_once(scene: Scene, *, breaking: bool, progress, record: bool, desc: str
     quat = np.zeros((n, nb, 4))
     plate_pos = np.zeros((n, 3))
 
+    bodies_col = bpy.data.collections["Bricks"]
+    order = np.array([objects.index(ob) for ob in bodies_col.objects]) if nb else np.zeros(0, int)
+    buf = np.zeros(nb * 16, dtype=np.float32)
+    mats = np.zeros((n, nb, 4, 4), dtype=np.float32)
+
     def grab(i: int) -> None:
-        for j, ob in enumerate(objects):
-            m = ob.matrix_world
-            pos[i, j] = m.translation
-            quat[i, j] = m.to_quaternion()
+        # one bulk read of every brick's world matrix (column-major 4x4)
+        bodies_col.objects.foreach_get("matrix_world", buf)
+        mats[i, order] = buf.reshape(nb, 4, 4).transpose(0, 2, 1)
         plate_pos[i] = plate.matrix_world.translation
 
     t1 = time.perf_counter()
@@ -236,6 +251,8 @@ def _run_once(scene: Scene, *, breaking: bool, progress, record: bool, desc: str
     seconds_stepping = time.perf_counter() - t1
     if not record:
         grab(0)  # the final state only
+    pos[:] = mats[:, :, :3, 3]
+    quat[:] = _quaternions(mats[:, :, :3, :3].astype(np.float64))
     return bpy, pos, quat, plate_pos, seconds_build, seconds_stepping
 
 

@@ -122,6 +122,14 @@ def peer(spec, out: Path) -> dict[str, float]:
     return t
 
 
+def _table(head: str, unit: str, run: dict[str, float], total: float, remark: str) -> None:
+    print(f"{head:32s} {unit:>10s}")
+    for k, v in run.items():
+        if not k.startswith("_"):
+            print(f"{k:32s} {v:10.3f}")
+    print(f"{'total':32s} {total:10.3f}{remark}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--structure", default=str(ROOT / "data_synthetic" / "stylite" / "structure.toml"))
@@ -139,17 +147,9 @@ def main() -> None:
     total_p = sum(v for k, v in best_peer.items() if not k.startswith("_"))
     print(f"masks -> STL, {spec.name}: {len(spec.walls)} walls, {best_ours['_bricks']} bricks "
           f"(best of {args.repeat} runs; peer best of {len(runs_peer)})")
-    print(f"{'stage':32s} {'ours (s)':>10s}")
-    for k, v in best_ours.items():
-        if not k.startswith("_"):
-            print(f"{k:32s} {v:10.3f}")
-    print(f"{'total':32s} {total_o:10.3f}   (aim < 1 s; the method reports < 20 s)")
+    _table("stage", "ours (s)", best_ours, total_o, "   (aim < 1 s; the method reports < 20 s)")
     print()
-    print(f"{'peer stage':32s} {'peer (s)':>10s}")
-    for k, v in best_peer.items():
-        if not k.startswith("_"):
-            print(f"{k:32s} {v:10.3f}")
-    print(f"{'total':32s} {total_p:10.3f}")
+    _table("peer stage", "peer (s)", best_peer, total_p, "")
     print()
     print(f"mean Dice vs own pixel region: ours {best_ours['_dice']:.4f}, peer {best_peer['_dice']:.4f}")
     print(f"speed-up ours / peer: {total_p / total_o:.1f}x")

@@ -48,7 +48,7 @@ def main() -> None:
         m = metrics(scene, out)
         t_rec = time.perf_counter() - t0
     s = scene.solver
-    print(f"Stylite model: {len(scene.bodies)} bricks, {len(scene.bonds)} bonds ({3 * len(scene.bonds)} constraints), "
+    print(f"Stylite model: {len(scene.bodies)} bricks, {len(scene.bonds)} bonds ({4 * len(scene.bonds)} constraints), "
           f"{args.duration:g} s at PGA {args.pga:g} g; {s.fps} fps x {s.substeps} substeps x {s.iterations} iterations, "
           f"{s.warmup_s:g} s warm-up")
     print(f"{'bare Bullet stepping (same scene)':40s} {t_bare:8.1f} s   (of which stepping {bare.seconds_stepping:.1f} s)")

@@ -86,15 +86,17 @@ def test_rocking_block_threshold(factor, overturns):
 def test_bond_holds_a_cantilever_and_breaks_when_weak():
     base = _block((0.4, 0.4, 0.4), (0, 0, 0.2))
     arm = _block((0.4, 0.4, 0.2), (0.41, 0, 0.3))
-    strong = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e6, 1e6, 1e6)
-    weak = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e-3, 1e-3, 1e-3)
+    strong = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e6, 1e6, 1e6, 1e6)
+    weak = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e-3, 1e-3, 1e-3, 1e-3)
+    weak_in_bending = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e6, 1e6, 1e6, 1e-3)
     drops = []
-    for bond in (strong, weak):
+    for bond in (strong, weak, weak_in_bending):
         out = run(Scene(bodies=(base, arm), bonds=(bond,), duration_s=1.0, solver=_solver(warmup=0.0)),
                   progress=False)
         drops.append(out.positions[0, 1, 2] - out.positions[-1, 1, 2])
     assert drops[0] < 0.001
     assert drops[1] > 0.05
+    assert drops[2] > 0.002  # the arm swings down about the joint once bending opens it
 
 
 @pytest.fixture(scope="module")

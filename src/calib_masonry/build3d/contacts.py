@@ -98,6 +98,7 @@ class ContactPatch:
     centroid: np.ndarray
     area_m2: float
     gap_m: float
+    min_width_m: float = 0.0  # the patch's narrower principal extent (the lever arm in bending)
 
 
 def _planar_faces(p: Polyhedron, angle_tol: float = 1e-3) -> list[tuple[np.ndarray, float, shapely.Geometry, np.ndarray]]:
@@ -132,6 +133,17 @@ def _plane_basis(normal: np.ndarray) -> np.ndarray:
     u /= np.linalg.norm(u)
     w = np.cross(normal, u)
     return np.vstack([u, w])
+
+
+def _min_width(poly: shapely.Geometry) -> float:
+    """The narrower extent of a patch along its principal axes."""
+    hull = poly.convex_hull
+    if not isinstance(hull, shapely.Polygon):
+        return 0.0
+    pts = np.asarray(hull.exterior.coords)[:-1]
+    centred = pts - pts.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    return float(np.ptp(centred @ vt[1]))
 
 
 def contact_patches(bricks: Sequence[Brick], *, max_gap_m: float = 0.03, min_area_m2: float = 1e-4,
@@ -169,10 +181,10 @@ def contact_patches(bricks: Sequence[Brick], *, max_gap_m: float = 0.03, min_are
                     if best is None or inter.area > best[0]:
                         c2 = np.asarray(inter.centroid.coords[0])
                         c3 = c2 @ basis + (da + 0.5 * gap) * na
-                        best = (inter.area, na, c3, gap)
+                        best = (inter.area, na, c3, gap, inter)
             if best is not None:
-                area, normal, centroid, gap = best
+                area, normal, centroid, gap, inter = best
                 out.append(ContactPatch(a=bricks[a].id, b=bricks[b].id, normal=normal, centroid=centroid,
-                                        area_m2=float(area), gap_m=float(gap)))
+                                        area_m2=float(area), gap_m=float(gap), min_width_m=_min_width(inter)))
     out.sort(key=lambda c: (c.a, c.b))
     return out

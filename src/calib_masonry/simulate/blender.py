@@ -186,7 +186,8 @@ def build_scene(scene: Scene, *, breaking: bool = True):
         big = 1e3
         for k, bond in enumerate(scene.bonds):
             rot = _frame_quaternion(bond.normal)
-            for kind, thr in (("C", bond.compression_ns), ("T", bond.tension_ns), ("S", bond.shear_ns)):
+            for kind, thr in (("C", bond.compression_ns), ("T", bond.tension_ns), ("S", bond.shear_ns),
+                              ("B", bond.bending_nms)):
                 e = bpy.data.objects.new(f"bond_{k:05d}_{kind}", None)
                 e.location = tuple(float(x) for x in bond.location)
                 e.rotation_mode = "QUATERNION"
@@ -198,13 +199,14 @@ def build_scene(scene: Scene, *, breaking: bool = True):
                 c.object1 = objects[bond.a]
                 c.object2 = objects[bond.b]
                 c.disable_collisions = False
-                c.use_breaking = breaking
-                c.breaking_threshold = float(thr)
+                c.use_breaking = bool(breaking and np.isfinite(thr))
+                c.breaking_threshold = float(min(thr, 1e30))
                 if kind == "S":
                     for ax in "xy":
                         setattr(c, f"use_limit_lin_{ax}", True)
                         setattr(c, f"limit_lin_{ax}_lower", 0.0)
                         setattr(c, f"limit_lin_{ax}_upper", 0.0)
+                elif kind == "B":
                     for ax in "xyz":
                         setattr(c, f"use_limit_ang_{ax}", True)
                         setattr(c, f"limit_ang_{ax}_lower", 0.0)

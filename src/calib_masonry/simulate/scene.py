@@ -7,19 +7,25 @@ Mortar model (re-derived from the Bullet Constraints Builder's masonry preset). 
 between two bricks is partly folded into the bricks: each brick's outer-face polygon is grown by
 half the narrowest joints (``mortar_fill``, the 5th percentile of the gaps), so most neighbours
 touch and, once a joint has cracked, bricks bear on each other with Coulomb friction. Each contact
-patch of area ``A`` (between the two bricks' facing faces, any orientation) becomes three
+patch of area ``A`` (between the two bricks' facing faces, any orientation) becomes four
 constraints at the patch centroid, in a frame whose z axis is the patch normal:
 
 * compression: one-sided, keeps b from approaching a along the normal, fails at ``f_c A``;
 * tension: one-sided, keeps b from leaving a along the normal, fails at ``f_t A``;
-* shear: locks sliding in the joint plane and all rotations, fails at ``f_s A``.
+* shear: locks sliding in the joint plane, fails at ``f_s A``;
+* bending: locks the three rotations, fails at the moment that cracks the joint,
+  ``M = f_t S`` with ``S = A d / 6`` (``d`` the patch's narrower width).
+
+Bullet compares each constraint row's impulse with the constraint's threshold, and the rows of a
+rotation lock carry angular impulses (N m s): that is why bending is a constraint of its own, with
+the threshold ``M dt_sub``.
 
 Bullet breaks a constraint when the impulse it applies within one solver substep exceeds its
 threshold, so a joint component that fails at the force ``F = f A`` gets the threshold
 
     ``J = f A dt_sub``,  with  ``dt_sub = 1 / (fps x substeps)``
 
-in N s (A in m^2, f in Pa). Defaults as the add-on's masonry preset: f_c = 10, f_t = 0.2,
+in N s (A in m^2, f in Pa); for bending ``M dt_sub`` in N m s. Defaults as the add-on's masonry preset: f_c = 10, f_t = 0.2,
 f_s = 0.5 N/mm^2, density 1800 kg/m^3.
 """
 
@@ -96,9 +102,9 @@ class Body:
 
 @dataclass(frozen=True)
 class Bond:
-    """A mortar joint: three one-sided or locked constraints at the patch centroid, each breaking
-    at its own impulse per substep (N s): compression, tension (along ``normal``, a -> b) and shear
-    (in the joint plane, with the rotations locked)."""
+    """A mortar joint: four constraints at the patch centroid, each breaking at its own impulse per
+    substep: compression and tension (one-sided, along ``normal``, a -> b), shear (in the joint
+    plane) in N s, and bending (the rotations) in N m s."""
 
     a: int  # body indices
     b: int
@@ -108,6 +114,7 @@ class Bond:
     compression_ns: float
     tension_ns: float
     shear_ns: float
+    bending_nms: float = math.inf  # angular impulse per substep (N m s) that opens the joint in bending
 
 
 @dataclass(frozen=True)
@@ -182,7 +189,9 @@ def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners:
     bonds = tuple(Bond(a=index[p.a], b=index[p.b], location=p.centroid, normal=p.normal, area_m2=p.area_m2,
                        compression_ns=material.compressive_strength * p.area_m2 * dt,
                        tension_ns=material.tensile_strength * p.area_m2 * dt,
-                       shear_ns=material.shear_strength * p.area_m2 * dt) for p in patches)
+                       shear_ns=material.shear_strength * p.area_m2 * dt,
+                       bending_nms=material.tensile_strength * p.area_m2 * p.min_width_m / 6.0 * dt)
+                  for p in patches)
     lo = np.min([b.location + b.vertices.min(axis=0) for b in bodies], axis=0)
     hi = np.max([b.location + b.vertices.max(axis=0) for b in bodies], axis=0)
     span = float(max(hi[0] - lo[0], hi[1] - lo[1]))

@@ -121,14 +121,12 @@ def main() -> None:
     ours_mean = float(np.mean([r.dice for r in res]))
 
     rng = np.random.default_rng(0)
-    flat = [(w, b.id, b.vertices_xy, k) for w, (_, tr, _) in enumerate(jobs) for b in tr.bricks
-            for k in [None]]
+    flat = [(w, b.id, b.vertices_xy) for w, (_, tr, _) in enumerate(jobs) for b in tr.bricks]
     pick = rng.choice(len(flat), size=min(args.peer_bricks, len(flat)), replace=False)
     t0 = time.perf_counter()
     peer_d, ours_sub, split_sub = [], [], []
-    offsets = np.cumsum([0] + [len(tr.bricks) for _, tr, _ in jobs])
     for p in pick:
-        w, bid, start, _ = flat[p]
+        w, bid, start = flat[p]
         d_peer, d_split = peer_one(jobs[w][0], bid, start)
         peer_d.append(d_peer)
         split_sub.append(d_split)

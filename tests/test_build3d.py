@@ -2,7 +2,6 @@ import math
 
 import numpy as np
 import pytest
-import trimesh
 
 from calib_masonry.build3d.assemble import WallPolygons, assemble
 from calib_masonry.build3d.contacts import intersection_volume, max_interpenetration
@@ -11,7 +10,7 @@ from calib_masonry.build3d.place import WallFrame, closure_gap, corners, wall_fr
 from calib_masonry.build3d.scale import image_from_wall, wall_from_image
 from calib_masonry.spec import load_structure
 
-from .conftest import DATA, scenario_text
+from .conftest import DATA
 
 
 def _frame(theta_deg=0.0, t=0.18, origin=(0.0, 0.0)):

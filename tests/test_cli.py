@@ -1,8 +1,6 @@
 import json
-import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,7 +8,7 @@ from PIL import Image
 
 from calib_masonry.cli import main
 
-from .conftest import DATA, SWAT, scenario_text
+from .conftest import DATA, SWAT
 
 
 def _run(*args, cwd=None):

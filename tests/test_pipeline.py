@@ -1,14 +1,10 @@
 import json
-import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 from calib_masonry.build3d.bond import find_end_faces
 from calib_masonry.build3d.place import corners, wall_frames
-from calib_masonry.cli import main
 from calib_masonry.io import read_mask
 from calib_masonry.pipeline import build_to_folder
 from calib_masonry.spec import load_structure

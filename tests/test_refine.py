@@ -7,7 +7,7 @@ import shapely
 from calib_masonry._jax import jax, jnp
 from calib_masonry.io import read_mask
 from calib_masonry.wall2d.dice import rasterise_polygon
-from calib_masonry.wall2d.refine import RefineConfig, hard_dice_points, refine_polygons, soft_dice
+from calib_masonry.wall2d.refine import RefineConfig, hard_dice_points, soft_dice
 from calib_masonry.wall2d.segment import label_bricks
 from calib_masonry.wall2d.trace import TraceConfig, trace_mask
 
@@ -24,7 +24,6 @@ def test_float64_is_on():
 
 
 def test_gradient_matches_finite_differences():
-    rng = np.random.default_rng(0)
     pts = _grid(40, 50)
     target = jnp.asarray(rasterise_polygon(np.array([[8.5, 6.5], [40.5, 9.5], [37.5, 33.5], [10.5, 30.5]]),
                                            (40, 50)).ravel(), dtype=jnp.float64)
@@ -95,7 +94,6 @@ def test_refine_stays_in_own_half_of_mortar():
     m = np.zeros((30, 60), bool)
     m[5:25, 5:29] = True
     m[5:25, 31:55] = True
-    labels = label_bricks(m)
     res = trace_mask(m, TraceConfig(vertices=4, refine=RefineConfig()))
     left, right = sorted(res.bricks, key=lambda b: b.vertices_xy[:, 0].min())
     assert left.vertices_xy[:, 0].max() <= 30.0 + 1e-6

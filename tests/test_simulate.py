@@ -14,7 +14,6 @@ from calib_masonry.simulate.blender import _box, run  # noqa: E402
 from calib_masonry.simulate.ground_motion import G, constant_acceleration  # noqa: E402
 from calib_masonry.simulate.scene import Body, Bond, Plate, Scene, SolverSettings  # noqa: E402
 
-from .conftest import DATA  # noqa: E402
 
 FPS = 100
 

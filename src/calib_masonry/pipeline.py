@@ -103,6 +103,7 @@ def _summary(result: BuildResult, interpenetration) -> dict:
     walls = []
     for w, (wall, tr) in enumerate(zip(spec.walls, result.traces)):
         own = s.bricks_of(w)
+        kept = {x.label for x in own}
         walls.append({
             "name": wall.name, "width_m": wall.width_m, "height_m": wall.height_m, "theta_deg": wall.theta_deg,
             "thickness_m": wall.thickness_m, "mask": wall.mask, "image_shape": list(tr.image_shape),
@@ -111,7 +112,7 @@ def _summary(result: BuildResult, interpenetration) -> dict:
             "mean_dice": float(np.mean([b.dice for b in own])) if own else None,
             "mean_dice_all_pieces": tr.mean_dice,
             "refine": wall.refine,
-            **({"mean_dice_splitting": float(np.mean([b.dice_splitting for b in tr.bricks if b.id in {x.label for x in own}])),
+            **({"mean_dice_splitting": float(np.mean([b.dice_splitting for b in tr.bricks if b.id in kept])),
                 "bricks_refined": int(sum(b.refined for b in tr.bricks))} if tr.refined else {}),
             "mean_vertices": float(np.mean([len(b.polygon_m) for b in own])) if own else None,
         })

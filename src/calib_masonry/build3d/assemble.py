@@ -12,7 +12,7 @@ from .bond import CornerTolerances, corner_clip_planes, find_end_faces
 from .extrude import Polyhedron, clip_plan, polygon_area, prism
 from .place import Corner, WallFrame, closure_gap, corners, wall_frames
 
-__all__ = ["WallPolygons", "Brick", "Structure3D", "assemble", "simple_polygon"]
+__all__ = ["WallPolygons", "Brick", "Structure3D", "assemble", "simple_polygon", "brick_solid"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +73,17 @@ def simple_polygon(poly: np.ndarray) -> np.ndarray:
     return poly
 
 
+def brick_solid(poly: np.ndarray, wall: int, frames: list[WallFrame], corners: list[Corner]) -> Polyhedron | None:
+    """The prism of an outer-face polygon of wall ``wall``, extended and cut where it meets a corner."""
+    ext_poly, planes = corner_clip_planes(poly, wall, frames, corners)
+    solid: Polyhedron | None = prism(ext_poly, frames[wall])
+    for point, normal in planes:
+        solid = clip_plan(solid, point, normal)
+        if solid is None:
+            break
+    return solid
+
+
 def assemble(spec: StructureSpec, walls: list[WallPolygons], *, end_faces: list[set[int]] | None = None,
              tolerances: CornerTolerances = CornerTolerances()) -> Structure3D:
     """Remove corner end faces, extrude every brick by its wall's thickness and place it.
@@ -91,12 +102,7 @@ def assemble(spec: StructureSpec, walls: list[WallPolygons], *, end_faces: list[
         for i, poly in enumerate(polys[w]):
             if i in end_faces[w] or abs(polygon_area(poly)) <= 0:
                 continue
-            ext_poly, planes = corner_clip_planes(poly, w, frames, cs)
-            solid: Polyhedron | None = prism(ext_poly, frames[w])
-            for point, normal in planes:
-                solid = clip_plan(solid, point, normal)
-                if solid is None:
-                    break
+            solid = brick_solid(poly, w, frames, cs)
             if solid is None:
                 continue
             bricks.append(Brick(id=len(bricks), wall=w, label=int(wp.ids[i]), polygon_m=poly, solid=solid,

@@ -41,6 +41,18 @@ def intersection_volume(p: Polyhedron, q: Polyhedron) -> float:
     return float(inter.volume()) if not inter.is_empty() else 0.0
 
 
+def _box_pairs(lo: np.ndarray, hi: np.ndarray, min_overlap: float):
+    """Pairs ``(i, j)``, i < j, of boxes ``[lo, hi]`` ``(N, 3)`` overlapping by more than
+    ``min_overlap`` along every axis (sweep and prune along x)."""
+    order = np.argsort(lo[:, 0], kind="stable")
+    for pos, i in enumerate(order):
+        for j in order[pos + 1:]:
+            if hi[i, 0] - lo[j, 0] <= min_overlap:
+                break
+            if np.all(np.minimum(hi[i], hi[j]) - np.maximum(lo[i], lo[j]) > min_overlap):
+                yield (int(i), int(j)) if i < j else (int(j), int(i))
+
+
 def _candidate_pairs(bricks: Sequence[Brick], eps: float) -> set[tuple[int, int]]:
     pairs: set[tuple[int, int]] = set()
     index = {b.id: k for k, b in enumerate(bricks)}
@@ -56,16 +68,7 @@ def _candidate_pairs(bricks: Sequence[Brick], eps: float) -> set[tuple[int, int]
     # across walls: global boxes that overlap by more than eps in every axis
     lo = np.array([b.solid.vertices.min(axis=0) for b in bricks])
     hi = np.array([b.solid.vertices.max(axis=0) for b in bricks])
-    wall = np.array([b.wall for b in bricks])
-    order = np.argsort(lo[:, 0], kind="stable")
-    for pos, i in enumerate(order):
-        for j in order[pos + 1:]:
-            if lo[j, 0] >= hi[i, 0] - eps:
-                break
-            if wall[i] == wall[j]:
-                continue
-            if np.all(np.minimum(hi[i], hi[j]) - np.maximum(lo[i], lo[j]) > eps):
-                pairs.add((int(min(i, j)), int(max(i, j))))
+    pairs.update((i, j) for i, j in _box_pairs(lo, hi, eps) if bricks[i].wall != bricks[j].wall)
     return pairs
 
 
@@ -157,34 +160,27 @@ def contact_patches(bricks: Sequence[Brick], *, max_gap_m: float = 0.03, min_are
     lo = np.array([b.solid.vertices.min(axis=0) for b in bricks]) - max_gap_m
     hi = np.array([b.solid.vertices.max(axis=0) for b in bricks]) + max_gap_m
     cos_tol = np.cos(np.radians(angle_deg))
-    order = np.argsort(lo[:, 0], kind="stable")
     out: list[ContactPatch] = []
-    for pos, i in enumerate(order):
-        for j in order[pos + 1:]:
-            if lo[j, 0] > hi[i, 0]:
-                break
-            if not np.all(np.minimum(hi[i], hi[j]) >= np.maximum(lo[i], lo[j])):
-                continue
-            a, b = (i, j) if i < j else (j, i)
-            best = None
-            for na, da, pa, basis in faces[a]:
-                for nb, db, pb, basis_b in faces[b]:
-                    if float(na @ nb) > -cos_tol:
-                        continue
-                    gap = -db - da  # distance from a's plane to b's plane along na (nb ~ -na)
-                    if gap < -1e-4 or gap > max_gap_m:
-                        continue
-                    # b's face in 3D, projected on a's plane basis
-                    inter = pa.intersection(shapely.transform(pb, lambda xy: (xy @ basis_b + db * nb) @ basis.T))
-                    if inter.area < min_area_m2:
-                        continue
-                    if best is None or inter.area > best[0]:
-                        c2 = np.asarray(inter.centroid.coords[0])
-                        c3 = c2 @ basis + (da + 0.5 * gap) * na
-                        best = (inter.area, na, c3, gap, inter)
-            if best is not None:
-                area, normal, centroid, gap, inter = best
-                out.append(ContactPatch(a=bricks[a].id, b=bricks[b].id, normal=normal, centroid=centroid,
-                                        area_m2=float(area), gap_m=float(gap), min_width_m=_min_width(inter)))
+    for a, b in _box_pairs(lo, hi, -1e-12):
+        best = None
+        for na, da, pa, basis in faces[a]:
+            for nb, db, pb, basis_b in faces[b]:
+                if float(na @ nb) > -cos_tol:
+                    continue
+                gap = -db - da  # distance from a's plane to b's plane along na (nb ~ -na)
+                if gap < -1e-4 or gap > max_gap_m:
+                    continue
+                # b's face in 3D, projected on a's plane basis
+                inter = pa.intersection(shapely.transform(pb, lambda xy: (xy @ basis_b + db * nb) @ basis.T))
+                if inter.area < min_area_m2:
+                    continue
+                if best is None or inter.area > best[0]:
+                    c2 = np.asarray(inter.centroid.coords[0])
+                    c3 = c2 @ basis + (da + 0.5 * gap) * na
+                    best = (inter.area, na, c3, gap, inter)
+        if best is not None:
+            area, normal, centroid, gap, inter = best
+            out.append(ContactPatch(a=bricks[a].id, b=bricks[b].id, normal=normal, centroid=centroid,
+                                    area_m2=float(area), gap_m=float(gap), min_width_m=_min_width(inter)))
     out.sort(key=lambda c: (c.a, c.b))
     return out

@@ -231,7 +231,8 @@ def _run_once(scene: Scene, *, breaking: bool, progress, record: bool, desc: str
     plate_pos = np.zeros((n, 3))
 
     bodies_col = bpy.data.collections["Bricks"]
-    order = np.array([objects.index(ob) for ob in bodies_col.objects]) if nb else np.zeros(0, int)
+    position = {ob.name: j for j, ob in enumerate(objects)}
+    order = np.array([position[ob.name] for ob in bodies_col.objects], dtype=int)
     buf = np.zeros(nb * 16, dtype=np.float32)
     mats = np.zeros((n, nb, 4, 4), dtype=np.float32)
 

@@ -38,10 +38,9 @@ from typing import Sequence
 import numpy as np
 import shapely
 
-from ..build3d.assemble import Brick
-from ..build3d.bond import corner_clip_planes
+from ..build3d.assemble import Brick, brick_solid
 from ..build3d.contacts import ContactPatch, contact_patches
-from ..build3d.extrude import Polyhedron, clip_plan, prism
+from ..build3d.extrude import Polyhedron
 from ..build3d.place import Corner, WallFrame
 from ..errors import InputError
 from .ground_motion import GroundMotion
@@ -159,11 +158,7 @@ def _grown_solid(brick: Brick, frames: list[WallFrame], corners: list[Corner], g
     change = hull.area / poly.area - 1.0 if poly.area > 0 else 0.0
     if grow > 0:
         hull = hull.buffer(grow, join_style="mitre", mitre_limit=3.0)
-    pts = np.asarray(hull.exterior.coords)[:-1]
-    ext, planes = corner_clip_planes(pts, brick.wall, frames, corners)
-    solid: Polyhedron | None = prism(ext, frames[brick.wall])
-    for point, normal in planes:
-        solid = clip_plan(solid, point, normal) if solid is not None else None
+    solid = brick_solid(np.asarray(hull.exterior.coords)[:-1], brick.wall, frames, corners)
     return (solid if solid is not None else brick.solid), change
 
 

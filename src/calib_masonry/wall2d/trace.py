@@ -205,11 +205,11 @@ def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[Trace
             break
         results = refine_polygons(labels, ids, starts, config.refine, alternatives=alts)
         still = []
-        for i, r, sd in zip(usable, results, split_dice):
+        for i, r, sd, start in zip(usable, results, split_dice, starts):
             k, region, outline, offset = items[i]
             prev = best.get(i)
             if prev is None or r.dice > prev[1] + 1e-12:
-                best[i] = (r.vertices_xy, r.dice, sd, r.refined, r.reason, starts[usable.index(i)])
+                best[i] = (r.vertices_xy, r.dice, sd, r.refined, r.reason, start)
             if config.target_dice is not None and r.dice < config.target_dice:
                 still.append(i)
         pending = still

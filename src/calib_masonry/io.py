@@ -12,16 +12,29 @@ import os
 import shutil
 import tempfile
 import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from .errors import InputError
 
-__all__ = ["read_mask", "write_mask", "write_json", "read_json", "staged_output", "staged_file",
-           "xy_from_rc", "rc_from_xy", "warn"]
+__all__ = [
+    "Photo",
+    "rc_from_xy",
+    "read_json",
+    "read_mask",
+    "read_photo",
+    "staged_file",
+    "staged_output",
+    "warn",
+    "write_json",
+    "write_mask",
+    "xy_from_rc",
+]
 
 
 def warn(message: str) -> None:
@@ -167,3 +180,65 @@ def staged_file(path: str | Path) -> Iterator[Path]:
         tmp_path.unlink(missing_ok=True)
         raise
     os.replace(tmp_path, path)
+
+
+@dataclass(frozen=True)
+class Photo:
+    """An RGB photo in [0, 1] with what its EXIF says about the camera."""
+
+    path: Path
+    rgb: np.ndarray  # (rows, cols, 3) float32
+    focal_px: float | None  # from FocalLength x FocalPlaneXResolution, or the 35 mm equivalent
+    heading_deg: float | None  # GPSImgDirection
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return int(self.rgb.shape[1]), int(self.rgb.shape[0])
+
+
+_PLANE_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}
+
+
+def _exif_camera(im) -> tuple[float | None, float | None]:
+    import math
+
+    try:
+        exif = im.getexif()
+        sub = exif.get_ifd(0x8769)
+        gps = exif.get_ifd(0x8825)
+    except Exception:  # noqa: BLE001 - a broken EXIF block only means no EXIF
+        return None, None
+    w, h = im.size
+    focal = None
+    fl, res, unit = sub.get(0x920A), sub.get(0xA20E), sub.get(0xA210, 2)
+    try:
+        if fl and res and int(unit) in _PLANE_UNIT_MM and float(fl) > 0 and float(res) > 0:
+            focal = float(fl) * float(res) * _PLANE_UNIT_MM[int(unit)]
+        elif sub.get(0xA405):
+            focal = float(sub[0xA405]) * math.hypot(w, h) / math.hypot(36.0, 24.0)
+    except (TypeError, ValueError, ZeroDivisionError):
+        focal = None
+    heading = None
+    try:
+        if 17 in gps:
+            heading = float(gps[17]) % 360.0
+    except (TypeError, ValueError, ZeroDivisionError):
+        heading = None
+    return focal, heading
+
+
+def read_photo(path: str | Path, *, field: str = "PHOTO") -> Photo:
+    """Read a colour photo (JPEG, PNG, TIFF) and its EXIF focal length and compass heading."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{field} {path}: file not found; check the path")
+    try:
+        with Image.open(path) as im:
+            im.load()
+            focal, heading = _exif_camera(im)
+            rgb = np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        raise InputError(f"{field} {path}: cannot be read as an image ({exc}); give a JPEG, PNG or TIFF photo") from None
+    if min(rgb.shape[:2]) < 32:
+        raise InputError(f"{field} {path}: image is only {rgb.shape[1]} x {rgb.shape[0]} px; give the full photo")
+    return Photo(path=path, rgb=rgb, focal_px=focal, heading_deg=heading)

@@ -1,0 +1,121 @@
+"""A pinhole camera looking at a wall: rotations, the image-from-wall homography and its pieces.
+
+Frames. Wall: x along the wall from its lower-left corner (seen from outside), z up, y into the
+wall, so the outer face is the plane y = 0 and a camera outside has y < 0. Camera (OpenCV): x
+right, y down, z forward. Image: (x = column, y = row) pixels, origin top-left, pixel centres at
+integers. The principal point is the image centre ``((w - 1) / 2, (h - 1) / 2)``.
+
+Angles (radians inside, degrees only in files): at yaw = pitch = roll = 0 the camera looks
+straight at the wall along +y with its image rows horizontal. ``yaw`` turns the view towards +x
+(the camera's forward direction is ``(sin yaw cos pitch, cos yaw cos pitch, sin pitch)`` in the
+wall frame), ``pitch`` tilts it up, ``roll`` turns the image about the optical axis.
+
+Every function takes ``xp`` (numpy or jax.numpy) so the same formulas serve the synthetic renderer
+(numpy) and the differentiable fit (JAX).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "PARAM_NAMES",
+    "angles_from_rotation",
+    "focal_px_from_35mm",
+    "heading_from_theta",
+    "image_from_wall_homography",
+    "intrinsics",
+    "normalise_homography",
+    "principal_point",
+    "project",
+    "theta_from_heading",
+    "wall_from_camera_rotation",
+]
+
+#: The calibration parameter vector, in this order (SI and radians).
+PARAM_NAMES = ("focal_px", "yaw_rad", "pitch_rad", "roll_rad", "cx_m", "cy_m", "cz_m", "width_m", "height_m")
+
+
+def principal_point(image_size: tuple[int, int]) -> tuple[float, float]:
+    """Image centre of an image ``(width, height)`` in pixels."""
+    w, h = image_size
+    return (w - 1) / 2.0, (h - 1) / 2.0
+
+
+def intrinsics(focal_px, pp, xp=np):
+    return xp.array([[focal_px, 0.0, pp[0]], [0.0, focal_px, pp[1]], [0.0, 0.0, 1.0]])
+
+
+def _rz(a, xp):
+    c, s = xp.cos(a), xp.sin(a)
+    return xp.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _rx(a, xp):
+    c, s = xp.cos(a), xp.sin(a)
+    return xp.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+# Columns: the camera's x, y, z axes in the wall frame when it looks straight at the wall.
+_WALL_FROM_CAMERA_0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+def wall_from_camera_rotation(yaw, pitch, roll, xp=np):
+    """Rotation whose columns are the camera axes in the wall frame (``X_wall = R X_cam + C``)."""
+    return _rz(-yaw, xp) @ _rx(pitch, xp) @ xp.asarray(_WALL_FROM_CAMERA_0) @ _rz(roll, xp)
+
+
+def image_from_wall_homography(params, pp, xp=np):
+    """3x3 map of homogeneous wall points ``(x, z, 1)`` (metres) to homogeneous pixels.
+
+    ``params`` follows :data:`PARAM_NAMES`; W and H are not used (they size the wall, not the map).
+    """
+    f, yaw, pitch, roll = params[0], params[1], params[2], params[3]
+    centre = xp.stack([params[4], params[5], params[6]])
+    camera_from_wall = wall_from_camera_rotation(yaw, pitch, roll, xp).T
+    k = intrinsics(f, pp, xp)
+    cols = xp.stack([camera_from_wall[:, 0], camera_from_wall[:, 2], -camera_from_wall @ centre], axis=1)
+    return k @ cols
+
+
+def project(h, xz, xp=np):
+    """Apply a 3x3 homography to points ``(..., 2)``."""
+    pts = xp.concatenate([xz, xp.ones(xz.shape[:-1] + (1,))], axis=-1) @ h.T
+    return pts[..., :2] / pts[..., 2:3]
+
+
+def normalise_homography(h: np.ndarray) -> np.ndarray:
+    """Scale a homography to unit Frobenius norm with a positive (2, 2) entry (for comparisons)."""
+    h = np.asarray(h, dtype=np.float64)
+    h = h / np.linalg.norm(h)
+    return h if h[2, 2] >= 0 else -h
+
+
+def angles_from_rotation(r_wall_from_camera: np.ndarray) -> tuple[float, float, float]:
+    """(yaw, pitch, roll) in radians of a wall-from-camera rotation (inverse of the constructor)."""
+    fwd = r_wall_from_camera[:, 2]
+    pitch = math.asin(float(np.clip(fwd[2], -1.0, 1.0)))
+    yaw = math.atan2(float(fwd[0]), float(fwd[1]))
+    no_roll = wall_from_camera_rotation(yaw, pitch, 0.0)
+    rz = no_roll.T @ r_wall_from_camera
+    roll = math.atan2(float(rz[1, 0]), float(rz[0, 0]))
+    return yaw, pitch, roll
+
+
+def heading_from_theta(theta_rad: float, yaw_rad: float) -> float:
+    """Compass heading (radians clockwise from north = global +Y) of a camera with this yaw in front
+    of a wall whose x axis points ``theta`` counter-clockwise from global X."""
+    return (yaw_rad - theta_rad) % (2 * math.pi)
+
+
+def theta_from_heading(heading_rad: float, yaw_rad: float) -> float:
+    """The wall's theta (radians, in [0, 2 pi)) from a camera heading and the fitted yaw."""
+    return (yaw_rad - heading_rad) % (2 * math.pi)
+
+
+def focal_px_from_35mm(focal_35mm: float, image_size: tuple[int, int]) -> float:
+    """Focal length in pixels from a 35 mm-equivalent focal length (diagonal convention)."""
+    w, h = image_size
+    return focal_35mm * math.hypot(w, h) / math.hypot(36.0, 24.0)

@@ -1,0 +1,103 @@
+"""Figures of the calibration: the photo with the fitted outline and joint lines, and the orthophoto."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .camera import project
+
+__all__ = ["plot_calibration", "plot_footprint"]
+
+
+def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
+    """Left: the photo, the fitted wall outline (green), the clicked or detected corners (red),
+    bed (orange) and head (cyan) joint segments used by the fit, the vanishing directions.
+    Right: the rectified orthophoto with a 1 m grid."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
+
+    res = cal.result
+    rgb = cal.photo.rgb
+    step = max(1, math.ceil(max(rgb.shape[:2]) / 1600))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(14, 7.5), gridspec_kw={"width_ratios": [1, 1]})
+    a.imshow(rgb[::step, ::step], extent=(-0.5, rgb.shape[1] - 0.5, rgb.shape[0] - 0.5, -0.5))
+    h = res.image_from_wall
+    w_m, h_m = res.width_m, res.height_m
+    # fitted outline, and 1 m grid lines of the wall drawn through the camera
+    t = np.linspace(0, 1, 50)
+    edge = np.concatenate([np.c_[t * w_m, 0 * t], np.c_[w_m + 0 * t, t * h_m], np.c_[(1 - t) * w_m, h_m + 0 * t],
+                           np.c_[0 * t, (1 - t) * h_m]])
+    e = project(h, edge)
+    a.plot(e[:, 0], e[:, 1], "-", color="lime", lw=1.2, label="fitted outline")
+    grid = [project(h, np.array([[x, 0], [x, h_m]])) for x in np.arange(1.0, w_m, 1.0)]
+    grid += [project(h, np.array([[0, z], [w_m, z]])) for z in np.arange(1.0, h_m, 1.0)]
+    a.add_collection(LineCollection(grid, colors="white", linewidths=0.5, alpha=0.7, label="fitted 1 m grid"))
+    if cal.detection is not None:
+        c = cal.detection.corners_px
+        lab = "detected corners"
+    else:
+        c = res.corners_px()
+        lab = "clicked corners (fitted)"
+    a.plot(c[:, 0], c[:, 1], "o", mfc="none", mec="red", ms=9, label=lab)
+    det = cal.detection
+    if det is not None:
+        for seg, col, name in ((det.bed_segments, "orange", "bed joints"), (det.head_segments, "cyan", "head joints")):
+            if len(seg):
+                a.add_collection(LineCollection(seg.reshape(-1, 2, 2), colors=col, linewidths=0.6,
+                                                label=f"{name} ({len(seg)})"))
+    a.set_xlim(-0.5, rgb.shape[1] - 0.5)
+    a.set_ylim(rgb.shape[0] - 0.5, -0.5)
+    a.legend(loc="lower left", fontsize=7, framealpha=0.8)
+    cam = res.camera_json()
+    a.set_title(f"{cal.photo.path.name}: {cal.mode}, f = {cam['focal_px']:.0f} px ({cal.focal_source}), "
+                f"yaw {cam['yaw_deg']:.1f}, pitch {cam['pitch_deg']:.1f}, roll {cam['roll_deg']:.1f} deg\n"
+                f"RMS residual {res.rms_residual_px:.2f} px, {res.status}", fontsize=9)
+    rows, cols = rect.shape[:2]
+    b.imshow(np.clip(rect, 0, 1), extent=(0, w_m, 0, h_m))
+    for x in np.arange(1.0, w_m, 1.0):
+        b.axvline(x, color="white", lw=0.5, alpha=0.7)
+    for z in np.arange(1.0, h_m, 1.0):
+        b.axhline(z, color="white", lw=0.5, alpha=0.7)
+    b.set_xlabel("x along the wall [m]")
+    b.set_ylabel("z [m]")
+    b.set_title(f"orthophoto {cols} x {rows} px: W = {w_m:.3f} +- {res.sigma('width_m'):.3f} m, "
+                f"H = {h_m:.3f} +- {res.sigma('height_m'):.3f} m", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_footprint(widths, thetas, adjusted_w, adjusted_t, names, path: Path, *, title: str = "") -> None:
+    """Plan view of the footprint from the per-wall estimates (dashed, not closing) and after the
+    closure-constrained fit (solid)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def walk(w, t):
+        steps = np.c_[np.cos(t) * w, np.sin(t) * w]
+        return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])
+
+    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    p0, p1 = walk(np.asarray(widths), np.asarray(thetas)), walk(np.asarray(adjusted_w), np.asarray(adjusted_t))
+    ax.plot(p0[:, 0], p0[:, 1], "--o", color="tab:red", ms=3, label="per-wall estimates")
+    ax.plot(p1[:, 0], p1[:, 1], "-o", color="tab:blue", ms=3, label="closure fit")
+    for i, n in enumerate(names):
+        m = (p1[i] + p1[i + 1]) / 2
+        ax.annotate(n, m, fontsize=8, ha="center")
+    gap = np.linalg.norm(p0[-1] - p0[0])
+    ax.set_aspect("equal")
+    ax.legend(fontsize=8)
+    ax.set_xlabel("X [m]")
+    ax.set_ylabel("Y [m]")
+    ax.set_title(f"{title}\nestimates leave a {gap * 1000:.0f} mm gap; the fit closes it".strip(), fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

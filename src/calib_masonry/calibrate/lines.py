@@ -1,0 +1,380 @@
+"""Automatic mode: find the wall's outline and its mortar-joint lines in a photo.
+
+1. Line segments: Canny edges and a probabilistic Hough transform (scikit-image) on a copy of the
+   photo shrunk to ``work_long_side_px``.
+2. Two families: roughly horizontal segments (bed joints, the wall's top and base) and roughly
+   vertical ones (head joints, the wall's ends). For each family a vanishing point by RANSAC over
+   segment pairs (inlier: both endpoints within ``vp_inlier_px`` of the line from the segment's midpoint to
+   the candidate), refined by
+   weighted least squares over the inliers.
+3. A projective map that sends both vanishing points to infinity makes bed joints horizontal and
+   head joints vertical. There the wall is an axis-aligned rectangle: its ends are the outermost
+   head-family segments of the densest run, its top and base the outermost bed-family segments
+   within those ends (the horizon, which also points at the bed vanishing point, lies outside them).
+4. Each side of that quadrilateral is refined in the full-size photo: colour-gradient maxima on
+   profiles across the side, a robust line fit, and the corners as intersections of adjacent sides.
+
+The result gives the fit its four corners and every joint segment inside the wall.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from ..errors import FitFailed
+from .fit import order_corners
+
+__all__ = ["DetectConfig", "Detection", "detect_wall", "segments_in_quad"]
+
+
+@dataclass(frozen=True)
+class DetectConfig:
+    work_long_side_px: int = 1400
+    canny_sigma: float = 1.2
+    min_length_px: int = 12  # at the working size
+    line_gap_px: int = 4
+    hough_threshold: int = 8
+    horizontal_max_deg: float = 45.0
+    vertical_max_deg: float = 30.0
+    vp_inlier_px: float = 1.0  # endpoint distance from the line to the vanishing point, working px
+    ransac_iterations: int = 400
+    refine_halfwidth_px: float | None = None  # full-size px of the coarse pass; default 6 working px
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Detection:
+    corners_px: np.ndarray  # (4, 2) LL, LR, UR, UL in full-size pixels
+    bed_segments: np.ndarray  # (n, 4)
+    head_segments: np.ndarray  # (m, 4)
+    vp_bed: np.ndarray  # homogeneous, full-size pixels
+    vp_head: np.ndarray
+    n_segments: int
+
+
+def _hough_segments(gray: np.ndarray, cfg: DetectConfig) -> np.ndarray:
+    """Hough segments, each re-fitted (total least squares) to the edge pixels along it.
+
+    The Hough transform quantises a segment's angle to its accumulator's 1 degree bins; the refit
+    removes that bias, which the vanishing points and the joint-line residuals would inherit."""
+    from skimage.feature import canny
+    from skimage.transform import probabilistic_hough_line
+
+    edges = canny(gray, sigma=cfg.canny_sigma, low_threshold=0.03, high_threshold=0.08)
+    segs = probabilistic_hough_line(edges, threshold=cfg.hough_threshold, line_length=cfg.min_length_px,
+                                    line_gap=cfg.line_gap_px, rng=cfg.seed)
+    # sub-pixel edge positions: the gradient-magnitude peak across each edge pixel (a parabola
+    # through three samples along the gradient); integer pixels would bias near-axis lines
+    # towards exactly horizontal or vertical
+    sm = ndimage.gaussian_filter(gray, cfg.canny_sigma)
+    gx, gy = ndimage.sobel(sm, axis=1), ndimage.sobel(sm, axis=0)
+    mag = np.hypot(gx, gy)
+    ey, ex = np.nonzero(edges)
+    nx, ny = gx[ey, ex], gy[ey, ex]
+    nn = np.hypot(nx, ny) + 1e-12
+    nx, ny = nx / nn, ny / nn
+    m0 = mag[ey, ex]
+    mp = ndimage.map_coordinates(mag, [ey + ny, ex + nx], order=1, mode="nearest")
+    mm = ndimage.map_coordinates(mag, [ey - ny, ex - nx], order=1, mode="nearest")
+    den = mm - 2 * m0 + mp
+    delta = np.clip(np.where(den < -1e-12, 0.5 * (mm - mp) / np.where(den < -1e-12, den, -1.0), 0.0), -0.5, 0.5)
+    sub = np.zeros(edges.shape + (2,))
+    sub[ey, ex, 0] = ex + delta * nx
+    sub[ey, ex, 1] = ey + delta * ny
+    out = []
+    rows, cols = edges.shape
+    for (x0, y0), (x1, y1) in segs:
+        a, b = np.array([x0, y0], float), np.array([x1, y1], float)
+        lo = np.maximum(np.floor(np.minimum(a, b)) - 2, 0).astype(int)
+        hi = np.minimum(np.ceil(np.maximum(a, b)) + 3, [cols, rows]).astype(int)
+        yy, xx = np.nonzero(edges[lo[1]:hi[1], lo[0]:hi[0]])
+        pts = sub[yy + lo[1], xx + lo[0]]
+        d = b - a
+        length = np.linalg.norm(d)
+        d /= length
+        rel = pts - a
+        along = rel @ d
+        perp = rel @ np.array([-d[1], d[0]])
+        near = (np.abs(perp) <= 1.0) & (along >= -0.5) & (along <= length + 0.5)
+        if near.sum() >= max(5, 0.6 * length):
+            q = pts[near]
+            c = q.mean(axis=0)
+            _, _, vt = np.linalg.svd(q - c)
+            e = vt[0] if vt[0] @ d >= 0 else -vt[0]
+            a, b = c + ((a - c) @ e) * e, c + ((b - c) @ e) * e
+        out.append([a[0], a[1], b[0], b[1]])
+    return np.array(out, dtype=np.float64).reshape(-1, 4)
+
+
+def _lines(seg: np.ndarray) -> np.ndarray:
+    p1 = np.c_[seg[:, :2], np.ones(len(seg))]
+    p2 = np.c_[seg[:, 2:], np.ones(len(seg))]
+    ln = np.cross(p1, p2)
+    return ln / np.linalg.norm(ln[:, :2], axis=1, keepdims=True)
+
+
+def _dist_to_vp(seg: np.ndarray, vp: np.ndarray) -> np.ndarray:
+    """Distance of each segment's endpoints from the line through its midpoint and ``vp``."""
+    mid = (seg[:, :2] + seg[:, 2:]) / 2
+    d = seg[:, 2:] - seg[:, :2]
+    to = vp[:2][None, :] - mid * vp[2]
+    cross = d[:, 0] * to[:, 1] - d[:, 1] * to[:, 0]
+    return 0.5 * np.abs(cross) / (np.linalg.norm(to, axis=1) + 1e-300)
+
+
+def _vanishing_point(seg: np.ndarray, tol: float, cfg: DetectConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """RANSAC + weighted least squares. Returns (vp, inlier mask); coordinates as given."""
+    if len(seg) < 3:
+        raise FitFailed("automatic mode: too few joint lines found to locate a vanishing point")
+    lines = _lines(seg)
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    prob = length / length.sum()
+    best, best_score = None, -1.0
+    for _ in range(cfg.ransac_iterations):
+        i, j = rng.choice(len(seg), size=2, replace=False, p=prob)
+        vp = np.cross(lines[i], lines[j])
+        if not np.all(np.isfinite(vp)) or np.linalg.norm(vp) == 0:
+            continue
+        inl = _dist_to_vp(seg, vp) < tol
+        score = float(length[inl].sum())
+        if score > best_score:
+            best, best_score = vp, score
+    inl = _dist_to_vp(seg, best) < tol
+    for _ in range(3):
+        w = np.sqrt(length[inl])
+        _, _, vt = np.linalg.svd(lines[inl] * w[:, None])
+        vp = vt[-1]
+        inl = _dist_to_vp(seg, vp) < tol
+    return vp, inl
+
+
+def _densest_run(pos: np.ndarray, weight: np.ndarray, trim: float = 0.015) -> tuple[float, float]:
+    """The extent of the heaviest run of ``pos`` (no gap wider than 12 % of the spread), with
+    ``trim`` of its total weight cut from either end: a stray short segment beyond the wall's edge
+    is dropped, the wall's long outline edge is kept."""
+    order = np.argsort(pos)
+    p, w = pos[order], weight[order]
+    spread = np.percentile(p, 95) - np.percentile(p, 5)
+    gap = max(0.12 * spread, 1e-9)
+    best, best_w, start = (0, 1), -1.0, 0
+    for k in range(1, len(p) + 1):
+        if k == len(p) or p[k] - p[k - 1] > gap:
+            total = float(w[start:k].sum())
+            if total > best_w:
+                best, best_w = (start, k), total
+            start = k
+    p, w = p[best[0]:best[1]], w[best[0]:best[1]]
+    cum = np.cumsum(w) / w.sum()
+    lo = int(np.searchsorted(cum, trim, side="right"))
+    hi = int(np.searchsorted(cum, 1.0 - trim, side="left"))
+    return float(p[min(lo, len(p) - 1)]), float(p[min(max(hi, lo), len(p) - 1)])
+
+
+def _refine_side(rgb_s: np.ndarray, a: np.ndarray, b: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Sub-pixel line (point, direction) of the strongest colour edge along the side a-b."""
+    d = b - a
+    length = float(np.linalg.norm(d))
+    if length < 10:
+        return None
+    d = d / length
+    n = np.array([-d[1], d[0]])
+    ts = np.linspace(0.08, 0.92, max(20, int(length / 6)))
+    offs = np.arange(-half, half + 0.25, 0.5)
+    pts = a[None, None, :] + ts[:, None, None] * (b - a)[None, None, :] + offs[None, :, None] * n[None, None, :]
+    coords = [pts[..., 1].ravel(), pts[..., 0].ravel()]
+    prof = np.stack([ndimage.map_coordinates(rgb_s[..., c], coords, order=1, mode="nearest")
+                     for c in range(3)], axis=-1).reshape(len(ts), len(offs), 3)
+    grad = np.linalg.norm(np.diff(prof, axis=1), axis=-1)  # between samples
+    k = np.argmax(grad, axis=1)
+    kk = np.clip(k, 1, grad.shape[1] - 2)
+    g0, g1, g2 = grad[np.arange(len(ts)), kk - 1], grad[np.arange(len(ts)), kk], grad[np.arange(len(ts)), kk + 1]
+    den = g0 - 2 * g1 + g2
+    frac = np.where(np.abs(den) > 1e-12, 0.5 * (g0 - g2) / np.where(np.abs(den) > 1e-12, den, 1.0), 0.0)
+    off = offs[0] + 0.5 * (kk + np.clip(frac, -0.5, 0.5)) + 0.25
+    edge = a[None, :] + ts[:, None] * (b - a)[None, :] + off[:, None] * n[None, :]
+    keep = np.ones(len(ts), dtype=bool)
+    for _ in range(3):
+        c = edge[keep].mean(axis=0)
+        _, _, vt = np.linalg.svd(edge[keep] - c)
+        dirn = vt[0]
+        nn = np.array([-dirn[1], dirn[0]])
+        r = (edge - c) @ nn
+        mad = np.median(np.abs(r[keep])) + 0.05
+        keep = np.abs(r) < 3.0 * 1.4826 * mad
+        if keep.sum() < 5:
+            return None
+    c = edge[keep].mean(axis=0)
+    _, _, vt = np.linalg.svd(edge[keep] - c)
+    return c, vt[0]
+
+
+def _intersect(l1, l2) -> np.ndarray:
+    (c1, d1), (c2, d2) = l1, l2
+    m = np.array([d1, -d2]).T
+    t = np.linalg.solve(m, c2 - c1)
+    return c1 + t[0] * d1
+
+
+def _wall_mask(rgb_small: np.ndarray, quad: np.ndarray) -> np.ndarray:
+    """Pixels whose colour is likelier under the wall's colours than under the surroundings'."""
+    from matplotlib.path import Path as MplPath
+    from skimage.measure import label
+
+    rows, cols = rgb_small.shape[:2]
+    c = quad.mean(axis=0)
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    pts = np.c_[xx.ravel(), yy.ravel()]
+    inner = MplPath(c + (quad - c) * 0.85).contains_points(pts).reshape(rows, cols)
+    outer = ~MplPath(c + (quad - c) * 1.15).contains_points(pts).reshape(rows, cols)
+    bins = 16
+    idx = np.clip((rgb_small * bins).astype(int), 0, bins - 1)
+    flat = (idx[..., 0] * bins + idx[..., 1]) * bins + idx[..., 2]
+    h_wall = np.bincount(flat[inner], minlength=bins**3) + 1.0
+    h_bg = np.bincount(flat[outer], minlength=bins**3) + 1.0
+    ratio = np.log(h_wall / h_wall.sum()) - np.log(h_bg / h_bg.sum())
+    score = ndimage.gaussian_filter(ratio[flat], 2.0)
+    wall = ndimage.binary_fill_holes(score > 0)
+    lab = label(wall)
+    centre_label = lab[round(np.clip(c[1], 0, rows - 1)), round(np.clip(c[0], 0, cols - 1))]
+    if centre_label == 0:
+        return wall
+    return lab == centre_label
+
+
+def _snap_to_mask(mask: np.ndarray, quad: np.ndarray) -> np.ndarray | None:
+    """Move each side of ``quad`` onto the mask's boundary (a robust line through the crossings)."""
+    size = float(np.max(np.ptp(quad, axis=0)))
+    reach = 0.15 * size
+    lines = []
+    for i in range(4):
+        a, b = quad[i], quad[(i + 1) % 4]
+        d = (b - a) / np.linalg.norm(b - a)
+        n = np.array([d[1], -d[0]])  # outward for a counter-clockwise (y-up) quad: checked below
+        if (a + b) / 2 @ n - quad.mean(axis=0) @ n < 0:
+            n = -n
+        steps = np.arange(-reach, reach, 0.5)
+        pts = []
+        for t in np.linspace(0.1, 0.9, 40):
+            line = a + t * (b - a) + steps[:, None] * n
+            inside = ndimage.map_coordinates(mask.astype(float), [line[:, 1], line[:, 0]], order=1, mode="constant") > 0.5
+            change = np.nonzero(inside[:-1] & ~inside[1:])[0]  # wall -> outside, going outwards
+            if len(change):
+                k = change[np.argmin(np.abs(steps[change]))]
+                pts.append(line[k] + 0.25 * n)
+        if len(pts) < 8:
+            return None
+        pts = np.array(pts)
+        keep = np.ones(len(pts), dtype=bool)
+        for _ in range(3):
+            c = pts[keep].mean(axis=0)
+            _, _, vt = np.linalg.svd(pts[keep] - c)
+            r = (pts - c) @ np.array([-vt[0][1], vt[0][0]])
+            keep = np.abs(r) < max(1.0, 3.0 * 1.4826 * np.median(np.abs(r[keep])))
+        c = pts[keep].mean(axis=0)
+        _, _, vt = np.linalg.svd(pts[keep] - c)
+        lines.append((c, vt[0]))
+    try:
+        return np.array([_intersect(lines[(i - 1) % 4], lines[i]) for i in range(4)])
+    except np.linalg.LinAlgError:
+        return None
+
+
+def segments_in_quad(seg: np.ndarray, quad: np.ndarray, shrink: float = 0.01) -> np.ndarray:
+    """Segments whose both endpoints lie inside the quadrilateral (shrunk towards its centre)."""
+    from matplotlib.path import Path as MplPath
+
+    c = quad.mean(axis=0)
+    path = MplPath(c + (quad - c) * (1 - shrink))
+    inside = path.contains_points(seg[:, :2]) & path.contains_points(seg[:, 2:])
+    return seg[inside]
+
+
+def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detection:
+    """Find the wall's corners and joint segments in an RGB photo ``(rows, cols, 3)`` in [0, 1]."""
+    from skimage.transform import rescale
+
+    rows, cols = rgb.shape[:2]
+    s = min(1.0, config.work_long_side_px / max(rows, cols))
+    gray = rgb.mean(axis=-1)
+    small = rescale(gray, s, anti_aliasing=True) if s < 1 else gray
+    seg = _hough_segments(small, config)
+    if len(seg) < 8:
+        raise FitFailed("automatic mode: no wall found (almost no straight edges in the photo); click the corners "
+                        "with --corners x1,y1,...,x4,y4")
+    ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
+    from_h = np.minimum(ang, 180.0 - ang)
+    horiz = seg[from_h < config.horizontal_max_deg]
+    vert = seg[np.abs(ang - 90.0) < config.vertical_max_deg]
+    rng = np.random.default_rng(config.seed)
+    # work in centred coordinates scaled by the size (well-conditioned homogeneous algebra)
+    centre = np.array([small.shape[1] - 1, small.shape[0] - 1]) / 2.0
+    scale = float(max(small.shape))
+
+    def norm(sg):
+        return np.c_[(sg[:, :2] - centre) / scale, (sg[:, 2:] - centre) / scale]
+
+    hn, vn = norm(horiz), norm(vert)
+    try:
+        vp_b, inl_b = _vanishing_point(hn, config.vp_inlier_px / scale, config, rng)
+        vp_h, inl_h = _vanishing_point(vn, config.vp_inlier_px / scale, config, rng)
+    except FitFailed:
+        raise FitFailed("automatic mode: no wall found (too few horizontal or vertical joint lines); click the "
+                        "corners with --corners x1,y1,...,x4,y4") from None
+    bed, head = hn[inl_b], vn[inl_h]
+    if len(bed) < 4 or len(head) < 4:
+        raise FitFailed("automatic mode: no wall found (too few mortar-joint lines agree on a wall plane); click the "
+                        "corners with --corners x1,y1,...,x4,y4")
+    # rectify: vp_b -> (1, 0, 0), vp_h -> (0, 1, 0)
+    o = np.array([0.0, 0.0, 1.0])
+    vanishing_line = np.cross(vp_b, vp_h)
+    if abs(vanishing_line @ o) < 1e-12:
+        raise FitFailed("automatic mode: the wall's vanishing line passes through the image centre; click the corners")
+    p = np.stack([np.cross(vp_h, o), np.cross(vp_b, o), vanishing_line])
+
+    def rect(pts):
+        q = np.c_[pts, np.ones(len(pts))] @ p.T
+        return q[:, :2] / q[:, 2:3]
+
+    b1, b2, h1, h2 = rect(bed[:, :2]), rect(bed[:, 2:]), rect(head[:, :2]), rect(head[:, 2:])
+    head_u = (h1[:, 0] + h2[:, 0]) / 2
+    head_len = np.abs(h2[:, 1] - h1[:, 1])
+    u0, u1 = _densest_run(head_u, head_len)
+    bed_mid_u = (b1[:, 0] + b2[:, 0]) / 2
+    inside = (bed_mid_u > u0) & (bed_mid_u < u1)
+    if inside.sum() < 3:
+        raise FitFailed("automatic mode: no wall found (joint lines do not outline a wall); click the corners")
+    bed_v = ((b1[:, 1] + b2[:, 1]) / 2)[inside]
+    v0, v1 = _densest_run(bed_v, np.abs(b2[:, 0] - b1[:, 0])[inside])
+    quad_r = np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]])
+    q = np.c_[quad_r, np.ones(4)] @ np.linalg.inv(p).T
+    quad_n = q[:, :2] / q[:, 2:3]
+    to_full = lambda pts: (pts * scale + centre + 0.5) / s - 0.5
+    # snap the sides to where the wall's colours end (joint-free strips at the edges, weak edges)
+    rgb_small = np.stack([rescale(rgb[..., k], s, anti_aliasing=True) if s < 1 else rgb[..., k] for k in range(3)], -1)
+    quad_small = order_corners(quad_n * scale + centre, where="automatic mode")
+    snapped = _snap_to_mask(_wall_mask(rgb_small, quad_small), quad_small)
+    if snapped is not None and np.max(np.linalg.norm(snapped - quad_small, axis=1)) < 0.2 * scale:
+        quad_small = snapped
+    quad = order_corners((quad_small + 0.5) / s - 0.5, where="automatic mode")
+    # refine each side in the full photo
+    rgb_s = ndimage.gaussian_filter(rgb, (0.7, 0.7, 0))
+    for half in (config.refine_halfwidth_px or 6.0 / s, 2.5 / s):  # coarse, then fine
+        sides = [_refine_side(rgb_s, quad[i], quad[(i + 1) % 4], half) for i in range(4)]
+        if any(sd is None for sd in sides):
+            break
+        try:
+            refined = np.array([_intersect(sides[(i - 1) % 4], sides[i]) for i in range(4)])
+        except np.linalg.LinAlgError:
+            break
+        if np.max(np.linalg.norm(refined - quad, axis=1)) > 4 * half:
+            break
+        quad = order_corners(refined, where="automatic mode")
+    bed_full = np.c_[to_full(bed[:, :2]), to_full(bed[:, 2:])]
+    head_full = np.c_[to_full(head[:, :2]), to_full(head[:, 2:])]
+    unscale = np.array([[scale / s, 0, (centre[0] + 0.5) / s - 0.5], [0, scale / s, (centre[1] + 0.5) / s - 0.5], [0, 0, 1.0]])
+    return Detection(corners_px=quad, bed_segments=segments_in_quad(bed_full, quad),
+                     head_segments=segments_in_quad(head_full, quad), vp_bed=unscale @ vp_b, vp_head=unscale @ vp_h,
+                     n_segments=len(seg))

@@ -1,0 +1,235 @@
+"""One photo to a calibrated wall: detect or take the corners, fit, check, resample to an orthophoto.
+
+``calibrate_photo`` is the library call behind ``calib-masonry rectify`` and behind ``build`` on
+structure files that name photos. ``rectify_image`` resamples with kornia's ``warp_perspective``
+(bilinear; a Gaussian pre-blur when the wall is shrunk, so the orthophoto does not alias).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FitFailed, InputError
+from ..io import Photo, read_photo, staged_output, write_json
+from .fit import CalibrationInput, CalibrationResult, calibrate, order_corners
+from .lines import DetectConfig, Detection, detect_wall, segments_in_quad
+
+__all__ = [
+    "CalibrateConfig",
+    "PhotoCalibration",
+    "calibrate_photo",
+    "native_px_per_m",
+    "parse_corners",
+    "rect_from_wall",
+    "rectify_image",
+    "rectify_to_folder",
+]
+
+
+@dataclass(frozen=True)
+class CalibrateConfig:
+    """What the user tells the calibration (the flags of ``rectify``)."""
+
+    corners_px: tuple[float, ...] | None = None  # 8 numbers x1, y1, ..., x4, y4 in any order; None = automatic
+    camera_height_m: float = 1.6
+    camera_height_sigma_m: float = 0.1
+    focal_px: float | None = None  # overrides EXIF
+    focal_sigma_px: float | None = None
+    known_width_m: float | None = None
+    known_height_m: float | None = None
+    corner_sigma_px: float | None = None  # default 1.5 clicked, 1.0 detected
+    line_sigma_px: float = 1.0
+    max_effective_segments: int = 16
+    use_lines: bool = True
+    max_rms_px: float = 3.0
+    force: bool = False
+    detect: DetectConfig = field(default_factory=DetectConfig)
+
+
+@dataclass(frozen=True)
+class PhotoCalibration:
+    photo: Photo
+    result: CalibrationResult
+    detection: Detection | None
+    mode: str  # "clicked" or "automatic"
+    focal_source: str
+
+    def to_json(self) -> dict:
+        doc = self.result.to_json()
+        doc.update(photo=str(self.photo.path), mode=self.mode, focal_source=self.focal_source)
+        if self.photo.heading_deg is not None:
+            doc["exif_heading_deg"] = self.photo.heading_deg
+            from .camera import theta_from_heading
+
+            doc["theta_from_heading_deg"] = math.degrees(
+                theta_from_heading(math.radians(self.photo.heading_deg), self.result.value("yaw_rad")))
+        return doc
+
+
+def parse_corners(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.replace(" ", "").split(","))
+    except ValueError:
+        raise InputError(f"--corners {text!r}: not a list of numbers; give x1,y1,x2,y2,x3,y3,x4,y4 in pixels") from None
+    if len(values) != 8:
+        raise InputError(f"--corners: got {len(values)} numbers; give exactly 8 (x1,y1,...,x4,y4)")
+    return values
+
+
+def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = CalibrateConfig()) -> PhotoCalibration:
+    """Fit the camera and the wall to one photo; refuse a fit whose residual is above ``max_rms_px``."""
+    if not isinstance(photo, Photo):
+        photo = read_photo(photo)
+    w, h = photo.size
+    focal, focal_source = config.focal_px, "--focal-px"
+    if focal is None and photo.focal_px is not None:
+        focal, focal_source = photo.focal_px, "EXIF"
+    if focal is None:
+        focal_source = "fitted"
+    if focal is not None and not 0.1 * max(w, h) < focal < 20 * max(w, h):
+        raise InputError(f"{photo.path}: focal length {focal:.0f} px is implausible for a {w} x {h} photo; "
+                         "pass --focal-px with the right value")
+    detection = None
+    if config.corners_px is not None:
+        corners = order_corners(np.array(config.corners_px).reshape(4, 2))
+        if np.any(corners < -0.5) or np.any(corners[:, 0] > w - 0.5) or np.any(corners[:, 1] > h - 0.5):
+            raise InputError(f"--corners: a corner lies outside the {w} x {h} photo {photo.path.name}; "
+                             "click inside the image")
+        mode = "clicked"
+        bed = head = np.zeros((0, 4))
+        if config.use_lines:
+            try:
+                found = detect_wall(photo.rgb, config.detect)
+                bed = segments_in_quad(found.bed_segments, corners)
+                head = segments_in_quad(found.head_segments, corners)
+            except FitFailed:
+                pass  # no joint lines: the corners alone (plus priors) still determine the fit
+        sigma = config.corner_sigma_px or 1.5
+    else:
+        try:
+            detection = detect_wall(photo.rgb, config.detect)
+        except FitFailed as exc:
+            raise FitFailed(f"{photo.path}: {exc}") from None
+        corners, bed, head = detection.corners_px, detection.bed_segments, detection.head_segments
+        if not config.use_lines:
+            bed = head = np.zeros((0, 4))
+        mode = "automatic"
+        sigma = config.corner_sigma_px or 1.0
+    inp = CalibrationInput(
+        image_size=(w, h), corners_px=corners, corner_sigma_px=sigma, bed_segments=bed, head_segments=head,
+        line_sigma_px=config.line_sigma_px, max_effective_segments=config.max_effective_segments,
+        camera_height_m=config.camera_height_m, camera_height_sigma_m=config.camera_height_sigma_m,
+        focal_px=focal, focal_sigma_px=config.focal_sigma_px, known_width_m=config.known_width_m,
+        known_height_m=config.known_height_m)
+    try:
+        result = calibrate(inp)
+    except FitFailed as exc:
+        raise FitFailed(f"{photo.path}: {exc}") from None
+    if focal is None and result.sigma("focal_px") > 0.2 * result.value("focal_px"):
+        raise FitFailed(f"{photo.path}: no focal length in EXIF and too few constraints to fit one "
+                        f"(+-{result.sigma('focal_px'):.0f} px); pass --focal-px F")
+    if not config.force:
+        if result.status != "converged":
+            raise FitFailed(f"{photo.path}: the calibration did not converge ({result.status}); check the corners, "
+                            "pass --focal-px, or use --force to keep it anyway")
+        if result.rms_residual_px > config.max_rms_px:
+            raise FitFailed(f"{photo.path}: RMS residual {result.rms_residual_px:.2f} px exceeds {config.max_rms_px:g} px "
+                            "(corners or joints do not fit one wall plane); click the corners with --corners, "
+                            "or use --force to keep it anyway")
+        if not (0.2 < result.width_m < 500 and 0.2 < result.height_m < 500):
+            raise FitFailed(f"{photo.path}: fitted wall {result.width_m:.2f} x {result.height_m:.2f} m is implausible; "
+                            "check --camera-height and the corners")
+    return PhotoCalibration(photo=photo, result=result, detection=detection, mode=mode, focal_source=focal_source)
+
+
+def rect_from_wall(width_m: float, height_m: float, shape: tuple[int, int]) -> np.ndarray:
+    """3x3 map of wall metres (x, z, 1) to orthophoto pixels, the Eq. 1 convention of build3d.scale."""
+    rows, cols = shape
+    return np.array([[cols / width_m, 0.0, -0.5], [0.0, -rows / height_m, rows - 0.5],
+                     [0.0, 0.0, 1.0]])
+
+
+def rectify_image(image: np.ndarray, wall_from_image: np.ndarray, width_m: float, height_m: float,
+                  px_per_m: float, *, nearest: bool = False) -> np.ndarray:
+    """Resample a photo ``(rows, cols[, C])`` into the wall's orthophoto at ``px_per_m``."""
+    import torch
+    from kornia.filters import gaussian_blur2d
+    from kornia.geometry.transform import warp_perspective
+
+    shape = (max(2, round(height_m * px_per_m)), max(2, round(width_m * px_per_m)))
+    m = rect_from_wall(width_m, height_m, shape) @ wall_from_image
+    img = np.asarray(image, dtype=np.float32)
+    chans = img[..., None] if img.ndim == 2 else img
+    src = torch.from_numpy(np.ascontiguousarray(chans)).permute(2, 0, 1)[None].double()
+    if not nearest:
+        # photo pixels per orthophoto pixel at the wall's corners: blur when the wall is shrunk
+        corners = np.array([[0, 0], [width_m, 0], [width_m, height_m], [0, height_m]])
+        image_from_wall = np.linalg.inv(wall_from_image)
+        shrink = []
+        for c in corners:
+            p = image_from_wall @ np.r_[c, 1]
+            q = image_from_wall @ np.r_[c + [1.0 / px_per_m, 0], 1]
+            shrink.append(np.linalg.norm(p[:2] / p[2] - q[:2] / q[2]))
+        s = float(np.median(shrink))
+        if s > 1.25:
+            sigma = 0.45 * s
+            k = int(2 * math.ceil(3 * sigma) + 1)
+            src = gaussian_blur2d(src, (k, k), (sigma, sigma))
+    out = warp_perspective(src, torch.from_numpy(m)[None], shape, mode="nearest" if nearest else "bilinear",
+                           align_corners=True)[0].permute(1, 2, 0).numpy()
+    return out[..., 0] if img.ndim == 2 else out
+
+
+def rectify_to_folder(photo_path: str | Path, out: str | Path, config: CalibrateConfig = CalibrateConfig(), *,
+                      px_per_m: float | None = None, mask_path: str | Path | None = None,
+                      figure: bool = True) -> dict:
+    """``calib-masonry rectify``: calibration.json, rectified.png (and rectified_mask.png), overlay.png."""
+    from PIL import Image
+
+    from .figures import plot_calibration
+
+    cal = calibrate_photo(photo_path, config)
+    res = cal.result
+    if px_per_m is None:  # the photo's own resolution at the wall's centre, rounded
+        px_per_m = native_px_per_m(res)
+    if px_per_m <= 0 or res.width_m * px_per_m * res.height_m * px_per_m > 1.2e8:
+        raise InputError(f"--px-per-m {px_per_m:g}: the orthophoto would be "
+                         f"{res.width_m * px_per_m:.0f} x {res.height_m * px_per_m:.0f} px; choose a smaller value")
+    mask = None
+    if mask_path is not None:
+        from ..io import read_mask
+
+        mask = read_mask(mask_path, field="--mask")
+        if mask.shape[::-1] != cal.photo.size:
+            raise InputError(f"--mask {mask_path}: {mask.shape[1]} x {mask.shape[0]} px, but the photo is "
+                             f"{cal.photo.size[0]} x {cal.photo.size[1]}; give the mask of this photo")
+    rect = rectify_image(cal.photo.rgb, res.wall_from_image, res.width_m, res.height_m, px_per_m)
+    doc = cal.to_json()
+    doc["px_per_m"] = px_per_m
+    doc["rectified_shape"] = list(rect.shape[:2])
+    with staged_output(out) as stage:
+        Image.fromarray((np.clip(rect, 0, 1) * 255 + 0.5).astype(np.uint8)).save(stage / "rectified.png")
+        if mask is not None:
+            rm = rectify_image(mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m)
+            Image.fromarray(((rm >= 0.5) * 255).astype(np.uint8)).save(stage / "rectified_mask.png")
+        write_json(stage / "calibration.json", doc)
+        if figure:
+            plot_calibration(cal, rect, stage / "overlay.png")
+    return doc
+
+
+def native_px_per_m(res: CalibrationResult) -> float:
+    """Photo pixels per wall metre at the wall's centre (rounded to 10), a natural orthophoto scale."""
+    h = res.image_from_wall
+    c = np.array([res.width_m / 2, res.height_m / 2])
+    p0 = h @ np.r_[c, 1]
+    p1 = h @ np.r_[c + [0.01, 0], 1]
+    p2 = h @ np.r_[c + [0, 0.01], 1]
+    a, b = p1[:2] / p1[2] - p0[:2] / p0[2], p2[:2] / p2[2] - p0[:2] / p0[2]
+    scale = math.sqrt(abs(a[0] * b[1] - a[1] * b[0])) / 0.01
+    return float(max(10.0, round(scale / 10.0) * 10.0))
+

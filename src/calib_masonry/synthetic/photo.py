@@ -1,0 +1,257 @@
+"""Synthetic perspective photos of synthetic walls, with the exact camera as truth.
+
+Each wall is textured (a colour and brightness per brick, mortar colour, low-frequency weathering,
+vertical streaks, grain) into an orthophoto, then photographed by a pinhole camera at standing
+height: eye 1.5-1.8 m above the wall's base, yawed up to +-35 degrees, slightly rolled and pitched
+up so the whole wall is in frame, 3-30 m away. The wall is warped into the photo with kornia's
+``warp_perspective`` over a sky and a ground plane rendered by casting the photo's rays; then
+optical blur, sensor noise and JPEG compression. The JPEG carries EXIF focal length (with the focal
+plane resolution, so the focal length in pixels is exact) and a compass heading (GPSImgDirection,
+with ``heading_sigma_deg`` of noise).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from skimage.draw import polygon as draw_polygon
+
+from ..build3d.scale import image_from_wall
+from ..calibrate.camera import (
+    focal_px_from_35mm,
+    heading_from_theta,
+    image_from_wall_homography,
+    intrinsics,
+    principal_point,
+    project,
+    wall_from_camera_rotation,
+)
+from ..errors import InputError
+from ..spec import WallSpec
+from .layouts import Piece
+from .render import mask_shape
+
+__all__ = ["PhotoSpec", "photograph_wall", "render_photo", "sample_camera", "save_jpeg", "wall_texture"]
+
+
+@dataclass(frozen=True)
+class PhotoSpec:
+    """How synthetic photos are taken (the ``[photos]`` table of a scenario file)."""
+
+    long_side_px: int = 3000
+    short_side_px: int = 2000
+    focal_35mm: tuple[float, float] = (24.0, 32.0)
+    eye_height_m: tuple[float, float] = (1.5, 1.8)
+    distance_m: tuple[float, float] = (3.0, 30.0)
+    max_yaw_deg: float = 35.0
+    max_roll_deg: float = 2.0
+    blur_px: tuple[float, float] = (0.4, 0.9)
+    noise: float = 0.012
+    jpeg_quality: int = 90
+    heading_sigma_deg: float = 0.25
+    margin: float = 0.04  # fraction of the image kept free around the wall
+
+
+def wall_texture(wall: WallSpec, pieces: list[Piece], px_per_m: float, rng: np.random.Generator) -> np.ndarray:
+    """An RGB orthophoto (rows, cols, 3) in [0, 1] of the wall's outer face."""
+    shape = mask_shape(wall, px_per_m)
+    labels = np.zeros(shape, dtype=np.int32)
+    for i, piece in enumerate(pieces, start=1):
+        xy = image_from_wall(piece.polygon_m, shape, wall.width_m, wall.height_m)
+        rr, cc = draw_polygon(xy[:, 1], xy[:, 0], shape=shape)
+        labels[rr, cc] = i
+    base = np.array([0.56, 0.27, 0.19]) * rng.uniform(0.85, 1.15)
+    colours = base * rng.uniform(0.72, 1.18, size=(len(pieces) + 1, 1)) + rng.normal(0, 0.025, (len(pieces) + 1, 3))
+    colours[0] = np.array([0.74, 0.71, 0.65]) * rng.uniform(0.93, 1.05)
+    img = colours[labels]
+    small = (max(2, shape[0] // 16), max(2, shape[1] // 16))
+    weather = ndimage.zoom(ndimage.gaussian_filter(rng.normal(size=small), 2.0), (shape[0] / small[0], shape[1] / small[1]),
+                           order=1)[: shape[0], : shape[1]]
+    weather = np.pad(weather, ((0, shape[0] - weather.shape[0]), (0, shape[1] - weather.shape[1])), mode="edge")
+    streaks = ndimage.gaussian_filter1d(rng.normal(size=shape[1]), 3.0)[None, :] * np.linspace(1.0, 0.2, shape[0])[:, None]
+    shade = 1.0 + 0.5 * weather / max(np.std(weather), 1e-9) * 0.1 - 0.03 * streaks / max(np.std(streaks), 1e-9)
+    img = img * shade[..., None]
+    grain = ndimage.gaussian_filter(rng.normal(0.0, 0.05, shape), 0.8)
+    img = img * (1.0 + grain[..., None] * (labels > 0)[..., None])
+    return np.clip(img, 0.0, 1.0).astype(np.float32)
+
+
+def _corners_m(wall: WallSpec) -> np.ndarray:
+    w, h = wall.width_m, wall.height_m
+    return np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=np.float64)
+
+
+def _in_frame(params, size, wall, margin) -> bool:
+    pp = principal_point(size)
+    h = image_from_wall_homography(params, pp)
+    pts = np.c_[_corners_m(wall), np.ones(4)] @ h.T
+    if np.any(pts[:, 2] <= 0):
+        return False
+    xy = pts[:, :2] / pts[:, 2:]
+    w, hh = size
+    return bool(np.all(xy[:, 0] > margin * w) and np.all(xy[:, 0] < (1 - margin) * w)
+                and np.all(xy[:, 1] > margin * hh) and np.all(xy[:, 1] < (1 - margin) * hh))
+
+
+def _aimed(wall: WallSpec, aim: tuple, d: float) -> np.ndarray:
+    """Camera parameters at horizontal distance ``d`` from the aim point, pitched to it."""
+    f, yaw, roll, eye, xt, zt, pitch_jitter = aim
+    c = (xt - d * math.sin(yaw), -d * math.cos(yaw), eye)
+    pitch = math.atan2(zt - eye, d) + pitch_jitter
+    return np.array([f, yaw, pitch, roll, *c, wall.width_m, wall.height_m])
+
+
+def sample_camera(wall: WallSpec, spec: PhotoSpec, rng: np.random.Generator) -> dict:
+    """A standing-height camera that sees the whole wall: parameters (PARAM_NAMES order) and size."""
+    portrait = wall.height_m > wall.width_m
+    size = (spec.short_side_px, spec.long_side_px) if portrait else (spec.long_side_px, spec.short_side_px)
+    for _ in range(50):
+        f35 = rng.uniform(*spec.focal_35mm)
+        f = focal_px_from_35mm(f35, size)
+        eye = rng.uniform(*spec.eye_height_m)
+        yaw = math.radians(rng.uniform(-spec.max_yaw_deg, spec.max_yaw_deg))
+        roll = math.radians(rng.uniform(-spec.max_roll_deg, spec.max_roll_deg))
+        xt, zt = wall.width_m * rng.uniform(0.4, 0.6), wall.height_m * rng.uniform(0.45, 0.55)
+        pitch_jitter = math.radians(rng.uniform(-2.0, 2.0))
+
+        aim = (f, yaw, roll, eye, xt, zt, pitch_jitter)
+        d_fit = None
+        for d in np.geomspace(spec.distance_m[0], spec.distance_m[1], 80):
+            if _in_frame(_aimed(wall, aim, d), size, wall, spec.margin):
+                d_fit = float(d)
+                break
+        if d_fit is None:
+            continue
+        d = min(spec.distance_m[1], d_fit * rng.uniform(1.0, 1.3))
+        params = _aimed(wall, aim, d)
+        if not _in_frame(params, size, wall, spec.margin):
+            d, params = d_fit, _aimed(wall, aim, d_fit)
+        return {"params": params, "image_size": size, "focal_35mm": f35, "distance_m": d, "eye_height_m": eye}
+    raise InputError(f"wall '{wall.name}': no standing-height camera {spec.distance_m[0]:g}-{spec.distance_m[1]:g} m "
+                     f"away frames a {wall.width_m:g} x {wall.height_m:g} m wall; widen [photos] distance_m or focal_35mm")
+
+
+def _scale_px_per_m(params, size, wall) -> np.ndarray:
+    """Photo pixels per wall metre at the four corners (the homography's local scale)."""
+    h = image_from_wall_homography(params, principal_point(size))
+    out = []
+    for c in _corners_m(wall):
+        eps = 1e-3
+        p0 = project(h, c[None])[0]
+        dx = project(h, (c + [eps, 0])[None])[0] - p0
+        dz = project(h, (c + [0, eps])[None])[0] - p0
+        out.append(math.sqrt(abs(dx[0] * dz[1] - dx[1] * dz[0])) / eps)
+    return np.array(out)
+
+
+def _background(params, size, rng) -> np.ndarray:
+    """Sky above the horizon, a ground plane (z = 0) below it, by casting each pixel's ray."""
+    w, h = size
+    k_inv = np.linalg.inv(intrinsics(params[0], principal_point(size)))
+    r = wall_from_camera_rotation(params[1], params[2], params[3])
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    rays = np.stack([xs, ys, np.ones_like(xs)], axis=-1) @ (r @ k_inv).T
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    elev = rays[..., 2]
+    sky = np.array([0.62, 0.74, 0.90]) + np.clip(elev, 0, 1)[..., None] * (np.array([0.30, 0.48, 0.82]) - [0.62, 0.74, 0.90])
+    t = np.where(elev < -1e-6, -params[6] / np.minimum(elev, -1e-6), 0.0)
+    gx, gy = params[4] + t * rays[..., 0], params[5] + t * rays[..., 1]
+    pattern = 0.5 + 0.25 * np.sin(2.3 * gx) * np.sin(1.7 * gy) + 0.25 * np.sin(7.1 * gx + 3.3 * gy)
+    ground = np.array([0.36, 0.37, 0.26]) * (0.8 + 0.3 * pattern)[..., None]
+    haze = np.clip(t / 200.0, 0, 0.6)[..., None]
+    ground = ground * (1 - haze) + haze * np.array([0.62, 0.74, 0.90])
+    img = np.where((elev < -1e-6)[..., None], ground, sky)
+    img += rng.normal(0, 0.01, img.shape)
+    return img.astype(np.float32)
+
+
+def render_photo(texture: np.ndarray, wall: WallSpec, params: np.ndarray, size: tuple[int, int],
+                 spec: PhotoSpec, rng: np.random.Generator) -> np.ndarray:
+    """The photo (h, w, 3) uint8 of a textured wall seen by the camera ``params``."""
+    import torch
+    from kornia.filters import gaussian_blur2d
+    from kornia.geometry.transform import warp_perspective
+
+    rows, cols = texture.shape[:2]
+    # texture pixel (u, v) -> wall metres (Eq. 1 convention) -> photo pixel
+    wall_from_tex = np.array([[wall.width_m / cols, 0, 0.5 * wall.width_m / cols],
+                              [0, -wall.height_m / rows, wall.height_m - 0.5 * wall.height_m / rows],
+                              [0, 0, 1.0]])
+    photo_from_tex = image_from_wall_homography(params, principal_point(size)) @ wall_from_tex
+    src = torch.from_numpy(np.concatenate([texture, np.ones((rows, cols, 1), np.float32)], axis=-1)).permute(2, 0, 1)[None]
+    tex_per_photo = (cols / wall.width_m) / float(np.min(_scale_px_per_m(params, size, wall)))
+    if tex_per_photo > 1.2:  # antialias: the texture is shrunk
+        s = 0.45 * tex_per_photo
+        k = int(2 * math.ceil(3 * s) + 1)
+        src = gaussian_blur2d(src, (k, k), (s, s))
+    w, h = size
+    warped = warp_perspective(src.double(), torch.from_numpy(photo_from_tex)[None], (h, w), mode="bilinear",
+                              align_corners=True)[0].permute(1, 2, 0).numpy()
+    alpha = np.clip(warped[..., 3:4], 0, 1)
+    img = warped[..., :3] + (1 - alpha) * _background(params, size, rng)
+    blur = rng.uniform(*spec.blur_px)
+    img = ndimage.gaussian_filter(img, (blur, blur, 0))
+    img = img + rng.normal(0, spec.noise, img.shape) + rng.normal(0, 1, img.shape) * spec.noise * np.sqrt(np.clip(img, 0, 1))
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def save_jpeg(path, img: np.ndarray, *, focal_35mm: float | None, heading_deg: float | None, quality: int = 90) -> None:
+    """Write a JPEG with EXIF focal length (35 mm equivalent and focal plane resolution) and heading."""
+    from fractions import Fraction
+
+    from PIL import Image
+    from PIL.TiffImagePlugin import IFDRational
+
+    def rational(v: float) -> IFDRational:
+        q = Fraction(v).limit_denominator(100000)
+        return IFDRational(q.numerator, q.denominator)
+
+    pil = Image.fromarray(img)
+    exif = Image.Exif()
+    exif[0x010F] = "calib_masonry"
+    exif[0x0110] = "synthetic pinhole"
+    if focal_35mm is not None:
+        sub = exif.get_ifd(0x8769)
+        sub[0x920A] = rational(focal_35mm)  # FocalLength, mm (full-frame scale)
+        sub[0xA405] = round(focal_35mm)  # FocalLengthIn35mmFilm
+        w, h = pil.size
+        # pixels per mm of a full-frame sensor with this image's diagonal: FocalLength x this = f in px
+        sub[0xA20E] = rational(math.hypot(w, h) / math.hypot(36.0, 24.0))
+        sub[0xA20F] = sub[0xA20E]
+        sub[0xA210] = 4  # unit: mm
+    if heading_deg is not None:
+        gps = exif.get_ifd(0x8825)
+        gps[16] = "T"
+        gps[17] = rational(heading_deg % 360.0)
+    pil.save(path, quality=quality, exif=exif)
+
+
+def photograph_wall(wall: WallSpec, pieces: list[Piece], spec: PhotoSpec, rng: np.random.Generator) -> dict:
+    """Sample a camera, texture and photograph one wall. Returns the image and its truth."""
+    cam = sample_camera(wall, spec, rng)
+    params, size = cam["params"], cam["image_size"]
+    tex_res = float(np.clip(1.25 * np.max(_scale_px_per_m(params, size, wall)), 100.0, 700.0))
+    texture = wall_texture(wall, pieces, tex_res, rng)
+    img = render_photo(texture, wall, params, size, spec, rng)
+    h = image_from_wall_homography(params, principal_point(size))
+    true_heading = math.degrees(heading_from_theta(wall.theta_rad, params[1]))
+    exif_heading = (true_heading + rng.normal(0, spec.heading_sigma_deg)) % 360.0
+    return {
+        "image": img,
+        "truth": {
+            "image_size": list(size),
+            "params": dict(zip(("focal_px", "yaw_rad", "pitch_rad", "roll_rad", "cx_m", "cy_m", "cz_m", "width_m",
+                                "height_m"), map(float, params))),
+            "yaw_deg": math.degrees(params[1]), "pitch_deg": math.degrees(params[2]), "roll_deg": math.degrees(params[3]),
+            "focal_35mm": cam["focal_35mm"], "distance_m": cam["distance_m"], "eye_height_m": cam["eye_height_m"],
+            "image_from_wall": (h / h[2, 2]).tolist(),
+            "image_to_wall": (np.linalg.inv(h) / np.linalg.inv(h)[2, 2]).tolist(),
+            "corners_px": project(h, _corners_m(wall)).tolist(),
+            "width_m": wall.width_m, "height_m": wall.height_m, "theta_deg": wall.theta_deg,
+            "heading_deg": true_heading, "exif_heading_deg": exif_heading,
+            "texture_px_per_m": tex_res,
+        },
+    }

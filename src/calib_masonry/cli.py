@@ -25,10 +25,19 @@ def _cmd_synth(args) -> int:
     from .spec import load_structure
     from .synthetic.truth import synthesize
 
+    from dataclasses import replace
+
     spec = load_structure(args.scenario, require_sources=False)
     if spec.synthetic is None:
         raise InputError(f"{args.scenario}: no [synthetic] table; add one (layout, px_per_m, seed, ...) to make a data set")
-    truth = synthesize(spec, args.out, figures=not args.no_figures)
+    photos = None
+    if args.photos:
+        from .spec import PhotoSpec
+
+        photos = spec.photos or PhotoSpec()
+        if args.photo_size:
+            photos = replace(photos, long_side_px=max(args.photo_size), short_side_px=min(args.photo_size))
+    truth = synthesize(spec, args.out, figures=not args.no_figures, photos=photos)
     print(f"synth: {spec.name}: {len(truth['walls'])} walls, {truth['bricks']} bricks, "
           f"{truth['end_faces']} corner end faces -> {args.out}")
     return 0
@@ -159,6 +168,59 @@ def _cmd_demo(args) -> int:
     return 0 if all(checks.values()) else 1
 
 
+def _calibrate_config(args):
+    from .calibrate.rectify import CalibrateConfig, parse_corners
+
+    kwargs = {}
+    if args.camera_height is not None:
+        if not 0 < args.camera_height < 100:
+            raise InputError(f"--camera-height {args.camera_height}: give the eye height above the wall's base in metres")
+        kwargs.update(camera_height_m=args.camera_height, camera_height_sigma_m=args.camera_height_sigma or 0.02)
+    elif args.camera_height_sigma is not None:
+        kwargs.update(camera_height_sigma_m=args.camera_height_sigma)
+    if args.focal_px is not None:
+        if args.focal_px <= 0:
+            raise InputError(f"--focal-px {args.focal_px}: must be > 0 (pixels)")
+        kwargs["focal_px"] = args.focal_px
+    for flag, key in (("known_width", "known_width_m"), ("known_height", "known_height_m")):
+        v = getattr(args, flag, None)
+        if v is not None:
+            if v <= 0:
+                raise InputError(f"--{flag.replace('_', '-')} {v}: must be > 0 (metres)")
+            kwargs[key] = v
+    if getattr(args, "corners", None):
+        kwargs["corners_px"] = parse_corners(args.corners)
+    return CalibrateConfig(max_rms_px=args.max_rms, force=args.force, **kwargs)
+
+
+def _cmd_rectify(args) -> int:
+    from .calibrate.rectify import rectify_to_folder
+
+    if args.known_width is not None and args.known_height is not None:
+        raise InputError("rectify: give --known-width or --known-height, not both")
+    doc = rectify_to_folder(args.photo, args.out, _calibrate_config(args), px_per_m=args.px_per_m,
+                            mask_path=args.mask, figure=not args.no_figures)
+    cam = doc["camera"]
+    print(f"rectify: {doc['mode']} corners, W = {doc['width_m']:.3f} +- {doc['width_sigma_m']:.3f} m, "
+          f"H = {doc['height_m']:.3f} +- {doc['height_sigma_m']:.3f} m, f = {cam['focal_px']:.0f} px ({doc['focal_source']}), "
+          f"yaw {cam['yaw_deg']:.1f} deg, RMS {doc['rms_residual_px']:.2f} px, {doc['status']} -> {args.out}")
+    return 0
+
+
+def _cmd_footprint(args) -> int:
+    from .calibrate.footprint import footprint_to_folder
+
+    doc = footprint_to_folder(args.inputs, args.out, config=_calibrate_config(args),
+                              heading_sigma_deg=args.heading_sigma, theta_sigma_deg=args.theta_sigma,
+                              figure=not args.no_figures)
+    print(f"footprint: {len(doc['walls'])} walls, gap {doc['closure_gap_before_m'] * 1000:.1f} mm before, "
+          f"{doc['closure_gap_m'] * 1000:.3g} mm after -> {args.out}")
+    for w in doc["walls"]:
+        print(f"  {w['name']:>10}: W = {w['width_m']:.3f} +- {w['width_sigma_m']:.3f} m, "
+              f"theta = {w['theta_deg']:.2f} +- {w['theta_sigma_deg']:.2f} deg")
+    return 0
+
+
 def _cmd_simulate(args) -> int:
     from dataclasses import replace
 
@@ -185,7 +247,39 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("scenario")
     s.add_argument("--out", required=True)
     s.add_argument("--no-figures", action="store_true")
+    s.add_argument("--photos", action="store_true", help="also take perspective photos (settings: [photos] table)")
+    s.add_argument("--photo-size", type=int, nargs=2, default=None, metavar=("W", "H"), help="photo size in px")
     s.set_defaults(func=_cmd_synth)
+
+    def calib_flags(q, *, corners: bool) -> None:
+        if corners:
+            q.add_argument("--corners", default=None, help="x1,y1,...,x4,y4: the wall's corners in pixels, any order "
+                                                           "(default: find them automatically)")
+        q.add_argument("--camera-height", type=float, default=None,
+                       help="eye height above the wall's base in m (default 1.6 +- 0.1)")
+        q.add_argument("--camera-height-sigma", type=float, default=None, help="its uncertainty in m (default 0.02 if given)")
+        q.add_argument("--focal-px", type=float, default=None, help="focal length in pixels (default: EXIF, else fitted)")
+        q.add_argument("--max-rms", type=float, default=3.0, help="refuse a fit above this RMS residual in px")
+        q.add_argument("--force", action="store_true", help="keep a fit above --max-rms or not converged")
+        q.add_argument("--no-figures", action="store_true")
+
+    r = sub.add_parser("rectify", help="photo -> calibrated camera, wall size and metric orthophoto")
+    r.add_argument("photo")
+    calib_flags(r, corners=True)
+    r.add_argument("--known-width", type=float, default=None, help="the wall's measured width in m")
+    r.add_argument("--known-height", type=float, default=None, help="the wall's measured height in m")
+    r.add_argument("--px-per-m", type=float, default=None, help="orthophoto resolution (default: the photo's own)")
+    r.add_argument("--mask", default=None, help="a brick mask of the photo to rectify along with it")
+    r.add_argument("--out", required=True)
+    r.set_defaults(func=_cmd_rectify)
+
+    f = sub.add_parser("footprint", help="close the footprint: adjust every wall's W and theta jointly")
+    f.add_argument("inputs", nargs="+", help="a structure TOML naming photos, or calibration.json files in footprint order")
+    calib_flags(f, corners=False)
+    f.add_argument("--heading-sigma", type=float, default=2.0, help="compass heading uncertainty in deg (default 2)")
+    f.add_argument("--theta-sigma", type=float, default=1.0, help="uncertainty of typed theta_deg values in deg")
+    f.add_argument("--out", required=True)
+    f.set_defaults(func=_cmd_footprint)
 
     t = sub.add_parser("trace", help="mask -> brick polygons with Dice (polygons.json)")
     t.add_argument("mask")
@@ -197,7 +291,7 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--no-figures", action="store_true")
     t.set_defaults(func=_cmd_trace)
 
-    b = sub.add_parser("build", help="structure TOML with masks -> 3D brick model")
+    b = sub.add_parser("build", help="structure TOML with masks or photos -> 3D brick model")
     b.add_argument("structure")
     b.add_argument("--out", default="out/build")
     b.add_argument("--no-figures", action="store_true")

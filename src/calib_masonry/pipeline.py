@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,13 +31,75 @@ class BuildResult:
     structure: Structure3D
     traces: tuple[TraceResult, ...]
     seconds: dict[str, float] = field(default_factory=dict)
+    photos: dict = field(default_factory=dict)  # wall name -> PhotoWall
 
 
-def trace_wall(wall: WallSpec, spec: StructureSpec) -> TraceResult:
-    """Read, check and trace one wall's mask."""
-    if wall.mask is None:
-        raise InputError(f"wall '{wall.name}': no mask given; add mask = 'PATH' to its [[wall]] table")
-    mask = read_mask(wall.mask, field=f"wall '{wall.name}' mask")
+@dataclass(frozen=True)
+class PhotoWall:
+    """A wall built from a photo: its calibration, orthophoto and segmented mask."""
+
+    calibration: object  # calibrate.rectify.PhotoCalibration
+    rectified: np.ndarray
+    mask: np.ndarray
+    wall: WallSpec  # with W and H resolved (typed values kept, missing ones fitted)
+
+
+def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
+    """Calibrate a wall's photo, rectify it onto the wall (W x H) and segment bricks from mortar."""
+    from dataclasses import replace
+
+    from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify_image
+    from .errors import CalibMasonryError
+    from .wall2d.segment import segment_photo
+
+    kwargs = {}
+    if wall.camera_height_m is not None:
+        kwargs.update(camera_height_m=wall.camera_height_m, camera_height_sigma_m=0.02)
+    known = {}
+    if not math.isnan(wall.width_m):
+        known["known_width_m"] = wall.width_m
+    elif not math.isnan(wall.height_m):
+        known["known_height_m"] = wall.height_m
+    config = CalibrateConfig(corners_px=wall.corners_px, focal_px=wall.focal_px, **kwargs, **known)
+    try:
+        cal = calibrate_photo(wall.image, config)
+    except CalibMasonryError as exc:
+        raise type(exc)(f"wall '{wall.name}': {exc}") from None
+    res = cal.result
+    width = res.width_m if math.isnan(wall.width_m) else wall.width_m
+    height = res.height_m if math.isnan(wall.height_m) else wall.height_m
+    # the fitted wall's frame stretched onto the typed W x H: the photo's outline maps onto the wall
+    stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
+    rect = rectify_image(cal.photo.rgb, stretch @ res.wall_from_image, width, height, spec.photo_px_per_m)
+    mask = segment_photo(rect)
+    return PhotoWall(calibration=cal, rectified=rect, mask=mask, wall=replace(wall, width_m=width, height_m=height))
+
+
+def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) -> tuple[StructureSpec, dict]:
+    """Calibrate every photo wall; the spec with fitted sizes filled in, and the photo results by wall name."""
+    photos = {}
+    walls = []
+    todo = [w for w in spec.walls if w.mask is None and w.image is not None]
+    bar = tqdm(total=len(todo), desc="calibrate photos", unit="photo", disable=None if progress is None else not progress,
+               leave=False)
+    for wall in spec.walls:
+        if wall in todo:
+            pw = photo_wall(wall, spec)
+            photos[wall.name] = pw
+            walls.append(pw.wall)
+            bar.update()
+        else:
+            walls.append(wall)
+    bar.close()
+    return spec.with_walls(tuple(walls)), photos
+
+
+def trace_wall(wall: WallSpec, spec: StructureSpec, mask: np.ndarray | None = None) -> TraceResult:
+    """Read, check and trace one wall's mask (or the mask segmented from its photo)."""
+    if mask is None:
+        if wall.mask is None:
+            raise InputError(f"wall '{wall.name}': no mask given; add mask = 'PATH' to its [[wall]] table")
+        mask = read_mask(wall.mask, field=f"wall '{wall.name}' mask")
     mismatch = aspect_mismatch(mask.shape, wall.width_m, wall.height_m)
     if mismatch > spec.aspect_tolerance:
         rows, cols = mask.shape
@@ -53,8 +116,9 @@ def trace_wall(wall: WallSpec, spec: StructureSpec) -> TraceResult:
                          refine=refine)
     result = trace_mask(mask, config)
     if not result.bricks:
-        raise InputError(f"wall '{wall.name}' mask {wall.mask}: no bricks found (no white regions); "
-                         "bricks must be white on black mortar")
+        source = f"mask {wall.mask}" if wall.mask is not None else f"photo {wall.image}"
+        raise InputError(f"wall '{wall.name}' {source}: no bricks found; "
+                         "bricks must be white on black mortar (or give a mask instead of the photo)")
     return result
 
 
@@ -73,10 +137,14 @@ def model_from_masks(spec: StructureSpec, *, progress: bool | None = None) -> Bu
     """Trace every wall's mask, scale to metres (Eq. 1), place, bond and extrude (Eqs. 2-4)."""
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
+    spec, photos = resolve_photo_walls(spec, progress=progress)
+    if photos:
+        seconds["calibrate_rectify_segment"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     traces = []
     for wall in tqdm(spec.walls, desc="trace walls", unit="wall", disable=None if progress is None else not progress,
                      leave=False):
-        traces.append(trace_wall(wall, spec))
+        traces.append(trace_wall(wall, spec, photos[wall.name].mask if wall.name in photos else None))
     seconds["trace"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -94,7 +162,7 @@ def model_from_masks(spec: StructureSpec, *, progress: bool | None = None) -> Bu
     message = closure_warning(spec, structure.closure_gap_xy)
     if message:
         warn(message)
-    return BuildResult(structure=structure, traces=tuple(traces), seconds=seconds)
+    return BuildResult(structure=structure, traces=tuple(traces), seconds=seconds, photos=photos)
 
 
 def _summary(result: BuildResult, interpenetration) -> dict:
@@ -112,6 +180,10 @@ def _summary(result: BuildResult, interpenetration) -> dict:
             "mean_dice": float(np.mean([b.dice for b in own])) if own else None,
             "mean_dice_all_pieces": tr.mean_dice,
             "refine": wall.refine,
+            **({"photo": str(wall.image), "calibration": f"photos/{wall.name}/calibration.json",
+                "fitted_width_m": result.photos[wall.name].calibration.result.width_m,
+                "fitted_height_m": result.photos[wall.name].calibration.result.height_m}
+               if wall.name in result.photos else {}),
             **({"mean_dice_splitting": float(np.mean([b.dice_splitting for b in tr.bricks if b.id in kept])),
                 "bricks_refined": int(sum(b.refined for b in tr.bricks))} if tr.refined else {}),
             "mean_vertices": float(np.mean([len(b.polygon_m) for b in own])) if own else None,
@@ -130,6 +202,22 @@ def _summary(result: BuildResult, interpenetration) -> dict:
         "worst_pair": interpenetration.pair,
         "seconds": {k: round(v, 4) for k, v in result.seconds.items()},
     }
+
+
+def _write_photo_wall(pw: PhotoWall, folder: Path, *, figures: bool) -> None:
+    from PIL import Image
+
+    from .calibrate.figures import plot_calibration
+    from .io import write_mask
+
+    folder.mkdir(parents=True)
+    doc = pw.calibration.to_json()
+    doc.update(used_width_m=pw.wall.width_m, used_height_m=pw.wall.height_m, rectified_shape=list(pw.mask.shape))
+    write_json(folder / "calibration.json", doc)
+    Image.fromarray((np.clip(pw.rectified, 0, 1) * 255 + 0.5).astype(np.uint8)).save(folder / "rectified.png")
+    write_mask(folder / "mask.png", pw.mask)
+    if figures:
+        plot_calibration(pw.calibration, pw.rectified, folder / "overlay.png")
 
 
 def build_to_folder(spec: StructureSpec, out: str | Path, *, figures: bool = True,
@@ -155,6 +243,8 @@ def build_to_folder(spec: StructureSpec, out: str | Path, *, figures: bool = Tru
             plot_walls(s, stage / "walls.png", removed_polygons=removed)
             plot_model(s, stage / "model.png")
             result.seconds["figures"] = time.perf_counter() - t0
+        for name, pw in result.photos.items():
+            _write_photo_wall(pw, stage / "photos" / name, figures=figures)
         summary = _summary(result, inter)
         write_json(stage / "summary.json", summary)
     return summary

@@ -39,6 +39,7 @@ __all__ = [
     "load_structure",
     "structure_to_toml",
     "LAYOUTS",
+    "PhotoSpec",
 ]
 
 LAYOUTS = ("stretcher", "stones")
@@ -58,6 +59,14 @@ class WallSpec:
     vertices: int | None = None
     target_dice: float | None = None
     refine: bool = False  # soft-Dice vertex refinement after splitting
+    # photo walls (``image``): what the calibration is told; W or H may be NaN = take the fitted value
+    camera_height_m: float | None = None
+    corners_px: tuple[float, ...] | None = None
+    focal_px: float | None = None
+
+    @property
+    def size_from_photo(self) -> bool:
+        return math.isnan(self.width_m) or math.isnan(self.height_m)
 
     @property
     def theta_deg(self) -> float:
@@ -89,6 +98,26 @@ class SyntheticSpec:
 
 
 @dataclass(frozen=True)
+class PhotoSpec:
+    """How ``synth`` takes perspective photos (the ``[photos]`` table of a scenario file).
+
+    Ranges are ``[min, max]``; each photo draws its camera from them (see synthetic.photo)."""
+
+    long_side_px: int = 3000
+    short_side_px: int = 2000
+    focal_35mm: tuple[float, float] = (24.0, 32.0)
+    eye_height_m: tuple[float, float] = (1.5, 1.8)
+    distance_m: tuple[float, float] = (3.0, 30.0)
+    max_yaw_deg: float = 35.0
+    max_roll_deg: float = 2.0
+    blur_px: tuple[float, float] = (0.4, 0.9)
+    noise: float = 0.012
+    jpeg_quality: int = 90
+    heading_sigma_deg: float = 0.25
+    margin: float = 0.04  # fraction of the image kept free around the wall
+
+
+@dataclass(frozen=True)
 class StructureSpec:
     """A whole structure: walls in footprint order plus defaults and tolerances."""
 
@@ -100,7 +129,9 @@ class StructureSpec:
     closed: bool | None = None
     aspect_tolerance: float = 0.03
     refine: bool = False
+    photo_px_per_m: float = 300.0  # orthophoto resolution for segmenting photo walls
     synthetic: SyntheticSpec | None = None
+    photos: PhotoSpec | None = None
     source: Path | None = field(default=None, compare=False)
 
     def with_walls(self, walls: tuple[WallSpec, ...]) -> "StructureSpec":
@@ -189,6 +220,37 @@ def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
     return spec
 
 
+def _photos_from(tbl: dict, where: str) -> PhotoSpec:
+    if not isinstance(tbl, dict):
+        raise InputError(f"{where}: must be a table of photo settings")
+    known = set(PhotoSpec.__dataclass_fields__)
+    unknown = sorted(set(tbl) - known)
+    if unknown:
+        raise InputError(f"{where}: unknown field(s) {unknown}; valid fields are {sorted(known)}")
+    kwargs: dict[str, Any] = {}
+    for key, value in tbl.items():
+        default = getattr(PhotoSpec, key)
+        if isinstance(default, tuple):
+            if (not isinstance(value, list) or len(value) != 2 or not all(isinstance(v, (int, float)) for v in value)
+                    or value[0] > value[1]):
+                raise InputError(f"{where}: '{key}' must be [min, max] with min <= max, got {value!r}")
+            kwargs[key] = (float(value[0]), float(value[1]))
+        elif isinstance(default, int):
+            if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+                raise InputError(f"{where}: '{key}' must be a positive whole number, got {value!r}")
+            kwargs[key] = value
+        else:
+            kwargs[key] = float(_num(tbl, key, where))
+    spec = PhotoSpec(**kwargs)
+    if spec.short_side_px > spec.long_side_px or spec.short_side_px < 64:
+        raise InputError(f"{where}: short_side_px must be >= 64 and <= long_side_px")
+    if spec.distance_m[0] <= 0 or spec.eye_height_m[0] <= 0 or spec.focal_35mm[0] <= 0:
+        raise InputError(f"{where}: distance_m, eye_height_m and focal_35mm must be positive")
+    if not 1 <= spec.jpeg_quality <= 100:
+        raise InputError(f"{where}: jpeg_quality must lie in 1..100, got {spec.jpeg_quality}")
+    return spec
+
+
 def load_structure(path: str | Path, *, require_sources: bool = True) -> StructureSpec:
     """Read and validate a structure (or scenario) TOML file.
 
@@ -218,12 +280,19 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
     if closed is not None and not isinstance(closed, bool):
         raise InputError(f"{where}: 'closed' must be true or false, got {closed!r}")
     refine_default = _flag(st, "refine", where, False)
+    photo_ppm = float(_num(st, "photo_px_per_m", where, default=300.0))
+    if photo_ppm <= 0:
+        raise InputError(f"{where}: 'photo_px_per_m' must be > 0, got {photo_ppm}")
     aspect_tol = float(_num(st, "aspect_tolerance", where, default=0.03))
     if aspect_tol <= 0:
         raise InputError(f"{where}: 'aspect_tolerance' must be > 0, got {aspect_tol}")
     synthetic = None
     if "synthetic" in data:
         synthetic = _synthetic_from(data["synthetic"], _where(path, "[synthetic]"))
+
+    photos = None
+    if "photos" in data:
+        photos = _photos_from(data["photos"], _where(path, "[photos]"))
 
     walls_tbl = data.get("wall")
     if not isinstance(walls_tbl, list) or not walls_tbl:
@@ -236,8 +305,9 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         if wname in names:
             raise InputError(f"{where}: duplicate wall name; give every wall its own name")
         names.add(wname)
-        width = _num(w, "width_m", where, required=True)
-        height = _num(w, "height_m", where, required=True)
+        has_photo = "image" in w or "photo" in w
+        width = _num(w, "width_m", where, required=not has_photo, default=math.nan)
+        height = _num(w, "height_m", where, required=not has_photo, default=math.nan)
         theta_deg = _num(w, "theta_deg", where, default=0.0)
         t = _num(w, "thickness_m", where, default=t_default)
         if width <= 0:
@@ -248,12 +318,16 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
             raise InputError(f"{where}: no thickness; set thickness_m here or in [structure]")
         if t <= 0:
             raise InputError(f"{where}: thickness_m = {t} must be > 0 (metres)")
-        if t >= width:
+        if t >= width and not math.isnan(width):
             raise InputError(f"{where}: thickness_m = {t} is not smaller than width_m = {width}; check both")
         n, d = _vertices_or_dice(w, where, n_default, d_default)
         mask = image = None
+        if "photo" in w and "image" not in w:
+            w = {**w, "image": w["photo"]}
         for key in ("mask", "image"):
             if key in w:
+                if not isinstance(w[key], str):
+                    raise InputError(f"{where}: '{key}' must be a path string, got {w[key]!r}")
                 p = Path(w[key])
                 p = p if p.is_absolute() else base / p
                 if require_sources and not p.is_file():
@@ -263,17 +337,33 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
                 else:
                     image = p
         if require_sources and mask is None and image is None:
-            raise InputError(f"{where}: neither 'mask' nor 'image' is given; name the wall's mask file")
-        if require_sources and mask is None:
-            raise InputError(f"{where}: only a photo is given; this version builds from masks, so add mask = 'PATH'")
+            raise InputError(f"{where}: neither 'mask' nor 'image' (photo) is given; name the wall's mask or photo file")
+        if mask is None and image is None and (math.isnan(width) or math.isnan(height)):
+            raise InputError(f"{where}: width_m and height_m are missing; give them (metres) or a photo to fit them from")
+        cam_h = _num(w, "camera_height_m", where, default=None)
+        if cam_h is not None and not 0.0 < cam_h < 100.0:
+            raise InputError(f"{where}: camera_height_m = {cam_h} must be the eye height above the wall's base in "
+                             "metres (e.g. 1.6)")
+        focal = _num(w, "focal_px", where, default=None)
+        if focal is not None and focal <= 0:
+            raise InputError(f"{where}: focal_px = {focal} must be > 0 (pixels)")
+        corners = w.get("corners_px")
+        if corners is not None:
+            if (not isinstance(corners, list) or len(corners) != 8
+                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in corners)):
+                raise InputError(f"{where}: corners_px must be 8 numbers [x1, y1, ..., x4, y4] (pixels), got {corners!r}")
+            corners = tuple(float(v) for v in corners)
         walls.append(WallSpec(name=wname, width_m=float(width), height_m=float(height),
                               theta_rad=math.radians(theta_deg), thickness_m=float(t), mask=mask,
                               image=image, vertices=n, target_dice=d,
-                              refine=_flag(w, "refine", where, refine_default)))
+                              refine=_flag(w, "refine", where, refine_default),
+                              camera_height_m=None if cam_h is None else float(cam_h), corners_px=corners,
+                              focal_px=None if focal is None else float(focal)))
     return StructureSpec(name=str(name), walls=tuple(walls),
                          thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),
                          vertices=n_default, target_dice=d_default, closed=closed,
-                         aspect_tolerance=aspect_tol, refine=refine_default, synthetic=synthetic, source=path)
+                         aspect_tolerance=aspect_tol, refine=refine_default, photo_px_per_m=photo_ppm,
+                         synthetic=synthetic, photos=photos, source=path)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -295,6 +385,8 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
     if spec.closed is not None:
         st["closed"] = spec.closed
     st["aspect_tolerance"] = spec.aspect_tolerance
+    if spec.photo_px_per_m != 300.0:
+        st["photo_px_per_m"] = spec.photo_px_per_m
     if spec.refine:
         st["refine"] = True
     doc: dict[str, Any] = {"structure": st}
@@ -310,8 +402,16 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
             if p is not None:
                 row[key] = (Path(p).relative_to(relative_to).as_posix() if relative_to
                             else Path(p).as_posix())
-        row.update(width_m=_clean(w.width_m), height_m=_clean(w.height_m),
-                   theta_deg=_clean(w.theta_deg), thickness_m=_clean(w.thickness_m))
+        if not math.isnan(w.width_m):
+            row["width_m"] = _clean(w.width_m)
+        if not math.isnan(w.height_m):
+            row["height_m"] = _clean(w.height_m)
+        row.update(theta_deg=_clean(w.theta_deg), thickness_m=_clean(w.thickness_m))
+        for key in ("camera_height_m", "focal_px"):
+            if getattr(w, key) is not None:
+                row[key] = _clean(getattr(w, key))
+        if w.corners_px is not None:
+            row["corners_px"] = [_clean(v) for v in w.corners_px]
         if w.vertices is not None and w.vertices != spec.vertices:
             row["vertices"] = w.vertices
         if w.target_dice is not None and w.target_dice != spec.target_dice:

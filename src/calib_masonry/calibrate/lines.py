@@ -244,16 +244,21 @@ def _wall_mask(rgb_small: np.ndarray, quad: np.ndarray) -> np.ndarray:
     return lab == centre_label
 
 
-def _snap_to_mask(mask: np.ndarray, quad: np.ndarray) -> np.ndarray | None:
-    """Move each side of ``quad`` onto the mask's boundary (a robust line through the crossings)."""
+def _snap_to_mask(mask: np.ndarray, quad: np.ndarray, vps: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
+    """Move each side of ``quad`` (LL, LR, UR, UL) onto the mask's boundary, keeping it pointed at
+    its vanishing point (bed family for the base and top, head family for the ends): only the
+    side's offset is estimated, as the median over 40 boundary crossings, so a stretch of weak or
+    confusing boundary cannot tilt it."""
     size = float(np.max(np.ptp(quad, axis=0)))
     reach = 0.15 * size
     lines = []
     for i in range(4):
+        vp = vps[0] if i in (0, 2) else vps[1]
         a, b = quad[i], quad[(i + 1) % 4]
         d = (b - a) / np.linalg.norm(b - a)
-        n = np.array([d[1], -d[0]])  # outward for a counter-clockwise (y-up) quad: checked below
-        if (a + b) / 2 @ n - quad.mean(axis=0) @ n < 0:
+        n = np.array([d[1], -d[0]])
+        mid = (a + b) / 2
+        if (mid - quad.mean(axis=0)) @ n < 0:
             n = -n
         steps = np.arange(-reach, reach, 0.5)
         pts = []
@@ -266,20 +271,19 @@ def _snap_to_mask(mask: np.ndarray, quad: np.ndarray) -> np.ndarray | None:
                 pts.append(line[k] + 0.25 * n)
         if len(pts) < 8:
             return None
-        pts = np.array(pts)
-        keep = np.ones(len(pts), dtype=bool)
-        for _ in range(3):
-            c = pts[keep].mean(axis=0)
-            _, _, vt = np.linalg.svd(pts[keep] - c)
-            r = (pts - c) @ np.array([-vt[0][1], vt[0][0]])
-            keep = np.abs(r) < max(1.0, 3.0 * 1.4826 * np.median(np.abs(r[keep])))
-        c = pts[keep].mean(axis=0)
-        _, _, vt = np.linalg.svd(pts[keep] - c)
-        lines.append((c, vt[0]))
-    try:
-        return np.array([_intersect(lines[(i - 1) % 4], lines[i]) for i in range(4)])
-    except np.linalg.LinAlgError:
-        return None
+        cand = np.cross(np.c_[np.array(pts), np.ones(len(pts))], vp)
+        cand /= np.linalg.norm(cand[:, :2], axis=1, keepdims=True)
+        offset = cand @ np.r_[mid, 1.0]
+        cand *= np.sign(cand @ np.r_[mid + n, 1.0] - offset)[:, None]  # consistent orientation
+        offset = cand @ np.r_[mid, 1.0]
+        lines.append(cand[np.argsort(offset)[len(offset) // 2]])
+    corners = []
+    for i in range(4):
+        c = np.cross(lines[(i - 1) % 4], lines[i])
+        if abs(c[2]) < 1e-12:
+            return None
+        corners.append(c[:2] / c[2])
+    return np.array(corners)
 
 
 def segments_in_quad(seg: np.ndarray, quad: np.ndarray, shrink: float = 0.01) -> np.ndarray:
@@ -355,7 +359,8 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     # snap the sides to where the wall's colours end (joint-free strips at the edges, weak edges)
     rgb_small = np.stack([rescale(rgb[..., k], s, anti_aliasing=True) if s < 1 else rgb[..., k] for k in range(3)], -1)
     quad_small = order_corners(quad_n * scale + centre, where="automatic mode")
-    snapped = _snap_to_mask(_wall_mask(rgb_small, quad_small), quad_small)
+    to_small = np.array([[scale, 0, centre[0]], [0, scale, centre[1]], [0, 0, 1.0]])
+    snapped = _snap_to_mask(_wall_mask(rgb_small, quad_small), quad_small, (to_small @ vp_b, to_small @ vp_h))
     if snapped is not None and np.max(np.linalg.norm(snapped - quad_small, axis=1)) < 0.2 * scale:
         quad_small = snapped
     quad = order_corners((quad_small + 0.5) / s - 0.5, where="automatic mode")

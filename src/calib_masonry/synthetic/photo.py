@@ -13,8 +13,6 @@ with ``heading_sigma_deg`` of noise).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-
 import numpy as np
 from scipy import ndimage
 from skimage.draw import polygon as draw_polygon
@@ -30,29 +28,11 @@ from ..calibrate.camera import (
     wall_from_camera_rotation,
 )
 from ..errors import InputError
-from ..spec import WallSpec
+from ..spec import PhotoSpec, WallSpec
 from .layouts import Piece
 from .render import mask_shape
 
 __all__ = ["PhotoSpec", "photograph_wall", "render_photo", "sample_camera", "save_jpeg", "wall_texture"]
-
-
-@dataclass(frozen=True)
-class PhotoSpec:
-    """How synthetic photos are taken (the ``[photos]`` table of a scenario file)."""
-
-    long_side_px: int = 3000
-    short_side_px: int = 2000
-    focal_35mm: tuple[float, float] = (24.0, 32.0)
-    eye_height_m: tuple[float, float] = (1.5, 1.8)
-    distance_m: tuple[float, float] = (3.0, 30.0)
-    max_yaw_deg: float = 35.0
-    max_roll_deg: float = 2.0
-    blur_px: tuple[float, float] = (0.4, 0.9)
-    noise: float = 0.012
-    jpeg_quality: int = 90
-    heading_sigma_deg: float = 0.25
-    margin: float = 0.04  # fraction of the image kept free around the wall
 
 
 def wall_texture(wall: WallSpec, pieces: list[Piece], px_per_m: float, rng: np.random.Generator) -> np.ndarray:

@@ -1,0 +1,201 @@
+"""The footprint: adjust every wall's W and theta so the walls close into a ring.
+
+Each wall brings an estimate of its width (from its photo's calibration, with its sigma) and of
+its orientation theta (from the photo's EXIF compass heading plus the fitted yaw, or typed in).
+We solve, with optimistix's Levenberg-Marquardt,
+
+    minimise  sum_n ((W_n - W^_n) / sW_n)^2 + (wrap(theta_n - theta^_n) / s_theta_n)^2
+    subject to  sum_n W_n (cos theta_n, sin theta_n) = 0,
+
+the constraint as two residuals scaled by ``closure_sigma_m`` (1 micrometre: the ring closes to
+far below a millimetre). The covariance of the adjusted values is ``(J^T J)^-1`` of that system,
+which is the constrained covariance to first order. The first wall's theta is the reference of a
+rotation that the closure cannot see, so its prior is what fixes the ring's orientation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._jax import jax, jnp
+from ..errors import FitFailed, InputError
+
+__all__ = ["FootprintResult", "fit_footprint"]
+
+
+@dataclass(frozen=True)
+class FootprintResult:
+    width_m: np.ndarray
+    theta_rad: np.ndarray
+    width_sigma_m: np.ndarray
+    theta_sigma_rad: np.ndarray
+    covariance: np.ndarray  # (2n, 2n): W_1..W_n, theta_1..theta_n
+    closure_gap_m: float  # after the fit
+    closure_gap_before_m: float
+    status: str
+
+    def to_json(self, names) -> dict:
+        return {
+            "walls": [{"name": n, "width_m": float(w), "width_sigma_m": float(sw),
+                       "theta_deg": math.degrees(t) % 360.0, "theta_sigma_deg": math.degrees(st)}
+                      for n, w, t, sw, st in zip(names, self.width_m, self.theta_rad, self.width_sigma_m,
+                                                 self.theta_sigma_rad)],
+            "closure_gap_m": self.closure_gap_m,
+            "closure_gap_before_m": self.closure_gap_before_m,
+            "covariance": {"order": [f"width_m:{n}" for n in names] + [f"theta_rad:{n}" for n in names],
+                           "matrix": self.covariance.tolist()},
+            "status": self.status,
+        }
+
+
+def _gap(w, t, xp=np):
+    return xp.stack([xp.sum(w * xp.cos(t)), xp.sum(w * xp.sin(t))])
+
+
+def _residuals(x, args):
+    w_hat, t_hat, sw, st, sc = args
+    n = w_hat.shape[0]
+    w, t = x[:n], x[n:]
+    dt = jnp.arctan2(jnp.sin(t - t_hat), jnp.cos(t - t_hat))
+    return jnp.concatenate([(w - w_hat) / sw, dt / st, _gap(w, t, jnp) / sc])
+
+
+@jax.jit
+def _solve(x0, args):
+    import optimistix as optx
+
+    sol = optx.least_squares(_residuals, optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), x0, args=args,
+                             max_steps=500, throw=False)
+    return sol.value, sol.result == optx.RESULTS.successful, jax.jacfwd(_residuals)(sol.value, args)
+
+
+def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure_sigma_m: float = 1e-6,
+                  names=None) -> FootprintResult:
+    """Adjust per-wall (W, theta) estimates with their sigmas so the footprint closes."""
+    w_hat = np.asarray(width_m, dtype=np.float64)
+    t_hat = np.asarray(theta_rad, dtype=np.float64)
+    sw = np.asarray(width_sigma_m, dtype=np.float64) * np.ones_like(w_hat)
+    st = np.asarray(theta_sigma_rad, dtype=np.float64) * np.ones_like(w_hat)
+    names = names or [f"wall{i + 1}" for i in range(len(w_hat))]
+    if len(w_hat) < 3 or len(t_hat) != len(w_hat):
+        raise InputError(f"footprint: {len(w_hat)} walls; a closed footprint needs at least 3 with W and theta each")
+    for i, n in enumerate(names):
+        if not (w_hat[i] > 0 and sw[i] > 0 and st[i] > 0 and np.isfinite(t_hat[i])):
+            raise InputError(f"footprint: wall '{n}' needs width_m > 0, a width sigma > 0, a theta and a theta "
+                             "sigma > 0; check its calibration.json or the structure file")
+    before = float(np.linalg.norm(_gap(w_hat, t_hat)))
+    args = tuple(jnp.asarray(a) for a in (w_hat, t_hat, sw, st, closure_sigma_m))
+    x, ok, jac = _solve(jnp.asarray(np.r_[w_hat, t_hat]), args)
+    x, jac = np.asarray(x), np.asarray(jac)
+    n = len(w_hat)
+    cov = np.linalg.pinv(jac.T @ jac)
+    gap = float(np.linalg.norm(_gap(x[:n], x[n:])))
+    if not bool(ok) or not np.all(np.isfinite(x)):
+        raise FitFailed("footprint: the closure fit did not converge; check that the walls are listed in "
+                        "footprint order and their theta values go round the building")
+    if np.any(x[:n] <= 0):
+        raise FitFailed("footprint: closing the ring needs a negative width; the thetas do not describe a closed "
+                        "footprint (check the wall order and headings)")
+    sig = np.sqrt(np.clip(np.diag(cov), 0, None))
+    return FootprintResult(width_m=x[:n], theta_rad=np.mod(x[n:], 2 * math.pi), width_sigma_m=sig[:n],
+                           theta_sigma_rad=sig[n:], covariance=cov, closure_gap_m=gap,
+                           closure_gap_before_m=before, status="converged")
+
+
+def _estimates_from_structure(path, config, heading_sigma_deg, theta_sigma_deg):
+    from dataclasses import replace
+
+    from ..spec import load_structure
+    from .camera import theta_from_heading
+    from .rectify import calibrate_photo
+
+    spec = load_structure(path)
+    rows = []
+    for wall in spec.walls:
+        if wall.image is None:
+            if wall.size_from_photo:
+                raise InputError(f"{path}: wall '{wall.name}' has neither a photo nor width_m; give one")
+            rows.append((wall.name, wall.width_m, 0.005, wall.theta_rad, math.radians(theta_sigma_deg), "typed"))
+            continue
+        cfg = config
+        if wall.camera_height_m is not None:
+            cfg = replace(cfg, camera_height_m=wall.camera_height_m, camera_height_sigma_m=0.02)
+        if wall.corners_px is not None:
+            cfg = replace(cfg, corners_px=wall.corners_px)
+        if wall.focal_px is not None:
+            cfg = replace(cfg, focal_px=wall.focal_px)
+        cal = calibrate_photo(wall.image, cfg)
+        res = cal.result
+        if cal.photo.heading_deg is not None:
+            theta = theta_from_heading(math.radians(cal.photo.heading_deg), res.value("yaw_rad"))
+            t_sigma = math.hypot(math.radians(heading_sigma_deg), res.sigma("yaw_rad"))
+            source = "EXIF heading + fitted yaw"
+        else:
+            theta, t_sigma, source = wall.theta_rad, math.radians(theta_sigma_deg), "typed (no EXIF heading)"
+        rows.append((wall.name, res.width_m, res.sigma("width_m"), theta, t_sigma, source))
+    return spec, rows
+
+
+def _estimates_from_json(paths, heading_sigma_deg):
+    from ..io import read_json
+
+    rows = []
+    for p in paths:
+        doc = read_json(p, field="calibration")
+        if "theta_from_heading_deg" not in doc:
+            raise InputError(f"{p}: no EXIF heading in this calibration; pass a structure TOML with theta_deg instead")
+        try:
+            yaw_sigma = math.sqrt(doc["covariance"]["matrix"][1][1])
+            rows.append((str(p), float(doc["width_m"]), float(doc["width_sigma_m"]),
+                         math.radians(doc["theta_from_heading_deg"]),
+                         math.hypot(math.radians(heading_sigma_deg), yaw_sigma), "EXIF heading + fitted yaw"))
+        except (KeyError, TypeError, IndexError, ValueError):
+            raise InputError(f"{p}: not a calibration.json written by `calib-masonry rectify`") from None
+    return None, rows
+
+
+def footprint_to_folder(inputs, out, *, config=None, heading_sigma_deg: float = 2.0, theta_sigma_deg: float = 1.0,
+                        figure: bool = True) -> dict:
+    """``calib-masonry footprint``: footprint.json, structure.toml with the adjusted W and theta, a plan figure."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from ..io import staged_output, write_json
+    from ..spec import structure_to_toml
+    from .figures import plot_footprint
+    from .rectify import CalibrateConfig
+
+    config = config or CalibrateConfig()
+    if heading_sigma_deg <= 0 or theta_sigma_deg <= 0:
+        raise InputError("footprint: --heading-sigma and --theta-sigma must be > 0 (degrees)")
+    paths = [Path(p) for p in inputs]
+    if len(paths) == 1 and paths[0].suffix == ".toml":
+        spec, rows = _estimates_from_structure(paths[0], config, heading_sigma_deg, theta_sigma_deg)
+    elif all(p.suffix == ".json" for p in paths):
+        spec, rows = _estimates_from_json(paths, heading_sigma_deg)
+    else:
+        raise InputError("footprint: give one structure .toml, or calibration .json files in footprint order")
+    names = [r[0] for r in rows]
+    w, sw, t, st = (np.array([r[i] for r in rows]) for i in (1, 2, 3, 4))
+    res = fit_footprint(w, sw, t, st, names=names)
+    doc = res.to_json(names)
+    for row, est in zip(doc["walls"], rows):
+        row.update(estimate_width_m=est[1], estimate_width_sigma_m=est[2], estimate_theta_deg=math.degrees(est[3]) % 360,
+                   estimate_theta_sigma_deg=math.degrees(est[4]), theta_source=est[5])
+    with staged_output(out) as stage:
+        write_json(stage / "footprint.json", doc)
+        if spec is not None:
+            walls = tuple(replace(wall, width_m=float(res.width_m[i]), theta_rad=float(res.theta_rad[i]),
+                                  image=wall.image.resolve() if wall.image else None,
+                                  mask=wall.mask.resolve() if wall.mask else None)
+                          for i, wall in enumerate(spec.walls))
+            (stage / "structure.toml").write_text(
+                "# Written by `calib-masonry footprint`: W and theta adjusted so the footprint closes.\n"
+                + structure_to_toml(replace(spec, walls=walls, closed=True), relative_to=None), encoding="utf-8")
+        if figure:
+            plot_footprint(w, t, res.width_m, res.theta_rad, names, stage / "footprint.png",
+                           title=f"footprint of {len(names)} walls")
+    return doc

@@ -33,6 +33,7 @@ from .camera import (
     project,
     wall_from_camera_rotation,
 )
+from .lm import least_squares
 
 __all__ = [
     "CalibrationInput",
@@ -316,22 +317,9 @@ def residual_vector(u, data):
 
 @jax.jit
 def _solve(u0, data):
-    import optimistix as optx
-
-    solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-10)
-    sol = optx.least_squares(residual_vector, solver, u0, args=data, max_steps=200, throw=False)
-    u = sol.value
-    jac = jax.jacfwd(residual_vector)(u, data)
-    # optimistix's LM can keep rejecting steps at a minimum where the cost no longer changes in
-    # float64, and then reports the step limit; first-order optimality (a vanishing gradient J^T r
-    # relative to the curvature) is the honest test of having converged
-    r = residual_vector(u, data)
-    grad = jac.T @ r
-    curv = jnp.sqrt(jnp.sum(jac**2, axis=0)) * (jnp.sqrt(r @ r) + 1.0)
-    stationary = jnp.all(jnp.abs(grad) <= 1e-6 * curv)
-    ok = (sol.result == optx.RESULTS.successful) | stationary
+    u, ok, steps, jac = least_squares(residual_vector, u0, data)
     corner_px, bed, head = _parts(u * SCALE, data)
-    return u, ok, sol.stats["num_steps"], jac, corner_px, bed, head
+    return u, ok, steps, jac, corner_px, bed, head
 
 
 def calibrate(inp: CalibrationInput, *, start: np.ndarray | None = None) -> CalibrationResult:

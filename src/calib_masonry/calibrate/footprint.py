@@ -22,6 +22,7 @@ import numpy as np
 
 from .._jax import jax, jnp
 from ..errors import FitFailed, InputError
+from .lm import least_squares
 
 __all__ = ["FootprintResult", "fit_footprint"]
 
@@ -65,11 +66,8 @@ def _residuals(x, args):
 
 @jax.jit
 def _solve(x0, args):
-    import optimistix as optx
-
-    sol = optx.least_squares(_residuals, optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), x0, args=args,
-                             max_steps=500, throw=False)
-    return sol.value, sol.result == optx.RESULTS.successful, jax.jacfwd(_residuals)(sol.value, args)
+    x, ok, _, jac = least_squares(_residuals, x0, args, max_steps=500, tol=1e-12)
+    return x, ok, jac
 
 
 def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure_sigma_m: float = 1e-6,

@@ -27,7 +27,7 @@ from scipy import ndimage
 from ..errors import FitFailed
 from .fit import order_corners
 
-__all__ = ["DetectConfig", "Detection", "detect_wall", "segments_in_quad"]
+__all__ = ["DetectConfig", "Detection", "detect_wall", "refine_quad", "segments_in_quad"]
 
 
 @dataclass(frozen=True)
@@ -286,6 +286,28 @@ def _snap_to_mask(mask: np.ndarray, quad: np.ndarray, vps: tuple[np.ndarray, np.
     return np.array(corners)
 
 
+def refine_quad(rgb: np.ndarray, quad: np.ndarray, halfwidths: tuple[float, ...] = (5.0, 2.5)) -> np.ndarray:
+    """Snap a quadrilateral (LL, LR, UR, UL) to the wall's outline edges in the full photo.
+
+    Each pass fits every side to the strongest colour edge within ``halfwidth`` pixels of it
+    (sub-pixel profile maxima, robust line fit) and intersects adjacent sides. A pass that fails or
+    moves a corner by more than four half-widths is discarded, so a quadrilateral with no clear
+    edge nearby comes back unchanged."""
+    rgb_s = ndimage.gaussian_filter(np.asarray(rgb, dtype=np.float64), (0.7, 0.7, 0))
+    for half in halfwidths:
+        sides = [_refine_side(rgb_s, quad[i], quad[(i + 1) % 4], half) for i in range(4)]
+        if any(sd is None for sd in sides):
+            break
+        try:
+            refined = np.array([_intersect(sides[(i - 1) % 4], sides[i]) for i in range(4)])
+        except np.linalg.LinAlgError:
+            break
+        if not np.all(np.isfinite(refined)) or np.max(np.linalg.norm(refined - quad, axis=1)) > 4 * half:
+            break
+        quad = order_corners(refined, where="outline refinement")
+    return quad
+
+
 def segments_in_quad(seg: np.ndarray, quad: np.ndarray, shrink: float = 0.01) -> np.ndarray:
     """Segments whose both endpoints lie inside the quadrilateral (shrunk towards its centre)."""
     from matplotlib.path import Path as MplPath
@@ -365,18 +387,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
         quad_small = snapped
     quad = order_corners((quad_small + 0.5) / s - 0.5, where="automatic mode")
     # refine each side in the full photo
-    rgb_s = ndimage.gaussian_filter(rgb, (0.7, 0.7, 0))
-    for half in (config.refine_halfwidth_px or 6.0 / s, 2.5 / s):  # coarse, then fine
-        sides = [_refine_side(rgb_s, quad[i], quad[(i + 1) % 4], half) for i in range(4)]
-        if any(sd is None for sd in sides):
-            break
-        try:
-            refined = np.array([_intersect(sides[(i - 1) % 4], sides[i]) for i in range(4)])
-        except np.linalg.LinAlgError:
-            break
-        if np.max(np.linalg.norm(refined - quad, axis=1)) > 4 * half:
-            break
-        quad = order_corners(refined, where="automatic mode")
+    quad = refine_quad(rgb, quad, (config.refine_halfwidth_px or 6.0 / s, 2.5 / s))
     bed_full = np.c_[to_full(bed[:, :2]), to_full(bed[:, 2:])]
     head_full = np.c_[to_full(head[:, :2]), to_full(head[:, 2:])]
     unscale = np.array([[scale / s, 0, (centre[0] + 0.5) / s - 0.5], [0, scale / s, (centre[1] + 0.5) / s - 0.5], [0, 0, 1.0]])

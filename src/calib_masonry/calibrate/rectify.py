@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import FitFailed, InputError
 from ..io import Photo, read_photo, staged_output, write_json
 from .fit import CalibrationInput, CalibrationResult, calibrate, order_corners
-from .lines import DetectConfig, Detection, detect_wall, segments_in_quad
+from .lines import DetectConfig, Detection, detect_wall, refine_quad, segments_in_quad
 
 __all__ = [
     "CalibrateConfig",
@@ -45,6 +45,7 @@ class CalibrateConfig:
     line_sigma_px: float = 1.0
     max_effective_segments: int = 16
     use_lines: bool = True
+    snap_corners: bool = True  # refine clicked corners onto the wall's outline edges
     max_rms_px: float = 3.0
     force: bool = False
     detect: DetectConfig = field(default_factory=DetectConfig)
@@ -100,6 +101,11 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             raise InputError(f"--corners: a corner lies outside the {w} x {h} photo {photo.path.name}; "
                              "click inside the image")
         mode = "clicked"
+        sigma = config.corner_sigma_px or 1.5
+        if config.snap_corners:
+            snapped = refine_quad(photo.rgb, corners, (3.0 * sigma + 1.0, 2.0))
+            if not np.array_equal(snapped, corners):
+                corners, sigma, mode = snapped, min(sigma, 0.5), "clicked, snapped to the outline"
         bed = head = np.zeros((0, 4))
         if config.use_lines:
             try:
@@ -108,7 +114,6 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
                 head = segments_in_quad(found.head_segments, corners)
             except FitFailed:
                 pass  # no joint lines: the corners alone (plus priors) still determine the fit
-        sigma = config.corner_sigma_px or 1.5
     else:
         try:
             detection = detect_wall(photo.rgb, config.detect)

@@ -1,0 +1,375 @@
+"""Camera calibration: the model, the fit, detection, rectification, segmentation, footprint, CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib_masonry.calibrate.camera import (
+    angles_from_rotation,
+    heading_from_theta,
+    image_from_wall_homography,
+    normalise_homography,
+    principal_point,
+    project,
+    theta_from_heading,
+    wall_from_camera_rotation,
+)
+from calib_masonry.calibrate.fit import (
+    SCALE,
+    CalibrationInput,
+    calibrate,
+    order_corners,
+    pack,
+    residual_vector,
+)
+from calib_masonry.errors import FitFailed, InputError
+
+from .conftest import scenario_text
+
+SIZE = (3000, 2000)
+
+
+def _camera(yaw=0.35, pitch=0.12, roll=0.02, d=9.0, w=5.0, h=6.0, eye=1.65, f=2400.0):
+    x = w / 2 - d * math.sin(yaw)
+    return np.array([f, yaw, pitch, roll, x, -d * math.cos(yaw), eye, w, h])
+
+
+def _observations(params, size=SIZE, *, rng=None, noise=0.0, courses=0.19, stride=0.4):
+    """Exact (or noisy) corners and joint segments of a wall seen by ``params``."""
+    h = image_from_wall_homography(params, principal_point(size))
+    w, ht = params[7], params[8]
+    corners = project(h, np.array([[0, 0], [w, 0], [w, ht], [0, ht]], dtype=float))
+    bed = [np.r_[project(h, np.array([[0.2, z], [min(w - 0.2, 1.8), z]]))[0], project(h, np.array([[min(w - 0.2, 1.8), z]]))[0]]
+           for z in np.arange(courses, ht - 0.05, courses)]
+    head = [np.r_[project(h, np.array([[x, 0.3]]))[0], project(h, np.array([[x, 0.3 + courses * 0.9]]))[0]]
+            for x in np.arange(stride, w - 0.05, stride)]
+    bed, head = np.array(bed), np.array(head)
+    if rng is not None:
+        corners = corners + rng.normal(0, noise, corners.shape)
+        bed = bed + rng.normal(0, noise * 0.5, bed.shape)
+        head = head + rng.normal(0, noise * 0.5, head.shape)
+    return corners, bed, head
+
+
+def test_rotation_angles_round_trip_and_forward_direction():
+    for yaw, pitch, roll in [(0.0, 0.0, 0.0), (0.4, -0.2, 0.05), (-0.6, 0.3, -0.03)]:
+        r = wall_from_camera_rotation(yaw, pitch, roll)
+        assert np.allclose(r.T @ r, np.eye(3), atol=1e-12) and np.isclose(np.linalg.det(r), 1.0)
+        assert np.allclose(r[:, 2], [math.sin(yaw) * math.cos(pitch), math.cos(yaw) * math.cos(pitch), math.sin(pitch)])
+        assert np.allclose(angles_from_rotation(r), (yaw, pitch, roll), atol=1e-12)
+    for theta in (0.0, 1.2, 4.0):
+        for yaw in (-0.5, 0.3):
+            assert math.isclose(theta_from_heading(heading_from_theta(theta, yaw), yaw), theta, abs_tol=1e-12)
+
+
+def test_known_homography_recovered_from_exact_observations():
+    truth = _camera()
+    corners, bed, head = _observations(truth)
+    inp = CalibrationInput(SIZE, order_corners(corners[[2, 0, 3, 1]]), corner_sigma_px=1.0, bed_segments=bed,
+                           head_segments=head, camera_height_m=truth[6], camera_height_sigma_m=0.01)
+    res = calibrate(inp)
+    assert res.status == "converged"
+    h_true = image_from_wall_homography(truth, principal_point(SIZE))
+    assert np.allclose(normalise_homography(res.image_from_wall), normalise_homography(h_true), atol=1e-7)
+    assert res.width_m == pytest.approx(truth[7], rel=1e-6) and res.height_m == pytest.approx(truth[8], rel=1e-6)
+    assert res.value("focal_px") == pytest.approx(truth[0], rel=1e-6)  # focal fitted, not given
+    assert res.rms_residual_px < 1e-4
+
+
+def test_residual_gradients_match_central_differences():
+    import jax
+    import jax.numpy as jnp
+
+    truth = _camera(yaw=-0.3, pitch=0.18)
+    corners, bed, head = _observations(truth, rng=np.random.default_rng(3), noise=1.0)
+    inp = CalibrationInput(SIZE, order_corners(corners), bed_segments=bed, head_segments=head, focal_px=2400.0,
+                           known_width_m=5.0)
+    data = {k: jnp.asarray(v) for k, v in pack(inp).items()}
+    u = jnp.asarray(truth / SCALE * 1.01)
+    jac = np.asarray(jax.jacfwd(residual_vector)(u, data))
+    fd = np.zeros_like(jac)
+    for i in range(len(u)):
+        e = np.zeros(len(u))
+        e[i] = 1e-6
+        fd[:, i] = (np.asarray(residual_vector(u + e, data)) - np.asarray(residual_vector(u - e, data))) / 2e-6
+    assert np.max(np.abs(jac - fd)) <= 1e-5 * max(1.0, np.max(np.abs(jac)))
+
+
+def test_covariance_shrinks_as_observations_are_added():
+    truth = _camera(yaw=0.25, pitch=0.15)
+    corners, bed, head = _observations(truth, rng=np.random.default_rng(5), noise=1.0)
+    base = CalibrationInput(SIZE, order_corners(corners), corner_sigma_px=1.0, line_sigma_px=0.5,
+                            camera_height_m=truth[6], camera_height_sigma_m=0.05)
+    steps = [base,
+             replace(base, bed_segments=bed[:5], head_segments=head[:3]),
+             replace(base, bed_segments=bed, head_segments=head),
+             replace(base, bed_segments=bed, head_segments=head, known_width_m=truth[7])]
+    sig_w = [calibrate(s).sigma("width_m") for s in steps]
+    sig_pitch = [calibrate(s).sigma("pitch_rad") for s in steps]
+    assert all(a > b for a, b in zip(sig_w, sig_w[1:])), sig_w
+    assert all(a >= b for a, b in zip(sig_pitch, sig_pitch[1:])) and sig_pitch[0] > sig_pitch[2], sig_pitch
+
+
+def test_order_corners_any_order_and_degenerate_inputs():
+    quad = np.array([[100, 900], [800, 950], [760, 120], [140, 180]], dtype=float)
+    for perm in ([0, 1, 2, 3], [3, 1, 0, 2], [2, 3, 1, 0]):
+        assert np.array_equal(order_corners(quad[perm]), quad)
+    with pytest.raises(InputError, match="collinear"):
+        order_corners(np.array([[0, 0], [100, 0], [200, 0], [50, 300]], dtype=float))
+    with pytest.raises(InputError, match="convex"):
+        order_corners(np.array([[0, 0], [400, 0], [200, 60], [200, 400]], dtype=float))
+    with pytest.raises(InputError, match="exactly 4"):
+        order_corners(np.zeros(6))
+
+
+def test_corners_alone_without_focal_on_a_fronto_parallel_photo_is_refused(tmp_path):
+    from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
+    from calib_masonry.io import read_photo
+
+    truth = _camera(yaw=0.0, pitch=0.0, roll=0.0, eye=3.0, f=900.0, d=12.0)
+    corners, _, _ = _observations(truth, size=(1200, 800))
+    img = np.full((800, 1200, 3), 128, np.uint8)
+    from PIL import Image
+
+    Image.fromarray(img).save(tmp_path / "flat.png")
+    photo = read_photo(tmp_path / "flat.png")
+    cfg = CalibrateConfig(corners_px=tuple(corners.ravel()), use_lines=False, snap_corners=False)
+    with pytest.raises(FitFailed, match="focal"):
+        calibrate_photo(photo, cfg)
+
+
+# ----------------------------------------------------------------------------------------------
+# synthetic photos: detection, rectification, segmentation
+
+
+@pytest.fixture(scope="module")
+def photo_set(tmp_path_factory):
+    """Two small walls photographed at 1500 x 1000 px (seed 4242, not used elsewhere)."""
+    from calib_masonry.spec import PhotoSpec, load_structure
+    from calib_masonry.synthetic.truth import synthesize
+
+    tmp = tmp_path_factory.mktemp("photos")
+    sc = tmp / "scenario.toml"
+    sc.write_text(scenario_text([(2.4, 2.0, 0.0), (2.0, 2.0, 90.0)], seed=4242, px_per_m=200))
+    photos = replace(PhotoSpec(), long_side_px=1500, short_side_px=1000)
+    truth = synthesize(load_structure(sc, require_sources=False), tmp / "data", figures=False, photos=photos,
+                       progress=False)
+    return tmp / "data", truth
+
+
+def test_synth_photos_have_exif_and_exact_truth(photo_set):
+    from calib_masonry.io import read_photo
+
+    data, truth = photo_set
+    for t in truth["photos"]:
+        photo = read_photo(data / t["photo"])
+        assert photo.size == tuple(t["image_size"])
+        assert photo.focal_px == pytest.approx(t["params"]["focal_px"], rel=1e-4)
+        assert photo.heading_deg == pytest.approx(t["exif_heading_deg"], abs=1e-3)
+        h = np.array(t["image_from_wall"])
+        w, ht = t["width_m"], t["height_m"]
+        assert np.allclose(project(h, np.array([[0, 0], [w, 0], [w, ht], [0, ht]])), t["corners_px"], atol=1e-6)
+        assert 1.5 <= t["eye_height_m"] <= 1.8 and abs(t["yaw_deg"]) <= 35.0
+    text = (data / "structure_photos.toml").read_text()
+    assert 'image = "photos/w0.jpg"' in text
+
+
+def test_automatic_mode_finds_corners_and_size(photo_set):
+    from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
+
+    data, truth = photo_set
+    for t in truth["photos"]:
+        cal = calibrate_photo(data / t["photo"], CalibrateConfig(camera_height_m=t["eye_height_m"],
+                                                                 camera_height_sigma_m=0.01))
+        assert cal.mode == "automatic" and cal.result.status == "converged"
+        assert np.max(np.abs(cal.detection.corners_px - np.array(t["corners_px"]))) < 1.5
+        assert cal.result.width_m == pytest.approx(t["width_m"], rel=0.02)
+        assert cal.result.height_m == pytest.approx(t["height_m"], rel=0.02)
+        assert cal.result.sigma("width_m") > 0
+        theta = cal.to_json()["theta_from_heading_deg"]
+        assert abs((theta - t["theta_deg"] + 180) % 360 - 180) < 1.5
+
+
+def test_clicked_corners_are_snapped_and_beat_raw_clicks(photo_set):
+    from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
+
+    data, truth = photo_set
+    t = truth["photos"][0]
+    rng = np.random.default_rng(17)
+    clicks = np.array(t["corners_px"]) + rng.normal(0, 1.5, (4, 2))
+    cfg = CalibrateConfig(corners_px=tuple(clicks[[1, 3, 0, 2]].ravel()), camera_height_m=t["eye_height_m"],
+                          camera_height_sigma_m=0.01)
+    snapped = calibrate_photo(data / t["photo"], cfg)
+    raw = calibrate_photo(data / t["photo"], replace(cfg, snap_corners=False))
+    assert snapped.mode.startswith("clicked, snapped")
+    assert abs(snapped.result.width_m / t["width_m"] - 1) < 0.01
+    err = [np.max(np.abs(c.result.corners_px() - np.array(t["corners_px"]))) for c in (snapped, raw)]
+    assert err[0] < err[1]
+
+
+def test_rectify_and_segment_recover_the_bricks(photo_set):
+    from calib_masonry.calibrate.rectify import rectify_image
+    from calib_masonry.io import read_mask, read_photo
+    from calib_masonry.wall2d.segment import label_bricks, segment_photo
+
+    data, truth = photo_set
+    t, wt = truth["photos"][0], truth["walls"][0]
+    photo = read_photo(data / t["photo"])
+    rect = rectify_image(photo.rgb, np.array(t["image_to_wall"]), t["width_m"], t["height_m"], 200.0)
+    true_mask = read_mask(data / wt["mask"])
+    assert rect.shape[:2] == true_mask.shape
+    mask = segment_photo(rect)
+    dice = 2 * np.sum(mask & true_mask) / (mask.sum() + true_mask.sum())
+    assert dice > 0.93
+    assert abs(label_bricks(mask).max() - len(wt["pieces"])) <= max(2, 0.03 * len(wt["pieces"]))
+    # a mask rectified with nearest-neighbour stays binary
+    rm = rectify_image(np.ones(photo.rgb.shape[:2], np.float32), np.array(t["image_to_wall"]), t["width_m"],
+                       t["height_m"], 100.0, nearest=True)
+    assert set(np.unique(rm)) <= {0.0, 1.0} and rm.mean() > 0.99
+
+
+@pytest.mark.slow
+def test_build_from_photos_matches_truth(photo_set, tmp_path):
+    from calib_masonry.pipeline import build_to_folder
+    from calib_masonry.spec import load_structure
+    from calib_masonry.study.compare import compare_dirs
+
+    data, _ = photo_set
+    spec = load_structure(data / "structure_photos.toml")
+    spec = replace(spec, closed=False)
+    summary = build_to_folder(spec, tmp_path / "b", figures=False, progress=False)
+    assert (tmp_path / "b" / "photos" / "w0" / "calibration.json").is_file()
+    assert summary["walls"][0]["photo"].endswith("w0.jpg")
+    m = compare_dirs(tmp_path / "b", data / "truth")
+    assert m["precision"] >= 0.95 and m["recall"] >= 0.95 and m["dice"]["median"] >= 0.95
+
+
+def test_photo_wall_without_size_takes_the_fitted_one(photo_set, tmp_path):
+    from calib_masonry.spec import load_structure
+
+    data, truth = photo_set
+    text = (data / "structure_photos.toml").read_text()
+    lines = [ln for ln in text.splitlines() if not ln.startswith(("width_m", "height_m"))]
+    p = data / "nosize.toml"
+    p.write_text("\n".join(lines) + "\n")
+    spec = load_structure(p)
+    assert all(w.size_from_photo for w in spec.walls)
+    p2 = data / "bad_corners.toml"
+    p2.write_text(text.replace('image = "photos/w0.jpg"', 'image = "photos/w0.jpg"\ncorners_px = [1, 2, 3]'))
+    with pytest.raises(InputError, match="corners_px"):
+        load_structure(p2)
+
+
+# ----------------------------------------------------------------------------------------------
+# footprint
+
+
+def test_footprint_closes_and_improves_thetas():
+    from calib_masonry.calibrate.footprint import fit_footprint
+
+    w = np.array([5.73, 4.10, 3.07, 1.23, 2.66, 5.33])
+    t = np.radians([0, 90, 180, 90, 180, 270])
+    rng = np.random.default_rng(8)
+    errs_before, errs_after = [], []
+    for _ in range(5):
+        we = w * (1 + rng.normal(0, 0.01, 6))
+        te = t + np.radians(rng.normal(0, 0.5, 6))
+        res = fit_footprint(we, 0.01 * we, te, math.radians(0.5))
+        assert res.closure_gap_m < 1e-6
+        errs_before.append(np.abs(np.angle(np.exp(1j * (te - t)))))
+        errs_after.append(np.abs(np.angle(np.exp(1j * (res.theta_rad - t)))))
+        assert np.all(res.theta_sigma_rad < math.radians(0.5)) and np.all(res.width_sigma_m < 0.01 * we)
+    assert np.sqrt(np.mean(np.square(errs_after))) < np.sqrt(np.mean(np.square(errs_before)))
+    with pytest.raises(InputError, match="at least 3"):
+        fit_footprint([1.0, 1.0], 0.01, [0.0, 3.14], 0.01)
+
+
+# ----------------------------------------------------------------------------------------------
+# CLI
+
+
+def _run(argv):
+    from calib_masonry.cli import main
+
+    return main([str(a) for a in argv])
+
+
+def test_rectify_cli_writes_calibration_json(photo_set, tmp_path, capsys):
+    data, truth = photo_set
+    t = truth["photos"][1]
+    out = tmp_path / "r"
+    assert _run(["rectify", data / t["photo"], "--camera-height", t["eye_height_m"], "--px-per-m", 150,
+                 "--mask", data / "truth" / "..", "--out", out]) == 2  # a folder is not a mask
+    assert not out.exists()
+    assert _run(["rectify", data / t["photo"], "--camera-height", t["eye_height_m"], "--px-per-m", 150,
+                 "--out", out]) == 0
+    doc = json.loads((out / "calibration.json").read_text())
+    for key in ("width_m", "height_m", "image_to_wall", "camera", "rms_residual_px", "covariance", "status"):
+        assert key in doc
+    assert set(doc["camera"]) >= {"focal_px", "center_m", "yaw_deg", "pitch_deg", "roll_deg"}
+    h = np.array(doc["image_to_wall"])
+    got = project(h, np.array(t["corners_px"]))
+    w, ht = t["width_m"], t["height_m"]
+    assert np.allclose(got, [[0, 0], [w, 0], [w, ht], [0, ht]], atol=0.03)
+    assert (out / "rectified.png").is_file() and (out / "overlay.png").is_file()
+    assert doc["rectified_shape"] == [round(doc["height_m"] * 150), round(doc["width_m"] * 150)]
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--corners", "1,2,3"], "exactly 8"),
+    (["--corners", "10,10,500,10,900,10,300,600"], "collinear"),
+    (["--corners", "10,10,500,10,500,400,-50,400"], "outside"),
+    (["--max-rms", "0.0001"], "RMS residual"),
+    (["--focal-px", "-5"], "focal"),
+])
+def test_rectify_bad_input_one_line_exit_2(photo_set, tmp_path, capsys, extra, message):
+    data, truth = photo_set
+    out = tmp_path / "r"
+    assert _run(["rectify", data / truth["photos"][0]["photo"], *extra, "--out", out]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error:") and message in err and "\n" not in err
+    assert not out.exists()
+
+
+def test_rectify_missing_corrupt_and_blank_photos(tmp_path, capsys):
+    assert _run(["rectify", tmp_path / "nope.jpg", "--out", tmp_path / "o"]) == 2
+    assert "not found" in capsys.readouterr().err
+    bad = tmp_path / "bad.jpg"
+    bad.write_bytes(b"\xff\xd8 not a jpeg")
+    assert _run(["rectify", bad, "--out", tmp_path / "o"]) == 2
+    assert "cannot be read" in capsys.readouterr().err
+    from PIL import Image
+
+    Image.fromarray(np.full((400, 600, 3), 90, np.uint8)).save(tmp_path / "blank.png")
+    assert _run(["rectify", tmp_path / "blank.png", "--out", tmp_path / "o"]) == 2
+    assert "no wall found" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_rectify_force_keeps_a_high_residual_fit(photo_set, tmp_path):
+    data, truth = photo_set
+    assert _run(["rectify", data / truth["photos"][0]["photo"], "--max-rms", "0.0001", "--force", "--no-figures",
+                 "--out", tmp_path / "f"]) == 0
+    assert (tmp_path / "f" / "calibration.json").is_file()
+
+
+def test_footprint_cli_from_calibrations(photo_set, tmp_path, capsys):
+    data, truth = photo_set
+    # three photos of a triangle are not at hand; use the two walls' calibrations plus a typed third wall
+    outs = []
+    for i, t in enumerate(truth["photos"]):
+        out = tmp_path / f"c{i}"
+        assert _run(["rectify", data / t["photo"], "--camera-height", t["eye_height_m"], "--no-figures",
+                     "--out", out]) == 0
+        outs.append(out / "calibration.json")
+    assert _run(["footprint", *outs, "--out", tmp_path / "fp"]) == 2  # two walls cannot close
+    assert "at least 3" in capsys.readouterr().err
+    assert _run(["footprint", outs[0], outs[1], outs[0], "--out", tmp_path / "fp3"]) in (0, 2)
+    assert _run(["footprint", tmp_path / "x.txt", "--out", tmp_path / "fp4"]) == 2
+    assert not Path(tmp_path / "fp").exists()

@@ -10,7 +10,7 @@ tuning used the data set's own seed 20261122 and seed 1). For every photo:
 - automatic mode: no clicks, camera height known; success rate and W, H errors;
 - fit time per photo after compilation (the LM solve alone, and detection separately);
 - the footprint: per-wall W from the automatic fits and theta from each photo's EXIF heading plus
-  the fitted yaw, closed by `fit_footprint`.
+  the fitted yaw, closed by `fit_footprint`, without and with the six corner photos' turn angles.
 
     .venv/bin/python experiments/bench_calibrate.py [--seeds 101 102 103 104 105] [--size 3000 2000]
 """
@@ -26,8 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_masonry.calibrate.camera import project
+from calib_masonry.calibrate.camera import project, theta_from_heading
 from calib_masonry.calibrate.fit import CalibrationInput, calibrate, order_corners
+from calib_masonry.calibrate.corner import calibrate_corner_photo
 from calib_masonry.calibrate.footprint import fit_footprint
 from calib_masonry.calibrate.lines import detect_wall, refine_quad, segments_in_quad
 from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
@@ -55,9 +56,9 @@ def vertex_rms_mm(wall_from_image: np.ndarray, image_from_wall_true: np.ndarray,
     return float(np.sqrt(np.mean(np.sum((back - vertices_m) ** 2, axis=1)))) * 1000
 
 
-def run(seeds, size, noise_px, heading_sigma_deg) -> None:
+def run(seeds, size, noise_px, heading_sigmas) -> None:
     base = load_structure(ROOT / "data_synthetic" / "paper_example" / "scenario.toml", require_sources=False)
-    photos = replace(PhotoSpec(), long_side_px=max(size), short_side_px=min(size), heading_sigma_deg=heading_sigma_deg)
+    photos = replace(PhotoSpec(), long_side_px=max(size), short_side_px=min(size))
     rows, auto_rows, fit_times, detect_times, footprints = [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in seeds:
@@ -67,7 +68,7 @@ def run(seeds, size, noise_px, heading_sigma_deg) -> None:
             truth = synthesize(spec, out, figures=False, photos=photos, progress=False)
             print(f"seed {seed}: {len(truth['photos'])} photos in {time.perf_counter() - t0:.0f} s", flush=True)
             rng = np.random.default_rng([seed, 99])
-            fp_w, fp_sw, fp_t, fp_st, fp_true = [], [], [], [], []
+            fp_w, fp_sw, fp_t, fp_true = [], [], [], []
             for wall_t, photo_t in zip(truth["walls"], truth["photos"]):
                 photo = read_photo(out / photo_t["photo"])
                 w_true, h_true = wall_t["width_m"], wall_t["height_m"]
@@ -118,22 +119,33 @@ def run(seeds, size, noise_px, heading_sigma_deg) -> None:
                                       "h_err": abs(r.height_m / h_true - 1)})
                     fp_w.append(r.width_m)
                     fp_sw.append(r.sigma("width_m"))
-                    doc = cal.to_json()
-                    fp_t.append(math.radians(doc["theta_from_heading_deg"]))
-                    fp_st.append(math.hypot(math.radians(heading_sigma_deg), r.sigma("yaw_rad")))
+                    fp_t.append((photo_t["heading_deg"], r.value("yaw_rad"), r.sigma("yaw_rad")))
                     fp_true.append((w_true, math.radians(wall_t["theta_deg"])))
                 except CalibMasonryError as exc:
                     auto_rows.append({"ok": False, "message": str(exc)})
                     print(f"  auto failed: {exc}")
             if len(fp_w) == len(truth["walls"]):
-                fp = fit_footprint(fp_w, fp_sw, fp_t, fp_st)
+                names = [w["name"] for w in truth["walls"]]
+                turns, turn_err = [], []
+                for c in truth["corner_photos"]:
+                    r = calibrate_corner_photo(out / c["photo"])
+                    turns.append((names.index(c["walls"][0]), names.index(c["walls"][1]), r.turn_rad,
+                                  r.turn_sigma_rad))
+                    turn_err.append(abs(math.degrees(r.turn_rad) - c["turn_deg"]))
                 tw, tt = np.array(fp_true).T
-                dtheta = np.degrees(np.abs(np.angle(np.exp(1j * (fp.theta_rad - tt)))))
-                dtheta0 = np.degrees(np.abs(np.angle(np.exp(1j * (np.array(fp_t) - tt)))))
-                footprints.append({"seed": seed, "gap_before_mm": fp.closure_gap_before_m * 1000,
-                                   "gap_mm": fp.closure_gap_m * 1000, "max_dtheta_deg": float(dtheta.max()),
-                                   "max_dtheta_before_deg": float(dtheta0.max()),
-                                   "max_w_err": float(np.max(np.abs(fp.width_m / tw - 1)))})
+                for hs in heading_sigmas:
+                    # compass headings: the truth plus N(0, hs); theta = yaw - heading
+                    noisy = [theta_from_heading(math.radians(h + rng.normal(0, hs)), yaw) for h, yaw, _ in fp_t]
+                    th_sig = [math.hypot(math.radians(hs), sy) for _, _, sy in fp_t]
+                    dtheta0 = np.degrees(np.abs(np.angle(np.exp(1j * (np.array(noisy) - tt)))))
+                    for label, tr in ((f"heading +-{hs:g} deg only", []), (f"heading +-{hs:g} deg + corners", turns)):
+                        fp = fit_footprint(fp_w, fp_sw, noisy, th_sig, turns=tr)
+                        dtheta = np.degrees(np.abs(np.angle(np.exp(1j * (fp.theta_rad - tt)))))
+                        footprints.append({"seed": seed, "label": label, "gap_before_mm": fp.closure_gap_before_m * 1000,
+                                           "gap_mm": fp.closure_gap_m * 1000, "max_dtheta_deg": float(dtheta.max()),
+                                           "max_dtheta_before_deg": float(dtheta0.max()),
+                                           "max_turn_err_deg": float(max(turn_err)) if tr else float("nan"),
+                                           "max_w_err": float(np.max(np.abs(fp.width_m / tw - 1)))})
 
     def med(key, rs):
         return float(np.median([r[key] for r in rs]))
@@ -169,10 +181,13 @@ def run(seeds, size, noise_px, heading_sigma_deg) -> None:
     print(f"\nfit time per photo after compilation (LM solve, 2 cores): median {np.median(fit_times) * 1000:.1f} ms, "
           f"max {np.max(fit_times) * 1000:.1f} ms; detection (outline + joints) median {np.median(detect_times):.2f} s")
     if footprints:
-        print(f"\nfootprint (EXIF heading noise {heading_sigma_deg} deg, per-wall W from the automatic fits):")
+        print("\nfootprint (per-wall W from the automatic fits, theta from a compass heading with the stated noise plus "
+              "the fitted yaw):")
         for f in footprints:
-            print(f"  seed {f['seed']}: gap {f['gap_before_mm']:.1f} mm -> {f['gap_mm']:.2e} mm, max |theta error| "
-                  f"{f['max_dtheta_before_deg']:.3f} -> {f['max_dtheta_deg']:.3f} deg, max W error {f['max_w_err']:.3%}")
+            turn = "" if math.isnan(f["max_turn_err_deg"]) else f", max corner-photo turn error {f['max_turn_err_deg']:.3f} deg"
+            print(f"  seed {f['seed']} {f['label']:<32}: gap {f['gap_before_mm']:.1f} mm -> {f['gap_mm']:.2e} mm, "
+                  f"max |theta error| {f['max_dtheta_before_deg']:.3f} -> {f['max_dtheta_deg']:.3f} deg, "
+                  f"max W error {f['max_w_err']:.3%}{turn}")
 
 
 def main() -> None:
@@ -180,7 +195,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[101, 102, 103, 104, 105])
     ap.add_argument("--size", type=int, nargs=2, default=[3000, 2000])
     ap.add_argument("--noise-px", type=float, default=1.5)
-    ap.add_argument("--heading-sigma", type=float, default=0.25)
+    ap.add_argument("--heading-sigma", type=float, nargs="+", default=[0.25, 2.0])
     a = ap.parse_args()
     run(a.seeds, a.size, a.noise_px, a.heading_sigma)
 

@@ -373,3 +373,72 @@ def test_footprint_cli_from_calibrations(photo_set, tmp_path, capsys):
     assert _run(["footprint", outs[0], outs[1], outs[0], "--out", tmp_path / "fp3"]) in (0, 2)
     assert _run(["footprint", tmp_path / "x.txt", "--out", tmp_path / "fp4"]) == 2
     assert not Path(tmp_path / "fp").exists()
+
+
+# ----------------------------------------------------------------------------------------------
+# corner photos
+
+
+@pytest.mark.parametrize("turn_deg", [90.0, -90.0, 60.0])
+def test_corner_photo_recovers_the_turn(tmp_path, turn_deg):
+    from calib_masonry.calibrate.corner import calibrate_corner_photo
+    from calib_masonry.spec import PhotoSpec, load_structure
+    from calib_masonry.synthetic.photo import photograph_corner, save_jpeg
+    from calib_masonry.synthetic.truth import truth_structure
+
+    sc = tmp_path / "s.toml"
+    sc.write_text(scenario_text([(2.6, 2.2, 0.0), (2.2, 2.2, turn_deg)], seed=5151))
+    spec = load_structure(sc, require_sources=False)
+    pieces, _ = truth_structure(spec)
+    shot = photograph_corner(spec.walls[0], pieces[0], spec.walls[1], pieces[1],
+                             replace(PhotoSpec(), long_side_px=1800, short_side_px=1200), np.random.default_rng(9))
+    save_jpeg(tmp_path / "c.jpg", shot["image"], focal_35mm=shot["truth"]["focal_35mm"], heading_deg=None)
+    res = calibrate_corner_photo(tmp_path / "c.jpg")
+    assert shot["truth"]["turn_deg"] == pytest.approx(turn_deg)
+    assert abs(math.degrees(res.turn_rad) - turn_deg) < 0.3
+    assert 0 < math.degrees(res.turn_sigma_rad) < 1.0
+    # without EXIF focal the corner fit refuses with the flag to add
+    from PIL import Image
+
+    Image.open(tmp_path / "c.jpg").save(tmp_path / "noexif.png")
+    with pytest.raises(InputError, match="--focal-px"):
+        calibrate_corner_photo(tmp_path / "noexif.png")
+
+
+def test_footprint_with_turns_ties_the_walls_together():
+    from calib_masonry.calibrate.footprint import fit_footprint
+
+    w = np.array([5.73, 4.10, 3.07, 1.23, 2.66, 5.33])
+    t = np.radians([0, 90, 180, 90, 180, 270])
+    rng = np.random.default_rng(21)
+    turns = [(i, (i + 1) % 6, t[(i + 1) % 6] - t[i] + math.radians(rng.normal(0, 0.05)), math.radians(0.1))
+             for i in range(6)]
+    we, te = w * (1 + rng.normal(0, 0.01, 6)), t + np.radians(rng.normal(0, 2.0, 6))
+    free = fit_footprint(we, 0.01 * we, te, math.radians(2.0))
+    tied = fit_footprint(we, 0.01 * we, te, math.radians(2.0), turns=turns)
+    rel = lambda th: np.degrees(np.angle(np.exp(1j * (np.diff(th) - np.diff(t)))))  # noqa: E731
+    assert np.max(np.abs(rel(tied.theta_rad))) < 0.3 < np.max(np.abs(rel(free.theta_rad)))
+    assert tied.closure_gap_m < 1e-6 and np.all(tied.theta_sigma_rad < free.theta_sigma_rad)
+    # one wall with no own theta is placed by its corners
+    st = np.full(6, math.radians(2.0))
+    st[3] = np.inf
+    te2 = te.copy()
+    te2[3] = np.nan
+    part = fit_footprint(we, 0.01 * we, te2, st, turns=turns)
+    assert abs(math.degrees(math.remainder(part.theta_rad[3] - t[3], 2 * math.pi))) < 2.0
+
+
+def test_corner_tables_are_checked_and_written_back(photo_set, tmp_path):
+    from calib_masonry.spec import load_structure, structure_to_toml
+
+    data, _ = photo_set
+    text = (data / "structure_photos.toml").read_text()
+    ok = data / "with_corner.toml"
+    ok.write_text(text + '\n[[corner]]\nphoto = "photos/w0.jpg"\nwalls = ["w0", "w1"]\n')
+    spec = load_structure(ok)
+    assert spec.corners[0].walls == ("w0", "w1") and spec.corners[0].photo.is_file()
+    assert 'walls = [' in structure_to_toml(spec, relative_to=data)
+    bad = data / "bad_corner.toml"
+    bad.write_text(text + '\n[[corner]]\nphoto = "photos/w0.jpg"\nwalls = ["w0", "nope"]\n')
+    with pytest.raises(InputError, match="two different walls"):
+        load_structure(bad)

@@ -39,6 +39,7 @@ __all__ = [
     "load_structure",
     "structure_to_toml",
     "LAYOUTS",
+    "CornerSpec",
     "PhotoSpec",
 ]
 
@@ -118,6 +119,15 @@ class PhotoSpec:
 
 
 @dataclass(frozen=True)
+class CornerSpec:
+    """A photo of the corner where wall ``walls[0]`` ends and ``walls[1]`` starts (``[[corner]]``)."""
+
+    photo: Path
+    walls: tuple[str, str]
+    focal_px: float | None = None
+
+
+@dataclass(frozen=True)
 class StructureSpec:
     """A whole structure: walls in footprint order plus defaults and tolerances."""
 
@@ -132,6 +142,7 @@ class StructureSpec:
     photo_px_per_m: float = 300.0  # orthophoto resolution for segmenting photo walls
     synthetic: SyntheticSpec | None = None
     photos: PhotoSpec | None = None
+    corners: tuple[CornerSpec, ...] = ()
     source: Path | None = field(default=None, compare=False)
 
     def with_walls(self, walls: tuple[WallSpec, ...]) -> "StructureSpec":
@@ -359,11 +370,26 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
                               refine=_flag(w, "refine", where, refine_default),
                               camera_height_m=None if cam_h is None else float(cam_h), corners_px=corners,
                               focal_px=None if focal is None else float(focal)))
+    corners = []
+    for i, c in enumerate(data.get("corner", []) or [], start=1):
+        where = _where(path, f"[[corner]] {i}")
+        if not isinstance(c, dict) or not isinstance(c.get("photo"), str):
+            raise InputError(f"{where}: needs photo = 'PATH' and walls = ['A', 'B']")
+        pair = c.get("walls")
+        if not (isinstance(pair, list) and len(pair) == 2 and all(p in names for p in pair) and pair[0] != pair[1]):
+            raise InputError(f"{where}: walls = {pair!r} must name two different walls of this file, the left one "
+                             "(as seen from outside) first")
+        p = Path(c["photo"])
+        p = p if p.is_absolute() else base / p
+        if require_sources and not p.is_file():
+            raise InputError(f"{where}: photo file {p} not found; fix the path (relative to {path.name})")
+        focal = _num(c, "focal_px", where, default=None)
+        corners.append(CornerSpec(photo=p, walls=(pair[0], pair[1]), focal_px=None if focal is None else float(focal)))
     return StructureSpec(name=str(name), walls=tuple(walls),
                          thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),
                          vertices=n_default, target_dice=d_default, closed=closed,
                          aspect_tolerance=aspect_tol, refine=refine_default, photo_px_per_m=photo_ppm,
-                         synthetic=synthetic, photos=photos, source=path)
+                         synthetic=synthetic, photos=photos, corners=tuple(corners), source=path)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -420,4 +446,8 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
             row["refine"] = w.refine
         walls.append(row)
     doc["wall"] = walls
+    if spec.corners:
+        doc["corner"] = [{"photo": (Path(c.photo).relative_to(relative_to).as_posix() if relative_to
+                                    else Path(c.photo).as_posix()), "walls": list(c.walls),
+                          **({"focal_px": c.focal_px} if c.focal_px else {})} for c in spec.corners]
     return tomli_w.dumps(doc)

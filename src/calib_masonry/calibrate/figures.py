@@ -9,7 +9,7 @@ import numpy as np
 
 from .camera import project
 
-__all__ = ["plot_calibration", "plot_footprint"]
+__all__ = ["plot_calibration", "plot_corner", "plot_footprint"]
 
 
 def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
@@ -100,4 +100,30 @@ def plot_footprint(widths, thetas, adjusted_w, adjusted_t, names, path: Path, *,
     ax.set_title(f"{title}\nestimates leave a {gap * 1000:.0f} mm gap; the fit closes it".strip(), fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_corner(rgb: np.ndarray, result, path: Path, *, names=("wall n", "wall n+1"), title: str = "") -> None:
+    """A corner photo with the bed-joint segments of the left (orange) and right (cyan) wall that
+    fixed the turn angle between them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
+
+    step = max(1, int(math.ceil(max(rgb.shape[:2]) / 1600)))
+    fig, ax = plt.subplots(figsize=(10, 10 * rgb.shape[0] / rgb.shape[1] + 0.6))
+    ax.imshow(rgb[::step, ::step], extent=(-0.5, rgb.shape[1] - 0.5, rgb.shape[0] - 0.5, -0.5))
+    for seg, col, name in zip(result.segments, ("orange", "cyan"), names):
+        if len(seg):
+            ax.add_collection(LineCollection(seg.reshape(-1, 2, 2), colors=col, linewidths=0.8,
+                                             label=f"{name}: {len(seg)} bed-joint segments"))
+    ax.set_xlim(-0.5, rgb.shape[1] - 0.5)
+    ax.set_ylim(rgb.shape[0] - 0.5, -0.5)
+    ax.legend(loc="lower left", fontsize=8)
+    ax.set_title(f"{title} turn {math.degrees(result.turn_rad):.2f} +- {math.degrees(result.turn_sigma_rad):.2f} deg, "
+                 f"RMS {result.rms_line_px:.2f} px".strip(), fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -1,7 +1,9 @@
 """The footprint: adjust every wall's W and theta so the walls close into a ring.
 
 Each wall brings an estimate of its width (from its photo's calibration, with its sigma) and of
-its orientation theta (from the photo's EXIF compass heading plus the fitted yaw, or typed in).
+its orientation theta (from the photo's EXIF compass heading plus the fitted yaw, or typed in);
+each corner photo (``[[corner]]`` in the structure file, see calibrate.corner) the turn between
+two walls, a residual ``wrap(theta_j - theta_i - turn) / sigma``.
 We solve, with optimistix's Levenberg-Marquardt,
 
     minimise  sum_n ((W_n - W^_n) / sW_n)^2 + (wrap(theta_n - theta^_n) / s_theta_n)^2
@@ -56,12 +58,16 @@ def _gap(w, t, xp=np):
     return xp.stack([xp.sum(w * xp.cos(t)), xp.sum(w * xp.sin(t))])
 
 
+def _wrap(a):
+    return jnp.arctan2(jnp.sin(a), jnp.cos(a))
+
+
 def _residuals(x, args):
-    w_hat, t_hat, sw, st, sc = args
+    w_hat, t_hat, sw, st_inv, sc, turn_i, turn_j, turn, turn_inv = args
     n = w_hat.shape[0]
     w, t = x[:n], x[n:]
-    dt = jnp.arctan2(jnp.sin(t - t_hat), jnp.cos(t - t_hat))
-    return jnp.concatenate([(w - w_hat) / sw, dt / st, _gap(w, t, jnp) / sc])
+    dturn = _wrap(t[turn_j] - t[turn_i] - turn) * turn_inv
+    return jnp.concatenate([(w - w_hat) / sw, _wrap(t - t_hat) * st_inv, _gap(w, t, jnp) / sc, dturn])
 
 
 @jax.jit
@@ -71,8 +77,11 @@ def _solve(x0, args):
 
 
 def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure_sigma_m: float = 1e-6,
-                  names=None) -> FootprintResult:
-    """Adjust per-wall (W, theta) estimates with their sigmas so the footprint closes."""
+                  names=None, turns=()) -> FootprintResult:
+    """Adjust per-wall (W, theta) estimates with their sigmas so the footprint closes.
+
+    ``theta_sigma_rad`` may be ``inf`` for a wall with no own orientation estimate. ``turns`` are
+    corner-photo measurements ``(i, j, turn_rad, sigma_rad)``: theta_j - theta_i = turn."""
     w_hat = np.asarray(width_m, dtype=np.float64)
     t_hat = np.asarray(theta_rad, dtype=np.float64)
     sw = np.asarray(width_sigma_m, dtype=np.float64) * np.ones_like(w_hat)
@@ -81,12 +90,28 @@ def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure
     if len(w_hat) < 3 or len(t_hat) != len(w_hat):
         raise InputError(f"footprint: {len(w_hat)} walls; a closed footprint needs at least 3 with W and theta each")
     for i, n in enumerate(names):
-        if not (w_hat[i] > 0 and sw[i] > 0 and st[i] > 0 and np.isfinite(t_hat[i])):
+        if not (w_hat[i] > 0 and sw[i] > 0 and st[i] > 0 and (np.isfinite(t_hat[i]) or np.isinf(st[i]))):
             raise InputError(f"footprint: wall '{n}' needs width_m > 0, a width sigma > 0, a theta and a theta "
                              "sigma > 0; check its calibration.json or the structure file")
+    turns = list(turns)
+    ti = np.array([t[0] for t in turns], dtype=np.int64)
+    tj = np.array([t[1] for t in turns], dtype=np.int64)
+    tv = np.array([t[2] for t in turns], dtype=np.float64)
+    ts = np.array([t[3] for t in turns], dtype=np.float64)
+    if np.any(ts <= 0) or np.any((ti < 0) | (ti >= len(w_hat)) | (tj < 0) | (tj >= len(w_hat))):
+        raise InputError("footprint: a corner measurement names a wall that is not there or has sigma <= 0")
+    st_inv = np.where(np.isinf(st), 0.0, 1.0 / st)
+    if not np.any(st_inv > 0):
+        raise InputError("footprint: no wall has an orientation estimate (EXIF heading or theta_deg); give one at least")
+    t_start = np.where(np.isinf(st), 0.0, t_hat)
+    # walls with no own theta take theirs from a measured turn (in footprint order), for the start
+    for i, j, v, _ in sorted(turns, key=lambda q: q[1]):
+        if np.isinf(st[j]) and not np.isinf(st[i]):
+            t_start[j] = t_start[i] + v
+    t_hat = np.where(np.isinf(st), t_start, t_hat)
     before = float(np.linalg.norm(_gap(w_hat, t_hat)))
-    args = tuple(jnp.asarray(a) for a in (w_hat, t_hat, sw, st, closure_sigma_m))
-    x, ok, jac = _solve(jnp.asarray(np.r_[w_hat, t_hat]), args)
+    args = tuple(jnp.asarray(a) for a in (w_hat, t_hat, sw, st_inv, closure_sigma_m, ti, tj, tv, 1.0 / ts))
+    x, ok, jac = _solve(jnp.asarray(np.r_[w_hat, t_start]), args)
     x, jac = np.asarray(x), np.asarray(jac)
     n = len(w_hat)
     cov = np.linalg.pinv(jac.T @ jac)
@@ -137,6 +162,17 @@ def _estimates_from_structure(path, config, heading_sigma_deg, theta_sigma_deg):
     return spec, rows
 
 
+def _turns_from_structure(spec, names):
+    from .corner import calibrate_corner_photo
+
+    turns, docs = [], []
+    for c in spec.corners:
+        res = calibrate_corner_photo(c.photo, focal_px=c.focal_px)
+        turns.append((names.index(c.walls[0]), names.index(c.walls[1]), res.turn_rad, res.turn_sigma_rad))
+        docs.append({"photo": str(c.photo), "walls": list(c.walls), **res.to_json(), "_result": res})
+    return turns, docs
+
+
 def _estimates_from_json(paths, heading_sigma_deg):
     from ..io import read_json
 
@@ -177,9 +213,11 @@ def footprint_to_folder(inputs, out, *, config=None, heading_sigma_deg: float = 
     else:
         raise InputError("footprint: give one structure .toml, or calibration .json files in footprint order")
     names = [r[0] for r in rows]
+    turns, corner_docs = _turns_from_structure(spec, names) if spec is not None else ([], [])
     w, sw, t, st = (np.array([r[i] for r in rows]) for i in (1, 2, 3, 4))
-    res = fit_footprint(w, sw, t, st, names=names)
+    res = fit_footprint(w, sw, t, st, names=names, turns=turns)
     doc = res.to_json(names)
+    doc["corners"] = [{k: v for k, v in d.items() if k != "_result"} for d in corner_docs]
     for row, est in zip(doc["walls"], rows):
         row.update(estimate_width_m=est[1], estimate_width_sigma_m=est[2], estimate_theta_deg=math.degrees(est[3]) % 360,
                    estimate_theta_sigma_deg=math.degrees(est[4]), theta_source=est[5])
@@ -193,6 +231,15 @@ def footprint_to_folder(inputs, out, *, config=None, heading_sigma_deg: float = 
             (stage / "structure.toml").write_text(
                 "# Written by `calib-masonry footprint`: W and theta adjusted so the footprint closes.\n"
                 + structure_to_toml(replace(spec, walls=walls, closed=True), relative_to=None), encoding="utf-8")
+        if figure and corner_docs:
+            from ..io import read_photo
+            from .figures import plot_corner
+
+            (stage / "corners").mkdir()
+            for d in corner_docs:
+                a, b = d["walls"]
+                plot_corner(read_photo(d["photo"]).rgb, d["_result"], stage / "corners" / f"{a}_{b}.png", names=(a, b),
+                            title=f"corner {a} / {b}:")
         if figure:
             plot_footprint(w, t, res.width_m, res.theta_rad, names, stage / "footprint.png",
                            title=f"footprint of {len(names)} walls")

@@ -41,6 +41,7 @@ class DetectConfig:
     vertical_max_deg: float = 30.0
     vp_inlier_px: float = 1.0  # endpoint distance from the line to the vanishing point, working px
     ransac_iterations: int = 400
+    ridge_sigma_px: float = 0.0  # > 0: segments of joint centre lines (Hessian ridges at this scale) instead of edges
     refine_halfwidth_px: float | None = None  # full-size px of the coarse pass; default 6 working px
     seed: int = 0
 
@@ -55,51 +56,93 @@ class Detection:
     n_segments: int
 
 
-def _hough_segments(gray: np.ndarray, cfg: DetectConfig) -> np.ndarray:
-    """Hough segments, each re-fitted (total least squares) to the edge pixels along it.
-
-    The Hough transform quantises a segment's angle to its accumulator's 1 degree bins; the refit
-    removes that bias, which the vanishing points and the joint-line residuals would inherit."""
+def _edge_points(gray: np.ndarray, cfg: DetectConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Canny edge pixels and their sub-pixel positions (the gradient-magnitude peak across each
+    pixel, a parabola through three samples along the gradient)."""
     from skimage.feature import canny
-    from skimage.transform import probabilistic_hough_line
 
     edges = canny(gray, sigma=cfg.canny_sigma, low_threshold=0.03, high_threshold=0.08)
-    segs = probabilistic_hough_line(edges, threshold=cfg.hough_threshold, line_length=cfg.min_length_px,
-                                    line_gap=cfg.line_gap_px, rng=cfg.seed)
-    # sub-pixel edge positions: the gradient-magnitude peak across each edge pixel (a parabola
-    # through three samples along the gradient); integer pixels would bias near-axis lines
-    # towards exactly horizontal or vertical
     sm = ndimage.gaussian_filter(gray, cfg.canny_sigma)
     gx, gy = ndimage.sobel(sm, axis=1), ndimage.sobel(sm, axis=0)
-    mag = np.hypot(gx, gy)
-    ey, ex = np.nonzero(edges)
-    nx, ny = gx[ey, ex], gy[ey, ex]
-    nn = np.hypot(nx, ny) + 1e-12
-    nx, ny = nx / nn, ny / nn
-    m0 = mag[ey, ex]
-    mp = ndimage.map_coordinates(mag, [ey + ny, ex + nx], order=1, mode="nearest")
-    mm = ndimage.map_coordinates(mag, [ey - ny, ex - nx], order=1, mode="nearest")
+    return edges, _subpixel(edges, np.hypot(gx, gy), gx, gy)
+
+
+def _subpixel(points: np.ndarray, strength: np.ndarray, nx: np.ndarray, ny: np.ndarray) -> np.ndarray:
+    """Sub-pixel positions (rows, cols, 2) of ``points``: the peak of ``strength`` along (nx, ny)."""
+    ey, ex = np.nonzero(points)
+    ux, uy = nx[ey, ex], ny[ey, ex]
+    nn = np.hypot(ux, uy) + 1e-12
+    ux, uy = ux / nn, uy / nn
+    m0 = strength[ey, ex]
+    mp = ndimage.map_coordinates(strength, [ey + uy, ex + ux], order=1, mode="nearest")
+    mm = ndimage.map_coordinates(strength, [ey - uy, ex - ux], order=1, mode="nearest")
     den = mm - 2 * m0 + mp
     delta = np.clip(np.where(den < -1e-12, 0.5 * (mm - mp) / np.where(den < -1e-12, den, -1.0), 0.0), -0.5, 0.5)
-    sub = np.zeros(edges.shape + (2,))
-    sub[ey, ex, 0] = ex + delta * nx
-    sub[ey, ex, 1] = ey + delta * ny
+    sub = np.zeros(points.shape + (2,))
+    sub[ey, ex, 0] = ex + delta * ux
+    sub[ey, ex, 1] = ey + delta * uy
+    return sub
+
+
+def _ridge_points(gray: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centre lines of thin light or dark lines (mortar joints): Hessian ridge strength at scale
+    ``sigma``, non-maximum suppression across the ridge, sub-pixel peaks. A joint's centre line is
+    not displaced by blur the way its two edges are (they spread apart where the joint narrows with
+    distance, which tilts each edge towards the image axes)."""
+    from skimage.feature import hessian_matrix, hessian_matrix_eigvals
+
+    hrr, hrc, hcc = hessian_matrix(gray, sigma=sigma, order="rc", use_gaussian_derivatives=False)
+    l1, l2 = hessian_matrix_eigvals([hrr, hrc, hcc])  # l1 >= l2
+    best = None
+    for strength, lam in ((np.maximum(-l2, 0), l2), (np.maximum(l1, 0), l1)):  # light, dark lines
+        # eigenvector of lam: across the ridge, (x, y) = (col, row)
+        vx, vy = hrc, lam - hrr
+        small = np.hypot(vx, vy) < 1e-12
+        vx, vy = np.where(small, lam - hcc, vx), np.where(small, hrc, vy)
+        nn = np.hypot(vx, vy) + 1e-12
+        vx, vy = vx / nn, vy / nn
+        rows, cols = gray.shape
+        yy, xx = np.mgrid[0:rows, 0:cols]
+        sp = ndimage.map_coordinates(strength, [yy + vy, xx + vx], order=1, mode="nearest")
+        sm = ndimage.map_coordinates(strength, [yy - vy, xx - vx], order=1, mode="nearest")
+        thr = 0.25 * np.percentile(strength, 99.5)
+        peak = (strength >= sp) & (strength > sm) & (strength > thr)
+        score = float(strength[peak].sum())
+        if best is None or score > best[0]:
+            best = (score, peak, strength, vx, vy)
+    _, peak, strength, vx, vy = best
+    return peak, _subpixel(peak, strength, vx, vy)
+
+
+def _hough_segments(gray: np.ndarray, cfg: DetectConfig, *, ridges: bool = False) -> np.ndarray:
+    """Hough segments of edge (or ridge) pixels, each re-fitted (total least squares) to the
+    sub-pixel points along it. The Hough transform quantises a segment's angle to its accumulator's
+    1 degree bins and integer pixels pull near-axis lines towards the axes; the refit removes both
+    biases, which the vanishing points and the joint-line residuals would inherit."""
+    from skimage.transform import probabilistic_hough_line
+
+    points, sub = _ridge_points(gray, cfg.ridge_sigma_px) if ridges else _edge_points(gray, cfg)
+    segs = probabilistic_hough_line(points, threshold=cfg.hough_threshold, line_length=cfg.min_length_px,
+                                    line_gap=cfg.line_gap_px, rng=cfg.seed)
     out = []
-    rows, cols = edges.shape
+    rows, cols = points.shape
     for (x0, y0), (x1, y1) in segs:
         a, b = np.array([x0, y0], float), np.array([x1, y1], float)
-        lo = np.maximum(np.floor(np.minimum(a, b)) - 2, 0).astype(int)
-        hi = np.minimum(np.ceil(np.maximum(a, b)) + 3, [cols, rows]).astype(int)
-        yy, xx = np.nonzero(edges[lo[1]:hi[1], lo[0]:hi[0]])
+        lo = np.maximum(np.floor(np.minimum(a, b)) - 3, 0).astype(int)
+        hi = np.minimum(np.ceil(np.maximum(a, b)) + 4, [cols, rows]).astype(int)
+        yy, xx = np.nonzero(points[lo[1]:hi[1], lo[0]:hi[0]])
         pts = sub[yy + lo[1], xx + lo[0]]
-        d = b - a
-        length = np.linalg.norm(d)
-        d /= length
-        rel = pts - a
-        along = rel @ d
-        perp = rel @ np.array([-d[1], d[0]])
-        near = (np.abs(perp) <= 1.0) & (along >= -0.5) & (along <= length + 0.5)
-        if near.sum() >= max(5, 0.6 * length):
+        length = np.linalg.norm(b - a)
+        # re-select the points near the current line and refit, three times: points picked in the
+        # band of the Hough line alone would pull the fit back towards its quantised angle
+        for _ in range(3):
+            d = (b - a) / np.linalg.norm(b - a)
+            rel = pts - a
+            along = rel @ d
+            perp = rel @ np.array([-d[1], d[0]])
+            near = (np.abs(perp) <= 1.0) & (along >= -0.5) & (along <= length + 0.5)
+            if near.sum() < max(5, 0.6 * length):
+                break
             q = pts[near]
             c = q.mean(axis=0)
             _, _, vt = np.linalg.svd(q - c)

@@ -32,7 +32,8 @@ from ..spec import PhotoSpec, WallSpec
 from .layouts import Piece
 from .render import mask_shape
 
-__all__ = ["PhotoSpec", "photograph_wall", "render_photo", "sample_camera", "save_jpeg", "wall_texture"]
+__all__ = ["corner_homographies", "photograph_corner", "photograph_wall", "render_photo", "sample_camera", "save_jpeg",
+           "wall_texture"]
 
 
 def wall_texture(wall: WallSpec, pieces: list[Piece], px_per_m: float, rng: np.random.Generator) -> np.ndarray:
@@ -114,9 +115,8 @@ def sample_camera(wall: WallSpec, spec: PhotoSpec, rng: np.random.Generator) -> 
                      f"away frames a {wall.width_m:g} x {wall.height_m:g} m wall; widen [photos] distance_m or focal_35mm")
 
 
-def _scale_px_per_m(params, size, wall) -> np.ndarray:
-    """Photo pixels per wall metre at the four corners (the homography's local scale)."""
-    h = image_from_wall_homography(params, principal_point(size))
+def _scale_of(h: np.ndarray, wall: WallSpec) -> np.ndarray:
+    """Photo pixels per wall metre at the wall's four corners (the homography's local scale)."""
     out = []
     for c in _corners_m(wall):
         eps = 1e-3
@@ -125,6 +125,10 @@ def _scale_px_per_m(params, size, wall) -> np.ndarray:
         dz = project(h, (c + [0, eps])[None])[0] - p0
         out.append(math.sqrt(abs(dx[0] * dz[1] - dx[1] * dz[0])) / eps)
     return np.array(out)
+
+
+def _scale_px_per_m(params, size, wall) -> np.ndarray:
+    return _scale_of(image_from_wall_homography(params, principal_point(size)), wall)
 
 
 def _background(params, size, rng) -> np.ndarray:
@@ -148,9 +152,8 @@ def _background(params, size, rng) -> np.ndarray:
     return img.astype(np.float32)
 
 
-def render_photo(texture: np.ndarray, wall: WallSpec, params: np.ndarray, size: tuple[int, int],
-                 spec: PhotoSpec, rng: np.random.Generator) -> np.ndarray:
-    """The photo (h, w, 3) uint8 of a textured wall seen by the camera ``params``."""
+def _warp_layer(texture: np.ndarray, wall: WallSpec, image_from_wall: np.ndarray, size: tuple[int, int]):
+    """A wall's texture warped into the photo: (rgb premultiplied by alpha, alpha)."""
     import torch
     from kornia.filters import gaussian_blur2d
     from kornia.geometry.transform import warp_perspective
@@ -160,9 +163,9 @@ def render_photo(texture: np.ndarray, wall: WallSpec, params: np.ndarray, size: 
     wall_from_tex = np.array([[wall.width_m / cols, 0, 0.5 * wall.width_m / cols],
                               [0, -wall.height_m / rows, wall.height_m - 0.5 * wall.height_m / rows],
                               [0, 0, 1.0]])
-    photo_from_tex = image_from_wall_homography(params, principal_point(size)) @ wall_from_tex
+    photo_from_tex = image_from_wall @ wall_from_tex
     src = torch.from_numpy(np.concatenate([texture, np.ones((rows, cols, 1), np.float32)], axis=-1)).permute(2, 0, 1)[None]
-    tex_per_photo = (cols / wall.width_m) / float(np.min(_scale_px_per_m(params, size, wall)))
+    tex_per_photo = (cols / wall.width_m) / float(np.min(_scale_of(image_from_wall, wall)))
     if tex_per_photo > 1.2:  # antialias: the texture is shrunk
         s = 0.45 * tex_per_photo
         k = int(2 * math.ceil(3 * s) + 1)
@@ -170,8 +173,17 @@ def render_photo(texture: np.ndarray, wall: WallSpec, params: np.ndarray, size: 
     w, h = size
     warped = warp_perspective(src.double(), torch.from_numpy(photo_from_tex)[None], (h, w), mode="bilinear",
                               align_corners=True)[0].permute(1, 2, 0).numpy()
-    alpha = np.clip(warped[..., 3:4], 0, 1)
-    img = warped[..., :3] + (1 - alpha) * _background(params, size, rng)
+    return warped[..., :3], np.clip(warped[..., 3:4], 0, 1)
+
+
+def render_photo(layers: list[tuple[np.ndarray, WallSpec, np.ndarray]], params: np.ndarray, size: tuple[int, int],
+                 spec: PhotoSpec, rng: np.random.Generator) -> np.ndarray:
+    """The photo (h, w, 3) uint8 of textured walls ``(texture, wall, image_from_wall)`` seen by the
+    camera ``params`` (which also places the sky and the ground), with blur and noise."""
+    img = _background(params, size, rng)
+    for texture, wall, h in layers:
+        rgb, alpha = _warp_layer(texture, wall, h, size)
+        img = rgb + (1 - alpha) * img
     blur = rng.uniform(*spec.blur_px)
     img = ndimage.gaussian_filter(img, (blur, blur, 0))
     img = img + rng.normal(0, spec.noise, img.shape) + rng.normal(0, 1, img.shape) * spec.noise * np.sqrt(np.clip(img, 0, 1))
@@ -215,8 +227,8 @@ def photograph_wall(wall: WallSpec, pieces: list[Piece], spec: PhotoSpec, rng: n
     params, size = cam["params"], cam["image_size"]
     tex_res = float(np.clip(1.25 * np.max(_scale_px_per_m(params, size, wall)), 100.0, 700.0))
     texture = wall_texture(wall, pieces, tex_res, rng)
-    img = render_photo(texture, wall, params, size, spec, rng)
     h = image_from_wall_homography(params, principal_point(size))
+    img = render_photo([(texture, wall, h)], params, size, spec, rng)
     true_heading = math.degrees(heading_from_theta(wall.theta_rad, params[1]))
     exif_heading = (true_heading + rng.normal(0, spec.heading_sigma_deg)) % 360.0
     return {
@@ -235,3 +247,67 @@ def photograph_wall(wall: WallSpec, pieces: list[Piece], spec: PhotoSpec, rng: n
             "texture_px_per_m": tex_res,
         },
     }
+
+
+def corner_homographies(params: np.ndarray, pp, wall_a: WallSpec, turn_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """image_from_wall of wall n (camera params in its frame) and of wall n+1, which starts at wall
+    n's end and runs along (cos turn, sin turn, 0) in wall n's frame."""
+    h_a = image_from_wall_homography(params, pp)
+    k = intrinsics(params[0], pp)
+    cam_from_wall = wall_from_camera_rotation(params[1], params[2], params[3]).T
+    along = np.array([math.cos(turn_rad), math.sin(turn_rad), 0.0])
+    origin_b = np.array([wall_a.width_m, 0.0, 0.0])
+    h_b = k @ np.stack([cam_from_wall @ along, cam_from_wall[:, 2], cam_from_wall @ (origin_b - params[4:7])], axis=1)
+    return h_a, h_b
+
+
+def photograph_corner(wall_a: WallSpec, pieces_a: list[Piece], wall_b: WallSpec, pieces_b: list[Piece],
+                      spec: PhotoSpec, rng: np.random.Generator) -> dict:
+    """A photo of the corner where wall_a ends and wall_b starts, taken from outside along the
+    corner's bisector (+-8 degrees), the corner edge in frame. Truth: the turn angle and the camera."""
+    turn = (wall_b.theta_rad - wall_a.theta_rad + math.pi) % (2 * math.pi) - math.pi
+    n_a = np.array([0.0, -1.0])
+    n_b = np.array([math.sin(turn), -math.cos(turn)])
+    bis = n_a + n_b
+    if np.linalg.norm(bis) < 1e-6:
+        raise InputError(f"walls '{wall_a.name}' and '{wall_b.name}' are parallel; no corner to photograph")
+    bis /= np.linalg.norm(bis)
+    size = (spec.long_side_px, spec.short_side_px)
+    pp = principal_point(size)
+    for _ in range(50):
+        f = focal_px_from_35mm(rng.uniform(*spec.focal_35mm), size)
+        eye = rng.uniform(*spec.eye_height_m)
+        jitter = math.radians(rng.uniform(-8.0, 8.0))
+        fwd = -np.array([bis[0] * math.cos(jitter) - bis[1] * math.sin(jitter),
+                         bis[0] * math.sin(jitter) + bis[1] * math.cos(jitter)])
+        yaw = math.atan2(fwd[0], fwd[1])
+        roll = math.radians(rng.uniform(-spec.max_roll_deg, spec.max_roll_deg))
+        z_top = min(wall_a.height_m, wall_b.height_m)
+        edge = np.array([[wall_a.width_m, 0.0, 0.0], [wall_a.width_m, 0.0, z_top]])
+        for d in np.geomspace(spec.distance_m[0], spec.distance_m[1], 60):
+            c = np.array([wall_a.width_m - d * fwd[0], -d * fwd[1], eye])
+            pitch = math.atan2(z_top / 2 - eye, d)
+            params = np.array([f, yaw, pitch, roll, *c, wall_a.width_m, wall_a.height_m])
+            k = intrinsics(f, pp)
+            cam = (wall_from_camera_rotation(yaw, pitch, roll).T @ (edge - c).T).T
+            if np.any(cam[:, 2] <= 0):
+                continue
+            px = (cam @ k.T)[:, :2] / cam[:, 2:3]
+            w, h = size
+            m = spec.margin
+            if np.all((px[:, 0] > m * w) & (px[:, 0] < (1 - m) * w) & (px[:, 1] > m * h) & (px[:, 1] < (1 - m) * h)):
+                break
+        else:
+            continue
+        h_a, h_b = corner_homographies(params, pp, wall_a, turn)
+        res = float(np.clip(1.25 * max(np.max(_scale_of(h_a, wall_a)), np.max(_scale_of(h_b, wall_b))), 100.0, 700.0))
+        tex_a = wall_texture(wall_a, pieces_a, res, rng)
+        tex_b = wall_texture(wall_b, pieces_b, res, rng)
+        img = render_photo([(tex_b, wall_b, h_b), (tex_a, wall_a, h_a)], params, size, spec, rng)
+        return {"image": img, "truth": {"walls": [wall_a.name, wall_b.name], "turn_deg": math.degrees(turn),
+                                        "image_size": list(size), "focal_px": float(f), "eye_height_m": eye,
+                                        "yaw_deg": math.degrees(yaw), "pitch_deg": math.degrees(pitch),
+                                        "roll_deg": math.degrees(roll), "distance_m": float(d),
+                                        "focal_35mm": float(f * math.hypot(36, 24) / math.hypot(*size))}}
+    raise InputError(f"corner {wall_a.name}/{wall_b.name}: no camera {spec.distance_m[0]:g}-{spec.distance_m[1]:g} m "
+                     "away frames it; widen [photos] distance_m")

@@ -50,7 +50,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
 
     from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify_image
     from .errors import CalibMasonryError
-    from .wall2d.segment import segment_photo
+    from .wall2d.segment import PhotoSegmentConfig, segment_photo
 
     kwargs = {}
     if wall.camera_height_m is not None:
@@ -71,7 +71,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     # the fitted wall's frame stretched onto the typed W x H: the photo's outline maps onto the wall
     stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
     rect = rectify_image(cal.photo.rgb, stretch @ res.wall_from_image, width, height, spec.photo_px_per_m)
-    mask = segment_photo(rect)
+    mask = segment_photo(rect, PhotoSegmentConfig(window_px=int(round(0.5 * spec.photo_px_per_m))))
     return PhotoWall(calibration=cal, rectified=rect, mask=mask, wall=replace(wall, width_m=width, height_m=height))
 
 

@@ -67,14 +67,19 @@ class PhotoSegmentConfig:
     Mortar joints are thin lines that differ from the bricks on both sides, whatever each brick's
     colour: a morphological top-hat of radius ``joint_px`` (wider than a joint, narrower than a
     brick) keeps exactly them. Both the white top-hat (light mortar) and the black top-hat (dark
-    mortar) are taken on CIELAB lightness and on chroma (grey mortar between coloured bricks), each
-    normalised by its 99th percentile; the channel whose response is most bimodal wins, and Otsu's
-    threshold on it, half-way between joint and brick, marks mortar. A final opening of
-    ``separate_px`` parts bricks joined by a pixel or two.
+    mortar) are taken on CIELAB lightness and on chroma (grey mortar between coloured bricks); the
+    channel whose response is most bimodal wins. A joint's contrast fades where the photo saw the
+    wall obliquely or from far away, so the response is divided by its local peak (a maximum
+    mean of likely joint pixels in a Gaussian window of ``window_px``, about a brick and a half) and
+    cut at one half: each joint is split near half-way between its own mortar and brick levels. Responses
+    below ``floor`` of the global 99th percentile are never mortar (brick texture). A final opening
+    of ``separate_px`` parts bricks joined by a pixel or two.
     """
 
     joint_px: int = 4
     smooth_px: float = 0.7
+    window_px: int = 151
+    floor: float = 0.12
     separate_px: int = 1
 
 
@@ -101,10 +106,16 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
                 continue
             sep = (hi.mean() - lo.mean()) ** 2 * len(lo) * len(hi) / r.size**2 / max(r.var(), 1e-12)
             if sep > best_sep:
-                best, best_sep = r > t, sep
+                best, best_sep = r, sep
     if best is None:
         return np.ones(rgb.shape[:2], dtype=bool)
-    bricks = ~best
+    # the local joint level: the mean response of likely-joint pixels (above a low global cut)
+    # in a Gaussian window, so faint joints far from the camera get their own threshold
+    likely = best > max(config.floor, 0.5 * threshold_otsu(best))
+    sigma = max(1.0, config.window_px / 4)
+    level = ndimage.gaussian_filter(best * likely, sigma) / np.maximum(ndimage.gaussian_filter(likely * 1.0, sigma), 1e-6)
+    mortar = (best > 0.5 * level) & (best > config.floor)
+    bricks = ~mortar
     if config.separate_px > 0:
         bricks = ndimage.binary_opening(bricks, disk(config.separate_px))
     return bricks

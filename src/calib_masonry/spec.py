@@ -194,11 +194,15 @@ def _vertices_or_dice(tbl: dict, where: str, default_n: int | None, default_d: f
     return n, d
 
 
-def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
-    known = set(SyntheticSpec.__dataclass_fields__)
+def _only_fields_of(cls, tbl: dict, where: str) -> None:
+    known = set(cls.__dataclass_fields__)
     unknown = sorted(set(tbl) - known)
     if unknown:
         raise InputError(f"{where}: unknown field(s) {unknown}; valid fields are {sorted(known)}")
+
+
+def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
+    _only_fields_of(SyntheticSpec, tbl, where)
     kwargs: dict[str, Any] = {}
     for key, value in tbl.items():
         if key == "layout":
@@ -234,10 +238,7 @@ def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
 def _photos_from(tbl: dict, where: str) -> PhotoSpec:
     if not isinstance(tbl, dict):
         raise InputError(f"{where}: must be a table of photo settings")
-    known = set(PhotoSpec.__dataclass_fields__)
-    unknown = sorted(set(tbl) - known)
-    if unknown:
-        raise InputError(f"{where}: unknown field(s) {unknown}; valid fields are {sorted(known)}")
+    _only_fields_of(PhotoSpec, tbl, where)
     kwargs: dict[str, Any] = {}
     for key, value in tbl.items():
         default = getattr(PhotoSpec, key)

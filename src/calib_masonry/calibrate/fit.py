@@ -31,7 +31,6 @@ from .camera import (
     image_from_wall_homography,
     principal_point,
     project,
-    wall_from_camera_rotation,
 )
 from .lm import least_squares
 
@@ -354,6 +353,3 @@ def calibrate(inp: CalibrationInput, *, start: np.ndarray | None = None) -> Cali
         image_size=tuple(int(v) for v in inp.image_size), n_bed=nb, n_head=nh,
     )
 
-
-def rotation_of(result: CalibrationResult) -> np.ndarray:
-    return wall_from_camera_rotation(result.value("yaw_rad"), result.value("pitch_rad"), result.value("roll_rad"))

@@ -19,7 +19,7 @@ the solution (residuals are already in units of their noise).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -243,11 +243,17 @@ def _bucket(n: int) -> int:
     return _BUCKETS[-1]
 
 
-def _pad_segments(seg: np.ndarray, sigma: float, n_eff: int) -> tuple[np.ndarray, np.ndarray]:
+def _capped(seg) -> np.ndarray:
+    """At most MAX_SEGMENTS segments, the longest."""
     seg = np.asarray(seg, dtype=np.float64).reshape(-1, 4)
-    if len(seg) > MAX_SEGMENTS:  # keep the longest
+    if len(seg) > MAX_SEGMENTS:
         length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
         seg = seg[np.argsort(-length)[:MAX_SEGMENTS]]
+    return seg
+
+
+def _pad_segments(seg: np.ndarray, sigma: float, n_eff: int) -> tuple[np.ndarray, np.ndarray]:
+    seg = _capped(seg)
     n = _bucket(len(seg))
     out = np.zeros((n, 4))
     w = np.zeros(n)
@@ -321,8 +327,29 @@ def _solve(u0, data):
     return u, ok, steps, jac, corner_px, bed, head
 
 
-def calibrate(inp: CalibrationInput, *, start: np.ndarray | None = None) -> CalibrationResult:
-    """Fit one photo. Raises FitFailed when the data cannot determine the camera."""
+def _inliers(seg: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Segments whose endpoint distance is within 3 robust sigmas (and 3 px) of the fitted line."""
+    if len(seg) == 0:
+        return seg
+    d = np.abs(dist[: len(seg)])
+    cut = max(3.0, 3.0 * 1.4826 * float(np.median(d)))
+    return seg[d <= cut]
+
+
+def calibrate(inp: CalibrationInput, *, start: np.ndarray | None = None, reject_outliers: bool = True) -> CalibrationResult:
+    """Fit one photo. Raises FitFailed when the data cannot determine the camera.
+
+    With ``reject_outliers`` the fit runs twice: joint segments more than three robust sigmas
+    from their vanishing point after the first fit (a stone's slanted edge, a crack, a segment of
+    the background) are dropped before the second."""
+    if reject_outliers and (len(inp.bed_segments) or len(inp.head_segments)):
+        first = calibrate(inp, start=start, reject_outliers=False)
+        h = first.image_from_wall
+        bed, head = _capped(inp.bed_segments), _capped(inp.head_segments)
+        d_bed = np.asarray(_line_distances(jnp.asarray(h[:, 0]), jnp.asarray(bed))) if len(bed) else np.zeros(0)
+        d_head = np.asarray(_line_distances(jnp.asarray(h[:, 1]), jnp.asarray(head))) if len(head) else np.zeros(0)
+        inp = replace(inp, bed_segments=_inliers(bed, d_bed), head_segments=_inliers(head, d_head))
+        start = first.params
     data = pack(inp)
     p0 = initial_params(inp) if start is None else np.asarray(start, dtype=np.float64)
     u, ok, steps, jac, corner_px, bed, head = _solve(jnp.asarray(p0 / SCALE), {k: jnp.asarray(v) for k, v in data.items()})

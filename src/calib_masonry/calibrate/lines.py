@@ -287,6 +287,21 @@ def _wall_mask(rgb_small: np.ndarray, quad: np.ndarray) -> np.ndarray:
     return lab == centre_label
 
 
+def _grow_to_mask(mask: np.ndarray, rect_from_px: np.ndarray) -> np.ndarray | None:
+    """The quadrilateral spanned by the mask's extent in the rectified frame (bed joints horizontal,
+    head joints vertical there), back in pixels; None when the mask is empty or degenerate."""
+    ys, xs = np.nonzero(mask[::2, ::2])
+    if len(xs) < 50:
+        return None
+    q = np.c_[2.0 * xs, 2.0 * ys, np.ones(len(xs))] @ rect_from_px.T
+    if np.any(np.abs(q[:, 2]) < 1e-12) or not (np.all(q[:, 2] > 0) or np.all(q[:, 2] < 0)):
+        return None
+    uv = q[:, :2] / q[:, 2:3]
+    (u0, v0), (u1, v1) = np.percentile(uv, 0.2, axis=0), np.percentile(uv, 99.8, axis=0)
+    back = np.c_[[[u0, v0], [u1, v0], [u1, v1], [u0, v1]], np.ones(4)] @ np.linalg.inv(rect_from_px).T
+    return back[:, :2] / back[:, 2:3]
+
+
 def _snap_to_mask(mask: np.ndarray, quad: np.ndarray, vps: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
     """Move each side of ``quad`` (LL, LR, UR, UL) onto the mask's boundary, keeping it pointed at
     its vanishing point (bed family for the base and top, head family for the ends): only the
@@ -425,6 +440,15 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     rgb_small = np.stack([rescale(rgb[..., k], s, anti_aliasing=True) if s < 1 else rgb[..., k] for k in range(3)], -1)
     quad_small = order_corners(quad_n * scale + centre, where="automatic mode")
     to_small = np.array([[scale, 0, centre[0]], [0, scale, centre[1]], [0, 0, 1.0]])
+    # the joints may outline only part of a wall (a tall tower seen from its foot shows few
+    # resolvable joints near its top): grow the quadrilateral to the extent of the wall's colours,
+    # measured along the two vanishing directions, twice (the colour model improves as it grows)
+    p_small = p @ np.linalg.inv(to_small)
+    for _ in range(2):
+        grown = _grow_to_mask(_wall_mask(rgb_small, quad_small), p_small)
+        if grown is None:
+            break
+        quad_small = order_corners(grown, where="automatic mode")
     snapped = _snap_to_mask(_wall_mask(rgb_small, quad_small), quad_small, (to_small @ vp_b, to_small @ vp_h))
     if snapped is not None and np.max(np.linalg.norm(snapped - quad_small, axis=1)) < 0.2 * scale:
         quad_small = snapped

@@ -148,3 +148,18 @@ def test_simulate_bad_input(small_model, tmp_path, case, msg):
     lines = [l for l in r.stderr.splitlines() if l.strip()]
     assert len(lines) == 1 and lines[0].startswith("error:") and msg in lines[0], r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_bottom_course_is_bonded_to_the_plate(small_model):
+    from calib_masonry.simulate.run import SimulationConfig, scene_for_model
+
+    scene = scene_for_model(small_model / "model", SimulationConfig(pga_g=0.1, duration_s=0.2))
+    ground = [b for b in scene.bonds if b.b < 0]
+    z_bottom = [float((b.location + b.vertices)[:, 2].min()) for b in scene.bodies]
+    lowest = min(z_bottom)
+    on_ground = {i for i, z in enumerate(z_bottom) if z <= lowest + 0.005}
+    assert {b.a for b in ground} == on_ground and len(on_ground) >= 4
+    for b in ground:
+        assert np.allclose(b.normal, [0, 0, -1]) and b.location[2] == pytest.approx(lowest)
+        assert b.area_m2 > 0 and b.tension_ns < b.compression_ns
+    assert scene.notes["foundation_bonds"] == len(ground)

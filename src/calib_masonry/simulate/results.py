@@ -46,16 +46,19 @@ def bond_breaks(scene: Scene, out: RunOutput, start: int) -> np.ndarray:
         return np.zeros(0)
     a = np.array([b.a for b in scene.bonds])
     b = np.array([b.b for b in scene.bonds])
+    ground = b < 0  # foundation bonds: the plate only translates
+    b = np.where(ground, a, b)
     c = np.array([bd.location for bd in scene.bonds])
     R = rotations(out.quaternions)  # (F, B, 3, 3)
     p = out.positions
-    # the bond point in each brick's frame at the start, then carried by each brick
+    # the bond point in each brick's frame at the start, then carried by each brick (or the plate)
     qa = np.einsum("nji,nj->ni", R[start, a], c - p[start, a])
     qb = np.einsum("nji,nj->ni", R[start, b], c - p[start, b])
     times = np.full(len(a), np.nan)
     for f in range(start, len(p)):
         pa = np.einsum("nij,nj->ni", R[f, a], qa) + p[f, a]
         pb = np.einsum("nij,nj->ni", R[f, b], qb) + p[f, b]
+        pb[ground] = c[ground] + (out.plate[f] - out.plate[start])
         gap = np.linalg.norm(pa - pb, axis=1)
         new = np.isnan(times) & (gap > scene.solver.drift_break_m)
         times[new] = out.time[f] - out.time[start]

@@ -105,7 +105,7 @@ class Bond:
     substep: compression and tension (one-sided, along ``normal``, a -> b), shear (in the joint
     plane) in N s, and bending (the rotations) in N m s."""
 
-    a: int  # body indices
+    a: int  # body indices; b = -1 is the ground plate (a foundation bond)
     b: int
     location: np.ndarray  # (3,) patch centroid
     normal: np.ndarray
@@ -162,11 +162,40 @@ def _grown_solid(brick: Brick, frames: list[WallFrame], corners: list[Corner], g
     return (solid if solid is not None else brick.solid), change
 
 
+def _foundation_bonds(bodies: list[Body], material: Material, dt: float, tol_m: float = 0.005) -> tuple[Bond, ...]:
+    """Bonds between the plate and every body whose bottom lies on the structure's lowest level."""
+    bottom = min(float(b.location[2] + b.vertices[:, 2].min()) for b in bodies)
+    out = []
+    for i, b in enumerate(bodies):
+        v = b.vertices + b.location
+        if v[:, 2].min() > bottom + tol_m:
+            continue
+        base = v[v[:, 2] <= bottom + tol_m]
+        hull = shapely.MultiPoint(base[:, :2]).convex_hull
+        if hull.area <= 1e-6:
+            continue
+        c = np.array([hull.centroid.x, hull.centroid.y, bottom])
+        rect = hull.minimum_rotated_rectangle
+        xy = np.asarray(rect.exterior.coords)[:4] if rect.geom_type == "Polygon" else base[:, :2]
+        width = float(min(np.linalg.norm(xy[1] - xy[0]), np.linalg.norm(xy[2] - xy[1]))) if len(xy) >= 3 else 0.0
+        area = float(hull.area)
+        out.append(Bond(a=i, b=-1, location=c, normal=np.array([0.0, 0.0, -1.0]), area_m2=area,
+                        compression_ns=material.compressive_strength * area * dt,
+                        tension_ns=material.tensile_strength * area * dt,
+                        shear_ns=material.shear_strength * area * dt,
+                        bending_nms=material.tensile_strength * area * width / 6.0 * dt))
+    return tuple(out)
+
+
 def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners: list[Corner], *,
                       motion: GroundMotion | None, duration_s: float, material: Material = MASONRY,
                       solver: SolverSettings = SolverSettings(), mortar_fill: bool = True,
-                      max_gap_m: float = 0.06) -> Scene:
-    """Bodies and bonds of a built structure (see the module docstring for the mortar model)."""
+                      max_gap_m: float = 0.06, foundation: bool = True) -> Scene:
+    """Bodies and bonds of a built structure (see the module docstring for the mortar model).
+
+    With ``foundation`` every brick of the bottom course is also bonded to the ground plate by a
+    mortar bed of the same strengths over its bottom face: a wall stands on a footing, and without
+    it the ground moves the structure only through friction (0.6 g at most)."""
     if not bricks:
         raise InputError("model: it has no bricks; build it first with `calib-masonry build`")
     patches: list[ContactPatch] = contact_patches(bricks, max_gap_m=max_gap_m, angle_deg=15.0)
@@ -187,12 +216,14 @@ def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners:
                        shear_ns=material.shear_strength * p.area_m2 * dt,
                        bending_nms=material.tensile_strength * p.area_m2 * p.min_width_m / 6.0 * dt)
                   for p in patches)
+    if foundation:
+        bonds = bonds + _foundation_bonds(bodies, material, dt)
     lo = np.min([b.location + b.vertices.min(axis=0) for b in bodies], axis=0)
     hi = np.max([b.location + b.vertices.max(axis=0) for b in bodies], axis=0)
     span = float(max(hi[0] - lo[0], hi[1] - lo[1]))
     plate = Plate(size=(span + 40.0, span + 40.0, 0.5), centre=(float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2)),
                   top_z=float(lo[2]), friction=math.sqrt(material.friction))
-    notes = {"mortar_fill_m": grow, "bonds": len(bonds), "max_hull_volume_change": worst_hull,
+    notes = {"mortar_fill_m": grow, "bonds": len(bonds), "foundation_bonds": sum(bd.b < 0 for bd in bonds), "max_hull_volume_change": worst_hull,
              "strengths_pa": {"compression": material.compressive_strength, "tension": material.tensile_strength,
                               "shear": material.shear_strength}}
     return Scene(bodies=tuple(bodies), bonds=bonds, plate=plate, motion=motion, duration_s=duration_s,

@@ -4,7 +4,7 @@ Prints, per PGA: outcome, bricks moved > 5 cm (relative to the plate), bonds bro
 brick displacement after the 0.5 s warm-up (the gravity-stability check: <= 2 mm in 10 s), roof
 drift and seconds. Each 10 s run takes about 3-4 minutes on 2 cores.
 
-    .venv/bin/python experiments/sim_paper_example.py [--pga 0 0.05 0.6] [--duration 10]
+    .venv/bin/python experiments/sim_paper_example.py [--pga 0 0.05 0.6] [--duration 10] [--foundation]
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ def main() -> None:
     ap.add_argument("--structure", default=str(ROOT / "data_synthetic" / "paper_example" / "structure.toml"))
     ap.add_argument("--pga", type=float, nargs="+", default=[0.0, 0.05, 0.6])
     ap.add_argument("--duration", type=float, default=10.0)
+    ap.add_argument("--foundation", action="store_true", help="bond the bottom course to the ground plate")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         model = Path(tmp) / "model"
@@ -38,7 +39,8 @@ def main() -> None:
               f"{'roof drift mm':>14s} {'s/frame':>8s} {'seconds':>8s}")
         for pga in args.pga:
             t0 = time.perf_counter()
-            scene = scene_for_model(model, SimulationConfig(pga_g=pga, duration_s=args.duration, seed=0))
+            scene = scene_for_model(model, SimulationConfig(pga_g=pga, duration_s=args.duration, seed=0,
+                                                                   foundation=args.foundation))
             out = run(scene, progress=False)
             m = metrics(scene, out)
             w = m.start_frame

@@ -153,7 +153,8 @@ def test_simulate_bad_input(small_model, tmp_path, case, msg):
 def test_bottom_course_is_bonded_to_the_plate(small_model):
     from calib_masonry.simulate.run import SimulationConfig, scene_for_model
 
-    scene = scene_for_model(small_model / "model", SimulationConfig(pga_g=0.1, duration_s=0.2))
+    assert not any(b.b < 0 for b in scene_for_model(small_model / "model", SimulationConfig(duration_s=0.2)).bonds)
+    scene = scene_for_model(small_model / "model", SimulationConfig(pga_g=0.1, duration_s=0.2, foundation=True))
     ground = [b for b in scene.bonds if b.b < 0]
     z_bottom = [float((b.location + b.vertices)[:, 2].min()) for b in scene.bodies]
     lowest = min(z_bottom)

@@ -231,7 +231,7 @@ def _cmd_simulate(args) -> int:
     config = SimulationConfig(pga_g=args.pga, duration_s=args.duration, seed=args.seed,
                               accelerogram=Path(args.accelerogram) if args.accelerogram else None,
                               components=args.components, solver=solver, frames_png=args.frames,
-                              figures=not args.no_figures)
+                              figures=not args.no_figures, foundation=args.foundation)
     s = simulate_to_folder(args.model_dir, args.out, config)
     print(f"simulate: {s['bricks']} bricks, {s['bonds']} bonds, {s['ground_motion']['source']}: {s['outcome']}; "
           f"moved {s['moved_fraction_final']:.1%} of bricks, {s['bonds_broken_fraction']:.1%} of bonds broken, "
@@ -315,6 +315,7 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--substeps", type=int, default=5)
     m.add_argument("--iterations", type=int, default=50)
     m.add_argument("--frames", type=int, default=6, help="collapse frames to render as PNG")
+    m.add_argument("--foundation", action="store_true", help="bond the bottom course to the ground (a footing)")
     m.add_argument("--no-figures", action="store_true")
     m.add_argument("--out", default="out/simulate")
     m.set_defaults(func=_cmd_simulate)

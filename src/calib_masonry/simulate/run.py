@@ -32,6 +32,9 @@ class SimulationConfig:
     material: Material = MASONRY
     frames_png: int = 6
     figures: bool = True
+    # bond the bottom course to the ground (a footing). Off by default: on the paper example it
+    # raises 0.6 g damage from 0.6 % to 3.8 % of bonds but doubles the gravity creep (9 -> 17 mm)
+    foundation: bool = False
 
 
 def load_model(model_dir: str | Path):
@@ -74,7 +77,7 @@ def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
     bricks, frames, cs, _ = load_model(model_dir)
     motion = motion_for(config)
     return scene_from_bricks(bricks, frames, cs, motion=motion, duration_s=motion.duration,
-                             material=config.material, solver=config.solver)
+                             material=config.material, solver=config.solver, foundation=config.foundation)
 
 
 def simulate_to_folder(model_dir: str | Path, out: str | Path, config: SimulationConfig = SimulationConfig(), *,

@@ -190,7 +190,7 @@ def _foundation_bonds(bodies: list[Body], material: Material, dt: float, tol_m: 
 def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners: list[Corner], *,
                       motion: GroundMotion | None, duration_s: float, material: Material = MASONRY,
                       solver: SolverSettings = SolverSettings(), mortar_fill: bool = True,
-                      max_gap_m: float = 0.06, foundation: bool = True) -> Scene:
+                      max_gap_m: float = 0.06, foundation: bool = False) -> Scene:
     """Bodies and bonds of a built structure (see the module docstring for the mortar model).
 
     With ``foundation`` every brick of the bottom course is also bonded to the ground plate by a

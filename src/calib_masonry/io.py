@@ -53,6 +53,20 @@ def rc_from_xy(xy: np.ndarray) -> np.ndarray:
     return xy_from_rc(xy)
 
 
+@contextlib.contextmanager
+def _opened_image(path: Path, field: str, hint: str) -> Iterator[Image.Image]:
+    """An image file, opened and decoded; a missing or unreadable file is a one-line InputError."""
+    if not path.is_file():
+        raise InputError(f"{field} {path}: file not found; check the path")
+    try:
+        im = Image.open(path)
+        im.load()
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        raise InputError(f"{field} {path}: cannot be read as an image ({exc}); {hint}") from None
+    with im:
+        yield im
+
+
 def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float = 0.05) -> np.ndarray:
     """Read a binary-like mask (bricks white, mortar black) as a boolean array ``(rows, cols)``.
 
@@ -60,15 +74,8 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
     the pixels lie between 20 % and 80 % of the intensity range the file is refused as not a mask.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{field} {path}: file not found; check the path")
-    try:
-        with Image.open(path) as im:
-            im.load()
-            mode = im.mode
-            arr = np.asarray(im.convert("RGB") if mode in ("P", "PA") else im)
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
-        raise InputError(f"{field} {path}: cannot be read as an image ({exc}); give a PNG or TIFF mask") from None
+    with _opened_image(path, field, "give a PNG or TIFF mask") as im:
+        arr = np.asarray(im.convert("RGB") if im.mode in ("P", "PA") else im)
     arr = np.asarray(arr)
     if arr.ndim == 3:
         chans = arr[..., :3].astype(np.float64)
@@ -230,15 +237,9 @@ def _exif_camera(im) -> tuple[float | None, float | None]:
 def read_photo(path: str | Path, *, field: str = "PHOTO") -> Photo:
     """Read a colour photo (JPEG, PNG, TIFF) and its EXIF focal length and compass heading."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{field} {path}: file not found; check the path")
-    try:
-        with Image.open(path) as im:
-            im.load()
-            focal, heading = _exif_camera(im)
-            rgb = np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
-        raise InputError(f"{field} {path}: cannot be read as an image ({exc}); give a JPEG, PNG or TIFF photo") from None
+    with _opened_image(path, field, "give a JPEG, PNG or TIFF photo") as im:
+        focal, heading = _exif_camera(im)
+        rgb = np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0
     if min(rgb.shape[:2]) < 32:
         raise InputError(f"{field} {path}: image is only {rgb.shape[1]} x {rgb.shape[0]} px; give the full photo")
     return Photo(path=path, rgb=rgb, focal_px=focal, heading_deg=heading)

@@ -86,6 +86,16 @@ def project(h, xz, xp=np):
     return pts[..., :2] / pts[..., 2:3]
 
 
+def px_per_m(image_from_wall: np.ndarray, xz: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+    """Photo pixels per wall metre at wall points ``(M, 2)``: the square root of the homography's
+    local area scale, from steps of ``eps`` metres along x and z."""
+    xz = np.atleast_2d(np.asarray(xz, dtype=np.float64))
+    p0 = project(image_from_wall, xz)
+    dx = project(image_from_wall, xz + [eps, 0.0]) - p0
+    dz = project(image_from_wall, xz + [0.0, eps]) - p0
+    return np.sqrt(np.abs(dx[:, 0] * dz[:, 1] - dx[:, 1] * dz[:, 0])) / eps
+
+
 def normalise_homography(h: np.ndarray) -> np.ndarray:
     """Scale a homography to unit Frobenius norm with a positive (2, 2) entry (for comparisons)."""
     h = np.asarray(h, dtype=np.float64)

@@ -123,14 +123,10 @@ def _families(seg, config: DetectConfig, tol, norm, rng):
 def corner_vanishing_points(rgb: np.ndarray, config: CornerDetect = CORNER_DETECT):
     """Segments of a corner photo split into (bed of the left wall, bed of the right wall, head), in
     full-size pixels, with their vanishing points (homogeneous, full-size pixels)."""
-    from skimage.transform import rescale
-
-    from .lines import _dist_to_vp
+    from .lines import _dist_to_vp, working_gray
 
     rows, cols = rgb.shape[:2]
-    s = min(1.0, config.ridges.work_long_side_px / max(rows, cols))
-    gray = rgb.mean(axis=-1)
-    small = rescale(gray, s, anti_aliasing=True) if s < 1 else gray
+    small, s = working_gray(rgb, config.ridges.work_long_side_px)
     ridge = (_hough_segments(small, config.ridges, ridges=True) + 0.5) / s - 0.5
     edge = (_hough_segments(small, config.edges) + 0.5) / s - 0.5
     if len(ridge) < 20:

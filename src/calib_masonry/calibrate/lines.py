@@ -376,14 +376,20 @@ def segments_in_quad(seg: np.ndarray, quad: np.ndarray, shrink: float = 0.01) ->
     return seg[inside]
 
 
+def working_gray(rgb: np.ndarray, long_side_px: int) -> tuple[np.ndarray, float]:
+    """The photo's grey levels shrunk (antialiased) to at most ``long_side_px``, and the factor."""
+    from skimage.transform import rescale
+
+    s = min(1.0, long_side_px / max(rgb.shape[:2]))
+    gray = rgb.mean(axis=-1)
+    return (rescale(gray, s, anti_aliasing=True) if s < 1 else gray), s
+
+
 def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detection:
     """Find the wall's corners and joint segments in an RGB photo ``(rows, cols, 3)`` in [0, 1]."""
     from skimage.transform import rescale
 
-    rows, cols = rgb.shape[:2]
-    s = min(1.0, config.work_long_side_px / max(rows, cols))
-    gray = rgb.mean(axis=-1)
-    small = rescale(gray, s, anti_aliasing=True) if s < 1 else gray
+    small, s = working_gray(rgb, config.work_long_side_px)
     seg = _hough_segments(small, config)
     if len(seg) < 8:
         raise FitFailed("automatic mode: no wall found (almost no straight edges in the photo); click the corners "

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import FitFailed, InputError
 from ..io import Photo, read_photo, staged_output, write_json
+from .camera import px_per_m
 from .fit import CalibrationInput, CalibrationResult, calibrate, order_corners
 from .lines import DetectConfig, Detection, detect_wall, refine_quad, segments_in_quad
 
@@ -229,12 +230,6 @@ def rectify_to_folder(photo_path: str | Path, out: str | Path, config: Calibrate
 
 def native_px_per_m(res: CalibrationResult) -> float:
     """Photo pixels per wall metre at the wall's centre (rounded to 10), a natural orthophoto scale."""
-    h = res.image_from_wall
-    c = np.array([res.width_m / 2, res.height_m / 2])
-    p0 = h @ np.r_[c, 1]
-    p1 = h @ np.r_[c + [0.01, 0], 1]
-    p2 = h @ np.r_[c + [0, 0.01], 1]
-    a, b = p1[:2] / p1[2] - p0[:2] / p0[2], p2[:2] / p2[2] - p0[:2] / p0[2]
-    scale = math.sqrt(abs(a[0] * b[1] - a[1] * b[0])) / 0.01
+    scale = float(px_per_m(res.image_from_wall, [res.width_m / 2, res.height_m / 2], eps=0.01)[0])
     return float(max(10.0, round(scale / 10.0) * 10.0))
 

@@ -25,6 +25,7 @@ from ..calibrate.camera import (
     intrinsics,
     principal_point,
     project,
+    px_per_m as photo_px_per_m,
     wall_from_camera_rotation,
 )
 from ..errors import InputError
@@ -117,14 +118,7 @@ def sample_camera(wall: WallSpec, spec: PhotoSpec, rng: np.random.Generator) -> 
 
 def _scale_of(h: np.ndarray, wall: WallSpec) -> np.ndarray:
     """Photo pixels per wall metre at the wall's four corners (the homography's local scale)."""
-    out = []
-    for c in _corners_m(wall):
-        eps = 1e-3
-        p0 = project(h, c[None])[0]
-        dx = project(h, (c + [eps, 0])[None])[0] - p0
-        dz = project(h, (c + [0, eps])[None])[0] - p0
-        out.append(math.sqrt(abs(dx[0] * dz[1] - dx[1] * dz[0])) / eps)
-    return np.array(out)
+    return photo_px_per_m(h, _corners_m(wall))
 
 
 def _scale_px_per_m(params, size, wall) -> np.ndarray:

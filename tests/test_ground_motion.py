@@ -38,6 +38,21 @@ def test_constant_acceleration_is_exact():
     assert np.isclose(m.displacement[-1, 0], 1.0)
 
 
+def test_mean_acceleration_per_frame_keeps_velocities_exact():
+    m = constant_acceleration(2.0, 1.0, dt=0.001)
+    t = np.arange(-3, 30) / 25.0  # frames at 25 fps, three of them before the ground moves
+    acc = m.mean_acceleration(t)
+    np.testing.assert_allclose(acc[:3], 0.0)
+    np.testing.assert_allclose(acc[3:28, 0], 2.0, rtol=1e-9)  # frames 3 .. 28 span the 1 s record
+    np.testing.assert_allclose(acc[28:], 0.0)  # keeps its last velocity after the record ends
+    q = synthetic_motion(0.4, 6.0, seed=3, components=2)
+    t = np.arange(0, 151) / 25.0
+    v = np.cumsum(q.mean_acceleration(t) * np.diff(t)[:, None], axis=0)  # velocity at each frame
+    d = np.concatenate([[[0.0, 0.0]], np.cumsum(0.5 * (np.vstack([[0, 0], v[:-1]]) + v) / 25.0, axis=0)])
+    ref = q.displacement_at(t)
+    assert np.abs(d - ref).max() < 0.05 * np.abs(ref).max()
+
+
 def test_accelerogram_csv(tmp_path):
     t = np.arange(0, 5, 0.01)
     a = 0.1 * np.sin(2 * np.pi * 2.0 * t) * np.minimum(t, 1.0)

@@ -15,7 +15,7 @@ from calib_masonry.simulate.ground_motion import G, constant_acceleration  # noq
 from calib_masonry.simulate.scene import Body, Bond, Plate, Scene, SolverSettings  # noqa: E402
 
 
-FPS = 100
+FPS = SolverSettings().fps  # the production settings: the benchmark runs at the settings tested here
 
 
 def _block(size, loc, mu=0.6, rotation=(1.0, 0.0, 0.0, 0.0)):
@@ -25,7 +25,7 @@ def _block(size, loc, mu=0.6, rotation=(1.0, 0.0, 0.0, 0.0)):
 
 
 def _solver(warmup=0.0):
-    return SolverSettings(fps=FPS, substeps=10, iterations=20, warmup_s=warmup)
+    return SolverSettings(warmup_s=warmup)
 
 
 @pytest.mark.parametrize("h", [1.0, 3.0])
@@ -39,12 +39,12 @@ def test_free_fall_time(h):
     assert abs(out.time[landed] - expected) <= max(0.05 * expected, 1.0 / FPS)
 
 
-@pytest.mark.parametrize("tilt_deg, slides", [(40.0, True), (36.0, True), (25.0, False)])
-def test_block_on_tilted_plane(tilt_deg, slides):
-    # atan(0.5) = 26.6 degrees. Measured here: Bullet's sliding friction matches mu within 4 %, but
-    # a block at rest only starts to slide at 31-34 degrees (its static friction is 0.6-0.67), so
-    # the "slides" cases sit clear of that band (see the issue note).
+@pytest.mark.parametrize("factor, slides", [(1.6, True), (1.05, True), (0.95, False)])
+def test_block_on_tilted_plane(factor, slides):
+    # 5 % either side of atan(mu) = 26.6 degrees. (At a 1 ms step Bullet's block at rest sticks up
+    # to 32 degrees; at the default 4 ms step it slides from 27.9.)
     mu = 0.5
+    tilt_deg = factor * math.degrees(math.atan(mu))
     th = math.radians(tilt_deg)
     plate = Plate(size=(6.0, 2.0, 0.2), top_z=0.0, friction=math.sqrt(mu), tilt_deg=tilt_deg)
     # the plate turns about its centre (0, 0, -0.1): its top passes through this point
@@ -60,7 +60,7 @@ def test_block_on_tilted_plane(tilt_deg, slides):
         a_fit = 2 * np.polyfit(out.time[keep], path[keep], 2)[0]
         a = G * (math.sin(th) - mu * math.cos(th))
         assert path[-1] > 0.05
-        if tilt_deg >= 40:  # nearer the threshold a is too sensitive to mu for a 5 % check
+        if factor > 1.5:  # nearer the threshold a is too sensitive to mu for a 5 % check
             assert a_fit == pytest.approx(a, rel=0.05)
     else:
         assert path.max() < 0.002

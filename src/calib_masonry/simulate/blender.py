@@ -8,23 +8,31 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
 * convex hulls use ``use_margin = True`` with ``collision_margin = 0`` (a positive margin rounds
   the corners and blocks rock over early); the ground plate uses the BOX shape;
 * the world is stepped with ``scene.frame_set(f)`` frame by frame, the point cache covering the run;
-* Bullet never reports a broken constraint to Python: breaking is detected afterwards from the
-  drift of each bonded pair at its patch centroid (see ``results.bond_breaks``).
+* Bullet never reports a broken constraint to Python, and it breaks each of a joint's four
+  constraints on its own. The run watches every joint's opening frame by frame
+  (:class:`~calib_masonry.simulate.monitor.JointMonitor`) and switches the remaining constraints of
+  a cracked joint off, so a joint fails once, as a whole, and then carries contact and friction
+  only. ``rigid_body_constraint.enabled = False`` is written on the *evaluated* object between
+  frames: it reaches the live Bullet constraint at once; writing the original object instead
+  tags the depsgraph and crashed Blender in about half the trials.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from ..errors import BackendMissing
+from .monitor import JointMonitor
 from .scene import Scene
 
 __all__ = ["RunOutput", "run", "require_bpy"]
+
+UNBREAKABLE = 1e30  # a breaking threshold no impulse reaches
 
 
 def require_bpy():
@@ -38,9 +46,10 @@ def require_bpy():
 
 @dataclass(frozen=True)
 class RunOutput:
-    """Poses at every frame (frame 0 is the initial state): ``positions`` ``(F, B, 3)``,
-    ``quaternions`` ``(F, B, 4)`` (w, x, y, z), ``plate`` ``(F, 3)``, ``time`` ``(F,)`` seconds from
-    the start of the warm-up; ``seconds_stepping`` is the wall time of the stepping loop."""
+    """Poses at every frame (frame 0 is the initial state), in the frame that moves with the ground:
+    ``positions`` ``(F, B, 3)``, ``quaternions`` ``(F, B, 4)`` (w, x, y, z), ``plate`` ``(F, 3)``,
+    ``time`` ``(F,)`` seconds from the start of the warm-up; ``seconds_stepping`` is the wall time
+    of the stepping loop."""
 
     time: np.ndarray
     positions: np.ndarray
@@ -48,6 +57,7 @@ class RunOutput:
     plate: np.ndarray
     seconds_build: float
     seconds_stepping: float
+    bond_break_time_s: np.ndarray | None = None  # cracking time of each bond after the warm-up, if watched
 
 
 def _reset(bpy) -> None:
@@ -108,8 +118,55 @@ def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:
     return tuple(q)
 
 
+def _gravity_per_frame(scene: Scene) -> np.ndarray:
+    """The gravity vector Bullet steps into each frame with, ``(frames + 1, 3)``; row k drives the
+    step from frame k - 1 to k (row 0: the initial state).
+
+    * Warm-up: gravity rises smoothly from 0 to g over ``gravity_ramp_s`` and then holds, so the
+      bonded structure takes its weight quasi-statically instead of ringing after a sudden load.
+    * Ground motion: applied as the inertial force it puts on every body in the ground's frame,
+      gravity ``(-a_x, -a_y, -g)`` with ``a`` the ground's mean acceleration over the frame, so the
+      velocities are exact at every frame. A kinematic plate keyed per frame would instead change
+      its velocity within one substep at every frame boundary: an acceleration spike of substeps x
+      a, which rocked a block at 0.9 g b / h (measured).
+    """
+    s = scene.solver
+    frames = scene.frames
+    warm = int(round(s.warmup_s * s.fps))
+    t = (np.arange(frames + 1) - warm) / s.fps  # time since the ground started moving
+    g = np.zeros((frames + 1, 3))
+    g[:, 2] = -scene.gravity
+    ramp = min(s.gravity_ramp_s, s.warmup_s)
+    if ramp > 0:
+        x = np.clip((t + s.warmup_s) / ramp, 0.0, 1.0)
+        g[:, 2] *= x * x * (3.0 - 2.0 * x)
+    if scene.motion is not None:
+        g[1:, :2] = -scene.motion.mean_acceleration(t)
+    return g
+
+
+def _key_gravity(bpy, scene: Scene) -> None:
+    sc = bpy.context.scene
+    g = _gravity_per_frame(scene)
+    if np.all(g == g[-1]):
+        sc.gravity = tuple(float(x) for x in g[-1])
+        return
+    prefs = bpy.context.preferences.edit
+    old = prefs.keyframe_new_interpolation_type
+    prefs.keyframe_new_interpolation_type = "CONSTANT"
+    try:
+        for k in range(len(g)):
+            sc.gravity = tuple(float(x) for x in g[k])
+            sc.keyframe_insert("gravity", frame=k + 1)  # our frame k is Blender's frame k + 1
+    finally:
+        prefs.keyframe_new_interpolation_type = old
+
+
 def build_scene(scene: Scene, *, breaking: bool = True):
-    """Create the Blender scene; returns (bpy, body objects, plate object, constraint objects)."""
+    """Create the Blender scene; returns (bpy, body objects, plate object, constraint objects).
+
+    Breakable bonds start with an unreachable threshold when there is a warm-up: :func:`run`
+    switches the real thresholds on at its end."""
     bpy = require_bpy()
     _reset(bpy)
     sc = bpy.context.scene
@@ -133,7 +190,7 @@ def build_scene(scene: Scene, *, breaking: bool = True):
     rb_col = bpy.data.collections.new("RigidBodyWorld")
     rw.collection = rb_col
 
-    # ground plate: a passive BOX, kinematic (keyed frame by frame) when the ground moves
+    # ground plate: a passive BOX that stays put (the ground motion is applied as an inertial force)
     pv, pf = _box(scene.plate.size)
     plate_loc = (scene.plate.centre[0], scene.plate.centre[1], scene.plate.top_z - scene.plate.size[2] / 2)
     plate = _mesh_object(bpy, "ground_plate", pv, pf, plate_loc, sc.collection)
@@ -146,19 +203,9 @@ def build_scene(scene: Scene, *, breaking: bool = True):
     prb.restitution = 0.0
     prb.use_margin = True
     prb.collision_margin = 0.0
-    if scene.motion is not None:
-        prb.kinematic = True
-        prefs = bpy.context.preferences.edit
-        old = prefs.keyframe_new_interpolation_type
-        prefs.keyframe_new_interpolation_type = "LINEAR"
-        warm = int(round(s.warmup_s * s.fps))
-        t = (np.arange(frames + 1) - warm) / s.fps
-        disp = scene.motion.displacement_at(np.clip(t, 0.0, scene.motion.duration))
-        for f in range(frames + 1):
-            plate.location = (plate_loc[0] + disp[f, 0], plate_loc[1] + disp[f, 1], plate_loc[2])
-            plate.keyframe_insert("location", frame=f + 1)
-        prefs.keyframe_new_interpolation_type = old
+    _key_gravity(bpy, scene)
 
+    warm = int(round(s.warmup_s * s.fps))
     objects = []
     for b in scene.bodies:
         ob = _mesh_object(bpy, b.name, b.vertices, b.faces, b.location, bodies_col)
@@ -173,8 +220,7 @@ def build_scene(scene: Scene, *, breaking: bool = True):
         rb.mass = float(b.mass)
         rb.friction = float(b.friction)
         rb.restitution = float(b.restitution)
-        rb.linear_damping = 0.0
-        rb.angular_damping = 0.0
+        rb.linear_damping = rb.angular_damping = s.warmup_damping if warm > 0 else 0.0
         rb.use_deactivation = False
         objects.append(ob)
 
@@ -200,7 +246,7 @@ def build_scene(scene: Scene, *, breaking: bool = True):
                 c.object2 = plate if bond.b < 0 else objects[bond.b]
                 c.disable_collisions = False
                 c.use_breaking = bool(breaking and np.isfinite(thr))
-                c.breaking_threshold = float(min(thr, 1e30))
+                c.breaking_threshold = float(min(thr, UNBREAKABLE)) if warm == 0 else UNBREAKABLE
                 if kind == "S":
                     for ax in "xy":
                         setattr(c, f"use_limit_lin_{ax}", True)
@@ -218,18 +264,28 @@ def build_scene(scene: Scene, *, breaking: bool = True):
     return bpy, objects, plate, constraints
 
 
-def _run_once(scene: Scene, *, breaking: bool, progress, record: bool, desc: str):
+def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None = None, record: bool = True
+        ) -> RunOutput:
+    """Simulate ``scene`` in one pass: the warm-up under (ramped) gravity with the bonds
+    unbreakable and the bodies damped, then the ground motion with the real thresholds switched on
+    and no damping.
+
+    The thresholds and damping are switched, and cracked joints switched off, on the evaluated copies of the
+    constraint objects, which hold the live Bullet constraints (writing the originals tags the
+    depsgraph and crashed Blender in about half the trials). With ``record=False`` only the
+    stepping and the threshold switch are done (the bare-Bullet baseline): no poses are read and
+    no joint is watched.
+    """
     t0 = time.perf_counter()
-    bpy, objects, plate, _ = build_scene(scene, breaking=breaking)
+    bpy, objects, plate, constraints = build_scene(scene)
     sc = bpy.context.scene
     seconds_build = time.perf_counter() - t0
+    s = scene.solver
     frames = scene.frames
+    warm = min(int(round(s.warmup_s * s.fps)), frames)
     nb = len(objects)
     n = frames + 1 if record else 1
-    pos = np.zeros((n, nb, 3))
-    quat = np.zeros((n, nb, 4))
     plate_pos = np.zeros((n, 3))
-
     bodies_col = bpy.data.collections["Bricks"]
     position = {ob.name: j for j, ob in enumerate(objects)}
     order = np.array([position[ob.name] for ob in bodies_col.objects], dtype=int)
@@ -242,55 +298,48 @@ def _run_once(scene: Scene, *, breaking: bool, progress, record: bool, desc: str
         mats[i, order] = buf.reshape(nb, 4, 4).transpose(0, 2, 1)
         plate_pos[i] = plate.matrix_world.translation
 
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    per_bond = len(constraints) // max(1, len(scene.bonds))
+    thresholds = [float(min(t, UNBREAKABLE)) for bd in scene.bonds
+                  for t in (bd.compression_ns, bd.tension_ns, bd.shear_ns, bd.bending_nms)]
+    watch = None
+
+    def start_breaking(i: int) -> None:
+        nonlocal watch
+        if warm > 0:
+            for e, thr in zip(constraints, thresholds):
+                e.evaluated_get(depsgraph).rigid_body_constraint.breaking_threshold = thr
+            for ob in objects:
+                rb = ob.evaluated_get(depsgraph).rigid_body
+                rb.linear_damping = rb.angular_damping = 0.0
+        if record and scene.bonds and s.crack_whole_joints:
+            watch = JointMonitor(scene, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i], 0.0)
+
     t1 = time.perf_counter()
     sc.frame_set(1)
     if record:
         grab(0)
-    for f in tqdm(range(2, frames + 2), desc=desc, unit="frame", disable=None if progress is None else not progress,
-                  leave=False):
-        sc.frame_set(f)
+    if warm == 0:
+        start_breaking(0)
+    for f in tqdm(range(1, frames + 1), desc="simulate", unit="frame",
+                  disable=None if progress is None else not progress, leave=False):
+        sc.frame_set(f + 1)  # our frame f is Blender's frame f + 1
+        i = f if record else 0
         if record:
-            grab(f - 1)
+            grab(i)
+        if f == warm:
+            start_breaking(i)
+        elif watch is not None:
+            for k in watch.update((f - warm) / s.fps, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i]):
+                for e in constraints[k * per_bond:(k + 1) * per_bond]:
+                    e.evaluated_get(depsgraph).rigid_body_constraint.enabled = False
     seconds_stepping = time.perf_counter() - t1
     if not record:
         grab(0)  # the final state only
-    pos[:] = mats[:, :, :3, 3]
-    quat[:] = _quaternions(mats[:, :, :3, :3].astype(np.float64))
-    return bpy, pos, quat, plate_pos, seconds_build, seconds_stepping
-
-
-def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None = None, record: bool = True
-        ) -> RunOutput:
-    """Simulate ``scene``: a warm-up under gravity with bonds unbreakable, then the ground motion.
-
-    Bullet cannot have a constraint's breaking switched on mid-run from Python (Blender crashes),
-    so a bonded scene settles in a first run and the settled poses start a second one with
-    breaking on. With ``record=False`` only the stepping is done (the bare-Bullet baseline).
-    """
-    s = scene.solver
-    warm = int(round(s.warmup_s * s.fps))
-    segments = []
-    build = step = 0.0
-    main = scene
-    if scene.bonds and warm > 0:
-        warm_scene = replace(scene, motion=None, duration_s=0.0)
-        _, p1, q1, pl1, b1, s1 = _run_once(warm_scene, breaking=False, progress=progress, record=record,
-                                           desc="settle")
-        build += b1
-        step += s1
-        segments.append((p1, q1, pl1))
-        bodies = tuple(replace(b, location=p1[-1, j].copy(), rotation=tuple(float(x) for x in q1[-1, j]))
-                       for j, b in enumerate(scene.bodies))
-        main = replace(scene, bodies=bodies, solver=replace(s, warmup_s=0.0))
-    bpy, p2, q2, pl2, b2, s2 = _run_once(main, breaking=True, progress=progress, record=record, desc="simulate")
-    build += b2
-    step += s2
-    if segments:
-        p1, q1, pl1 = segments[0]
-        if record:
-            p2, q2, pl2 = (np.concatenate([p1, p2[1:]]), np.concatenate([q1, q2[1:]]), np.concatenate([pl1, pl2[1:]]))
     if blend_path is not None:
-        bpy.context.scene.frame_set(1)
+        sc.frame_set(1)
         bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), check_existing=False, compress=True)
-    return RunOutput(time=np.arange(len(p2)) / s.fps, positions=p2, quaternions=q2, plate=pl2,
-                     seconds_build=build, seconds_stepping=step)
+    return RunOutput(time=np.arange(n) / s.fps, positions=mats[:, :, :3, 3].astype(np.float64),
+                     quaternions=_quaternions(mats[:, :, :3, :3].astype(np.float64)), plate=plate_pos,
+                     seconds_build=seconds_build, seconds_stepping=seconds_stepping,
+                     bond_break_time_s=watch.break_time_s if watch is not None else None)

@@ -4,8 +4,10 @@ A synthetic record is white noise filtered by the Kanai-Tajimi soil filter
 ``H(w) = (wg^2 + 2 i zg wg w) / (wg^2 - w^2 + 2 i zg wg w)``, shaped by a trapezoid-exponential
 envelope (rise, strong phase, exponential decay), high-passed (fourth-order, ``highpass_hz``) so
 that velocity and displacement return to rest, and scaled so that its peak equals the PGA. The
-plate's displacement is the record integrated twice in the frequency domain, and the acceleration
-that is actually applied is recomputed from the sampled displacement, so the two always agree.
+displacement is the record integrated twice in the frequency domain, and the acceleration is
+recomputed from the sampled displacement, so the two always agree. The simulation applies the
+motion as the inertial force it puts on every brick in the ground's frame (see
+:meth:`GroundMotion.mean_acceleration` and :mod:`calib_masonry.simulate.blender`).
 
 Units: seconds, metres, m/s^2; ``pga_g`` is in g at the edges only.
 """
@@ -59,6 +61,19 @@ class GroundMotion:
     @property
     def pga(self) -> float:
         return float(np.abs(self.acceleration).max())
+
+    def mean_acceleration(self, t: np.ndarray) -> np.ndarray:
+        """The ground's mean acceleration over each interval ``[t_k, t_k+1]`` of ``t`` ``(K,)`` ->
+        ``(K - 1, 2)``: its velocity change over the interval divided by the interval, so a run
+        that holds it constant within each frame gives the ground's velocity exactly at every frame.
+        The ground is at rest before the record and keeps its last velocity after it."""
+        v_mid = np.diff(self.displacement, axis=0) / self.dt
+        tk = np.concatenate([[0.0], (np.arange(len(v_mid)) + 0.5) * self.dt, [self.duration]])
+        t = np.asarray(t, dtype=np.float64)
+        v_end = 1.5 * v_mid[-1] - 0.5 * v_mid[-2] if len(v_mid) > 1 else v_mid[-1]
+        v = np.column_stack([np.interp(t, tk, np.concatenate([[0.0], v_mid[:, k], [v_end[k]]]), left=0.0)
+                             for k in range(2)])
+        return np.diff(v, axis=0) / np.diff(t)[:, None]
 
     def displacement_at(self, t: np.ndarray) -> np.ndarray:
         """Linear interpolation of the displacement at times ``t`` ``(K,)`` -> ``(K, 2)``."""

@@ -2,8 +2,8 @@
 
 Displacements are measured relative to the ground plate (a brick carried rigidly by the ground has
 not moved) and from the end of the gravity warm-up. A bond counts as broken at the first frame
-where the two bricks' copies of its patch centroid (each carried by its own brick) are more than
-``drift_break_m`` apart: Bullet does not tell Python when a constraint breaks.
+where its joint has opened by more than ``drift_break_m`` anywhere on its patch (see
+:mod:`calib_masonry.simulate.monitor`): Bullet does not tell Python when a constraint breaks.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .blender import RunOutput
+from .monitor import JointMonitor
 from .scene import Scene
 
 __all__ = ["Metrics", "rotations", "bond_breaks", "metrics", "plot_histories", "plot_ground_motion",
@@ -42,27 +43,17 @@ class Metrics:
 
 
 def bond_breaks(scene: Scene, out: RunOutput, start: int) -> np.ndarray:
+    """Each bond's cracking time (s after ``start``; NaN if intact): recorded during the run, or
+    found afterwards from the poses with the same :class:`~calib_masonry.simulate.monitor.JointMonitor`."""
     if not scene.bonds:
         return np.zeros(0)
-    a = np.array([b.a for b in scene.bonds])
-    b = np.array([b.b for b in scene.bonds])
-    ground = b < 0  # foundation bonds: the plate only translates
-    b = np.where(ground, a, b)
-    c = np.array([bd.location for bd in scene.bonds])
-    R = rotations(out.quaternions)  # (F, B, 3, 3)
-    p = out.positions
-    # the bond point in each brick's frame at the start, then carried by each brick (or the plate)
-    qa = np.einsum("nji,nj->ni", R[start, a], c - p[start, a])
-    qb = np.einsum("nji,nj->ni", R[start, b], c - p[start, b])
-    times = np.full(len(a), np.nan)
-    for f in range(start, len(p)):
-        pa = np.einsum("nij,nj->ni", R[f, a], qa) + p[f, a]
-        pb = np.einsum("nij,nj->ni", R[f, b], qb) + p[f, b]
-        pb[ground] = c[ground] + (out.plate[f] - out.plate[start])
-        gap = np.linalg.norm(pa - pb, axis=1)
-        new = np.isnan(times) & (gap > scene.solver.drift_break_m)
-        times[new] = out.time[f] - out.time[start]
-    return times
+    if out.bond_break_time_s is not None:
+        return out.bond_break_time_s
+    R = rotations(out.quaternions)
+    mon = JointMonitor(scene, out.positions[start], R[start], out.plate[start], out.time[start])
+    for f in range(start + 1, len(out.time)):
+        mon.update(out.time[f], out.positions[f], R[f], out.plate[f])
+    return mon.break_time_s
 
 
 def metrics(scene: Scene, out: RunOutput) -> Metrics:

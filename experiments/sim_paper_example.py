@@ -4,7 +4,7 @@ Prints, per PGA: outcome, bricks moved > 5 cm (relative to the plate), bonds bro
 brick displacement after the 0.5 s warm-up (the gravity-stability check: <= 2 mm in 10 s), roof
 drift and seconds. Each 10 s run takes about 3-4 minutes on 2 cores.
 
-    .venv/bin/python experiments/sim_paper_example.py [--pga 0 0.05 0.6] [--duration 10] [--foundation]
+    .venv/bin/python experiments/sim_paper_example.py [--pga 0 0.05 0.6] [--duration 10] [--no-foundation]
 """
 
 from __future__ import annotations
@@ -30,7 +30,8 @@ def main() -> None:
     ap.add_argument("--structure", default=str(ROOT / "data_synthetic" / "paper_example" / "structure.toml"))
     ap.add_argument("--pga", type=float, nargs="+", default=[0.0, 0.05, 0.6])
     ap.add_argument("--duration", type=float, default=10.0)
-    ap.add_argument("--foundation", action="store_true", help="bond the bottom course to the ground plate")
+    ap.add_argument("--foundation", action=argparse.BooleanOptionalAction, default=True,
+                    help="bond the bottom course to the ground plate (default)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         model = Path(tmp) / "model"

@@ -227,7 +227,9 @@ def _cmd_simulate(args) -> int:
     from .simulate.run import SimulationConfig, simulate_to_folder
     from .simulate.scene import SolverSettings
 
-    solver = replace(SolverSettings(), fps=args.fps, substeps=args.substeps, iterations=args.iterations)
+    d = SolverSettings()
+    solver = replace(d, **{k: v for k, v in (("fps", args.fps), ("substeps", args.substeps),
+                                              ("iterations", args.iterations)) if v is not None})
     config = SimulationConfig(pga_g=args.pga, duration_s=args.duration, seed=args.seed,
                               accelerogram=Path(args.accelerogram) if args.accelerogram else None,
                               components=args.components, solver=solver, frames_png=args.frames,
@@ -311,11 +313,12 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--seed", type=int, default=0)
     m.add_argument("--components", type=int, default=1, choices=(1, 2))
     m.add_argument("--accelerogram", default=None, help="CSV of time, acceleration (g) instead of --pga")
-    m.add_argument("--fps", type=int, default=25)
-    m.add_argument("--substeps", type=int, default=5)
-    m.add_argument("--iterations", type=int, default=50)
+    m.add_argument("--fps", type=int, default=None, help="frames per second (default: the tested settings, 25)")
+    m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")
+    m.add_argument("--iterations", type=int, default=None, help="solver iterations per substep (default 50)")
     m.add_argument("--frames", type=int, default=6, help="collapse frames to render as PNG")
-    m.add_argument("--foundation", action="store_true", help="bond the bottom course to the ground (a footing)")
+    m.add_argument("--foundation", action=argparse.BooleanOptionalAction, default=True,
+                   help="bond the bottom course to the ground, a footing (default; --no-foundation: friction only)")
     m.add_argument("--no-figures", action="store_true")
     m.add_argument("--out", default="out/simulate")
     m.set_defaults(func=_cmd_simulate)

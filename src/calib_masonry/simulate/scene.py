@@ -13,15 +13,19 @@ constraints at the patch centroid, in a frame whose z axis is the patch normal:
 * compression: one-sided, keeps b from approaching a along the normal, fails at ``f_c A``;
 * tension: one-sided, keeps b from leaving a along the normal, fails at ``f_t A``;
 * shear: locks sliding in the joint plane, fails at ``f_s A``;
-* bending: locks the three rotations, fails at the moment that cracks the joint,
-  ``M = (f_t + sigma_0) S`` with ``S = A d / 6`` (``d`` the patch's narrower width) and
-  ``sigma_0`` the dead-load precompression across the joint (Navier: a joint under compression
-  cracks only once bending has undone it). ``sigma_0 = rho g h n_z^2``, ``h`` the height of
-  masonry above the patch (the highest brick top within ``0.25 m`` of it in plan) and ``n_z`` the
-  normal's vertical part (0 for head joints). Without it a bed joint's rotation lock, which the
-  solver loads with whatever bending the eccentric weight above it causes before the contacts
-  take it over, cracks under gravity alone at the base and the walls sway by millimetres
-  (measured on the paper example).
+* bending: locks the three rotations, fails at the moment that turns the joint,
+  ``M = f_t S + N d / 2 = (f_t + 3 sigma_0) S`` with ``S = A d / 6`` (``d`` the patch's narrower
+  width), ``N = sigma_0 A`` the dead load across the joint and ``sigma_0 = rho g h n_z^2`` (``h``
+  the height of masonry above the patch: the highest brick top within 0.25 m of it in plan;
+  ``n_z`` the normal's vertical part, 0 for head joints). ``N d / 2`` is the moment that rocks a
+  joint under compression about its edge, which the contacts carry after cracking too; ``f_t S``
+  is what the mortar's tension adds. Bullet's contact manifolds at zero margin often hold a
+  brick on one edge, so the rotation lock carries up to ``N d / 2`` under gravity alone: with
+  ``f_t S`` only (or the elastic ``(f_t + sigma_0) S``), bed joints of the paper example cracked
+  under their own weight and the wall tops swayed by 2-3 mm (measured).
+
+A cracked joint fails as a whole: the run switches its remaining constraints off (see
+:mod:`calib_masonry.simulate.monitor`).
 
 Bullet compares each constraint row's impulse with the constraint's threshold, and the rows of a
 rotation lock carry angular impulses (N m s): that is why bending is a constraint of its own, with

@@ -13,6 +13,7 @@ and an overhead ratio <= 1.15.
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -20,13 +21,17 @@ from pathlib import Path
 from calib_masonry.pipeline import build_to_folder
 from calib_masonry.simulate.blender import run
 from calib_masonry.simulate.results import metrics
-from calib_masonry.simulate.run import SimulationConfig, scene_for_model, simulate_to_folder
+from calib_masonry.simulate.run import (SimulationConfig, rerun_with_fixed_hash_seed, scene_for_model,
+                                       simulate_to_folder)
 from calib_masonry.spec import load_structure
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
+    code = rerun_with_fixed_hash_seed(sys.argv)  # the same numbers on every run (see that function)
+    if code is not None:
+        sys.exit(code)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--structure", default=str(ROOT / "data_synthetic" / "stylite" / "structure.toml"))
     ap.add_argument("--pga", type=float, default=0.3)

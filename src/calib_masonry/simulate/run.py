@@ -17,7 +17,26 @@ from ..spec import StructureSpec, WallSpec
 from .ground_motion import GroundMotion, read_accelerogram, synthetic_motion
 from .scene import MASONRY, Material, Scene, SolverSettings, scene_from_bricks
 
-__all__ = ["SimulationConfig", "load_model", "scene_for_model", "simulate_to_folder"]
+__all__ = ["SimulationConfig", "load_model", "scene_for_model", "simulate_to_folder", "rerun_with_fixed_hash_seed"]
+
+
+def rerun_with_fixed_hash_seed(python_args: list[str]) -> int | None:
+    """Run ``python PYTHON_ARGS`` in a child with ``PYTHONHASHSEED=0`` and return its exit code, or
+    None when this process already has that seed (then the caller does the work itself).
+
+    Bullet in Blender repeats a run bit for bit only when the process's memory layout repeats, and
+    Python's string-hash seed changes it: two processes with random seeds diverged from the second
+    frame on the Stylite model, processes with PYTHONHASHSEED=0 matched exactly (measured; also
+    with a different --out path). The first run after a source change still differs (Python writes
+    its bytecode caches then), which is why scripts/setup.sh compiles them."""
+    import os
+    import subprocess
+    import sys
+
+    if os.environ.get("PYTHONHASHSEED") == "0":
+        return None
+    env = {**os.environ, "PYTHONHASHSEED": "0"}
+    return subprocess.run([sys.executable, *python_args], env=env).returncode
 
 
 @dataclass(frozen=True)

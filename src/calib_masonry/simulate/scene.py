@@ -141,7 +141,8 @@ class Bond:
 
 @dataclass(frozen=True)
 class Plate:
-    """The ground: a passive box; it stays put and the ground motion acts as an inertial force. ``tilt_deg`` about global Y (for tests)."""
+    """The ground: a passive box that stays put (the ground motion acts as an inertial force).
+    ``tilt_deg`` about global Y (for tests)."""
 
     size: tuple[float, float, float] = (20.0, 20.0, 0.5)
     centre: tuple[float, float] = (0.0, 0.0)
@@ -185,6 +186,17 @@ def _grown_solid(brick: Brick, frames: list[WallFrame], corners: list[Corner], g
     return (solid if solid is not None else brick.solid), change
 
 
+def mortar_bond(a: int, b: int, location: np.ndarray, normal: np.ndarray, area_m2: float, width_m: float,
+                sigma0_pa: float, material: Material, dt: float) -> Bond:
+    """A mortar joint's four thresholds (see the module docstring): ``f A dt`` for compression,
+    tension and shear, ``(f_t + 3 sigma_0) S dt`` with ``S = A d / 6`` for bending."""
+    return Bond(a=a, b=b, location=location, normal=normal, area_m2=area_m2,
+                compression_ns=material.compressive_strength * area_m2 * dt,
+                tension_ns=material.tensile_strength * area_m2 * dt,
+                shear_ns=material.shear_strength * area_m2 * dt,
+                bending_nms=(material.tensile_strength + 3.0 * sigma0_pa) * area_m2 * width_m / 6.0 * dt)
+
+
 def dead_load_precompression(bodies: Sequence[Body], points: np.ndarray, normals: np.ndarray, material: Material,
                              radius_m: float = 0.25) -> np.ndarray:
     """Dead-load compression (Pa) across joints at ``points`` ``(N, 3)`` with unit ``normals``:
@@ -220,11 +232,7 @@ def _foundation_bonds(bodies: list[Body], material: Material, dt: float, tol_m: 
         width = float(min(np.linalg.norm(xy[1] - xy[0]), np.linalg.norm(xy[2] - xy[1]))) if len(xy) >= 3 else 0.0
         area = float(hull.area)
         s0 = float(dead_load_precompression(bodies, c[None], np.array([[0.0, 0.0, 1.0]]), material)[0])
-        out.append(Bond(a=i, b=-1, location=c, normal=np.array([0.0, 0.0, -1.0]), area_m2=area,
-                        compression_ns=material.compressive_strength * area * dt,
-                        tension_ns=material.tensile_strength * area * dt,
-                        shear_ns=material.shear_strength * area * dt,
-                        bending_nms=(material.tensile_strength + 3.0 * s0) * area * width / 6.0 * dt))
+        out.append(mortar_bond(i, -1, c, np.array([0.0, 0.0, -1.0]), area, width, s0, material, dt))
     return tuple(out)
 
 
@@ -253,11 +261,7 @@ def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners:
     dt = solver.dt_substep
     sigma0 = dead_load_precompression(bodies, np.array([p.centroid for p in patches]).reshape(-1, 3),
                                       np.array([p.normal for p in patches]).reshape(-1, 3), material)
-    bonds = tuple(Bond(a=index[p.a], b=index[p.b], location=p.centroid, normal=p.normal, area_m2=p.area_m2,
-                       compression_ns=material.compressive_strength * p.area_m2 * dt,
-                       tension_ns=material.tensile_strength * p.area_m2 * dt,
-                       shear_ns=material.shear_strength * p.area_m2 * dt,
-                       bending_nms=(material.tensile_strength + 3.0 * s0) * p.area_m2 * p.min_width_m / 6.0 * dt)
+    bonds = tuple(mortar_bond(index[p.a], index[p.b], p.centroid, p.normal, p.area_m2, p.min_width_m, s0, material, dt)
                   for p, s0 in zip(patches, sigma0))
     if foundation:
         bonds = bonds + _foundation_bonds(bodies, material, dt)

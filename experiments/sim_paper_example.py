@@ -2,7 +2,7 @@
 
 Prints, per PGA: outcome, bricks moved > 5 cm (relative to the plate), bonds broken, the largest
 brick displacement after the 0.5 s warm-up (the gravity-stability check: <= 2 mm in 10 s), roof
-drift and seconds. Each 10 s run takes about 3-4 minutes on 2 cores.
+drift and seconds. Each 10 s run takes about 6 minutes on 2 cores.
 
     .venv/bin/python experiments/sim_paper_example.py [--pga 0 0.05 0.6] [--duration 10] [--no-foundation]
 """

@@ -162,7 +162,7 @@ def _key_gravity(bpy, scene: Scene) -> None:
         prefs.keyframe_new_interpolation_type = old
 
 
-def build_scene(scene: Scene, *, breaking: bool = True):
+def build_scene(scene: Scene):
     """Create the Blender scene; returns (bpy, body objects, plate object, constraint objects).
 
     Breakable bonds start with an unreachable threshold when there is a warm-up: :func:`run`
@@ -245,7 +245,7 @@ def build_scene(scene: Scene, *, breaking: bool = True):
                 c.object1 = objects[bond.a]
                 c.object2 = plate if bond.b < 0 else objects[bond.b]
                 c.disable_collisions = False
-                c.use_breaking = bool(breaking and np.isfinite(thr))
+                c.use_breaking = bool(np.isfinite(thr))
                 c.breaking_threshold = float(min(thr, UNBREAKABLE)) if warm == 0 else UNBREAKABLE
                 if kind == "S":
                     for ax in "xy":
@@ -300,15 +300,15 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     per_bond = len(constraints) // max(1, len(scene.bonds))
-    thresholds = [float(min(t, UNBREAKABLE)) for bd in scene.bonds
-                  for t in (bd.compression_ns, bd.tension_ns, bd.shear_ns, bd.bending_nms)]
     watch = None
 
     def start_breaking(i: int) -> None:
         nonlocal watch
         if warm > 0:
+            thresholds = (min(t, UNBREAKABLE) for bd in scene.bonds
+                          for t in (bd.compression_ns, bd.tension_ns, bd.shear_ns, bd.bending_nms))
             for e, thr in zip(constraints, thresholds):
-                e.evaluated_get(depsgraph).rigid_body_constraint.breaking_threshold = thr
+                e.evaluated_get(depsgraph).rigid_body_constraint.breaking_threshold = float(thr)
             for ob in objects:
                 rb = ob.evaluated_get(depsgraph).rigid_body
                 rb.linear_damping = rb.angular_damping = 0.0

@@ -132,7 +132,7 @@ def _gravity_per_frame(scene: Scene) -> np.ndarray:
     """
     s = scene.solver
     frames = scene.frames
-    warm = int(round(s.warmup_s * s.fps))
+    warm = s.warmup_frames
     t = (np.arange(frames + 1) - warm) / s.fps  # time since the ground started moving
     g = np.zeros((frames + 1, 3))
     g[:, 2] = -scene.gravity
@@ -205,7 +205,7 @@ def build_scene(scene: Scene):
     prb.collision_margin = 0.0
     _key_gravity(bpy, scene)
 
-    warm = int(round(s.warmup_s * s.fps))
+    warm = s.warmup_frames
     objects = []
     for b in scene.bodies:
         ob = _mesh_object(bpy, b.name, b.vertices, b.faces, b.location, bodies_col)
@@ -282,7 +282,7 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
     seconds_build = time.perf_counter() - t0
     s = scene.solver
     frames = scene.frames
-    warm = min(int(round(s.warmup_s * s.fps)), frames)
+    warm = min(s.warmup_frames, frames)
     nb = len(objects)
     n = frames + 1 if record else 1
     plate_pos = np.zeros((n, 3))

@@ -58,7 +58,7 @@ def bond_breaks(scene: Scene, out: RunOutput, start: int) -> np.ndarray:
 
 def metrics(scene: Scene, out: RunOutput) -> Metrics:
     s = scene.solver
-    start = min(int(round(s.warmup_s * s.fps)), len(out.time) - 1)
+    start = min(s.warmup_frames, len(out.time) - 1)
     rel = out.positions - out.positions[start] - (out.plate - out.plate[start])[:, None, :]
     dist = np.linalg.norm(rel, axis=2)
     dist[:start] = 0.0

@@ -104,6 +104,10 @@ class SolverSettings:
                              f"{self.substeps}, {self.iterations})")
 
     @property
+    def warmup_frames(self) -> int:
+        return int(round(self.warmup_s * self.fps))
+
+    @property
     def dt_substep(self) -> float:
         return 1.0 / (self.fps * self.substeps)
 

@@ -77,3 +77,14 @@ def test_monitor_follows_the_plate_for_foundation_bonds():
 def test_rotations_of_quaternions():
     q = np.array([math.cos(0.15), 0.0, math.sin(0.15), 0.0])
     np.testing.assert_allclose(rotations(q), _rot_y(0.3), atol=1e-12)
+
+
+def test_grown_bricks_that_overlap_an_unbonded_neighbour_are_found():
+    from calib_masonry.simulate.scene import _overlapping_unbonded
+
+    v, f = _box((0.4, 0.2, 0.2))
+    at = [(0.0, 0.0, 0.1), (0.395, 0.0, 0.1), (0.0, 0.3, 0.1), (0.0, 0.0, 0.3)]
+    bodies = [Body(f"b{i}", v, f, np.array(p), 28.8, 0.77) for i, p in enumerate(at)]
+    # 0 and 1 overlap by 5 mm and are not bonded: both found; 0-2 apart; 0-3 touch only
+    assert _overlapping_unbonded(bodies, set()) == {0, 1}
+    assert _overlapping_unbonded(bodies, {(0, 1)}) == set()  # a bonded pair is the joint's business

@@ -6,23 +6,29 @@ Bullet through ``bpy``, and any other engine could read the same description.
 Mortar model (re-derived from the Bullet Constraints Builder's masonry preset). The mortar joint
 between two bricks is partly folded into the bricks: each brick's outer-face polygon is grown by
 half the narrowest joints (``mortar_fill``, the 5th percentile of the gaps), so most neighbours
-touch and, once a joint has cracked, bricks bear on each other with Coulomb friction. Each contact
+touch and, once a joint has cracked, bricks bear on each other with Coulomb friction. Bricks whose
+grown hulls would overlap a brick they are not bonded to (two walls' end bricks at a re-entrant
+corner meet only along an edge) keep their exact shape. Each contact
 patch of area ``A`` (between the two bricks' facing faces, any orientation) becomes four
 constraints at the patch centroid, in a frame whose z axis is the patch normal:
 
 * compression: one-sided, keeps b from approaching a along the normal, fails at ``f_c A``;
 * tension: one-sided, keeps b from leaving a along the normal, fails at ``f_t A``;
 * shear: locks sliding in the joint plane, fails at ``f_s A``;
-* bending: locks the three rotations, fails at the moment that turns the joint,
-  ``M = f_t S + N d / 2 = (f_t + 3 sigma_0) S`` with ``S = A d / 6`` (``d`` the patch's narrower
-  width), ``N = sigma_0 A`` the dead load across the joint and ``sigma_0 = rho g h n_z^2`` (``h``
-  the height of masonry above the patch: the highest brick top within 0.25 m of it in plan;
-  ``n_z`` the normal's vertical part, 0 for head joints). ``N d / 2`` is the moment that rocks a
-  joint under compression about its edge, which the contacts carry after cracking too; ``f_t S``
-  is what the mortar's tension adds. Bullet's contact manifolds at zero margin often hold a
-  brick on one edge, so the rotation lock carries up to ``N d / 2`` under gravity alone: with
-  ``f_t S`` only (or the elastic ``(f_t + sigma_0) S``), bed joints of the paper example cracked
-  under their own weight and the wall tops swayed by 2-3 mm (measured).
+* bending: locks the three rotations, fails at the moment that cracks the joint,
+  ``M = (f_t + sigma_0) S`` with ``S = A d / 6`` (``d`` the patch's narrower width) and
+  ``sigma_0 = rho g h n_z^2`` the dead-load precompression (``h`` the height of masonry above the
+  patch: the highest brick top within 0.25 m of it in plan; ``n_z`` the normal's vertical part,
+  0 for head joints): the elastic stress ``sigma_0 - M / S`` at the joint's edge reaches ``-f_t``.
+
+While a joint is intact its two bricks do not collide with each other (the constraints'
+``disable_collisions``): the joint alone carries the load, as the mortar does. With contacts on,
+a brick turning about its compressed edge lifts the patch centroid, so the central tension lock
+would carry bending up to ``(f_t A + N) d / 2``, three times the cracking moment, and the rotation
+lock would see edge-contact moments up to ``N d / 2`` under gravity alone (measured: bed joints
+cracked under their own weight). Once the joint has cracked, the run switches its constraints
+off and the pair's contacts back on, so a cracked joint carries compression, rocking about its
+edge (``N d / 2``) and Coulomb friction, and nothing else.
 
 A cracked joint fails as a whole: the run switches its remaining constraints off (see
 :mod:`calib_masonry.simulate.monitor`).
@@ -190,15 +196,48 @@ def _grown_solid(brick: Brick, frames: list[WallFrame], corners: list[Corner], g
     return (solid if solid is not None else brick.solid), change
 
 
+def _hull_overlap_depth(a: Body, b: Body) -> float:
+    """The radius of the largest ball inside both bodies' convex hulls (0 if they do not overlap)."""
+    from scipy.optimize import linprog
+    from scipy.spatial import ConvexHull
+
+    h = np.vstack([ConvexHull(a.vertices + a.location).equations, ConvexHull(b.vertices + b.location).equations])
+    norm = np.linalg.norm(h[:, :3], axis=1)
+    res = linprog([0.0, 0.0, 0.0, -1.0], A_ub=np.column_stack([h[:, :3], norm]), b_ub=-h[:, 3],
+                  bounds=[(None, None)] * 3 + [(0.0, None)], method="highs")
+    return float(res.x[3]) if res.success else 0.0
+
+
+def _overlapping_unbonded(bodies: Sequence[Body], bonded: set[tuple[int, int]], tol_m: float = 1e-4) -> set[int]:
+    """Bodies, not bonded to each other, whose hulls overlap by more than ``tol_m`` (grown bricks
+    that meet only along an edge, as two walls' end bricks at a re-entrant corner do, or stones
+    whose corners nearly touch, overlap once grown)."""
+    lo = np.array([b.location + b.vertices.min(axis=0) for b in bodies])
+    hi = np.array([b.location + b.vertices.max(axis=0) for b in bodies])
+    from scipy.spatial import cKDTree
+
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    tree = cKDTree(centre)
+    out: set[int] = set()
+    for i, j in tree.query_pairs(2.0 * float(half.max()) * math.sqrt(3.0)):
+        if (min(i, j), max(i, j)) in bonded:
+            continue
+        if np.any(np.abs(centre[i] - centre[j]) >= half[i] + half[j] - tol_m):
+            continue
+        if _hull_overlap_depth(bodies[i], bodies[j]) > tol_m:
+            out.update((i, j))
+    return out
+
+
 def mortar_bond(a: int, b: int, location: np.ndarray, normal: np.ndarray, area_m2: float, width_m: float,
                 sigma0_pa: float, material: Material, dt: float) -> Bond:
     """A mortar joint's four thresholds (see the module docstring): ``f A dt`` for compression,
-    tension and shear, ``(f_t + 3 sigma_0) S dt`` with ``S = A d / 6`` for bending."""
+    tension and shear, ``(f_t + sigma_0) S dt`` with ``S = A d / 6`` for bending."""
     return Bond(a=a, b=b, location=location, normal=normal, area_m2=area_m2,
                 compression_ns=material.compressive_strength * area_m2 * dt,
                 tension_ns=material.tensile_strength * area_m2 * dt,
                 shear_ns=material.shear_strength * area_m2 * dt,
-                bending_nms=(material.tensile_strength + 3.0 * sigma0_pa) * area_m2 * width_m / 6.0 * dt)
+                bending_nms=(material.tensile_strength + sigma0_pa) * area_m2 * width_m / 6.0 * dt)
 
 
 def dead_load_precompression(bodies: Sequence[Body], points: np.ndarray, normals: np.ndarray, material: Material,
@@ -255,13 +294,20 @@ def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners:
     index = {b.id: i for i, b in enumerate(bricks)}
     gaps = np.array([p.gap_m for p in patches if p.gap_m > 0])
     grow = 0.5 * float(np.percentile(gaps, 5)) if (mortar_fill and gaps.size) else 0.0
-    bodies = []
-    worst_hull = 0.0
-    for b in bricks:
-        solid, change = _grown_solid(b, frames, corners, grow)
-        worst_hull = max(worst_hull, change)
+
+    def make_body(b: Brick, g: float) -> Body:
+        solid, change = _grown_solid(b, frames, corners, g)
         body = body_from_polyhedron(f"brick_{b.id:05d}", solid, material, mass_volume=b.volume)
-        bodies.append(Body(**{**body.__dict__, "hull_volume_change": change}))
+        return Body(**{**body.__dict__, "hull_volume_change": change})
+
+    bodies = [make_body(b, grow) for b in bricks]
+    worst_hull = max((bd.hull_volume_change for bd in bodies), default=0.0)
+    ungrown: set[int] = set()
+    if grow > 0:
+        bonded = {(min(index[p.a], index[p.b]), max(index[p.a], index[p.b])) for p in patches}
+        ungrown = _overlapping_unbonded(bodies, bonded)
+        for i in ungrown:
+            bodies[i] = make_body(bricks[i], 0.0)
     dt = solver.dt_substep
     sigma0 = dead_load_precompression(bodies, np.array([p.centroid for p in patches]).reshape(-1, 3),
                                       np.array([p.normal for p in patches]).reshape(-1, 3), material)
@@ -274,7 +320,7 @@ def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners:
     span = float(max(hi[0] - lo[0], hi[1] - lo[1]))
     plate = Plate(size=(span + 40.0, span + 40.0, 0.5), centre=(float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2)),
                   top_z=float(lo[2]), friction=math.sqrt(material.friction))
-    notes = {"mortar_fill_m": grow, "bonds": len(bonds), "foundation_bonds": sum(bd.b < 0 for bd in bonds), "max_hull_volume_change": worst_hull,
+    notes = {"mortar_fill_m": grow, "bricks_without_fill": len(ungrown), "bonds": len(bonds), "foundation_bonds": sum(bd.b < 0 for bd in bonds), "max_hull_volume_change": worst_hull,
              "strengths_pa": {"compression": material.compressive_strength, "tension": material.tensile_strength,
                               "shear": material.shear_strength}}
     return Scene(bodies=tuple(bodies), bonds=bonds, plate=plate, motion=motion, duration_s=duration_s,

@@ -14,7 +14,11 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
   a cracked joint off, so a joint fails once, as a whole, and then carries contact and friction
   only. ``rigid_body_constraint.enabled = False`` is written on the *evaluated* object between
   frames: it reaches the live Bullet constraint at once; writing the original object instead
-  tags the depsgraph and crashed Blender in about half the trials.
+  tags the depsgraph and crashed Blender in about half the trials;
+* a bond's constraints disable collisions between its two bricks, and Bullet keeps ignoring that
+  pair's contacts after a constraint is merely disabled (a block fell through its support,
+  measured); writing ``disable_collisions = False`` on the evaluated constraint as well restores
+  them (the block then came to rest on the support).
 """
 
 from __future__ import annotations
@@ -244,7 +248,7 @@ def build_scene(scene: Scene):
                 c.type = "GENERIC"
                 c.object1 = objects[bond.a]
                 c.object2 = plate if bond.b < 0 else objects[bond.b]
-                c.disable_collisions = False
+                c.disable_collisions = True  # an intact joint's bricks do not touch: the joint carries the load
                 c.use_breaking = bool(np.isfinite(thr))
                 c.breaking_threshold = float(min(thr, UNBREAKABLE)) if warm == 0 else UNBREAKABLE
                 if kind == "S":
@@ -264,8 +268,8 @@ def build_scene(scene: Scene):
     return bpy, objects, plate, constraints
 
 
-def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None = None, record: bool = True
-        ) -> RunOutput:
+def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None = None, record: bool = True,
+        switch_off_s: np.ndarray | None = None) -> RunOutput:
     """Simulate ``scene`` in one pass: the warm-up under (ramped) gravity with the bonds
     unbreakable and the bodies damped, then the ground motion with the real thresholds switched on
     and no damping.
@@ -274,7 +278,9 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
     constraint objects, which hold the live Bullet constraints (writing the originals tags the
     depsgraph and crashed Blender in about half the trials). With ``record=False`` only the
     stepping and the threshold switch are done (the bare-Bullet baseline): no poses are read and
-    no joint is watched.
+    no joint is watched; ``switch_off_s`` (per bond, seconds after the warm-up, NaN for never; the
+    ``bond_break_time_s`` of a recorded run) then replays that run's joint switches on a schedule
+    fixed in advance, so the baseline does the same Bullet work.
     """
     t0 = time.perf_counter()
     bpy, objects, plate, constraints = build_scene(scene)
@@ -315,6 +321,18 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
         if record and scene.bonds and s.crack_whole_joints:
             watch = JointMonitor(scene, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i], 0.0)
 
+    schedule: dict[int, list[int]] = {}
+    if not record and switch_off_s is not None:
+        for k in np.flatnonzero(np.isfinite(switch_off_s)):
+            schedule.setdefault(warm + int(round(float(switch_off_s[k]) * s.fps)), []).append(int(k))
+
+    def switch_off(bonds) -> None:
+        for k in bonds:
+            for e in constraints[k * per_bond:(k + 1) * per_bond]:
+                live = e.evaluated_get(depsgraph).rigid_body_constraint
+                live.enabled = False
+                live.disable_collisions = False  # the cracked joint's bricks bear on each other
+
     t1 = time.perf_counter()
     sc.frame_set(1)
     if record:
@@ -330,9 +348,9 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
         if f == warm:
             start_breaking(i)
         elif watch is not None:
-            for k in watch.update((f - warm) / s.fps, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i]):
-                for e in constraints[k * per_bond:(k + 1) * per_bond]:
-                    e.evaluated_get(depsgraph).rigid_body_constraint.enabled = False
+            switch_off(watch.update((f - warm) / s.fps, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i]))
+        elif f in schedule:
+            switch_off(schedule[f])
     seconds_stepping = time.perf_counter() - t1
     if not record:
         grab(0)  # the final state only

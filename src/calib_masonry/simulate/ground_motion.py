@@ -75,6 +75,17 @@ class GroundMotion:
                              for k in range(2)])
         return np.diff(v, axis=0) / np.diff(t)[:, None]
 
+    def applied_peak(self, fps: float) -> float:
+        """The peak of the acceleration a run at ``fps`` frames per second applies (m/s^2): the largest
+        frame mean, :meth:`mean_acceleration` over frames of ``1 / fps`` from the record's start.
+        Content above the frame rate averages out, so it is below :attr:`pga` for a broadband record."""
+        t = np.arange(int(math.ceil(self.duration * fps)) + 1) / fps
+        return float(np.abs(self.mean_acceleration(t)).max()) if len(t) > 1 else 0.0
+
+    def scaled(self, factor: float, source: str | None = None) -> "GroundMotion":
+        return GroundMotion(dt=self.dt, displacement=self.displacement * factor,
+                            acceleration=self.acceleration * factor, source=self.source if source is None else source)
+
     def displacement_at(self, t: np.ndarray) -> np.ndarray:
         """Linear interpolation of the displacement at times ``t`` ``(K,)`` -> ``(K, 2)``."""
         tt = self.time

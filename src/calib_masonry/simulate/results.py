@@ -91,9 +91,17 @@ def plot_ground_motion(scene: Scene, path: Path) -> None:
     if m is not None:
         ax[0].plot(m.time, m.acceleration[:, 0] / 9.80665, lw=0.7, label="X")
         ax[0].plot(m.time, m.acceleration[:, 1] / 9.80665, lw=0.7, label="Y")
+        fps = scene.solver.fps
+        tf = np.arange(int(np.ceil(m.duration * fps)) + 1) / fps
+        applied = m.mean_acceleration(tf) / 9.80665
+        for k, name in enumerate("XY"):
+            if np.any(applied[:, k]):
+                ax[0].step(tf[:-1], applied[:, k], where="post", lw=0.9, color="k" if k == 0 else "0.4",
+                           label=f"{name} as applied (mean over each frame)")
         ax[1].plot(m.time, m.displacement[:, 0] * 1000, lw=0.9, label="X")
         ax[1].plot(m.time, m.displacement[:, 1] * 1000, lw=0.9, label="Y")
-        ax[0].set_title(f"ground motion: {m.source}, PGA {m.pga / 9.80665:.3f} g", fontsize=9)
+        ax[0].set_title(f"ground motion: {m.source}\napplied peak {m.applied_peak(fps) / 9.80665:.3f} g at {fps} fps, "
+                        f"record peak {m.pga / 9.80665:.3f} g", fontsize=9)
     ax[0].set_ylabel("acceleration (g)")
     ax[1].set_ylabel("plate displacement (mm)")
     ax[1].set_xlabel("time (s)")

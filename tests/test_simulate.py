@@ -98,6 +98,29 @@ def test_bond_holds_a_cantilever_and_breaks_when_weak():
     assert drops[2] > 0.002  # the arm swings down about the joint once bending opens it
 
 
+def test_a_cracked_joint_gives_its_bricks_their_contacts_back():
+    # a block bonded on top of another by a joint too weak to carry its weight: while bonded the
+    # pair does not collide, and once the joint has cracked the top block must rest on the bottom
+    # one, not fall through it to the plate
+    base = _block((0.4, 0.4, 0.4), (0, 0, 0.2))
+    top = _block((0.4, 0.4, 0.2), (0, 0, 0.5))
+    weak = Bond(0, 1, np.array([0.0, 0, 0.4]), np.array([0.0, 0, 1.0]), 0.16, 1e-3, 1e-3, 1e-3, 1e-3)
+    out = run(Scene(bodies=(base, top), bonds=(weak,), duration_s=1.0, solver=_solver(warmup=0.0)), progress=False)
+    assert np.isfinite(out.bond_break_time_s).all()
+    assert abs(out.positions[-1, 1, 2] - 0.5) < 0.005
+
+
+def test_bare_run_replays_joint_switches_on_a_schedule():
+    base = _block((0.4, 0.4, 0.4), (0, 0, 0.2))
+    arm = _block((0.4, 0.4, 0.2), (0.41, 0, 0.3))
+    strong = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e6, 1e6, 1e6, 1e6)
+    scene = Scene(bodies=(base, arm), bonds=(strong,), duration_s=1.0, solver=_solver(warmup=0.0))
+    held = run(scene, progress=False, record=False)
+    released = run(scene, progress=False, record=False, switch_off_s=np.array([0.2]))
+    assert abs(held.positions[0, 1, 2] - 0.3) < 0.001
+    assert released.positions[0, 1, 2] < 0.3 - 0.05
+
+
 @pytest.fixture(scope="module")
 def small_model(tmp_path_factory):
     from calib_masonry.pipeline import build_to_folder

@@ -145,7 +145,7 @@ def simulate_to_folder(model_dir: str | Path, out: str | Path, config: Simulatio
                        "joint_opening_crack_m": s.drift_break_m},
             "frame": "ground: the plate stays put and the ground motion acts on every brick as an inertial force",
             "foundation_bonds": int(scene.notes.get("foundation_bonds", 0)),
-            "mortar": {"fill_m": scene.notes.get("mortar_fill_m"), "strengths_pa": scene.notes.get("strengths_pa"),
+            "mortar": {"fill_volume_fraction": scene.notes.get("mortar_fill_volume"), "strengths_pa": scene.notes.get("strengths_pa"),
                        "max_hull_volume_change": scene.notes.get("max_hull_volume_change"),
                        "bricks_without_fill": scene.notes.get("bricks_without_fill", 0)},
             "moved_fraction_final": float(m.moved_fraction[-1]),

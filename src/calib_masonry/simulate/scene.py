@@ -3,32 +3,35 @@
 Nothing here imports Blender: :mod:`calib_masonry.simulate.blender` realises a :class:`Scene` in
 Bullet through ``bpy``, and any other engine could read the same description.
 
-Mortar model (re-derived from the Bullet Constraints Builder's masonry preset). The mortar joint
-between two bricks is partly folded into the bricks: each brick's outer-face polygon is grown by
-half the narrowest joints (``mortar_fill``, the 5th percentile of the gaps), so most neighbours
-touch and, once a joint has cracked, bricks bear on each other with Coulomb friction. Bricks whose
-grown hulls would overlap a brick they are not bonded to (two walls' end bricks at a re-entrant
-corner meet only along an edge) keep their exact shape. Each contact
-patch of area ``A`` (between the two bricks' facing faces, any orientation) becomes four
-constraints at the patch centroid, in a frame whose z axis is the patch normal:
+Mortar model (re-derived from the Bullet Constraints Builder's masonry preset). The mortar joints
+are folded into the bricks: each brick's body is its share of the wall, up to the middle of each
+joint around it (:func:`calib_masonry.simulate.mortar.mortar_cells`), so neighbours touch and,
+once a joint has cracked, bear on each other with Coulomb friction. Bricks whose filled bodies
+would overlap a brick they are not bonded to (at corners, where walls meet) keep their exact
+shape. The mortar's mass is left out: a body weighs as much as its brick. Each contact patch of
+area ``A`` between two bricks' facing faces (any orientation) becomes four constraints at the
+patch centroid, in a frame whose z axis is the patch normal:
 
 * compression: one-sided, keeps b from approaching a along the normal, fails at ``f_c A``;
 * tension: one-sided, keeps b from leaving a along the normal, fails at ``f_t A``;
 * shear: locks sliding in the joint plane, fails at ``f_s A``;
-* bending: locks the three rotations, fails at the moment that cracks the joint,
-  ``M = (f_t + sigma_0) S`` with ``S = A d / 6`` (``d`` the patch's narrower width) and
-  ``sigma_0 = rho g h n_z^2`` the dead-load precompression (``h`` the height of masonry above the
-  patch: the highest brick top within 0.25 m of it in plan; ``n_z`` the normal's vertical part,
-  0 for head joints): the elastic stress ``sigma_0 - M / S`` at the joint's edge reaches ``-f_t``.
+* bending: locks the three rotations, fails at the moment that opens the joint,
+  ``M = f_t S + N d / 2 = (f_t + 3 sigma_0) S`` with ``S = A d / 6`` (``d`` the patch's narrower
+  width), ``N = sigma_0 A`` the dead load across the joint and ``sigma_0 = rho g h n_z^2`` (``h``
+  the height of masonry above the patch: the highest brick top within 0.25 m of it in plan;
+  ``n_z`` the normal's vertical part, 0 for head joints). ``N d / 2`` is the moment that rocks a
+  joint under compression about its edge; ``f_t S`` is what the mortar's tension adds.
 
 While a joint is intact its two bricks do not collide with each other (the constraints'
-``disable_collisions``): the joint alone carries the load, as the mortar does. With contacts on,
-a brick turning about its compressed edge lifts the patch centroid, so the central tension lock
-would carry bending up to ``(f_t A + N) d / 2``, three times the cracking moment, and the rotation
-lock would see edge-contact moments up to ``N d / 2`` under gravity alone (measured: bed joints
-cracked under their own weight). Once the joint has cracked, the run switches its constraints
-off and the pair's contacts back on, so a cracked joint carries compression, rocking about its
-edge (``N d / 2``) and Coulomb friction, and nothing else.
+``disable_collisions``): the four constraints alone carry the joint's load, each up to its own
+strength. With contacts on, a brick turning about its compressed edge lifts the patch centroid,
+so the central tension lock carried bending up to ``(f_t A + N) d / 2`` on top of the rotation
+lock, and nothing saw the rotation lock break. Once the joint has cracked, the run switches its
+constraints off and the pair's contacts back on: a cracked joint carries compression, rocking and
+Coulomb friction, and nothing else. Both halves of the bending threshold are needed (measured):
+with the elastic ``(f_t + sigma_0) S`` the Stylite tower's eccentrically loaded stone joints
+cracked as soon as the warm-up ended and the tower fell under its own weight; with
+``(f_t + 3 sigma_0) S`` it stood.
 
 A cracked joint fails as a whole: the run switches its remaining constraints off (see
 :mod:`calib_masonry.simulate.monitor`).
@@ -61,6 +64,7 @@ from ..build3d.extrude import Polyhedron
 from ..build3d.place import Corner, WallFrame
 from ..errors import InputError
 from .ground_motion import GroundMotion
+from .mortar import mortar_cells
 
 __all__ = ["Material", "SolverSettings", "Body", "Bond", "Plate", "Scene", "scene_from_bricks", "MASONRY",
            "dead_load_precompression"]
@@ -185,14 +189,15 @@ def body_from_polyhedron(name: str, solid: Polyhedron, material: Material, *, ma
                 restitution=material.restitution, volume=vol)
 
 
-def _grown_solid(brick: Brick, frames: list[WallFrame], corners: list[Corner], grow: float) -> tuple[Polyhedron, float]:
-    """The brick's convex hull in wall 2D, grown by ``grow`` (mitred), extruded and cut at corners."""
+def _cell_solid(brick: Brick, outline: np.ndarray | None, frames: list[WallFrame], corners: list[Corner]
+                ) -> tuple[Polyhedron, float]:
+    """The prism of ``outline`` (the brick's mortar cell in wall 2D, or its convex hull if None),
+    extruded and cut at corners; and the relative area change from taking the brick's hull."""
     poly = shapely.Polygon(brick.polygon_m)
     hull = poly.convex_hull
     change = hull.area / poly.area - 1.0 if poly.area > 0 else 0.0
-    if grow > 0:
-        hull = hull.buffer(grow, join_style="mitre", mitre_limit=3.0)
-    solid = brick_solid(np.asarray(hull.exterior.coords)[:-1], brick.wall, frames, corners)
+    xy = np.asarray(hull.exterior.coords)[:-1] if outline is None else outline
+    solid = brick_solid(xy, brick.wall, frames, corners)
     return (solid if solid is not None else brick.solid), change
 
 
@@ -232,12 +237,12 @@ def _overlapping_unbonded(bodies: Sequence[Body], bonded: set[tuple[int, int]], 
 def mortar_bond(a: int, b: int, location: np.ndarray, normal: np.ndarray, area_m2: float, width_m: float,
                 sigma0_pa: float, material: Material, dt: float) -> Bond:
     """A mortar joint's four thresholds (see the module docstring): ``f A dt`` for compression,
-    tension and shear, ``(f_t + sigma_0) S dt`` with ``S = A d / 6`` for bending."""
+    tension and shear, ``(f_t + 3 sigma_0) S dt`` with ``S = A d / 6`` for bending."""
     return Bond(a=a, b=b, location=location, normal=normal, area_m2=area_m2,
                 compression_ns=material.compressive_strength * area_m2 * dt,
                 tension_ns=material.tensile_strength * area_m2 * dt,
                 shear_ns=material.shear_strength * area_m2 * dt,
-                bending_nms=(material.tensile_strength + sigma0_pa) * area_m2 * width_m / 6.0 * dt)
+                bending_nms=(material.tensile_strength + 3.0 * sigma0_pa) * area_m2 * width_m / 6.0 * dt)
 
 
 def dead_load_precompression(bodies: Sequence[Body], points: np.ndarray, normals: np.ndarray, material: Material,
@@ -257,15 +262,18 @@ def dead_load_precompression(bodies: Sequence[Body], points: np.ndarray, normals
     return material.density * 9.80665 * h * nz**2
 
 
-def _foundation_bonds(bodies: list[Body], material: Material, dt: float, tol_m: float = 0.005) -> tuple[Bond, ...]:
-    """Bonds between the plate and every body whose bottom lies on the structure's lowest level."""
+def _foundation_bonds(bodies: list[Body], material: Material, dt: float, tol_m: float) -> tuple[Bond, ...]:
+    """Bonds between the plate and every body whose bottom lies within a joint's width ``tol_m`` of
+    the structure's lowest level: the bed joint on the footing, as thick as it needs to be under an
+    irregular stone. Its patch is the body's footprint within ``tol_m`` of its own bottom."""
     bottom = min(float(b.location[2] + b.vertices[:, 2].min()) for b in bodies)
     out = []
     for i, b in enumerate(bodies):
         v = b.vertices + b.location
-        if v[:, 2].min() > bottom + tol_m:
+        own = float(v[:, 2].min())
+        if own > bottom + tol_m:
             continue
-        base = v[v[:, 2] <= bottom + tol_m]
+        base = v[v[:, 2] <= own + tol_m]
         hull = shapely.MultiPoint(base[:, :2]).convex_hull
         if hull.area <= 1e-6:
             continue
@@ -292,35 +300,43 @@ def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners:
         raise InputError("model: it has no bricks; build it first with `calib-masonry build`")
     patches: list[ContactPatch] = contact_patches(bricks, max_gap_m=max_gap_m, angle_deg=15.0)
     index = {b.id: i for i, b in enumerate(bricks)}
-    gaps = np.array([p.gap_m for p in patches if p.gap_m > 0])
-    grow = 0.5 * float(np.percentile(gaps, 5)) if (mortar_fill and gaps.size) else 0.0
+    outlines: list[np.ndarray | None] = [None] * len(bricks)
+    if mortar_fill:
+        for w in sorted({b.wall for b in bricks}):
+            members = [i for i, b in enumerate(bricks) if b.wall == w]
+            for i, cell in zip(members, mortar_cells([bricks[i].polygon_m for i in members], 0.5 * max_gap_m)):
+                outlines[i] = cell
 
-    def make_body(b: Brick, g: float) -> Body:
-        solid, change = _grown_solid(b, frames, corners, g)
-        body = body_from_polyhedron(f"brick_{b.id:05d}", solid, material, mass_volume=b.volume)
+    def make_body(i: int, outline: np.ndarray | None) -> Body:
+        solid, change = _cell_solid(bricks[i], outline, frames, corners)
+        body = body_from_polyhedron(f"brick_{bricks[i].id:05d}", solid, material, mass_volume=bricks[i].volume)
         return Body(**{**body.__dict__, "hull_volume_change": change})
 
-    bodies = [make_body(b, grow) for b in bricks]
+    bodies = [make_body(i, o) for i, o in enumerate(outlines)]
     worst_hull = max((bd.hull_volume_change for bd in bodies), default=0.0)
     ungrown: set[int] = set()
-    if grow > 0:
+    if mortar_fill:
         bonded = {(min(index[p.a], index[p.b]), max(index[p.a], index[p.b])) for p in patches}
         ungrown = _overlapping_unbonded(bodies, bonded)
         for i in ungrown:
-            bodies[i] = make_body(bricks[i], 0.0)
+            bodies[i] = make_body(i, None)
+    from scipy.spatial import ConvexHull
+
+    # how much the bodies outgrow the bricks: the mortar given to them, as a fraction of the bricks' volume
+    fill = sum(ConvexHull(bd.vertices).volume for bd in bodies) / max(1e-12, sum(b.volume for b in bricks)) - 1.0
     dt = solver.dt_substep
     sigma0 = dead_load_precompression(bodies, np.array([p.centroid for p in patches]).reshape(-1, 3),
                                       np.array([p.normal for p in patches]).reshape(-1, 3), material)
     bonds = tuple(mortar_bond(index[p.a], index[p.b], p.centroid, p.normal, p.area_m2, p.min_width_m, s0, material, dt)
                   for p, s0 in zip(patches, sigma0))
     if foundation:
-        bonds = bonds + _foundation_bonds(bodies, material, dt)
+        bonds = bonds + _foundation_bonds(bodies, material, dt, max_gap_m)
     lo = np.min([b.location + b.vertices.min(axis=0) for b in bodies], axis=0)
     hi = np.max([b.location + b.vertices.max(axis=0) for b in bodies], axis=0)
     span = float(max(hi[0] - lo[0], hi[1] - lo[1]))
     plate = Plate(size=(span + 40.0, span + 40.0, 0.5), centre=(float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2)),
                   top_z=float(lo[2]), friction=math.sqrt(material.friction))
-    notes = {"mortar_fill_m": grow, "bricks_without_fill": len(ungrown), "bonds": len(bonds), "foundation_bonds": sum(bd.b < 0 for bd in bonds), "max_hull_volume_change": worst_hull,
+    notes = {"mortar_fill_volume": fill, "bricks_without_fill": len(ungrown), "bonds": len(bonds), "foundation_bonds": sum(bd.b < 0 for bd in bonds), "max_hull_volume_change": worst_hull,
              "strengths_pa": {"compression": material.compressive_strength, "tension": material.tensile_strength,
                               "shear": material.shear_strength}}
     return Scene(bodies=tuple(bodies), bonds=bonds, plate=plate, motion=motion, duration_s=duration_s,

@@ -238,7 +238,8 @@ def _cmd_simulate(args) -> int:
                                               ("iterations", args.iterations)) if v is not None})
     config = SimulationConfig(pga_g=args.pga, duration_s=args.duration, seed=args.seed,
                               accelerogram=Path(args.accelerogram) if args.accelerogram else None,
-                              components=args.components, solver=solver, frames_png=args.frames,
+                              components=args.components or SimulationConfig.components, solver=solver,
+                              frames_png=args.frames,
                               figures=not args.no_figures, foundation=args.foundation)
     s = simulate_to_folder(args.model_dir, args.out, config)
     print(f"simulate: {s['bricks']} bricks, {s['bonds']} bonds, {s['ground_motion']['source']}: {s['outcome']}; "
@@ -317,7 +318,9 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--pga", type=float, default=0.3, help="peak ground acceleration in g (synthetic motion)")
     m.add_argument("--duration", type=float, default=10.0, help="seconds of ground motion")
     m.add_argument("--seed", type=int, default=0)
-    m.add_argument("--components", type=int, default=1, choices=(1, 2))
+    m.add_argument("--components", type=int, default=None, choices=(1, 2),
+                   help="horizontal components of the synthetic motion (default 2, as in a real earthquake; "
+                        "1 shakes along X only and spares the walls parallel to it)")
     m.add_argument("--accelerogram", default=None, help="CSV of time, acceleration (g) instead of --pga")
     m.add_argument("--fps", type=int, default=None, help="frames per second (default: the tested settings, 25)")
     m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")

@@ -153,7 +153,8 @@ def synthetic_motion(pga_g: float, duration_s: float, *, seed: int, dt: float = 
     peak = motion.pga
     scale = 0.0 if peak == 0 else pga_g * G / peak
     return GroundMotion(dt=dt, displacement=motion.displacement * scale, acceleration=motion.acceleration * scale,
-                        source=f"Kanai-Tajimi seed {seed}, PGA {pga_g:g} g")
+                        source=f"Kanai-Tajimi seed {seed}, {'two components' if components == 2 else 'one component'}, "
+                               f"PGA {pga_g:g} g")
 
 
 def constant_acceleration(a: float, duration_s: float, *, dt: float = 0.001, direction_deg: float = 0.0,

@@ -32,7 +32,7 @@ from tqdm.auto import tqdm
 
 from ..errors import BackendMissing
 from .monitor import JointMonitor
-from .scene import Scene
+from .scene import Scene, joint_axes
 
 __all__ = ["RunOutput", "run", "require_bpy"]
 
@@ -100,13 +100,9 @@ def _quaternions(r: np.ndarray) -> np.ndarray:
 
 
 def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:
-    """Quaternion (w, x, y, z) of a frame whose z axis is ``normal``."""
-    z = np.asarray(normal, dtype=np.float64)
-    z = z / np.linalg.norm(z)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
+    """Quaternion (w, x, y, z) of the joint frame (:func:`~calib_masonry.simulate.scene.joint_axes`)
+    whose z axis is ``normal``."""
+    x, y, z = (a[0] for a in joint_axes(np.asarray(normal, dtype=np.float64)[None]))
     m = np.column_stack([x, y, z])
     w = np.sqrt(max(0.0, 1.0 + m[0, 0] + m[1, 1] + m[2, 2])) / 2.0
     if w > 1e-6:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import Scene
+from .scene import Scene, joint_axes
 
 __all__ = ["JointMonitor"]
 
@@ -41,12 +41,7 @@ class JointMonitor:
         if n == 0:
             return
         c = np.array([bd.location for bd in bonds], dtype=np.float64)
-        normal = np.array([bd.normal for bd in bonds], dtype=np.float64)
-        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-        helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-        u = np.cross(helper, normal)
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
-        v = np.cross(normal, u)
+        u, v, _ = joint_axes(np.array([bd.normal for bd in bonds], dtype=np.float64))
         r = np.sqrt(np.array([bd.area_m2 for bd in bonds]) / np.pi)[:, None]
         # probe points per bond: centroid and four rim points in the joint plane -> (n, 5, 3)
         self.points = np.stack([c, c + r * u, c - r * u, c + r * v, c - r * v], axis=1)

@@ -67,7 +67,7 @@ from .ground_motion import GroundMotion
 from .mortar import mortar_cells
 
 __all__ = ["Material", "SolverSettings", "Body", "Bond", "Plate", "Scene", "scene_from_bricks", "MASONRY",
-           "dead_load_precompression"]
+           "dead_load_precompression", "joint_axes"]
 
 
 @dataclass(frozen=True)
@@ -244,6 +244,17 @@ def mortar_bond(a: int, b: int, location: np.ndarray, normal: np.ndarray, area_m
                 shear_ns=material.shear_strength * area_m2 * dt,
                 bending_nms=(material.tensile_strength + 3.0 * sigma0_pa) * area_m2 * width_m / 6.0 * dt)
 
+
+def joint_axes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each joint's frame from its normal ``(N, 3)``: in-plane axes ``u, v`` and the unit normal ``n``
+    (right-handed, ``u = h x n / |h x n|`` with the helper ``h`` = X, or Y where the normal is nearly
+    along X, and ``v = n x u``). The Bullet constraints and the joint monitor share this frame."""
+    n = np.asarray(normals, dtype=np.float64)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(helper, n)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(n, u), n
 
 def dead_load_precompression(bodies: Sequence[Body], points: np.ndarray, normals: np.ndarray, material: Material,
                              radius_m: float = 0.25) -> np.ndarray:

@@ -21,7 +21,7 @@ import numpy as np
 
 from calib_masonry.pipeline import build_to_folder
 from calib_masonry.simulate.blender import run
-from calib_masonry.simulate.results import metrics
+from calib_masonry.simulate.results import metrics, outcome
 from calib_masonry.simulate.run import SimulationConfig, rerun_with_fixed_hash_seed, scene_for_model
 from calib_masonry.spec import load_structure
 
@@ -59,8 +59,8 @@ def main() -> None:
                                       axis=2).max()
                 moved = m.moved_fraction[-1]
                 broken = float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0
-                outcome = "collapsed" if moved >= 0.5 else "damaged" if moved > 0.01 else "standing"
-                print(f"{pga:6.2f} {seed:4d} {outcome:>10s} {moved:7.1%} {broken:7.1%} {disp * 1000:12.2f} "
+                verdict = outcome(float(moved))
+                print(f"{pga:6.2f} {seed:4d} {verdict:>10s} {moved:7.1%} {broken:7.1%} {disp * 1000:12.2f} "
                       f"{m.roof_drift_m.max() * 1000:14.1f} {out.seconds_stepping / (len(out.time) - 1):8.2f} "
                       f"{time.perf_counter() - t0:8.1f}", flush=True)
 

@@ -17,7 +17,7 @@ from .blender import RunOutput
 from .monitor import JointMonitor
 from .scene import Scene
 
-__all__ = ["Metrics", "rotations", "bond_breaks", "metrics", "plot_histories", "plot_ground_motion",
+__all__ = ["Metrics", "rotations", "bond_breaks", "metrics", "outcome", "plot_histories", "plot_ground_motion",
            "render_frames"]
 
 
@@ -55,6 +55,11 @@ def bond_breaks(scene: Scene, out: RunOutput, start: int) -> np.ndarray:
         mon.update(out.time[f], out.positions[f], R[f], out.plate[f])
     return mon.break_time_s
 
+
+def outcome(moved_fraction: float) -> str:
+    """The run's verdict from the final fraction of bricks moved: "collapsed" when at least half
+    moved, "damaged" when more than 1 % did, else "standing"."""
+    return "collapsed" if moved_fraction >= 0.5 else "damaged" if moved_fraction > 0.01 else "standing"
 
 def metrics(scene: Scene, out: RunOutput) -> Metrics:
     s = scene.solver

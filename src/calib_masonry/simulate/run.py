@@ -117,7 +117,7 @@ def simulate_to_folder(model_dir: str | Path, out: str | Path, config: Simulatio
                        progress: bool | None = None) -> dict:
     """Run the simulation and write summary.json, poses.npz, scene.blend, figures and frames/."""
     from .blender import require_bpy, run
-    from .results import metrics, plot_ground_motion, plot_histories, render_frames
+    from .results import metrics, outcome, plot_ground_motion, plot_histories, render_frames
 
     require_bpy()
     t0 = time.perf_counter()
@@ -158,8 +158,7 @@ def simulate_to_folder(model_dir: str | Path, out: str | Path, config: Simulatio
             "bonds_broken": int(np.isfinite(m.bond_break_time_s).sum()),
             "bonds_broken_fraction": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
             "max_brick_displacement_m": float(m.max_displacement_m.max()),
-            "outcome": ("collapsed" if m.moved_fraction[-1] >= 0.5 else
-                        "damaged" if m.moved_fraction[-1] > 0.01 else "standing"),
+            "outcome": outcome(float(m.moved_fraction[-1])),
             "seconds": {"scene": round(t_scene, 3), "blender_build": round(result.seconds_build, 3),
                         "stepping": round(result.seconds_stepping, 3), "figures": round(t_fig, 3),
                         "per_frame": round(result.seconds_stepping / max(1, len(result.time) - 1), 4)},

@@ -75,12 +75,18 @@ class GroundMotion:
                              for k in range(2)])
         return np.diff(v, axis=0) / np.diff(t)[:, None]
 
+    def frame_means(self, fps: float) -> tuple[np.ndarray, np.ndarray]:
+        """Frame start times ``(K,)`` over the record and the acceleration a run at ``fps`` frames per
+        second applies in each frame, :meth:`mean_acceleration` ``(K, 2)``."""
+        t = np.arange(int(math.ceil(self.duration * fps)) + 1) / fps
+        return t[:-1], self.mean_acceleration(t)
+
     def applied_peak(self, fps: float) -> float:
         """The peak of the acceleration a run at ``fps`` frames per second applies (m/s^2): the largest
-        frame mean, :meth:`mean_acceleration` over frames of ``1 / fps`` from the record's start.
-        Content above the frame rate averages out, so it is below :attr:`pga` for a broadband record."""
-        t = np.arange(int(math.ceil(self.duration * fps)) + 1) / fps
-        return float(np.abs(self.mean_acceleration(t)).max()) if len(t) > 1 else 0.0
+        of :meth:`frame_means`. Content above the frame rate averages out, so it is below
+        :attr:`pga` for a broadband record."""
+        a = self.frame_means(fps)[1]
+        return float(np.abs(a).max()) if a.size else 0.0
 
     def scaled(self, factor: float, source: str | None = None) -> "GroundMotion":
         return GroundMotion(dt=self.dt, displacement=self.displacement * factor,

@@ -97,11 +97,11 @@ def plot_ground_motion(scene: Scene, path: Path) -> None:
         ax[0].plot(m.time, m.acceleration[:, 0] / 9.80665, lw=0.7, label="X")
         ax[0].plot(m.time, m.acceleration[:, 1] / 9.80665, lw=0.7, label="Y")
         fps = scene.solver.fps
-        tf = np.arange(int(np.ceil(m.duration * fps)) + 1) / fps
-        applied = m.mean_acceleration(tf) / 9.80665
+        tf, applied = m.frame_means(fps)
+        applied = applied / 9.80665
         for k, name in enumerate("XY"):
             if np.any(applied[:, k]):
-                ax[0].step(tf[:-1], applied[:, k], where="post", lw=0.9, color="k" if k == 0 else "0.4",
+                ax[0].step(tf, applied[:, k], where="post", lw=0.9, color="k" if k == 0 else "0.4",
                            label=f"{name} as applied (mean over each frame)")
         ax[1].plot(m.time, m.displacement[:, 0] * 1000, lw=0.9, label="X")
         ax[1].plot(m.time, m.displacement[:, 1] * 1000, lw=0.9, label="Y")

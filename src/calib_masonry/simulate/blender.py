@@ -232,8 +232,7 @@ def build_scene(scene: Scene):
         big = 1e3
         for k, bond in enumerate(scene.bonds):
             rot = _frame_quaternion(bond.normal)
-            for kind, thr in (("C", bond.compression_ns), ("T", bond.tension_ns), ("S", bond.shear_ns),
-                              ("B", bond.bending_nms)):
+            for kind, thr in zip("CTSB", bond.thresholds):
                 e = bpy.data.objects.new(f"bond_{k:05d}_{kind}", None)
                 e.location = tuple(float(x) for x in bond.location)
                 e.rotation_mode = "QUATERNION"
@@ -307,8 +306,7 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
     def start_breaking(i: int) -> None:
         nonlocal watch
         if warm > 0:
-            thresholds = (min(t, UNBREAKABLE) for bd in scene.bonds
-                          for t in (bd.compression_ns, bd.tension_ns, bd.shear_ns, bd.bending_nms))
+            thresholds = (min(t, UNBREAKABLE) for bd in scene.bonds for t in bd.thresholds)
             for e, thr in zip(constraints, thresholds):
                 e.evaluated_get(depsgraph).rigid_body_constraint.breaking_threshold = float(thr)
             for ob in objects:

@@ -152,6 +152,12 @@ class Bond:
     shear_ns: float
     bending_nms: float = math.inf  # angular impulse per substep (N m s) that opens the joint in bending
 
+    @property
+    def thresholds(self) -> tuple[float, float, float, float]:
+        """The four constraints' thresholds in the order a joint's constraints are built: compression,
+        tension, shear, bending."""
+        return (self.compression_ns, self.tension_ns, self.shear_ns, self.bending_nms)
+
 
 @dataclass(frozen=True)
 class Plate:

@@ -207,12 +207,12 @@ def _cell_solid(brick: Brick, outline: np.ndarray | None, frames: list[WallFrame
     return (solid if solid is not None else brick.solid), change
 
 
-def _hull_overlap_depth(a: Body, b: Body) -> float:
-    """The radius of the largest ball inside both bodies' convex hulls (0 if they do not overlap)."""
+def _hull_overlap_depth(ha: np.ndarray, hb: np.ndarray) -> float:
+    """The radius of the largest ball inside two convex hulls given by their facet equations
+    ``(k, 4)`` (``n . x + d <= 0`` inside; 0 if they do not overlap)."""
     from scipy.optimize import linprog
-    from scipy.spatial import ConvexHull
 
-    h = np.vstack([ConvexHull(a.vertices + a.location).equations, ConvexHull(b.vertices + b.location).equations])
+    h = np.vstack([ha, hb])
     norm = np.linalg.norm(h[:, :3], axis=1)
     res = linprog([0.0, 0.0, 0.0, -1.0], A_ub=np.column_stack([h[:, :3], norm]), b_ub=-h[:, 3],
                   bounds=[(None, None)] * 3 + [(0.0, None)], method="highs")
@@ -227,15 +227,24 @@ def _overlapping_unbonded(bodies: Sequence[Body], bonded: set[tuple[int, int]], 
     hi = np.array([b.location + b.vertices.max(axis=0) for b in bodies])
     from scipy.spatial import cKDTree
 
+    from scipy.spatial import ConvexHull
+
     centre, half = (lo + hi) / 2, (hi - lo) / 2
     tree = cKDTree(centre)
+    facets: dict[int, np.ndarray] = {}  # each body's hull, computed once however many pairs it is in
+
+    def hull(k: int) -> np.ndarray:
+        if k not in facets:
+            facets[k] = ConvexHull(bodies[k].vertices + bodies[k].location).equations
+        return facets[k]
+
     out: set[int] = set()
     for i, j in tree.query_pairs(2.0 * float(half.max()) * math.sqrt(3.0)):
         if (min(i, j), max(i, j)) in bonded:
             continue
         if np.any(np.abs(centre[i] - centre[j]) >= half[i] + half[j] - tol_m):
             continue
-        if _hull_overlap_depth(bodies[i], bodies[j]) > tol_m:
+        if _hull_overlap_depth(hull(i), hull(j)) > tol_m:
             out.update((i, j))
     return out
 

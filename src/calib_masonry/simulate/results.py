@@ -61,6 +61,7 @@ def outcome(moved_fraction: float) -> str:
     moved, "damaged" when more than 1 % did, else "standing"."""
     return "collapsed" if moved_fraction >= 0.5 else "damaged" if moved_fraction > 0.01 else "standing"
 
+
 def metrics(scene: Scene, out: RunOutput) -> Metrics:
     s = scene.solver
     start = min(s.warmup_frames, len(out.time) - 1)

@@ -271,6 +271,7 @@ def joint_axes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     return u, np.cross(n, u), n
 
+
 def dead_load_precompression(bodies: Sequence[Body], points: np.ndarray, normals: np.ndarray, material: Material,
                              radius_m: float = 0.25) -> np.ndarray:
     """Dead-load compression (Pa) across joints at ``points`` ``(N, 3)`` with unit ``normals``:
@@ -293,7 +294,7 @@ def _foundation_bonds(bodies: list[Body], material: Material, dt: float, tol_m: 
     the structure's lowest level: the bed joint on the footing, as thick as it needs to be under an
     irregular stone. Its patch is the body's footprint within ``tol_m`` of its own bottom."""
     bottom = min(float(b.location[2] + b.vertices[:, 2].min()) for b in bodies)
-    out = []
+    beds = []  # (body, centroid, area, width) of each footing patch
     for i, b in enumerate(bodies):
         v = b.vertices + b.location
         own = float(v[:, 2].min())
@@ -307,10 +308,13 @@ def _foundation_bonds(bodies: list[Body], material: Material, dt: float, tol_m: 
         rect = hull.minimum_rotated_rectangle
         xy = np.asarray(rect.exterior.coords)[:4] if rect.geom_type == "Polygon" else base[:, :2]
         width = float(min(np.linalg.norm(xy[1] - xy[0]), np.linalg.norm(xy[2] - xy[1]))) if len(xy) >= 3 else 0.0
-        area = float(hull.area)
-        s0 = float(dead_load_precompression(bodies, c[None], np.array([[0.0, 0.0, 1.0]]), material)[0])
-        out.append(mortar_bond(i, -1, c, np.array([0.0, 0.0, -1.0]), area, width, s0, material, dt))
-    return tuple(out)
+        beds.append((i, c, float(hull.area), width))
+    if not beds:
+        return ()
+    up = np.array([0.0, 0.0, 1.0])
+    s0 = dead_load_precompression(bodies, np.array([c for _, c, _, _ in beds]), np.tile(up, (len(beds), 1)), material)
+    return tuple(mortar_bond(i, -1, c, -up, area, width, float(s), material, dt)
+                 for (i, c, area, width), s in zip(beds, s0))
 
 
 def scene_from_bricks(bricks: Sequence[Brick], frames: list[WallFrame], corners: list[Corner], *,

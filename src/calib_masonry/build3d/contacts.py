@@ -123,8 +123,8 @@ def _planar_faces(p: Polyhedron, angle_tol: float = 1e-3) -> list[tuple[np.ndarr
         normal /= np.linalg.norm(normal)
         offset = float(np.mean(d[idx]))
         basis = _plane_basis(normal)
-        tris = [shapely.Polygon(t @ basis.T) for t in v[idx]]
-        poly = shapely.union_all([t for t in tris if t.area > 0])
+        tris = shapely.polygons(v[idx] @ basis.T)  # all of the face's triangles at once
+        poly = shapely.union_all(tris[shapely.area(tris) > 0])
         out.append((normal, offset, poly, basis))
     return out
 

@@ -15,9 +15,11 @@ from ..errors import InputError
 from ..io import read_json, staged_output, write_json
 from ..spec import StructureSpec, WallSpec
 from .ground_motion import G, GroundMotion, read_accelerogram, synthetic_motion
-from .scene import MASONRY, Material, Scene, SolverSettings, scene_from_bricks
+from .scene import (MASONRY, Material, Scene, SceneGeometry, SolverSettings, load_geometry, save_geometry,
+                    scene_from_geometry, scene_geometry)
 
-__all__ = ["SimulationConfig", "load_model", "scene_for_model", "simulate_to_folder", "rerun_with_fixed_hash_seed"]
+__all__ = ["SimulationConfig", "load_model", "model_from_json", "geometry_for_model", "store_geometry",
+           "scene_for_model", "simulate_to_folder", "rerun_with_fixed_hash_seed"]
 
 
 def rerun_with_fixed_hash_seed(python_args: list[str]) -> int | None:
@@ -60,29 +62,83 @@ class SimulationConfig:
     foundation: bool = True
 
 
-def load_model(model_dir: str | Path):
-    """Bricks, wall frames and corners of a ``build`` output folder."""
+GEOMETRY_FILE = "sim_geometry.npz"  # the simulation's bodies and contact patches, stored by `build`
+
+
+def _checked_model_dir(model_dir: str | Path) -> Path:
     model_dir = Path(model_dir)
     if not model_dir.is_dir():
         raise InputError(f"MODEL_DIR {model_dir}: not a folder; give the --out folder of `calib-masonry build`")
     if not (model_dir / "bricks.json").is_file():
         raise InputError(f"MODEL_DIR {model_dir}: has no bricks.json; run `calib-masonry build STRUCTURE.toml --out {model_dir}` first")
-    data = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
+    return model_dir
+
+
+def _closed_footprint(model_dir: Path):
+    if (model_dir / "summary.json").is_file():
+        return read_json(model_dir / "summary.json").get("closed_footprint")
+    return None
+
+
+def model_from_json(data: dict, closed, source: str | Path):
+    """Bricks, wall frames, corners and spec of a ``build`` output's bricks.json contents ``data``
+    (``closed``: the build summary's closed_footprint)."""
     try:
         bricks = bricks_from_json(data)
         walls = tuple(WallSpec(name=w["name"], width_m=w["width_m"], height_m=w["height_m"],
                                theta_rad=math.radians(w["theta_deg"]), thickness_m=w["thickness_m"])
                       for w in data["walls"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"MODEL_DIR {model_dir}: bricks.json is not a build output ({exc}); re-run build") from None
+        raise InputError(f"MODEL_DIR {source}: bricks.json is not a build output ({exc}); re-run build") from None
     if not bricks:
-        raise InputError(f"MODEL_DIR {model_dir}: bricks.json holds no bricks; nothing to simulate")
-    closed = None
-    if (model_dir / "summary.json").is_file():
-        closed = read_json(model_dir / "summary.json").get("closed_footprint")
-    spec = StructureSpec(name=data.get("structure", model_dir.name), walls=walls, thickness_m=walls[0].thickness_m,
+        raise InputError(f"MODEL_DIR {source}: bricks.json holds no bricks; nothing to simulate")
+    spec = StructureSpec(name=data.get("structure", Path(source).name), walls=walls, thickness_m=walls[0].thickness_m,
                          closed=closed)
     return bricks, wall_frames(spec), corners(spec), spec
+
+
+def load_model(model_dir: str | Path):
+    """Bricks, wall frames, corners and spec of a ``build`` output folder."""
+    model_dir = _checked_model_dir(model_dir)
+    data = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
+    return model_from_json(data, _closed_footprint(model_dir), model_dir)
+
+
+def _geometry_key(bricks_json: bytes, closed, max_gap_m: float, mortar_fill: bool) -> str:
+    """What a model's simulation geometry is computed from: the bricks.json bytes, whether the
+    footprint is closed, the joint reach and the mortar fill."""
+    import hashlib
+
+    h = hashlib.sha256(bricks_json)
+    h.update(repr((closed, float(max_gap_m), bool(mortar_fill))).encode())
+    return h.hexdigest()
+
+
+def store_geometry(model_dir: str | Path, closed, *, max_gap_m: float = 0.06, mortar_fill: bool = True) -> SceneGeometry:
+    """Compute the simulation geometry of the bricks.json in ``model_dir`` (a ``build`` stage, whose
+    summary says whether the footprint is ``closed``) and store it there as sim_geometry.npz."""
+    model_dir = Path(model_dir)
+    raw = (model_dir / "bricks.json").read_bytes()
+    bricks, frames, cs, _ = model_from_json(read_json(model_dir / "bricks.json"), closed, model_dir)
+    geometry = scene_geometry(bricks, frames, cs, mortar_fill=mortar_fill, max_gap_m=max_gap_m)
+    save_geometry(geometry, model_dir / GEOMETRY_FILE, _geometry_key(raw, closed, max_gap_m, mortar_fill))
+    return geometry
+
+
+def geometry_for_model(model_dir: str | Path, *, max_gap_m: float = 0.06, mortar_fill: bool = True
+                       ) -> tuple[SceneGeometry, bool]:
+    """The simulation geometry of a model folder and whether it came from the folder's
+    sim_geometry.npz. The stored copy is used only if it was computed from this bricks.json (its
+    hash), footprint and settings by this version of the code; otherwise (a model built before it
+    was stored, an edited bricks.json) the geometry is computed here, as :func:`store_geometry` would."""
+    model_dir = _checked_model_dir(model_dir)
+    raw = (model_dir / "bricks.json").read_bytes()
+    closed = _closed_footprint(model_dir)
+    stored = load_geometry(model_dir / GEOMETRY_FILE, _geometry_key(raw, closed, max_gap_m, mortar_fill))
+    if stored is not None:
+        return stored, True
+    bricks, frames, cs, _ = load_model(model_dir)
+    return scene_geometry(bricks, frames, cs, mortar_fill=mortar_fill, max_gap_m=max_gap_m), False
 
 
 def motion_for(config: SimulationConfig) -> GroundMotion:
@@ -107,10 +163,12 @@ def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
         raise InputError(f"--pga {config.pga_g}: the peak ground acceleration must be >= 0 (in g)")
     if config.duration_s <= 0:
         raise InputError(f"--duration {config.duration_s}: must be > 0 seconds")
-    bricks, frames, cs, _ = load_model(model_dir)
+    geometry, stored = geometry_for_model(model_dir)
     motion = motion_for(config)
-    return scene_from_bricks(bricks, frames, cs, motion=motion, duration_s=motion.duration,
-                             material=config.material, solver=config.solver, foundation=config.foundation)
+    scene = scene_from_geometry(geometry, motion=motion, duration_s=motion.duration, material=config.material,
+                                solver=config.solver, foundation=config.foundation)
+    scene.notes["geometry_stored"] = stored
+    return scene
 
 
 def simulate_to_folder(model_dir: str | Path, out: str | Path, config: SimulationConfig = SimulationConfig(), *,
@@ -148,6 +206,9 @@ def simulate_to_folder(model_dir: str | Path, out: str | Path, config: Simulatio
                        "joint_opening_crack_m": s.drift_break_m},
             "frame": "ground: the plate stays put and the ground motion acts on every brick as an inertial force",
             "foundation_bonds": int(scene.notes.get("foundation_bonds", 0)),
+            # the bodies and contact patches: read from the model folder's sim_geometry.npz (stored
+            # by build) or, for a model built without it or edited since, computed in this run
+            "geometry_stored_by_build": bool(scene.notes.get("geometry_stored", False)),
             "mortar": {"fill_volume_fraction": scene.notes.get("mortar_fill_volume"), "strengths_pa": scene.notes.get("strengths_pa"),
                        "max_hull_volume_change": scene.notes.get("max_hull_volume_change"),
                        "bricks_without_fill": scene.notes.get("bricks_without_fill", 0)},

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from calib_masonry.simulate.blender import _box
+from calib_masonry.simulate.blender import _box, _quaternions
 from calib_masonry.simulate.monitor import JointMonitor
 from calib_masonry.simulate.results import rotations
 from calib_masonry.simulate.scene import MASONRY, Body, Bond, Scene, SolverSettings, dead_load_precompression
@@ -88,3 +88,23 @@ def test_grown_bricks_that_overlap_an_unbonded_neighbour_are_found():
     # 0 and 1 overlap by 5 mm and are not bonded: both found; 0-2 apart; 0-3 touch only
     assert _overlapping_unbonded(bodies, set()) == {0, 1}
     assert _overlapping_unbonded(bodies, {(0, 1)}) == set()  # a bonded pair is the joint's business
+
+
+def test_pose_quaternions_match_scipy_and_give_back_the_matrices():
+    from scipy.spatial.transform import Rotation
+
+    rot = Rotation.random(2000, random_state=3)
+    m = np.concatenate([rot.as_matrix(), np.eye(3)[None], np.diag([1.0, -1, -1])[None], np.diag([-1.0, 1, -1])[None],
+                        np.diag([-1.0, -1, 1])[None]])  # and the turns where w = 0
+    q = _quaternions(m)
+    assert np.allclose(np.linalg.norm(q, axis=1), 1.0) and np.all(q[:, 0] >= 0)
+    back = Rotation.from_quat(np.column_stack([q[:, 1:], q[:, :1]])).as_matrix()
+    assert np.abs(back - m).max() < 1e-12
+    ref = Rotation.from_matrix(m).as_quat()
+    ref = np.column_stack([ref[:, 3], ref[:, :3]])
+    assert np.minimum(np.abs(q - ref).max(axis=1), np.abs(q + ref).max(axis=1)).max() < 1e-12
+    # batched shapes, and poses read back in float32 as a run reads them
+    m32 = m[:2000].astype(np.float32).astype(np.float64).reshape(40, 50, 3, 3)
+    q32 = _quaternions(m32)
+    assert q32.shape == (40, 50, 4)
+    assert np.abs(q32.reshape(-1, 4) - q[:2000]).max() < 1e-6

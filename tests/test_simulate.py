@@ -226,7 +226,7 @@ def _same_geometry(g, h) -> bool:
     return True
 
 
-def test_build_stores_the_geometry_simulate_would_compute(small_model, tmp_path):
+def test_build_stores_the_geometry_simulate_would_compute(small_model, tmp_path, monkeypatch):
     import shutil
 
     from calib_masonry.simulate.run import GEOMETRY_FILE, geometry_for_model, load_model
@@ -255,3 +255,10 @@ def test_build_stores_the_geometry_simulate_would_compute(small_model, tmp_path)
     (model / GEOMETRY_FILE).write_bytes(b"not an npz")
     again, from_file = geometry_for_model(model)
     assert not from_file and _same_geometry(again, stored)
+
+    # nor one computed by other code (any edit to the modules that compute it)
+    import calib_masonry.simulate.scene as scene_module
+
+    assert geometry_for_model(small_model / "model")[1]
+    monkeypatch.setattr(scene_module, "_geometry_code_version", lambda: "edited")
+    assert not geometry_for_model(small_model / "model")[1]

@@ -248,7 +248,7 @@ def build_to_folder(spec: StructureSpec, out: str | Path, *, figures: bool = Tru
         for name, pw in result.photos.items():
             _write_photo_wall(pw, stage / "photos" / name, figures=figures)
         summary = _summary(result, inter)
-        if simulation_geometry:
+        if simulation_geometry and s.bricks:
             # the simulation's bodies and contact patches, computed once here rather than in every
             # `simulate` run of this model (about 2 s on the Stylite tower, 4 s on the paper example)
             from .simulate.run import store_geometry

@@ -388,7 +388,19 @@ def scene_geometry(bricks: Sequence[Brick], frames: list[WallFrame], corners: li
         mortar_fill=bool(mortar_fill))
 
 
-GEOMETRY_FORMAT = 1  # bump when SceneGeometry or the way it is computed changes: stored copies are then recomputed
+def _geometry_code_version() -> str:
+    """A hash of the source of every module the geometry is computed by, so that a stored copy
+    computed by other code (after any edit to them) is never taken for this code's result."""
+    import hashlib
+    import sys
+
+    from ..build3d import assemble, contacts, extrude, place
+    from . import mortar
+
+    h = hashlib.sha256()
+    for module in (sys.modules[__name__], mortar, contacts, assemble, extrude, place):
+        h.update(Path(module.__file__).read_bytes())
+    return h.hexdigest()[:16]
 
 
 def save_geometry(geometry: SceneGeometry, path: Path, key: str) -> None:
@@ -398,7 +410,7 @@ def save_geometry(geometry: SceneGeometry, path: Path, key: str) -> None:
     nv = np.array([len(v) for v in g.vertices], dtype=np.int64)
     nf = np.array([len(f) for f in g.faces], dtype=np.int64)
     with open(path, "wb") as fh:
-        np.savez(fh, key=np.array(f"{GEOMETRY_FORMAT}:{key}"), names=np.array(g.names),
+        np.savez(fh, key=np.array(f"{_geometry_code_version()}:{key}"), names=np.array(g.names),
                  vertex_counts=nv, vertices=np.concatenate(g.vertices).reshape(-1, 3),
                  face_counts=nf, faces=np.concatenate(g.faces).reshape(-1, 3),
                  locations=g.locations, brick_volumes=g.brick_volumes, hull_volume_change=g.hull_volume_change,
@@ -409,10 +421,11 @@ def save_geometry(geometry: SceneGeometry, path: Path, key: str) -> None:
 
 def load_geometry(path: Path, key: str) -> SceneGeometry | None:
     """The geometry stored at ``path`` if it was computed from the inputs ``key`` names by this
-    version of the code; None otherwise (no file, another key, an unreadable file)."""
+    version of the code (the source of the modules that compute it, hashed); None otherwise (no
+    file, another key, other code, an unreadable file)."""
     try:
         with np.load(path, allow_pickle=False) as z:
-            if str(z["key"]) != f"{GEOMETRY_FORMAT}:{key}":
+            if str(z["key"]) != f"{_geometry_code_version()}:{key}":
                 return None
             d = {k: z[k] for k in z.files}
     except (OSError, ValueError, KeyError, EOFError):

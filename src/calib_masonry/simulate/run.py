@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import dataclass
@@ -114,13 +115,17 @@ def _geometry_key(bricks_json: bytes, closed, max_gap_m: float, mortar_fill: boo
     return h.hexdigest()
 
 
+def _computed_geometry(data: dict, closed, source: Path, max_gap_m: float, mortar_fill: bool) -> SceneGeometry:
+    bricks, frames, cs, _ = model_from_json(data, closed, source)
+    return scene_geometry(bricks, frames, cs, mortar_fill=mortar_fill, max_gap_m=max_gap_m)
+
+
 def store_geometry(model_dir: str | Path, closed, *, max_gap_m: float = 0.06, mortar_fill: bool = True) -> SceneGeometry:
     """Compute the simulation geometry of the bricks.json in ``model_dir`` (a ``build`` stage, whose
     summary says whether the footprint is ``closed``) and store it there as sim_geometry.npz."""
     model_dir = Path(model_dir)
     raw = (model_dir / "bricks.json").read_bytes()
-    bricks, frames, cs, _ = model_from_json(read_json(model_dir / "bricks.json"), closed, model_dir)
-    geometry = scene_geometry(bricks, frames, cs, mortar_fill=mortar_fill, max_gap_m=max_gap_m)
+    geometry = _computed_geometry(json.loads(raw), closed, model_dir, max_gap_m, mortar_fill)  # the file build just wrote
     save_geometry(geometry, model_dir / GEOMETRY_FILE, _geometry_key(raw, closed, max_gap_m, mortar_fill))
     return geometry
 
@@ -137,8 +142,8 @@ def geometry_for_model(model_dir: str | Path, *, max_gap_m: float = 0.06, mortar
     stored = load_geometry(model_dir / GEOMETRY_FILE, _geometry_key(raw, closed, max_gap_m, mortar_fill))
     if stored is not None:
         return stored, True
-    bricks, frames, cs, _ = load_model(model_dir)
-    return scene_geometry(bricks, frames, cs, mortar_fill=mortar_fill, max_gap_m=max_gap_m), False
+    data = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
+    return _computed_geometry(data, closed, model_dir, max_gap_m, mortar_fill), False
 
 
 def motion_for(config: SimulationConfig) -> GroundMotion:

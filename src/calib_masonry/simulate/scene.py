@@ -189,12 +189,20 @@ class Scene:
         return int(round((self.solver.warmup_s + self.duration_s) * self.solver.fps))
 
 
-def body_from_polyhedron(name: str, solid: Polyhedron, material: Material, *, mass_volume: float | None = None) -> Body:
+def _body(name: str, vertices: np.ndarray, faces: np.ndarray, location: np.ndarray, volume: float,
+          material: Material, hull_volume_change: float = 0.0) -> Body:
+    """A body of ``volume`` m^3 of ``material``: the one place a body's mass, friction and
+    restitution come from (Bullet multiplies the two bodies' frictions, hence the square root)."""
+    return Body(name=name, vertices=vertices, faces=faces, location=location, mass=material.density * volume,
+                friction=math.sqrt(material.friction), restitution=material.restitution, volume=float(volume),
+                hull_volume_change=float(hull_volume_change))
+
+
+def body_from_polyhedron(name: str, solid: Polyhedron, material: Material, *, mass_volume: float | None = None,
+                         hull_volume_change: float = 0.0) -> Body:
     c = solid.centroid
-    vol = solid.volume if mass_volume is None else mass_volume
-    return Body(name=name, vertices=solid.vertices - c, faces=solid.faces, location=c,
-                mass=material.density * vol, friction=math.sqrt(material.friction),
-                restitution=material.restitution, volume=vol)
+    return _body(name, solid.vertices - c, solid.faces, c, solid.volume if mass_volume is None else mass_volume,
+                 material, hull_volume_change)
 
 
 def _cell_solid(brick: Brick, outline: np.ndarray | None, frames: list[WallFrame], corners: list[Corner]
@@ -361,8 +369,8 @@ def scene_geometry(bricks: Sequence[Brick], frames: list[WallFrame], corners: li
 
     def make_body(i: int, outline: np.ndarray | None) -> Body:
         solid, change = _cell_solid(bricks[i], outline, frames, corners)
-        body = body_from_polyhedron(f"brick_{bricks[i].id:05d}", solid, MASONRY, mass_volume=bricks[i].volume)
-        return Body(**{**body.__dict__, "hull_volume_change": change})
+        return body_from_polyhedron(f"brick_{bricks[i].id:05d}", solid, MASONRY, mass_volume=bricks[i].volume,
+                                    hull_volume_change=change)
 
     bodies = [make_body(i, o) for i, o in enumerate(outlines)]
     pairs = np.array([(index[p.a], index[p.b]) for p in patches], dtype=np.int64).reshape(-1, 2)
@@ -451,11 +459,8 @@ def scene_from_geometry(geometry: SceneGeometry, *, motion: GroundMotion | None,
     mortar bed of the same strengths over its bottom face: a wall stands on a footing, and without
     it the ground moves the structure only through friction (0.6 g at most)."""
     g = geometry
-    bodies = [Body(name=n, vertices=v, faces=f, location=c, mass=material.density * vol,
-                   friction=math.sqrt(material.friction), restitution=material.restitution, volume=float(vol),
-                   hull_volume_change=float(h))
-              for n, v, f, c, vol, h in zip(g.names, g.vertices, g.faces, g.locations, g.brick_volumes,
-                                            g.hull_volume_change)]
+    bodies = [_body(n, v, f, c, vol, material, h) for n, v, f, c, vol, h in zip(
+        g.names, g.vertices, g.faces, g.locations, g.brick_volumes, g.hull_volume_change)]
     dt = solver.dt_substep
     sigma0 = dead_load_precompression(bodies, g.patch_centroids, g.patch_normals, material)
     bonds = tuple(mortar_bond(int(a), int(b), c, n, float(area), float(w), float(s0), material, dt)

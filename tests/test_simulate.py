@@ -12,7 +12,8 @@ pytest.importorskip("bpy")
 
 from calib_masonry.simulate.blender import _box, run  # noqa: E402
 from calib_masonry.simulate.ground_motion import G, constant_acceleration  # noqa: E402
-from calib_masonry.simulate.scene import Body, Bond, Plate, Scene, SolverSettings  # noqa: E402
+from calib_masonry.simulate.results import collapse_multiplier, metrics, pushover_stop  # noqa: E402
+from calib_masonry.simulate.scene import Body, Bond, Material, Plate, Pushover, Scene, SolverSettings  # noqa: E402
 
 
 FPS = SolverSettings().fps  # the production settings: the benchmark runs at the settings tested here
@@ -82,43 +83,196 @@ def test_rocking_block_threshold(factor, overturns):
         assert tilt < 1.0
 
 
-def test_bond_holds_a_cantilever_and_breaks_when_weak():
+STRONG = Material()
+WEAK = Material(tensile_strength=10.0, shear_strength=10.0, compressive_strength=10.0)
+
+
+def _arm_scene(material, **kw):
+    # a 0.4 m cube with an arm bonded to its side by a 0.4 x 0.2 head joint: a cantilever
     base = _block((0.4, 0.4, 0.4), (0, 0, 0.2))
     arm = _block((0.4, 0.4, 0.2), (0.41, 0, 0.3))
-    strong = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e6, 1e6, 1e6, 1e6)
-    weak = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e-3, 1e-3, 1e-3, 1e-3)
-    weak_in_bending = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e6, 1e6, 1e6, 1e-3)
+    joint = Bond.rectangle(0, 1, (0.205, 0, 0.3), (1.0, 0, 0), (0, 1.0, 0), 0.4, 0.2)
+    return Scene(bodies=(base, arm), bonds=(joint,), duration_s=1.0, solver=_solver(warmup=0.0), material=material, **kw)
+
+
+def test_bond_holds_a_cantilever_and_breaks_when_weak():
     drops = []
-    for bond in (strong, weak, weak_in_bending):
-        out = run(Scene(bodies=(base, arm), bonds=(bond,), duration_s=1.0, solver=_solver(warmup=0.0)),
-                  progress=False)
+    for material in (STRONG, WEAK):
+        out = run(_arm_scene(material), progress=False)
         drops.append(out.positions[0, 1, 2] - out.positions[-1, 1, 2])
+        if material is WEAK:
+            assert np.isfinite(out.bond_break_time_s).all() and out.bond_break_time_s[0] == 0.0
+        else:
+            assert not np.isfinite(out.bond_break_time_s).any()
     assert drops[0] < 0.001
     assert drops[1] > 0.05
-    assert drops[2] > 0.002  # the arm swings down about the joint once bending opens it
 
 
 def test_a_cracked_joint_gives_its_bricks_their_contacts_back():
-    # a block bonded on top of another by a joint too weak to carry its weight: while bonded the
-    # pair does not collide, and once the joint has cracked the top block must rest on the bottom
-    # one, not fall through it to the plate
+    # a block bonded on top of another by a joint too weak for anything: while bonded the pair does
+    # not collide, and once the joint has cracked the top block must rest on the bottom one, not
+    # fall through it to the plate
     base = _block((0.4, 0.4, 0.4), (0, 0, 0.2))
     top = _block((0.4, 0.4, 0.2), (0, 0, 0.5))
-    weak = Bond(0, 1, np.array([0.0, 0, 0.4]), np.array([0.0, 0, 1.0]), 0.16, 1e-3, 1e-3, 1e-3, 1e-3)
-    out = run(Scene(bodies=(base, top), bonds=(weak,), duration_s=1.0, solver=_solver(warmup=0.0)), progress=False)
+    weak = Bond.rectangle(0, 1, (0.0, 0, 0.4), (0.0, 0, 1.0), (1.0, 0, 0), 0.4, 0.4)
+    # pushed sideways a little so that the weak joint cracks in shear
+    motion = constant_acceleration(0.05 * G, 1.0, dt=0.001)
+    out = run(Scene(bodies=(base, top), bonds=(weak,), duration_s=1.0, solver=_solver(warmup=0.0), material=WEAK,
+                    motion=motion), progress=False)
     assert np.isfinite(out.bond_break_time_s).all()
     assert abs(out.positions[-1, 1, 2] - 0.5) < 0.005
 
 
 def test_bare_run_replays_joint_switches_on_a_schedule():
-    base = _block((0.4, 0.4, 0.4), (0, 0, 0.2))
-    arm = _block((0.4, 0.4, 0.2), (0.41, 0, 0.3))
-    strong = Bond(0, 1, np.array([0.205, 0, 0.3]), np.array([1.0, 0, 0]), 0.08, 1e6, 1e6, 1e6, 1e6)
-    scene = Scene(bodies=(base, arm), bonds=(strong,), duration_s=1.0, solver=_solver(warmup=0.0))
+    scene = _arm_scene(STRONG)
     held = run(scene, progress=False, record=False)
     released = run(scene, progress=False, record=False, switch_off_s=np.array([0.2]))
     assert abs(held.positions[0, 1, 2] - 0.3) < 0.001
     assert released.positions[0, 1, 2] < 0.3 - 0.05
+
+
+def _pushover(bodies, bonds=(), rate=0.01, max_g=0.6, material=Material(), mu=0.6, direction=0.0):
+    scene = Scene(bodies=tuple(bodies), bonds=tuple(bonds), plate=Plate(friction=math.sqrt(mu)), material=material,
+                  pushover=Pushover(rate_g_per_s=rate, max_g=max_g, direction_deg=direction), duration_s=max_g / rate,
+                  solver=_solver(warmup=0.3))
+    out = run(scene, progress=False, stop=pushover_stop(scene, scene.solver.warmup_frames))
+    m = metrics(scene, out)
+    return collapse_multiplier(scene, out, m)[0], scene, out, m
+
+
+@pytest.mark.parametrize("b, h", [(0.1, 0.5), (0.15, 0.6)])
+def test_pushover_tips_a_rigid_block_at_b_over_h(b, h):
+    value, *_ = _pushover([_block((2 * b, 0.6, 2 * h), (0, 0, h), mu=0.8)], mu=0.8, max_g=2 * b / h)
+    assert value == pytest.approx(b / h, rel=0.03)
+    slower, *_ = _pushover([_block((2 * b, 0.6, 2 * h), (0, 0, h), mu=0.8)], rate=0.005, mu=0.8, max_g=2 * b / h)
+    assert slower == pytest.approx(value, rel=0.02)  # the ramp is slow enough: halving it changes < 2 %
+
+
+def _panel(courses, per_course, length, height, thickness):
+    """A dry-stacked running-bond panel: odd courses start with a half brick."""
+    blocks = []
+    for k in range(courses):
+        edges = np.arange(per_course + 1) * length if k % 2 == 0 else np.concatenate(
+            [[0.0], (np.arange(per_course) + 0.5) * length, [per_course * length]])
+        for x0, x1 in zip(edges[:-1], edges[1:]):
+            blocks.append(((x0, x1), (k * height, (k + 1) * height)))
+    return blocks
+
+
+def _limit_analysis(blocks, thickness, mu, rho=1800.0):
+    """The largest uniform lateral acceleration (in g, along +x) a dry-stacked panel of rigid
+    blocks can carry: a static (lower-bound) linear programme, the blocks' equilibrium under
+    gravity and lam times their weight sideways with contact forces at both ends of every
+    interface, each with a normal force n >= 0 (no tension) and a friction force |t| <= mu n."""
+    from scipy.optimize import linprog
+
+    nb = len(blocks)
+    W = np.array([rho * G * (x1 - x0) * (z1 - z0) * thickness for (x0, x1), (z0, z1) in blocks])
+    cx = np.array([(x0 + x1) / 2 for (x0, x1), _ in blocks])
+    cz = np.array([(z0 + z1) / 2 for _, (z0, z1) in blocks])
+    tol = 1e-9
+    points = []  # (block a, block b or -1 for ground, x, z, normal (from a to b))
+    for i, ((x0, x1), (z0, z1)) in enumerate(blocks):
+        if z0 < tol:  # on the ground
+            for x in (x0, x1):
+                points.append((i, -1, x, 0.0, (0.0, -1.0)))
+        for j, ((y0, y1), (w0, w1)) in enumerate(blocks):
+            if abs(w0 - z1) < tol and min(x1, y1) - max(x0, y0) > tol:  # j sits on i
+                lo, hi = max(x0, y0), min(x1, y1)
+                for x in (lo, hi):
+                    points.append((i, j, x, z1, (0.0, 1.0)))
+            if j > i and abs(y0 - x1) < tol and abs(w0 - z0) < tol:  # j is i's right-hand neighbour
+                for z in (z0, z1):
+                    points.append((i, j, x1, z, (1.0, 0.0)))
+    nc = len(points)
+    # variables: n_k, t_k for every contact point, then lam
+    nv = 2 * nc + 1
+    A_eq = np.zeros((3 * nb, nv))
+    b_eq = np.zeros(3 * nb)
+    for k, (a, b, x, z, (nx, nz)) in enumerate(points):
+        tx, tz = -nz, nx  # tangent
+        for body, sign in ((a, -1.0), (b, 1.0)):  # the force on b is +n along the normal, on a the opposite
+            if body < 0:
+                continue
+            fxn, fzn = sign * nx, sign * nz
+            fxt, fzt = sign * tx, sign * tz
+            A_eq[3 * body, k] += fxn
+            A_eq[3 * body + 1, k] += fzn
+            A_eq[3 * body + 2, k] += (x - cx[body]) * fzn - (z - cz[body]) * fxn
+            A_eq[3 * body, nc + k] += fxt
+            A_eq[3 * body + 1, nc + k] += fzt
+            A_eq[3 * body + 2, nc + k] += (x - cx[body]) * fzt - (z - cz[body]) * fxt
+    A_eq[0::3, -1] = W  # lam W sideways
+    b_eq[1::3] = W  # the contact forces hold the weight up
+    A_ub = np.zeros((2 * nc, nv))
+    for k in range(nc):
+        A_ub[2 * k, nc + k], A_ub[2 * k, k] = 1.0, -mu
+        A_ub[2 * k + 1, nc + k], A_ub[2 * k + 1, k] = -1.0, -mu
+    c = np.zeros(nv)
+    c[-1] = -1.0
+    bounds = [(0, None)] * nc + [(None, None)] * nc + [(0, None)]
+    res = linprog(c, A_ub=A_ub, b_ub=np.zeros(2 * nc), A_eq=A_eq, b_eq=b_eq, bounds=bounds, method="highs")
+    assert res.success, res.message
+    return float(res.x[-1])
+
+
+def test_limit_analysis_of_one_block_is_the_smaller_of_tipping_and_sliding():
+    # the programme itself against the two closed forms: b / h (tipping) and mu (sliding)
+    assert _limit_analysis([((0.0, 0.2), (0.0, 1.0))], 0.3, 0.6) == pytest.approx(0.1 / 0.5)
+    assert _limit_analysis([((0.0, 1.0), (0.0, 0.2))], 0.3, 0.6) == pytest.approx(0.6)
+    # two equal blocks stacked tip together about the bottom toe (the top one alone would need twice)
+    assert _limit_analysis([((0.0, 0.2), (0.0, 0.5)), ((0.0, 0.2), (0.5, 1.0))], 0.3, 0.8) == pytest.approx(0.1 / 0.5)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "Bullet's friction between two moving bodies creeps: a block on a block slides 43 mm against it "
+    "by 0.2 g with mu = 0.6 (a single block on the plate: 0.000 mm), whatever the iterations (10, 50, "
+    "200), substeps (10, 20, 40), collision shape (hull, BOX) or margin (0 to 0.5 mm); split impulse "
+    "halves it. The dry panel therefore creeps away at about 0.01 g; see the issue note."))
+def test_pushover_of_a_dry_stacked_panel_matches_limit_analysis():
+    # 12 courses of 3 bricks (0.3 x 0.15 x 0.2 m), running bond, no mortar, pushed in its plane:
+    # taller than wide, so the panel rocks rather than slides (mu = 0.6): for a rocking mechanism
+    # the static (associative) programme and the real, non-associative friction give the same load
+    L, H, T, mu = 0.3, 0.15, 0.2, 0.6
+    blocks = _panel(12, 3, L, H, T)
+    expected = _limit_analysis(blocks, T, mu)
+    bodies = [_block((x1 - x0, T, z1 - z0), ((x0 + x1) / 2, 0.0, (z0 + z1) / 2), mu=mu) for (x0, x1), (z0, z1) in blocks]
+    value, *_ = _pushover(bodies, mu=mu, max_g=2 * expected)
+    assert value == pytest.approx(expected, rel=0.10)
+
+
+def test_pushover_cracks_a_bonded_wall_out_of_plane_at_the_analytic_moment():
+    # a wall of 3 x 4 bricks in stack bond, bonded by mortar, on a footing, pushed out of its plane
+    # (+Y): every column's base joint carries lam W_col H / 2 and fails at
+    # max(f_t S + N t / 6, N t / 2) (first crack of the linear stress; rocking of the cracked joint)
+    lx, t, h, n_up, n_along = 0.4, 0.2, 0.2, 4, 3
+    material = Material(tensile_strength=0.05e6)
+    bodies, bonds = [], []
+    for i in range(n_along):
+        for k in range(n_up):
+            bodies.append(_block((lx, t, h), (lx * (i + 0.5), 0.0, h * (k + 0.5))))
+    idx = lambda i, k: i * n_up + k  # noqa: E731
+    for i in range(n_along):
+        bonds.append(Bond.rectangle(idx(i, 0), -1, (lx * (i + 0.5), 0, 0), (0, 0, -1.0), (1.0, 0, 0), lx, t))
+        for k in range(n_up - 1):
+            bonds.append(Bond.rectangle(idx(i, k), idx(i, k + 1), (lx * (i + 0.5), 0, h * (k + 1)), (0, 0, 1.0),
+                                        (1.0, 0, 0), lx, t))
+        if i + 1 < n_along:
+            for k in range(n_up):
+                bonds.append(Bond.rectangle(idx(i, k), idx(i + 1, k), (lx * (i + 1), 0, h * (k + 0.5)), (1.0, 0, 0),
+                                            (0, 0, 1.0), h, t))
+    value, scene, out, m = _pushover(bodies, bonds, material=material, direction=90.0, max_g=1.0)
+    W = n_up * bodies[0].mass * G  # one column
+    H = n_up * h
+    S = lx * t**2 / 6
+    crack = max(material.tensile_strength * S + W * t / 6, W * t / 2) / (W * H / 2)
+    base = [k for k, b in enumerate(scene.bonds) if b.b < 0]
+    t_crack = out.bond_break_time_s[base]
+    assert np.isfinite(t_crack).all()
+    lam_crack = scene.pushover.lateral_g(t_crack - 0.5 / scene.solver.fps)  # the mean of the frame it cracked in
+    assert lam_crack == pytest.approx(np.full(len(base), crack), rel=0.10)
+    assert value is not None and value == pytest.approx(crack, rel=0.10)  # the cracked wall cannot rock back
 
 
 @pytest.fixture(scope="module")
@@ -186,7 +340,7 @@ def test_bottom_course_is_bonded_to_the_plate(small_model):
     assert {b.a for b in ground} == on_ground and len(on_ground) >= 4
     for b in ground:
         assert np.allclose(b.normal, [0, 0, -1]) and b.location[2] == pytest.approx(lowest)
-        assert b.area_m2 > 0 and b.tension_ns < b.compression_ns
+        assert b.area_m2 > 0 and b.moments[0] > 0 and b.moments[1] > 0
     assert scene.notes["foundation_bonds"] == len(ground)
 
 

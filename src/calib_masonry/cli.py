@@ -231,7 +231,7 @@ def _cmd_simulate(args) -> int:
         return code
 
     from .simulate.run import SimulationConfig, simulate_to_folder
-    from .simulate.scene import SolverSettings
+    from .simulate.scene import Pushover, SolverSettings
 
     d = SolverSettings()
     solver = replace(d, **{k: v for k, v in (("fps", args.fps), ("substeps", args.substeps),
@@ -240,8 +240,16 @@ def _cmd_simulate(args) -> int:
                               accelerogram=Path(args.accelerogram) if args.accelerogram else None,
                               components=args.components or SimulationConfig.components, solver=solver,
                               frames_png=args.frames,
-                              figures=not args.no_figures, foundation=args.foundation)
+                              figures=not args.no_figures, foundation=args.foundation,
+                              pushover=Pushover(rate_g_per_s=args.pushover_rate, direction_deg=args.direction,
+                                                max_g=args.pushover_max) if args.pushover else None)
     s = simulate_to_folder(args.model_dir, args.out, config)
+    if args.pushover:
+        value = s["collapse_multiplier_g"]
+        print(f"pushover: {s['bricks']} bricks, {s['bonds']} bonds, along {args.direction:g} deg: collapse multiplier "
+              + (f"{value:.3f} g" if value is not None else f"above {args.pushover_max:g} g (no collapse)")
+              + f"; {s['bonds_broken_fraction']:.1%} of bonds broken; stepping {s['seconds']['stepping']:.1f} s -> {args.out}")
+        return 0
     print(f"simulate: {s['bricks']} bricks, {s['bonds']} bonds, {s['ground_motion']['source']}: {s['outcome']}; "
           f"moved {s['moved_fraction_final']:.1%} of bricks, {s['bonds_broken_fraction']:.1%} of bonds broken, "
           f"max roof drift {s['max_roof_drift_m'] * 1000:.0f} mm; stepping {s['seconds']['stepping']:.1f} s -> {args.out}")
@@ -325,6 +333,12 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--fps", type=int, default=None, help="frames per second (default: the tested settings, 25)")
     m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")
     m.add_argument("--iterations", type=int, default=None, help="solver iterations per substep (default 50)")
+    m.add_argument("--pushover", action="store_true",
+                   help="quasi-static collapse analysis: ramp a uniform lateral acceleration until the structure "
+                        "runs away; writes collapse_multiplier_g and pushover.png")
+    m.add_argument("--direction", type=float, default=0.0, help="pushover direction in degrees from global X")
+    m.add_argument("--pushover-rate", type=float, default=0.01, help="pushover ramp in g per second (default 0.01)")
+    m.add_argument("--pushover-max", type=float, default=1.0, help="pushover's largest lateral acceleration in g")
     m.add_argument("--frames", type=int, default=6, help="collapse frames to render as PNG")
     m.add_argument("--foundation", action=argparse.BooleanOptionalAction, default=True,
                    help="bond the bottom course to the ground, a footing (default; --no-foundation: friction only)")

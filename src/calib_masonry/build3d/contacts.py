@@ -7,7 +7,7 @@ exactly as solids (manifold3d).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import manifold3d
 import numpy as np
@@ -18,7 +18,10 @@ from typing import Sequence
 from .assemble import Brick
 from .extrude import Polyhedron
 
-__all__ = ["Interpenetration", "max_interpenetration", "intersection_volume"]
+__all__ = ["Interpenetration", "max_interpenetration", "intersection_volume", "ContactPatch", "contact_patches",
+           "joint_axes", "patch_section", "OUTLINE_POINTS"]
+
+OUTLINE_POINTS = 16  # a patch's outline (its convex hull) is stored with this many corners, padded by repeats
 
 
 @dataclass(frozen=True)
@@ -102,6 +105,66 @@ class ContactPatch:
     area_m2: float
     gap_m: float
     min_width_m: float = 0.0  # the patch's narrower principal extent (the lever arm in bending)
+    # second moments (int u^2 dA, int v^2 dA, int u v dA) about the centroid in the joint frame
+    # (:func:`joint_axes`), m^4, and the outline's corners (OUTLINE_POINTS, 2) in (u, v), m
+    moments: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    outline: np.ndarray = field(default_factory=lambda: np.zeros((OUTLINE_POINTS, 2)))
+
+
+def joint_axes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each joint's frame from its normal ``(N, 3)``: in-plane axes ``u, v`` and the unit normal ``n``
+    (right-handed, ``u = h x n / |h x n|`` with the helper ``h`` = X, or Y where the normal is nearly
+    along X, and ``v = n x u``). The Bullet constraints, the joint model and the patches' second
+    moments share this frame."""
+    n = np.asarray(normals, dtype=np.float64)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(helper, n)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(n, u), n
+
+
+def _ring_moments(xy: np.ndarray) -> np.ndarray:
+    """(A, int x dA, int y dA, int x^2 dA, int y^2 dA, int x y dA) of a closed ring ``(k + 1, 2)``,
+    signed by its orientation (Green's theorem)."""
+    x0, y0, x1, y1 = xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1]
+    c = x0 * y1 - x1 * y0
+    return np.array([c.sum() / 2, (c * (x0 + x1)).sum() / 6, (c * (y0 + y1)).sum() / 6,
+                     (c * (x0**2 + x0 * x1 + x1**2)).sum() / 12, (c * (y0**2 + y0 * y1 + y1**2)).sum() / 12,
+                     (c * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)).sum() / 24])
+
+
+def patch_section(poly: shapely.Geometry, basis: np.ndarray, normal: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """A joint patch's section in its joint frame: the patch ``poly`` is in the 2D coordinates of
+    ``basis`` ``(2, 3)`` (rows: the plane's axes in 3D); returns its centroid's offset in those
+    2D coordinates ``(2,)``, the second moments ``(I_uu, I_vv, I_uv)`` about the centroid in the
+    frame of :func:`joint_axes` of ``normal``, its outline's corners ``(OUTLINE_POINTS, 2)`` in
+    (u, v) about the centroid (the convex hull, padded by repeats), and its area."""
+    parts = [g for g in getattr(poly, "geoms", [poly]) if isinstance(g, shapely.Polygon) and g.area > 0]
+    m = np.zeros(6)
+    for g in parts:
+        g = shapely.geometry.polygon.orient(g, 1.0)
+        m += _ring_moments(np.asarray(g.exterior.coords))
+        for hole in g.interiors:
+            m += _ring_moments(np.asarray(hole.coords))
+    area = m[0]
+    if area <= 0:
+        return np.zeros(2), np.zeros(3), np.zeros((OUTLINE_POINTS, 2)), 0.0
+    cx, cy = m[1] / area, m[2] / area
+    jxx = m[3] - area * cx * cx
+    jyy = m[4] - area * cy * cy
+    jxy = m[5] - area * cx * cy
+    u, v, _ = (a[0] for a in joint_axes(np.asarray(normal, dtype=np.float64)[None]))
+    rot = np.array([[u @ basis[0], u @ basis[1]], [v @ basis[0], v @ basis[1]]])  # (x, y) -> (u, v)
+    J = rot @ np.array([[jxx, jxy], [jxy, jyy]]) @ rot.T
+    hull = shapely.union_all(parts).convex_hull
+    pts = np.asarray(hull.exterior.coords)[:-1] if isinstance(hull, shapely.Polygon) else np.array([[cx, cy]])
+    if len(pts) > OUTLINE_POINTS:  # keep the corners farthest apart: evenly along the hull
+        pts = pts[np.linspace(0, len(pts), OUTLINE_POINTS, endpoint=False).astype(int)]
+    outline = (pts - [cx, cy]) @ rot.T
+    outline = np.vstack([outline, np.repeat(outline[-1:], OUTLINE_POINTS - len(outline), axis=0)])
+    return np.array([cx, cy]), np.array([J[0, 0], J[1, 1], J[0, 1]]), outline, float(area)
 
 
 def _planar_faces(p: Polyhedron, angle_tol: float = 1e-3) -> list[tuple[np.ndarray, float, shapely.Geometry, np.ndarray]]:
@@ -175,12 +238,13 @@ def contact_patches(bricks: Sequence[Brick], *, max_gap_m: float = 0.03, min_are
                 if inter.area < min_area_m2:
                     continue
                 if best is None or inter.area > best[0]:
-                    c2 = np.asarray(inter.centroid.coords[0])
-                    c3 = c2 @ basis + (da + 0.5 * gap) * na
-                    best = (inter.area, na, c3, gap, inter)
+                    best = (inter.area, na, da, gap, inter, basis)
         if best is not None:
-            area, normal, centroid, gap, inter = best
+            area, normal, da, gap, inter, basis = best
+            c2, moments, outline, _ = patch_section(inter, basis, normal)
+            centroid = c2 @ basis + (da + 0.5 * gap) * normal
             out.append(ContactPatch(a=bricks[a].id, b=bricks[b].id, normal=normal, centroid=centroid,
-                                    area_m2=float(area), gap_m=float(gap), min_width_m=_min_width(inter)))
+                                    area_m2=float(area), gap_m=float(gap), min_width_m=_min_width(inter),
+                                    moments=moments, outline=outline))
     out.sort(key=lambda c: (c.a, c.b))
     return out

@@ -8,11 +8,10 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
 * convex hulls use ``use_margin = True`` with ``collision_margin = 0`` (a positive margin rounds
   the corners and blocks rock over early); the ground plate uses the BOX shape;
 * the world is stepped with ``scene.frame_set(f)`` frame by frame, the point cache covering the run;
-* Bullet never reports a broken constraint to Python, and it breaks each of a joint's four
-  constraints on its own. The run watches every joint's opening frame by frame
-  (:class:`~calib_masonry.simulate.monitor.JointMonitor`) and switches the remaining constraints of
-  a cracked joint off, so a joint fails once, as a whole, and then carries contact and friction
-  only. ``rigid_body_constraint.enabled = False`` is written on the *evaluated* object between
+* every intact mortar joint is one FIXED constraint that never breaks in Bullet: the joint model
+  (:class:`~calib_masonry.simulate.joints.JointModel`) decides, before every step after the
+  warm-up, which joints the coming step's load cracks, and the run switches those off.
+  ``rigid_body_constraint.enabled = False`` is written on the *evaluated* object between
   frames: it reaches the live Bullet constraint at once; writing the original object instead
   tags the depsgraph and crashed Blender in about half the trials;
 * a bond's constraints disable collisions between its two bricks, and Bullet keeps ignoring that
@@ -31,12 +30,11 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ..errors import BackendMissing
-from .monitor import JointMonitor
+from .joints import CrackTracker
 from .scene import Scene, joint_axes
 
 __all__ = ["RunOutput", "run", "require_bpy"]
 
-UNBREAKABLE = 1e30  # a breaking threshold no impulse reaches
 
 
 def require_bpy():
@@ -62,6 +60,9 @@ class RunOutput:
     seconds_build: float
     seconds_stepping: float
     bond_break_time_s: np.ndarray | None = None  # cracking time of each bond after the warm-up, if watched
+    bond_break_mode: np.ndarray | None = None  # per bond: index into joints.FAILURE_MODES, -1 if intact
+    max_utilisation: np.ndarray | None = None  # (F,) the intact joints' largest utilisation at each frame
+    seconds_joints: float = 0.0  # wall time spent in the joint model
 
 
 def _reset(bpy) -> None:
@@ -142,6 +143,8 @@ def _gravity_per_frame(scene: Scene) -> np.ndarray:
       velocities are exact at every frame. A kinematic plate keyed per frame would instead change
       its velocity within one substep at every frame boundary: an acceleration spike of substeps x
       a, which rocked a block at 0.9 g b / h (measured).
+    * Pushover: a uniform lateral acceleration ``lambda g`` along the pushover's direction, with
+      ``lambda`` rising linearly from 0 at the end of the warm-up (mean over each frame).
     """
     s = scene.solver
     frames = scene.frames
@@ -155,6 +158,12 @@ def _gravity_per_frame(scene: Scene) -> np.ndarray:
         g[:, 2] *= x * x * (3.0 - 2.0 * x)
     if scene.motion is not None:
         g[1:, :2] = -scene.motion.mean_acceleration(t)
+    if scene.pushover is not None:
+        p = scene.pushover
+        lam = 0.5 * (p.lateral_g(t[:-1]) + p.lateral_g(t[1:]))  # the mean over each frame (linear ramp)
+        d = np.radians(p.direction_deg)
+        g[1:, 0] = lam * scene.gravity * np.cos(d)
+        g[1:, 1] = lam * scene.gravity * np.sin(d)
     return g
 
 
@@ -176,10 +185,8 @@ def _key_gravity(bpy, scene: Scene) -> None:
 
 
 def build_scene(scene: Scene):
-    """Create the Blender scene; returns (bpy, body objects, plate object, constraint objects).
-
-    Breakable bonds start with an unreachable threshold when there is a warm-up: :func:`run`
-    switches the real thresholds on at its end."""
+    """Create the Blender scene; returns (bpy, body objects, plate object, constraint objects: one
+    rigid, unbreakable FIXED constraint per mortar joint)."""
     bpy = require_bpy()
     _reset(bpy)
     sc = bpy.context.scene
@@ -227,9 +234,9 @@ def build_scene(scene: Scene):
         rb_col.objects.link(ob)
         rb = ob.rigid_body
         rb.type = "ACTIVE"
-        rb.collision_shape = "CONVEX_HULL"
+        rb.collision_shape = b.shape
         rb.use_margin = True
-        rb.collision_margin = 0.0
+        rb.collision_margin = s.collision_margin_m
         rb.mass = float(b.mass)
         rb.friction = float(b.friction)
         rb.restitution = float(b.restitution)
@@ -242,53 +249,38 @@ def build_scene(scene: Scene):
         ccol = bpy.data.collections.new("RigidBodyConstraints")
         sc.collection.children.link(ccol)
         rw.constraints = ccol
-        big = 1e3
         for k, bond in enumerate(scene.bonds):
-            rot = _frame_quaternion(bond.normal)
-            for kind, thr in zip("CTSB", bond.thresholds):
-                e = bpy.data.objects.new(f"bond_{k:05d}_{kind}", None)
-                e.location = tuple(float(x) for x in bond.location)
-                e.rotation_mode = "QUATERNION"
-                e.rotation_quaternion = rot
-                e.empty_display_size = 0.02
-                ccol.objects.link(e)
-                c = e.rigid_body_constraint
-                c.type = "GENERIC"
-                c.object1 = objects[bond.a]
-                c.object2 = plate if bond.b < 0 else objects[bond.b]
-                c.disable_collisions = True  # an intact joint's bricks do not touch: the joint carries the load
-                c.use_breaking = bool(np.isfinite(thr))
-                c.breaking_threshold = float(min(thr, UNBREAKABLE)) if warm == 0 else UNBREAKABLE
-                if kind == "S":
-                    for ax in "xy":
-                        setattr(c, f"use_limit_lin_{ax}", True)
-                        setattr(c, f"limit_lin_{ax}_lower", 0.0)
-                        setattr(c, f"limit_lin_{ax}_upper", 0.0)
-                elif kind == "B":
-                    for ax in "xyz":
-                        setattr(c, f"use_limit_ang_{ax}", True)
-                        setattr(c, f"limit_ang_{ax}_lower", 0.0)
-                        setattr(c, f"limit_ang_{ax}_upper", 0.0)
-                else:
-                    c.use_limit_lin_z = True
-                    c.limit_lin_z_lower, c.limit_lin_z_upper = (0.0, big) if kind == "C" else (-big, 0.0)
-                constraints.append(e)
+            e = bpy.data.objects.new(f"bond_{k:05d}", None)
+            e.location = tuple(float(x) for x in bond.location)
+            e.rotation_mode = "QUATERNION"
+            e.rotation_quaternion = _frame_quaternion(bond.normal)
+            e.empty_display_size = 0.02
+            ccol.objects.link(e)
+            c = e.rigid_body_constraint
+            c.type = "FIXED"
+            c.object1 = objects[bond.a]
+            c.object2 = plate if bond.b < 0 else objects[bond.b]
+            c.disable_collisions = True  # an intact joint's bricks do not touch: the joint carries the load
+            c.use_breaking = False  # the joint model decides when a joint cracks (see joints.py)
+            constraints.append(e)
     return bpy, objects, plate, constraints
 
 
 def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None = None, record: bool = True,
-        switch_off_s: np.ndarray | None = None) -> RunOutput:
-    """Simulate ``scene`` in one pass: the warm-up under (ramped) gravity with the bonds
-    unbreakable and the bodies damped, then the ground motion with the real thresholds switched on
-    and no damping.
+        switch_off_s: np.ndarray | None = None, stop=None) -> RunOutput:
+    """Simulate ``scene`` in one pass: the warm-up under (ramped) gravity with every joint intact
+    and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
+    joint model cracking joints before each step (:class:`~calib_masonry.simulate.joints.CrackTracker`).
 
-    The thresholds and damping are switched, and cracked joints switched off, on the evaluated copies of the
-    constraint objects, which hold the live Bullet constraints (writing the originals tags the
-    depsgraph and crashed Blender in about half the trials). With ``record=False`` only the
-    stepping and the threshold switch are done (the bare-Bullet baseline): no poses are read and
-    no joint is watched; ``switch_off_s`` (per bond, seconds after the warm-up, NaN for never; the
-    ``bond_break_time_s`` of a recorded run) then replays that run's joint switches on a schedule
-    fixed in advance, so the baseline does the same Bullet work.
+    Damping is switched, and cracked joints switched off, on the evaluated copies of the objects,
+    which hold the live Bullet bodies and constraints (writing the originals tags the depsgraph
+    and crashed Blender in about half the trials). With ``record=False`` only the stepping is done
+    (the bare-Bullet baseline): no poses are read and no joint model runs; ``switch_off_s`` (per
+    bond, seconds after the warm-up, NaN for never; the ``bond_break_time_s`` of a recorded run)
+    then replays that run's joint switches on a schedule fixed in advance, so the baseline does the
+    same Bullet work. ``stop(frame, positions (B, 3), plate (3,))``, if given, is asked after every
+    recorded frame whether the run may end there (a pushover ends once it has run away); the
+    output then holds the frames up to that one.
     """
     t0 = time.perf_counter()
     bpy, objects, plate, constraints = build_scene(scene)
@@ -305,6 +297,8 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
     order = np.array([position[ob.name] for ob in bodies_col.objects], dtype=int)
     buf = np.zeros(nb * 16, dtype=np.float32)
     mats = np.zeros((n, nb, 4, 4), dtype=np.float32)
+    gravity = _gravity_per_frame(scene)
+    utilisation = np.zeros(n)
 
     def grab(i: int) -> None:
         # one bulk read of every brick's world matrix (column-major 4x4)
@@ -313,20 +307,16 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
         plate_pos[i] = plate.matrix_world.translation
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    per_bond = len(constraints) // max(1, len(scene.bonds))
-    watch = None
+    tracker: CrackTracker | None = None
 
-    def start_breaking(i: int) -> None:
-        nonlocal watch
+    def end_warmup(i: int) -> None:
+        nonlocal tracker
         if warm > 0:
-            thresholds = (min(t, UNBREAKABLE) for bd in scene.bonds for t in bd.thresholds)
-            for e, thr in zip(constraints, thresholds):
-                e.evaluated_get(depsgraph).rigid_body_constraint.breaking_threshold = float(thr)
             for ob in objects:
                 rb = ob.evaluated_get(depsgraph).rigid_body
                 rb.linear_damping = rb.angular_damping = 0.0
-        if record and scene.bonds and s.crack_whole_joints:
-            watch = JointMonitor(scene, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i], 0.0)
+        if record and scene.bonds:
+            tracker = CrackTracker(scene, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i], (i) / s.fps)
 
     schedule: dict[int, list[int]] = {}
     if not record and switch_off_s is not None:
@@ -335,30 +325,37 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
 
     def switch_off(bonds) -> None:
         for k in bonds:
-            for e in constraints[k * per_bond:(k + 1) * per_bond]:
-                live = e.evaluated_get(depsgraph).rigid_body_constraint
-                live.enabled = False
-                live.disable_collisions = False  # the cracked joint's bricks bear on each other
+            live = constraints[k].evaluated_get(depsgraph).rigid_body_constraint
+            live.enabled = False
+            live.disable_collisions = False  # the cracked joint's bricks bear on each other
 
     t1 = time.perf_counter()
     sc.frame_set(1)
     if record:
         grab(0)
     if warm == 0:
-        start_breaking(0)
+        end_warmup(0)
     for f in tqdm(range(1, frames + 1), desc="simulate", unit="frame",
                   disable=None if progress is None else not progress, leave=False):
-        sc.frame_set(f + 1)  # our frame f is Blender's frame f + 1
         i = f if record else 0
+        if tracker is not None:
+            # the joints the coming step's load cracks, given the poses now (frame f - 1)
+            p = i - 1
+            switch_off(tracker.step((f - 1) / s.fps, gravity[f], mats[p, :, :3, 3].astype(np.float64),
+                                    mats[p, :, :3, :3].astype(np.float64), plate_pos[p]))
+            utilisation[p] = tracker.max_utilisation
+        elif f - 1 in schedule:
+            switch_off(schedule[f - 1])
+        sc.frame_set(f + 1)  # our frame f is Blender's frame f + 1
         if record:
             grab(i)
         if f == warm:
-            start_breaking(i)
-        elif watch is not None:
-            switch_off(watch.update((f - warm) / s.fps, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i]))
-        elif f in schedule:
-            switch_off(schedule[f])
+            end_warmup(i)
+        if record and stop is not None and f > warm and stop(f, mats[i, :, :3, 3], plate_pos[i]):
+            n = f + 1
+            break
     seconds_stepping = time.perf_counter() - t1
+    mats, plate_pos, utilisation = mats[:n], plate_pos[:n], utilisation[:n]
     if not record:
         grab(0)  # the final state only
     if blend_path is not None:
@@ -367,4 +364,7 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
     return RunOutput(time=np.arange(n) / s.fps, positions=mats[:, :, :3, 3].astype(np.float64),
                      quaternions=_quaternions(mats[:, :, :3, :3].astype(np.float64)), plate=plate_pos,
                      seconds_build=seconds_build, seconds_stepping=seconds_stepping,
-                     bond_break_time_s=watch.break_time_s if watch is not None else None)
+                     bond_break_time_s=tracker.break_time_s if tracker is not None else None,
+                     bond_break_mode=tracker.break_mode if tracker is not None else None,
+                     max_utilisation=utilisation if record else None,
+                     seconds_joints=tracker.seconds if tracker is not None else 0.0)

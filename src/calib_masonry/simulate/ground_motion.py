@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import InputError
 
 __all__ = ["G", "GroundMotion", "KanaiTajimi", "synthetic_motion", "read_accelerogram", "constant_acceleration",
-           "motion_from_acceleration"]
+           "motion_from_acceleration", "start_from_rest", "TAPER_S"]
 
 G = 9.80665
 
@@ -104,8 +104,22 @@ def _second_difference(x: np.ndarray, dt: float) -> np.ndarray:
     return a
 
 
+TAPER_S = 0.5  # the ground starts from rest: a cosine taper over this long on the displacement
+
+
+def start_from_rest(disp: np.ndarray, dt: float, taper_s: float = TAPER_S) -> np.ndarray:
+    """The displacement ``(T, 2)`` multiplied by ``w(t) = (1 - cos(pi t / taper_s)) / 2`` for
+    ``t < taper_s`` (1 after): ``w``, ``w'`` and ``w''`` are 0, 0 and finite at t = 0, so the tapered
+    displacement, velocity and acceleration all start at zero and the first frame does not jolt
+    the structure (the integrated record alone has a velocity at t = 0 after high-passing)."""
+    t = np.arange(len(disp)) * dt
+    w = np.where(t < taper_s, 0.5 * (1.0 - np.cos(np.pi * np.minimum(t, taper_s) / taper_s)), 1.0)
+    return disp * w[:, None]
+
+
 def motion_from_acceleration(acc: np.ndarray, dt: float, *, highpass_hz: float = 0.0, source: str = "") -> GroundMotion:
-    """Integrate an acceleration record ``(T,)`` or ``(T, 2)`` twice (frequency domain, zero padded)."""
+    """Integrate an acceleration record ``(T,)`` or ``(T, 2)`` twice (frequency domain, zero padded),
+    starting from rest (:func:`start_from_rest`)."""
     acc = np.asarray(acc, dtype=np.float64)
     if acc.ndim == 1:
         acc = np.column_stack([acc, np.zeros_like(acc)])
@@ -120,7 +134,7 @@ def motion_from_acceleration(acc: np.ndarray, dt: float, *, highpass_hz: float =
     with np.errstate(divide="ignore", invalid="ignore"):
         disp_spec = np.where(w[:, None] > 0, -spec / (w[:, None] ** 2), 0.0)
     disp = np.fft.irfft(disp_spec, n=pad, axis=0)[:n]
-    disp -= disp[0]
+    disp = start_from_rest(disp - disp[0], dt)
     return GroundMotion(dt=dt, displacement=disp, acceleration=_second_difference(disp, dt), source=source)
 
 

@@ -1,9 +1,18 @@
 """Results of a simulation: collapse metrics, bond breaks, figures and the output folder.
 
 Displacements are measured relative to the ground plate (a brick carried rigidly by the ground has
-not moved) and from the end of the gravity warm-up. A bond counts as broken at the first frame
-where its joint has opened by more than ``drift_break_m`` anywhere on its patch (see
-:mod:`calib_masonry.simulate.monitor`): Bullet does not tell Python when a constraint breaks.
+not moved) and from the end of the gravity warm-up. A bond counts as broken at the frame where the
+joint model cracked it (:mod:`calib_masonry.simulate.joints`).
+
+Pushover: the collapse multiplier is the lateral acceleration (in g) at the last frame where every
+brick still moved slower than ``ONSET_DRIFT`` (0.1 %) of the structure's height per second (its
+speed over the last ``ONSET_WINDOW_S``), provided the displacement then runs away (past
+``moved_threshold_m`` and ten times 0.1 % of the height). Speed, not displacement: an intact
+structure is rigid in Bullet but for the constraints' steady-state error, which grows with the
+load (0.8 mm at the top of a 0.8 m bonded wall at 0.23 g, measured) and only slowly; a mechanism
+accelerates. A rigid block under a ramp ``r`` (g/s) lifts off at ``b / h`` and its speed then
+grows as the square of the time since, so the reading lags by a little (about 1 % of ``b / h`` at
+0.01 g/s for a 1 m block, measured in the tests).
 """
 
 from __future__ import annotations
@@ -14,11 +23,16 @@ from pathlib import Path
 import numpy as np
 
 from .blender import RunOutput
-from .monitor import JointMonitor
+from .joints import FAILURE_MODES
 from .scene import Scene
 
-__all__ = ["Metrics", "rotations", "bond_breaks", "metrics", "outcome", "plot_histories", "plot_ground_motion",
-           "render_frames"]
+ONSET_DRIFT = 1e-3  # a pushover's onset of collapse: a brick moves faster than this fraction of the height per second
+ONSET_WINDOW_S = 0.2  # ... measured over this window
+
+__all__ = ["Metrics", "rotations", "metrics", "outcome", "plot_histories", "plot_ground_motion",
+           "render_frames", "structure_height", "pushover_stop", "collapse_multiplier", "plot_pushover", "ONSET_DRIFT",
+           "ONSET_WINDOW_S",
+           "failure_mode_counts"]
 
 
 def rotations(q: np.ndarray) -> np.ndarray:
@@ -42,20 +56,6 @@ class Metrics:
     collapse_time_s: float | None  # first time half the bricks have moved
 
 
-def bond_breaks(scene: Scene, out: RunOutput, start: int) -> np.ndarray:
-    """Each bond's cracking time (s after ``start``; NaN if intact): recorded during the run, or
-    found afterwards from the poses with the same :class:`~calib_masonry.simulate.monitor.JointMonitor`."""
-    if not scene.bonds:
-        return np.zeros(0)
-    if out.bond_break_time_s is not None:
-        return out.bond_break_time_s
-    R = rotations(out.quaternions)
-    mon = JointMonitor(scene, out.positions[start], R[start], out.plate[start], out.time[start])
-    for f in range(start + 1, len(out.time)):
-        mon.update(out.time[f], out.positions[f], R[f], out.plate[f])
-    return mon.break_time_s
-
-
 def outcome(moved_fraction: float) -> str:
     """The run's verdict from the final fraction of bricks moved: "collapsed" when at least half
     moved, "damaged" when more than 1 % did, else "standing"."""
@@ -72,13 +72,67 @@ def metrics(scene: Scene, out: RunOutput) -> Metrics:
     z0 = out.positions[start, :, 2]
     top = z0 >= z0.min() + 0.9 * (z0.max() - z0.min())
     drift = np.linalg.norm(rel[:, top, :2].mean(axis=1), axis=1)
-    breaks = bond_breaks(scene, out, start)
+    breaks = out.bond_break_time_s if out.bond_break_time_s is not None else np.full(len(scene.bonds), np.nan)
     t_rel = out.time - out.time[start]
     broken = (np.array([(breaks <= t).sum() for t in t_rel]) / max(1, len(breaks))) if len(breaks) else np.zeros(len(t_rel))
     idx = np.flatnonzero(moved >= 0.5)
     collapse = float(t_rel[idx[0]]) if idx.size else None
     return Metrics(start_frame=start, moved_fraction=moved, roof_drift_m=drift, max_displacement_m=dist.max(axis=0),
                    bond_break_time_s=breaks, broken_fraction=broken, collapse_time_s=collapse)
+
+
+def failure_mode_counts(out: RunOutput) -> dict:
+    """How many joints cracked by each criterion (tension, compression, shear)."""
+    modes = out.bond_break_mode if out.bond_break_mode is not None else np.zeros(0, dtype=int)
+    return {name: int((modes == k).sum()) for k, name in enumerate(FAILURE_MODES)}
+
+
+def structure_height(scene: Scene) -> float:
+    z = np.concatenate([b.vertices[:, 2] + b.location[2] for b in scene.bodies])
+    return float(z.max() - z.min())
+
+
+def pushover_stop(scene: Scene, warm_frame: int, settle_s: float = 1.0):
+    """A ``stop`` for :func:`~calib_masonry.simulate.blender.run`: true ``settle_s`` after the largest
+    brick displacement (from the end of the warm-up, relative to the plate) has run away."""
+    s = scene.solver
+    limit = max(s.moved_threshold_m, 10 * ONSET_DRIFT * structure_height(scene))
+    state = {"ref": None, "since": None}
+
+    def stop(frame: int, positions: np.ndarray, plate: np.ndarray) -> bool:
+        if state["ref"] is None:
+            state["ref"] = (positions.astype(np.float64).copy(), np.asarray(plate, dtype=np.float64).copy())
+            return False
+        p0, q0 = state["ref"]
+        d = np.linalg.norm(positions - p0 - (plate - q0), axis=1).max()
+        if state["since"] is None and d > limit:
+            state["since"] = frame
+        return state["since"] is not None and frame - state["since"] >= settle_s * s.fps
+
+    return stop
+
+
+def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float | None, np.ndarray, np.ndarray]:
+    """The pushover's collapse multiplier (g), or None if the structure did not run away within
+    the ramp; and the lateral acceleration (g) and roof displacement (m) at every frame from the
+    end of the warm-up (the pushover curve)."""
+    p = scene.pushover
+    start = m.start_frame
+    t = out.time[start:] - out.time[start]
+    lam = p.lateral_g(t)
+    rel = out.positions[start:] - out.positions[start] - (out.plate[start:] - out.plate[start])[:, None, :]
+    dmax = np.linalg.norm(rel, axis=2).max(axis=1)
+    height = structure_height(scene)
+    limit = max(scene.solver.moved_threshold_m, 10 * ONSET_DRIFT * height)
+    w = max(1, int(round(ONSET_WINDOW_S * scene.solver.fps)))
+    speed = np.zeros(len(rel))
+    speed[w:] = np.linalg.norm(rel[w:] - rel[:-w], axis=2).max(axis=1) / (w / scene.solver.fps)
+    run_away = np.flatnonzero(dmax > limit)
+    value = None
+    if run_away.size:
+        calm = np.flatnonzero(speed[:run_away[0]] <= ONSET_DRIFT * height)
+        value = float(lam[calm[-1]]) if calm.size else 0.0
+    return value, lam, m.roof_drift_m[start:]
 
 
 def _plt():
@@ -175,3 +229,22 @@ def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) ->
         plt.close(fig)
         paths.append(p)
     return paths
+
+
+def plot_pushover(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> float | None:
+    """Roof displacement against lateral acceleration, with the collapse multiplier marked."""
+    plt = _plt()
+    value, lam, roof = collapse_multiplier(scene, out, m)
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    ax.plot(lam, roof * 1000, color="C3", lw=1.2)
+    if value is not None:
+        ax.axvline(value, color="k", lw=0.8, ls="--")
+        ax.text(value, ax.get_ylim()[1] * 0.9, f"  collapse multiplier {value:.3f} g", fontsize=8)
+    ax.set_xlabel(f"lateral acceleration (g), along {scene.pushover.direction_deg:g} deg from X")
+    ax.set_ylabel("roof displacement (mm)")
+    ax.set_title(f"pushover at {scene.pushover.rate_g_per_s:g} g/s", fontsize=9)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return value

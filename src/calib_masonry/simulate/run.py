@@ -16,10 +16,11 @@ from ..errors import InputError
 from ..io import read_json, staged_output, write_json
 from ..spec import StructureSpec, WallSpec
 from .ground_motion import G, GroundMotion, read_accelerogram, synthetic_motion
-from .scene import (MASONRY, Material, Scene, SceneGeometry, SolverSettings, load_geometry, save_geometry,
+from .joints import joint_stiffness
+from .scene import (MASONRY, Material, Pushover, Scene, SceneGeometry, SolverSettings, load_geometry, save_geometry,
                     scene_from_geometry, scene_geometry)
 
-__all__ = ["SimulationConfig", "load_model", "model_from_json", "geometry_for_model", "store_geometry",
+__all__ = ["Pushover", "SimulationConfig", "load_model", "model_from_json", "geometry_for_model", "store_geometry",
            "scene_for_model", "simulate_to_folder", "rerun_with_fixed_hash_seed"]
 
 
@@ -61,6 +62,9 @@ class SimulationConfig:
     # through friction alone, and the whole structure creeps on the plate (a slow turn of ~1 mrad
     # in 10 s under gravity alone on the paper example, measured)
     foundation: bool = True
+    # a quasi-static collapse analysis instead of a ground motion (then pga, duration, seed,
+    # accelerogram and components are not used)
+    pushover: Pushover | None = None
 
 
 GEOMETRY_FILE = "sim_geometry.npz"  # the simulation's bodies and contact patches, stored by `build`
@@ -169,6 +173,11 @@ def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
     if config.duration_s <= 0:
         raise InputError(f"--duration {config.duration_s}: must be > 0 seconds")
     geometry, stored = geometry_for_model(model_dir)
+    if config.pushover is not None:
+        scene = scene_from_geometry(geometry, pushover=config.pushover, duration_s=config.pushover.duration_s,
+                                    material=config.material, solver=config.solver, foundation=config.foundation)
+        scene.notes["geometry_stored"] = stored
+        return scene
     motion = motion_for(config)
     scene = scene_from_geometry(geometry, motion=motion, duration_s=motion.duration, material=config.material,
                                 solver=config.solver, foundation=config.foundation)
@@ -180,25 +189,32 @@ def simulate_to_folder(model_dir: str | Path, out: str | Path, config: Simulatio
                        progress: bool | None = None) -> dict:
     """Run the simulation and write summary.json, poses.npz, scene.blend, figures and frames/."""
     from .blender import require_bpy, run
-    from .results import metrics, outcome, plot_ground_motion, plot_histories, render_frames
+    from .results import (ONSET_DRIFT, collapse_multiplier, failure_mode_counts, metrics, outcome, plot_ground_motion,
+                          plot_histories, plot_pushover, pushover_stop, render_frames)
 
     require_bpy()
     t0 = time.perf_counter()
     scene = scene_for_model(model_dir, config)
     t_scene = time.perf_counter() - t0
     with staged_output(out) as stage:
-        result = run(scene, progress=progress, blend_path=stage / "scene.blend")
+        stop = pushover_stop(scene, scene.solver.warmup_frames) if scene.pushover is not None else None
+        result = run(scene, progress=progress, blend_path=stage / "scene.blend", stop=stop)
         m = metrics(scene, result)
         np.savez_compressed(stage / "poses.npz", time=result.time, positions=result.positions.astype(np.float32),
                             quaternions=result.quaternions.astype(np.float32), plate=result.plate.astype(np.float32),
                             bond_break_time_s=m.bond_break_time_s)
         t1 = time.perf_counter()
         if config.figures:
-            plot_ground_motion(scene, stage / "ground_motion.png")
+            if scene.pushover is not None:
+                plot_pushover(scene, result, m, stage / "pushover.png")
+            else:
+                plot_ground_motion(scene, stage / "ground_motion.png")
             plot_histories(scene, result, m, stage / "histories.png")
             render_frames(scene, result, stage / "frames", count=config.frames_png)
         t_fig = time.perf_counter() - t1
         s = scene.solver
+        k = joint_stiffness(scene.material)
+        mat = scene.material
         summary = {
             "model": str(model_dir), "bricks": len(scene.bodies), "bonds": len(scene.bonds),
             # pga_g: the peak of the acceleration the run applies (frame means); record_peak_g: of the samples
@@ -208,13 +224,22 @@ def simulate_to_folder(model_dir: str | Path, out: str | Path, config: Simulatio
                               "duration_s": scene.motion.duration if scene.motion else 0.0},
             "solver": {"fps": s.fps, "substeps": s.substeps, "iterations": s.iterations, "warmup_s": s.warmup_s,
                        "gravity_ramp_s": s.gravity_ramp_s, "warmup_damping": s.warmup_damping,
-                       "joint_opening_crack_m": s.drift_break_m},
+                       "contact_gap_m": s.contact_gap_m},
+            "joints": {"model": "elastic interfaces (UDEC/3DEC convention) between rigid bricks; Bullet keeps intact "
+                                "joints rigid, the joint model cracks them (calib_masonry.simulate.joints)",
+                       "normal_stiffness_n_per_m3": k.normal, "shear_stiffness_n_per_m3": k.shear,
+                       "tensile_strength_pa": mat.tensile_strength, "compressive_strength_pa": mat.compressive_strength,
+                       "cohesion_pa": mat.shear_strength, "friction": mat.friction,
+                       "cracked_by": failure_mode_counts(result),
+                       "max_utilisation_at_end_of_warmup": float(result.max_utilisation[min(s.warmup_frames, len(result.time) - 1)])
+                       if result.max_utilisation is not None and len(result.time) else None,
+                       "seconds": round(result.seconds_joints, 3)},
             "frame": "ground: the plate stays put and the ground motion acts on every brick as an inertial force",
             "foundation_bonds": int(scene.notes.get("foundation_bonds", 0)),
             # the bodies and contact patches: read from the model folder's sim_geometry.npz (stored
             # by build) or, for a model built without it or edited since, computed in this run
             "geometry_stored_by_build": bool(scene.notes.get("geometry_stored", False)),
-            "mortar": {"fill_volume_fraction": scene.notes.get("mortar_fill_volume"), "strengths_pa": scene.notes.get("strengths_pa"),
+            "mortar": {"fill_volume_fraction": scene.notes.get("mortar_fill_volume"),
                        "max_hull_volume_change": scene.notes.get("max_hull_volume_change"),
                        "bricks_without_fill": scene.notes.get("bricks_without_fill", 0)},
             "moved_fraction_final": float(m.moved_fraction[-1]),
@@ -229,5 +254,12 @@ def simulate_to_folder(model_dir: str | Path, out: str | Path, config: Simulatio
                         "stepping": round(result.seconds_stepping, 3), "figures": round(t_fig, 3),
                         "per_frame": round(result.seconds_stepping / max(1, len(result.time) - 1), 4)},
         }
+        if scene.pushover is not None:
+            value = collapse_multiplier(scene, result, m)[0]
+            summary["pushover"] = {"rate_g_per_s": scene.pushover.rate_g_per_s,
+                                   "direction_deg": scene.pushover.direction_deg, "max_g": scene.pushover.max_g,
+                                   "onset_drift": ONSET_DRIFT}
+            summary["collapse_multiplier_g"] = value
+            summary["ground_motion"] = None
         write_json(stage / "summary.json", summary)
     return summary

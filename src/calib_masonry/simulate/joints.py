@@ -1,0 +1,499 @@
+"""Mortar joints as elastic interfaces: converged joint forces and the criterion that cracks them.
+
+Why this module exists. Bullet holds an intact joint's two bricks together with a rigid constraint.
+Rigid constraints in a statically indeterminate structure have no unique forces: how the iterative
+solver splits a load between them, and so which joint would break at an impulse threshold, changes
+with the iteration count and the substep (the Stylite tower stood at 50 iterations and fell at 150
+under its own weight). Springs inside Bullet are no way out: Bullet clamps a spring's stiffness to
+about ``m / (16 dt^2)`` (a 23 kg brick at a 4 ms step: 90 kN/m, so a mortar joint would open by
+centimetres before it carried its tensile strength).
+
+So the two jobs are split. Bullet keeps every intact joint rigid and unbreakable and does what it
+is good at: rigid-body motion, contacts, friction, impacts once joints have cracked. Whether a joint
+cracks is decided here, from the joint forces of an elastic model of the same joints, as the
+distinct-element codes UDEC and 3DEC model a mortar interface (Lourenco and Rots 1997; Itasca,
+3DEC manual, "joint stiffness"): a zero-thickness interface between rigid bricks with
+
+* normal stiffness per unit area ``k_n = E_u E_m / (t_j (E_u - E_m))``   [Pa/m = N/m^3]
+* shear stiffness per unit area  ``k_s = G_u G_m / (t_j (G_u - G_m))``   [Pa/m]
+
+(``E_u, G_u`` the unit's and ``E_m, G_m`` the mortar's moduli, ``G = E / (2 (1 + nu))``, ``t_j`` the
+joint thickness). A joint patch of area ``A`` with second moments ``I_uu = int u^2 dA``,
+``I_vv = int v^2 dA``, ``I_uv = int u v dA`` about its centroid, in its frame (u, v in the joint
+plane, n the normal from brick a to brick b), has the 6 x 6 stiffness, acting on the relative
+displacement ``d`` (m) and rotation ``r`` (rad) of b against a at the centroid,
+
+    F_u = k_s A d_u,   F_v = k_s A d_v,   F_n = k_n A d_n                         [N]
+    [M_u, M_v] = k_n [[I_vv, -I_uv], [-I_uv, I_uu]] [r_u, r_v],  M_n = k_s (I_uu + I_vv) r_n   [N m]
+
+and the normal stress at a point ``(u, v)`` of the patch is ``sigma = k_n (d_n + r_u v - r_v u)``
+[Pa], positive in tension (the joint opening). The joint cracks, as a whole, when anywhere on its
+outline (the convex hull of the patch, where a linear field takes its extremes)
+
+* tension cut-off:  ``sigma_max > f_t``, and, for a joint under net compression, its compressive
+  resultant ``(u_r, v_r) = (-M_v / F_n, M_u / F_n)`` outside the outline: brittle mortar cracks
+  where the stress reaches ``f_t``, but under compression that crack stops where the stress
+  changes sign, and the joint stands as a no-tension section until the resultant leaves it
+  (rocking). Under net tension the first crack runs through (nothing stops it);
+* compression cap:  ``-sigma_min > f_c``
+* Mohr-Coulomb shear: ``tau > c + mu sigma_c`` with ``tau = |F_uv| / A + |M_n| r_max / (I_uu + I_vv)``
+  and ``sigma_c = max(0, -F_n / A)`` the mean compression.
+
+Bending is no separate constant: it is the linear stress distribution over the patch. A joint of
+a rectangle ``b x d`` under a compression ``N`` and a moment ``M`` about a principal axis first
+reaches ``f_t`` at ``M = f_t S + N d / 6`` (``S = b d^2 / 6``); its resultant leaves the patch at
+``M = N d / 2``; so it fails at ``M = max(f_t S + N d / 6, N d / 2)``: by the mortar's tension for
+a lightly loaded joint, by rocking for a heavily loaded one. Once cracked, the joint carries what
+rigid contact carries (compression, rocking about an edge, Coulomb friction): Bullet's contacts
+take over. (A partly cracked joint keeps its full stiffness in this linear model; the stiffness
+lost by the cracked part would shift some load to its neighbours.)
+
+The elastic model. Every brick is a rigid body with six degrees of freedom (translation and small
+rotation about its centroid). The intact joints (and the foundation joints to the ground) couple
+them through the stiffness above; the joints that have cracked couple them through
+compression-only contact springs at their outline's corners (``k_n A / k`` and ``k_s A / k`` for
+``k`` corners, a corner that would pull is dropped and the system solved again), but only at
+corners that Bullet says are still closed (gap under ``contact_gap_m``). The load is each brick's
+weight in the frame that moves with the ground, ``m (-a_x, -a_y, -g)``, the same vector Bullet
+steps with in that frame: the intact structure is rigid in Bullet, so it responds to the ground
+quasi-statically, and its joint forces are those of this linear solve (direct sparse LU, exact to
+rounding: they do not depend on any solver setting). A brick or a group of bricks that no joint or
+contact holds (falling) is held by a weak spring ``eps m`` to its place; under the uniform
+gravity-like load that spring takes exactly the group's own weight, so it puts no force on the
+group's joints (inertia relief).
+
+Forces depend on the ratios of the stiffnesses (``k_s / k_n`` and the patches' geometry), not on
+their size: all joints share one material, so scaling ``E`` scales every displacement and leaves
+every force as it is. The absolute values matter only for how far a joint opens, which nothing
+here reads.
+
+When a frame's load cracks a joint, the load is re-solved on the structure without it, and the
+joints that this overloads crack in the same frame (event by event: those within 10 % of the
+worst at each round), up to ``max_rounds``.
+
+Units: metres, newtons, pascals, radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .scene import Bond, Material, Scene, footing_patches, joint_axes
+
+__all__ = ["JointStiffness", "joint_stiffness", "JointModel", "JointState", "CrackTracker", "FAILURE_MODES"]
+
+FAILURE_MODES = ("tension", "compression", "shear")
+
+
+@dataclass(frozen=True)
+class JointStiffness:
+    """Normal and shear stiffness per unit area of a mortar interface, N/m^3 (Pa/m)."""
+
+    normal: float
+    shear: float
+
+
+def joint_stiffness(material: Material) -> JointStiffness:
+    """``k_n = E_u E_m / (t_j (E_u - E_m))``, ``k_s = G_u G_m / (t_j (G_u - G_m))`` (see the module
+    docstring); a unit much stiffer than the mortar gives ``E_m / t_j``."""
+    m = material
+    gu = m.unit_youngs_modulus / (2.0 * (1.0 + m.unit_poisson))
+    gm = m.mortar_youngs_modulus / (2.0 * (1.0 + m.mortar_poisson))
+    kn = m.unit_youngs_modulus * m.mortar_youngs_modulus / (
+        m.joint_thickness_m * (m.unit_youngs_modulus - m.mortar_youngs_modulus))
+    ks = gu * gm / (m.joint_thickness_m * (gu - gm))
+    return JointStiffness(normal=float(kn), shear=float(ks))
+
+
+def _skew(r: np.ndarray) -> np.ndarray:
+    """``[r]x`` ``(N, 3, 3)`` of vectors ``(N, 3)``: ``[r]x w = r x w``."""
+    z = np.zeros(len(r))
+    return np.stack([np.stack([z, -r[:, 2], r[:, 1]], -1), np.stack([r[:, 2], z, -r[:, 0]], -1),
+                     np.stack([-r[:, 1], r[:, 0], z], -1)], -2)
+
+
+@dataclass(frozen=True)
+class JointState:
+    """The joints' condition under one load: per joint its utilisation (the largest of the three
+    criteria's stress over strength; >= 1 fails), the criterion that governs, and the forces in
+    the joint frame (``F_u, F_v, F_n, M_u, M_v, M_n``; N and N m, ``F_n > 0`` pulls)."""
+
+    utilisation: np.ndarray  # (J,)
+    mode: np.ndarray  # (J,) index into FAILURE_MODES
+    forces: np.ndarray  # (J, 6)
+    relative: np.ndarray  # (J, 6) d_u, d_v, d_n (m), r_u, r_v, r_n (rad) of b against a
+
+
+def _plate_contacts(scene: Scene) -> tuple[Bond, ...]:
+    """Contact-only joints for the bodies that stand on the plate without a foundation joint."""
+    if not scene.bodies:
+        return ()
+    founded = {b.a for b in scene.bonds if b.b < 0}
+    tol = max(scene.solver.contact_gap_m, 1e-4)
+    top = scene.plate.top_z
+    if scene.plate.tilt_deg != 0.0:
+        return ()  # a tilted plate (tests of sliding) holds no bonded structure
+    patches = footing_patches(scene.bodies, tol, bottom=top)
+    return tuple(p for p in patches if p.a not in founded)
+
+
+def _ratio(stress: np.ndarray, strength) -> np.ndarray:
+    """Utilisation ``stress / strength``, where a zero strength is met by any positive stress."""
+    strength = np.broadcast_to(np.asarray(strength, dtype=np.float64), np.shape(stress))
+    out = np.where(stress > 0, np.inf, 0.0)
+    np.divide(stress, strength, out=out, where=strength > 0)
+    return out
+
+
+def _inside_outline(outline: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Whether the points ``(u, v)`` (J,) lie inside each joint's convex outline ``(J, K, 2)``
+    (corners in order, padded by repeats)."""
+    a = outline
+    b = np.roll(outline, -1, axis=1)
+    edge = b - a
+    rel = np.stack([u, v], axis=1)[:, None] - a
+    cross = edge[..., 0] * rel[..., 1] - edge[..., 1] * rel[..., 0]
+    real = np.linalg.norm(edge, axis=2) > 1e-12
+    pos = np.where(real, cross >= -1e-12, True).all(axis=1)
+    neg = np.where(real, cross <= 1e-12, True).all(axis=1)
+    return pos | neg
+
+
+class JointModel:
+    """The elastic joint network of a scene's bonds (see the module docstring).
+
+    ``intact`` (per bond) says which joints still act as mortar; the others act as contacts where
+    ``closed`` (per bond and outline corner, from Bullet's poses) says they touch. Body ``i`` is
+    ``scene.bodies[i]`` at its reference position (the end of the warm-up): the model is linear,
+    small-displacement, about that state.
+    """
+
+    def __init__(self, scene: Scene, *, eps_per_s2: float = 1e-2, contact_gap_m: float = 1e-3,
+                 max_rounds: int = 40) -> None:
+        self.material = scene.material
+        self.stiffness = joint_stiffness(self.material)
+        self.contact_gap_m = float(contact_gap_m)
+        self.max_rounds = int(max_rounds)
+        bodies = scene.bodies
+        bonds = scene.bonds
+        self.nb = len(bodies)
+        self.nj = len(bonds)  # the mortar joints; self.n_all adds the plate contacts
+        self.mass = np.array([b.mass for b in bodies], dtype=np.float64)
+        # bodies standing on the plate without a foundation joint bear on it: contact-only joints,
+        # after the real ones, never intact
+        bonds = tuple(bonds) + _plate_contacts(scene)
+        self.x = np.array([b.location for b in bodies], dtype=np.float64).reshape(-1, 3)
+        size = np.array([np.cbrt(max(b.volume, 1e-9)) for b in bodies])
+        # weak springs to the body's place: eps m on translations, eps m l^2 on rotations
+        reg = np.column_stack([np.repeat(eps_per_s2 * self.mass[:, None], 3, axis=1),
+                               np.repeat((eps_per_s2 * self.mass * size**2)[:, None], 3, axis=1)])
+        self._reg = sp.diags(reg.ravel())
+        self._lu: dict = {}
+        self.n_all = len(bonds)
+        if self.n_all == 0:
+            return
+        self.a = np.array([b.a for b in bonds], dtype=np.int64)
+        self.b = np.array([b.b for b in bonds], dtype=np.int64)
+        self.centre = np.array([b.location for b in bonds], dtype=np.float64)
+        u, v, n = joint_axes(np.array([b.normal for b in bonds], dtype=np.float64))
+        self.R = np.stack([u, v, n], axis=2)  # (J, 3, 3): columns u, v, n
+        self.area = np.array([b.area_m2 for b in bonds], dtype=np.float64)
+        mom = np.array([b.moments for b in bonds], dtype=np.float64).reshape(-1, 3)
+        self.iuu, self.ivv, self.iuv = mom[:, 0], mom[:, 1], mom[:, 2]
+        self.outline = np.array([b.outline for b in bonds], dtype=np.float64)  # (J, K, 2)
+        kn, ks = self.stiffness.normal, self.stiffness.shear
+        D = np.zeros((self.n_all, 6, 6))
+        D[:, 0, 0] = D[:, 1, 1] = ks * self.area
+        D[:, 2, 2] = kn * self.area
+        D[:, 3, 3] = kn * self.ivv
+        D[:, 4, 4] = kn * self.iuu
+        D[:, 3, 4] = D[:, 4, 3] = -kn * self.iuv
+        D[:, 5, 5] = ks * (self.iuu + self.ivv)
+        self.D = D
+        # L (J, 6, 12): the joint-frame relative displacement and rotation of b against a, from the
+        # two bodies' (translation, rotation) about their centroids
+        ground = self.b < 0
+        ra = self.centre - self.x[self.a]
+        rb = self.centre - self.x[np.where(ground, self.a, self.b)]
+        eye = np.broadcast_to(np.eye(3), (self.n_all, 3, 3))
+        B = np.zeros((self.n_all, 6, 12))
+        B[:, :3, 0:3] = -eye
+        B[:, :3, 3:6] = _skew(ra)
+        B[:, 3:, 3:6] = -eye
+        B[:, :3, 6:9] = eye
+        B[:, :3, 9:12] = -_skew(rb)
+        B[:, 3:, 9:12] = eye
+        B[ground, :, 6:] = 0.0
+        Rt = np.transpose(self.R, (0, 2, 1))
+        L = np.zeros_like(B)
+        L[:, :3] = Rt @ B[:, :3]
+        L[:, 3:] = Rt @ B[:, 3:]
+        self.L = L
+        self.Kj = np.transpose(L, (0, 2, 1)) @ D @ L  # (J, 12, 12)
+        self.dofs = np.concatenate([6 * self.a[:, None] + np.arange(6), 6 * np.where(ground, self.a, self.b)[:, None]
+                                    + np.arange(6)], axis=1)  # (J, 12); ground columns are zero in L
+        # contact corners of each joint: global positions at the reference state and their B rows
+        self.corner_mask = self._unique_corners()
+        self._corner_L, self._corner_k = self._corner_rows()
+
+    # ------------------------------------------------------------------ geometry of the corners
+    def _unique_corners(self) -> np.ndarray:
+        """(J, K) True for the distinct outline corners (outlines are padded by repeats)."""
+        o = self.outline
+        keep = np.ones(o.shape[:2], dtype=bool)
+        keep[:, 1:] = np.linalg.norm(np.diff(o, axis=1), axis=2) > 1e-9
+        return keep
+
+    def corner_points(self) -> np.ndarray:
+        """Global positions ``(J, K, 3)`` of every joint's outline corners at the reference state."""
+        u, v = self.R[:, :, 0], self.R[:, :, 1]
+        return self.centre[:, None] + self.outline[..., :1] * u[:, None] + self.outline[..., 1:] * v[:, None]
+
+    def _corner_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint and corner the (3, 12) map from the two bodies' motion to the corner's relative
+        displacement in the joint frame, and the corner spring's (k_s, k_s, k_n) stiffness."""
+        p = self.corner_points()  # (J, K, 3)
+        J, K = p.shape[:2]
+        ground = self.b < 0
+        xa = self.x[self.a][:, None]
+        xb = self.x[np.where(ground, self.a, self.b)][:, None]
+        ra = (p - xa).reshape(-1, 3)
+        rb = (p - xb).reshape(-1, 3)
+        eye = np.broadcast_to(np.eye(3), (J * K, 3, 3))
+        B = np.zeros((J * K, 3, 12))
+        B[:, :, 0:3] = -eye
+        B[:, :, 3:6] = _skew(ra)
+        B[:, :, 6:9] = eye
+        B[:, :, 9:12] = -_skew(rb)
+        B = B.reshape(J, K, 3, 12)
+        B[ground, :, :, 6:] = 0.0
+        Rt = np.transpose(self.R, (0, 2, 1))
+        Lc = np.einsum("jab,jkbc->jkac", Rt, B)
+        count = self.corner_mask.sum(axis=1, keepdims=True)
+        share = self.area[:, None] / count  # each corner carries its share of the patch
+        k = np.stack([self.stiffness.shear * share, self.stiffness.shear * share, self.stiffness.normal * share], -1)
+        return Lc, k * self.corner_mask[..., None]
+
+    # ------------------------------------------------------------------ assembly and solve
+    def _pad(self, intact: np.ndarray) -> np.ndarray:
+        """``intact`` over the mortar joints, extended over the plate contacts (never intact)."""
+        out = np.zeros(self.n_all, dtype=bool)
+        out[:self.nj] = np.asarray(intact, dtype=bool)
+        return out
+
+    def _matrix(self, intact: np.ndarray, contacts: np.ndarray) -> sp.csc_matrix:
+        n = 6 * self.nb
+        rows, cols, vals = [], [], []
+        idx = np.flatnonzero(intact)
+        if idx.size:
+            d = self.dofs[idx]
+            rows.append(np.repeat(d, 12, axis=1).ravel())
+            cols.append(np.tile(d, (1, 12)).ravel())
+            vals.append(self.Kj[idx].ravel())
+        jc, kc = np.nonzero(contacts)
+        if jc.size:
+            Lc = self._corner_L[jc, kc]  # (C, 3, 12)
+            kk = self._corner_k[jc, kc]  # (C, 3)
+            Kc = np.einsum("cai,ca,caj->cij", Lc, kk, Lc)
+            d = self.dofs[jc]
+            rows.append(np.repeat(d, 12, axis=1).ravel())
+            cols.append(np.tile(d, (1, 12)).ravel())
+            vals.append(Kc.ravel())
+        if rows:
+            r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+            keep = v != 0.0
+            K = sp.coo_matrix((v[keep], (r[keep], c[keep])), shape=(n, n)).tocsc()
+        else:
+            K = sp.csc_matrix((n, n))
+        return (K + self._reg).tocsc()
+
+    def _load(self, g: np.ndarray) -> np.ndarray:
+        f = np.zeros((self.nb, 6))
+        f[:, :3] = self.mass[:, None] * np.asarray(g, dtype=np.float64)[None]
+        return f.ravel()
+
+    def _factor(self, intact: np.ndarray, active: np.ndarray):
+        """The LU factors of the stiffness with these joints intact and these contact corners
+        active, kept for the last few states (a run that does not change its joints or contacts
+        between frames only back-substitutes)."""
+        key = (intact.tobytes(), np.packbits(active).tobytes())
+        lu = self._lu.pop(key, None)
+        if lu is None:
+            lu = spla.splu(self._matrix(intact, active))
+        self._lu[key] = lu
+        while len(self._lu) > 8:
+            self._lu.pop(next(iter(self._lu)))
+        return lu
+
+    def solve(self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None
+              ) -> tuple[JointState, np.ndarray]:
+        """The joints' state under the load ``m g`` on every body (``g`` (3,) m/s^2), with the joints
+        ``intact`` (J,) as mortar and the others as compression-only contacts at their corners
+        where ``closed`` (J', K) (default: every corner of every cracked joint; J' counts the plate
+        contacts after the joints, :attr:`n_all`). Returns the state of the mortar joints and the
+        contact corners that carry compression (a corner that pulls is dropped and the system solved
+        again, up to three times; which corners touch at all is Bullet's answer, ``closed``)."""
+        intact = self._pad(intact)
+        cand = (~intact)[:, None] & self.corner_mask
+        if closed is not None:
+            cand &= closed
+        active = cand.copy()
+        rhs = self._load(g)
+        jc, kc = np.nonzero(cand)
+        for _ in range(3):  # drop the corners that pull, solve again (Bullet's poses say which touch)
+            U = self._factor(intact, active).solve(rhs)
+            if jc.size == 0:
+                break
+            dn = np.einsum("ca,ca->c", self._corner_L[jc, kc, 2], U[self.dofs[jc]])
+            pulling = active[jc, kc] & (dn > 0.0)
+            if not pulling.any():
+                break
+            active[jc[pulling], kc[pulling]] = False
+        return self.state(U), active
+
+    def state(self, U: np.ndarray) -> JointState:
+        """Utilisation, governing criterion and forces of every mortar joint for the body motion ``U`` (6 B,)."""
+        n = self.nj
+        return self.state_from_relative(np.einsum("jab,jb->ja", self.L[:n], U[self.dofs[:n]]))
+
+    def state_from_relative(self, rel: np.ndarray) -> JointState:
+        """The same from every joint's relative displacement and rotation ``(J, 6)`` (d_u, d_v, d_n,
+        r_u, r_v, r_n) in its frame."""
+        m = self.material
+        n = self.nj
+        forces = np.einsum("jab,jb->ja", self.D[:n], rel)
+        kn = self.stiffness.normal
+        outline, area, iuu, ivv = self.outline[:n], self.area[:n], self.iuu[:n], self.ivv[:n]
+        ou, ov = outline[..., 0], outline[..., 1]
+        sigma = kn * (rel[:, 2:3] + rel[:, 3:4] * ov - rel[:, 4:5] * ou)  # (J, K), tension positive
+        tension = _ratio(sigma.max(axis=1), m.tensile_strength)
+        # a compressed joint whose tensile corner has cracked stands as a no-tension section while
+        # its compressive resultant stays inside the patch: it fails in bending only once the
+        # resultant leaves the outline (rocking)
+        fn = forces[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ur = np.where(fn < 0, -forces[:, 4] / fn, 0.0)
+            vr = np.where(fn < 0, forces[:, 3] / fn, 0.0)
+        inside = _inside_outline(outline, ur, vr)
+        tension = np.where((fn < 0) & inside, np.minimum(tension, 1.0 - 1e-12), tension)
+        compression = -sigma.min(axis=1) / m.compressive_strength
+        polar = np.maximum(iuu + ivv, 1e-30)
+        rmax = np.sqrt((outline**2).sum(axis=2)).max(axis=1)
+        tau = np.hypot(forces[:, 0], forces[:, 1]) / area + np.abs(forces[:, 5]) * rmax / polar
+        sigma_c = np.maximum(0.0, -forces[:, 2] / area)
+        shear = _ratio(tau, m.shear_strength + m.friction * sigma_c)
+        crit = np.stack([tension, compression, shear], axis=1)
+        return JointState(utilisation=crit.max(axis=1), mode=crit.argmax(axis=1), forces=forces, relative=rel)
+
+    def crack(self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, JointState]:
+        """The joints that crack under the load ``m g``, event by event: solve, crack the intact
+        joints whose utilisation is over 1 and within 10 % of the worst, solve again on what is
+        left, until no intact joint is over 1 (or ``max_rounds``). Returns the indices cracked (in
+        order), the criterion each failed by, and the last state."""
+        intact = np.asarray(intact, dtype=bool)[:self.nj].copy()
+        closed = None if closed is None else np.asarray(closed, dtype=bool).copy()
+        cracked: list[np.ndarray] = []
+        modes: list[np.ndarray] = []
+        state, _ = self.solve(g, intact, closed)
+        for _ in range(self.max_rounds):
+            util = np.where(intact, state.utilisation, 0.0)
+            worst = float(util.max(initial=0.0))
+            if worst <= 1.0:
+                break
+            new = np.flatnonzero(util >= max(1.0, 0.9 * worst))
+            intact[new] = False
+            if closed is not None:
+                closed[new] = True  # a joint that has just cracked still touches
+            cracked.append(new)
+            modes.append(state.mode[new])
+            state, _ = self.solve(g, intact, closed)
+        if not cracked:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), state
+        return np.concatenate(cracked), np.concatenate(modes), state
+
+    def corner_gaps(self, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray,
+                    ref_positions: np.ndarray, ref_rotations: np.ndarray, plate0: np.ndarray) -> np.ndarray:
+        """How far each joint's outline corners have opened ``(J, K)`` (m, along the joint normal as
+        brick a carries it) between the reference poses and these."""
+        p = self.corner_points()
+        ground = self.b < 0
+        bb = np.where(ground, self.a, self.b)
+        Ra0, Rb0 = ref_rotations[self.a], ref_rotations[bb]
+        qa = np.einsum("jba,jkb->jka", Ra0, p - ref_positions[self.a][:, None])
+        qb = np.einsum("jba,jkb->jka", Rb0, p - ref_positions[bb][:, None])
+        pa = np.einsum("jab,jkb->jka", rotations[self.a], qa) + positions[self.a][:, None]
+        pb = np.einsum("jab,jkb->jka", rotations[bb], qb) + positions[bb][:, None]
+        pb[ground] = p[ground] + (np.asarray(plate, dtype=np.float64) - np.asarray(plate0, dtype=np.float64))
+        n = np.einsum("jab,jb->ja", rotations[self.a] @ np.transpose(Ra0, (0, 2, 1)), self.R[:, :, 2])
+        return np.einsum("jka,ja->jk", pb - pa, n)
+
+    def __repr__(self) -> str:
+        return (f"JointModel({self.nb} bodies, {self.nj} joints, k_n={self.stiffness.normal:.3g} N/m^3, "
+                f"k_s={self.stiffness.shear:.3g} N/m^3)")
+
+
+class CrackTracker:
+    """The joints of a run, from the end of the warm-up on: before each step, :meth:`step` cracks
+    the joints that the step's load (``m g`` on every body) cracks, given which cracked joints
+    still touch (from the poses). Records each joint's cracking time and failure mode.
+
+    While no joint has cracked (and no body merely stands on the plate), the joint forces are
+    linear in ``g``: the three unit-load solutions are computed once and combined, so a structure
+    that stands costs one factorisation."""
+
+    def __init__(self, scene: Scene, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray,
+                 time_s: float) -> None:
+        self.model = JointModel(scene, contact_gap_m=scene.solver.contact_gap_m)
+        n = self.model.nj
+        self.t0 = float(time_s)
+        self.ref = (np.asarray(positions, dtype=np.float64).copy(), np.asarray(rotations, dtype=np.float64).copy(),
+                    np.asarray(plate, dtype=np.float64).copy())
+        self.intact = np.ones(n, dtype=bool)
+        self.break_time_s = np.full(n, np.nan)
+        self.break_mode = np.full(n, -1, dtype=np.int64)
+        self.max_utilisation = 0.0
+        self.seconds = 0.0
+        self._unit = None
+
+    def _unit_states(self) -> list[JointState]:
+        if self._unit is None:
+            eye = np.eye(3)
+            self._unit = [self.model.solve(eye[k], self.intact)[0] for k in range(3)]
+        return self._unit
+
+    def step(self, time_s: float, g: np.ndarray, positions: np.ndarray, rotations: np.ndarray,
+             plate: np.ndarray) -> np.ndarray:
+        """The joints that crack under the coming step's load ``g`` (3,), given the current poses;
+        returns their indices."""
+        import time
+
+        t = time.perf_counter()
+        try:
+            if self.model.nj == 0:
+                return np.zeros(0, dtype=np.int64)
+            g = np.asarray(g, dtype=np.float64)
+            closed = None
+            if self.intact.all() and self.model.n_all == self.model.nj:
+                # forces are linear in g while nothing has cracked: combine the unit-load solutions
+                unit = self._unit_states()
+                state = self.model.state_from_relative(sum(g[k] * unit[k].relative for k in range(3)))
+                self.max_utilisation = float(state.utilisation.max())
+                if self.max_utilisation <= 1.0:
+                    return np.zeros(0, dtype=np.int64)
+            else:
+                gaps = self.model.corner_gaps(positions, rotations, plate, *self.ref)
+                closed = gaps < self.model.contact_gap_m
+            new, modes, state = self.model.crack(g, self.intact, closed)
+            self.intact[new] = False
+            self.break_time_s[new] = float(time_s) - self.t0
+            self.break_mode[new] = modes
+            self.max_utilisation = float(np.where(self.intact, state.utilisation, 0.0).max(initial=0.0))
+            return new
+        finally:
+            self.seconds += time.perf_counter() - t
+

@@ -95,3 +95,20 @@ def test_run_motion_peaks_at_the_pga_as_applied_per_frame():
             i = np.argmax(np.abs(raw.displacement[:, 0]))
             np.testing.assert_allclose(m.displacement, raw.displacement * (m.displacement[i, 0] / raw.displacement[i, 0]),
                                        atol=1e-12)
+
+
+def test_a_record_starts_from_rest():
+    # displacement and velocity zero at t = 0 and the first frame's applied acceleration a small
+    # fraction of the peak (the record is tapered in over TAPER_S): the structure is not jolted
+    from calib_masonry.simulate.ground_motion import TAPER_S
+    from calib_masonry.simulate.run import SimulationConfig, motion_for
+
+    for seed in (0, 1, 2):
+        m = motion_for(SimulationConfig(pga_g=0.3, seed=seed))
+        assert np.all(m.displacement[0] == 0.0)
+        v = np.diff(m.displacement, axis=0) / m.dt
+        assert np.abs(v[0]).max() < 1e-3 * np.abs(v).max()
+        t, a = m.frame_means(25)
+        assert np.abs(a[0]).max() < 0.02 * np.abs(a).max()
+        # after the taper the record is the record: its peak is where the strong phase is
+        assert t[np.abs(a).max(axis=1).argmax()] > TAPER_S

@@ -239,7 +239,7 @@ def plot_pushover(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> float
     ax.plot(lam, roof * 1000, color="C3", lw=1.2)
     if value is not None:
         ax.axvline(value, color="k", lw=0.8, ls="--")
-        ax.text(value, ax.get_ylim()[1] * 0.9, f"  collapse multiplier {value:.3f} g", fontsize=8)
+        ax.text(value, ax.get_ylim()[1] * 0.9, f"collapse multiplier {value:.3f} g  ", fontsize=8, ha="right")
     ax.set_xlabel(f"lateral acceleration (g), along {scene.pushover.direction_deg:g} deg from X")
     ax.set_ylabel("roof displacement (mm)")
     ax.set_title(f"pushover at {scene.pushover.rate_g_per_s:g} g/s", fontsize=9)

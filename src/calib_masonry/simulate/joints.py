@@ -76,6 +76,7 @@ Units: metres, newtons, pascals, radians.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -489,8 +490,6 @@ class CrackTracker:
              plate: np.ndarray) -> np.ndarray:
         """The joints that crack under the coming step's load ``g`` (3,), given the current poses;
         returns their indices."""
-        import time
-
         t = time.perf_counter()
         try:
             if self.model.nj == 0:

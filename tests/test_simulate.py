@@ -135,7 +135,7 @@ def _pushover(bodies, bonds=(), rate=0.01, max_g=0.6, material=Material(), mu=0.
     scene = Scene(bodies=tuple(bodies), bonds=tuple(bonds), plate=Plate(friction=math.sqrt(mu)), material=material,
                   pushover=Pushover(rate_g_per_s=rate, max_g=max_g, direction_deg=direction), duration_s=max_g / rate,
                   solver=solver or _solver(warmup=0.3))
-    out = run(scene, progress=False, stop=pushover_stop(scene, scene.solver.warmup_frames))
+    out = run(scene, progress=False, stop=pushover_stop(scene))
     m = metrics(scene, out)
     return collapse_multiplier(scene, out, m)[0], scene, out, m
 
@@ -310,6 +310,17 @@ def test_simulate_cli_outputs(small_model):
         assert (out / f).is_file(), f
     poses = np.load(out / "poses.npz")
     assert poses["positions"].shape[1] == s["bricks"]
+
+
+def test_simulate_cli_pushover(small_model):
+    out = small_model / "push"
+    r = _cli("simulate", small_model / "model", "--pushover", "--pushover-rate", "0.1", "--pushover-max", "0.3",
+             "--direction", "90", "--frames", "2", "--out", out)
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["pushover"]["direction_deg"] == 90.0 and s["ground_motion"] is None
+    assert "collapse_multiplier_g" in s
+    assert (out / "pushover.png").is_file() and not (out / "ground_motion.png").exists()
 
 
 @pytest.mark.parametrize("case, msg", [("nobricks", "no bricks.json"), ("negative", "--pga"),

@@ -129,6 +129,33 @@ class JointState:
     relative: np.ndarray  # (J, 6) d_u, d_v, d_n (m), r_u, r_v, r_n (rad) of b against a
 
 
+def _point_map(ra: np.ndarray, rb: np.ndarray, ground: np.ndarray) -> np.ndarray:
+    """``(N, 3, 12)``: the displacement of body b's copy of a point less body a's, from the two
+    bodies' (translation, small rotation) about their centroids; ``ra``, ``rb`` ``(N, 3)`` run from
+    each centroid to the point. Where ``ground`` (the point's b is the fixed plate), b's columns are 0."""
+    eye = np.broadcast_to(np.eye(3), (len(ra), 3, 3))
+    B = np.zeros((len(ra), 3, 12))
+    B[:, :, 0:3] = -eye
+    B[:, :, 3:6] = _skew(ra)
+    B[:, :, 6:9] = eye
+    B[:, :, 9:12] = -_skew(rb)
+    B[ground, :, 6:] = 0.0
+    return B
+
+
+def _scatter(dofs: np.ndarray, blocks: np.ndarray, n: int, drop_zeros: bool = False) -> sp.csc_matrix:
+    """The ``n x n`` sum of the 12 x 12 ``blocks`` ``(M, 12, 12)`` placed at ``dofs`` ``(M, 12)``
+    (with ``drop_zeros``, entries that are exactly 0 are left out of the sparsity pattern: a contact
+    corner on the plate has no b columns)."""
+    rows = np.repeat(dofs, 12, axis=1).ravel()
+    cols = np.tile(dofs, (1, 12)).ravel()
+    vals = blocks.ravel()
+    if drop_zeros:
+        keep = vals != 0.0
+        rows, cols, vals = rows[keep], cols[keep], vals[keep]
+    return sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsc()
+
+
 def _plate_contacts(scene: Scene) -> tuple[Bond, ...]:
     """Contact-only joints for the bodies that stand on the plate without a foundation joint."""
     if not scene.bodies:
@@ -218,26 +245,21 @@ class JointModel:
         self.D = D
         # L (J, 6, 12): the joint-frame relative displacement and rotation of b against a, from the
         # two bodies' (translation, rotation) about their centroids
-        ground = self.b < 0
-        ra = self.centre - self.x[self.a]
-        rb = self.centre - self.x[np.where(ground, self.a, self.b)]
-        eye = np.broadcast_to(np.eye(3), (self.n_all, 3, 3))
+        self.ground = self.b < 0
+        self.bb = np.where(self.ground, self.a, self.b)  # b's body, or a's for the plate (its columns are 0)
         B = np.zeros((self.n_all, 6, 12))
-        B[:, :3, 0:3] = -eye
-        B[:, :3, 3:6] = _skew(ra)
-        B[:, 3:, 3:6] = -eye
-        B[:, :3, 6:9] = eye
-        B[:, :3, 9:12] = -_skew(rb)
-        B[:, 3:, 9:12] = eye
-        B[ground, :, 6:] = 0.0
+        B[:, :3] = _point_map(self.centre - self.x[self.a], self.centre - self.x[self.bb], self.ground)
+        B[:, 3:, 3:6] = -np.eye(3)
+        B[:, 3:, 9:12] = np.eye(3)
+        B[self.ground, 3:, 9:12] = 0.0
         Rt = np.transpose(self.R, (0, 2, 1))
         L = np.zeros_like(B)
         L[:, :3] = Rt @ B[:, :3]
         L[:, 3:] = Rt @ B[:, 3:]
         self.L = L
         self.Kj = np.transpose(L, (0, 2, 1)) @ D @ L  # (J, 12, 12)
-        self.dofs = np.concatenate([6 * self.a[:, None] + np.arange(6), 6 * np.where(ground, self.a, self.b)[:, None]
-                                    + np.arange(6)], axis=1)  # (J, 12); ground columns are zero in L
+        self.dofs = np.concatenate([6 * self.a[:, None] + np.arange(6), 6 * self.bb[:, None] + np.arange(6)],
+                                   axis=1)  # (J, 12); ground columns are zero in L
         # contact corners of each joint: global positions at the reference state and their B rows
         self.corner_mask = self._unique_corners()
         self._corner_L, self._corner_k = self._corner_rows()
@@ -260,19 +282,9 @@ class JointModel:
         displacement in the joint frame, and the corner spring's (k_s, k_s, k_n) stiffness."""
         p = self.corner_points()  # (J, K, 3)
         J, K = p.shape[:2]
-        ground = self.b < 0
-        xa = self.x[self.a][:, None]
-        xb = self.x[np.where(ground, self.a, self.b)][:, None]
-        ra = (p - xa).reshape(-1, 3)
-        rb = (p - xb).reshape(-1, 3)
-        eye = np.broadcast_to(np.eye(3), (J * K, 3, 3))
-        B = np.zeros((J * K, 3, 12))
-        B[:, :, 0:3] = -eye
-        B[:, :, 3:6] = _skew(ra)
-        B[:, :, 6:9] = eye
-        B[:, :, 9:12] = -_skew(rb)
-        B = B.reshape(J, K, 3, 12)
-        B[ground, :, :, 6:] = 0.0
+        ra = (p - self.x[self.a][:, None]).reshape(-1, 3)
+        rb = (p - self.x[self.bb][:, None]).reshape(-1, 3)
+        B = _point_map(ra, rb, np.repeat(self.ground, K)).reshape(J, K, 3, 12)
         Rt = np.transpose(self.R, (0, 2, 1))
         Lc = np.einsum("jab,jkbc->jkac", Rt, B)
         count = self.corner_mask.sum(axis=1, keepdims=True)
@@ -292,31 +304,18 @@ class JointModel:
         key = intact.tobytes()
         if self._joint_part is not None and self._joint_part[0] == key:
             return self._joint_part[1]
-        n = 6 * self.nb
         idx = np.flatnonzero(intact)
-        d = self.dofs[idx]
-        K = sp.coo_matrix((self.Kj[idx].ravel(), (np.repeat(d, 12, axis=1).ravel(), np.tile(d, (1, 12)).ravel())),
-                          shape=(n, n)).tocsc() + self._reg
+        K = _scatter(self.dofs[idx], self.Kj[idx], 6 * self.nb) + self._reg
         self._joint_part = (key, K.tocsc())
         return self._joint_part[1]
 
     def _matrix(self, intact: np.ndarray, contacts: np.ndarray) -> sp.csc_matrix:
-        n = 6 * self.nb
-        rows, cols, vals = [], [], []
+        K = self._joint_matrix(intact)
         jc, kc = np.nonzero(contacts)
         if jc.size:
             Lc = self._corner_L[jc, kc]  # (C, 3, 12)
-            kk = self._corner_k[jc, kc]  # (C, 3)
-            Kc = np.einsum("cai,ca,caj->cij", Lc, kk, Lc)
-            d = self.dofs[jc]
-            rows.append(np.repeat(d, 12, axis=1).ravel())
-            cols.append(np.tile(d, (1, 12)).ravel())
-            vals.append(Kc.ravel())
-        K = self._joint_matrix(intact)
-        if rows:
-            r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
-            keep = v != 0.0
-            K = (K + sp.coo_matrix((v[keep], (r[keep], c[keep])), shape=(n, n)).tocsc()).tocsc()
+            Kc = np.einsum("cai,ca,caj->cij", Lc, self._corner_k[jc, kc], Lc)
+            K = (K + _scatter(self.dofs[jc], Kc, 6 * self.nb, drop_zeros=True)).tocsc()
         return K
 
     def _load(self, g: np.ndarray) -> np.ndarray:
@@ -441,8 +440,7 @@ class JointModel:
         """How far each joint's outline corners have opened ``(J, K)`` (m, along the joint normal as
         brick a carries it) between the reference poses and these."""
         p = self.corner_points()
-        ground = self.b < 0
-        bb = np.where(ground, self.a, self.b)
+        ground, bb = self.ground, self.bb
         Ra0, Rb0 = ref_rotations[self.a], ref_rotations[bb]
         qa = np.einsum("jba,jkb->jka", Ra0, p - ref_positions[self.a][:, None])
         qb = np.einsum("jba,jkb->jka", Rb0, p - ref_positions[bb][:, None])

@@ -92,11 +92,17 @@ def structure_height(scene: Scene) -> float:
     return float(z.max() - z.min())
 
 
-def pushover_stop(scene: Scene, warm_frame: int, settle_s: float = 1.0):
+def _runaway_m(scene: Scene) -> float:
+    """A displacement that only a mechanism reaches: the moved threshold, or ten times the onset
+    drift of the structure's height if that is more."""
+    return max(scene.solver.moved_threshold_m, 10 * ONSET_DRIFT * structure_height(scene))
+
+
+def pushover_stop(scene: Scene, settle_s: float = 1.0):
     """A ``stop`` for :func:`~calib_masonry.simulate.blender.run`: true ``settle_s`` after the largest
     brick displacement (from the end of the warm-up, relative to the plate) has run away."""
     s = scene.solver
-    limit = max(s.moved_threshold_m, 10 * ONSET_DRIFT * structure_height(scene))
+    limit = _runaway_m(scene)
     state = {"ref": None, "since": None}
 
     def stop(frame: int, positions: np.ndarray, plate: np.ndarray) -> bool:
@@ -123,7 +129,7 @@ def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float
     rel = out.positions[start:] - out.positions[start] - (out.plate[start:] - out.plate[start])[:, None, :]
     dmax = np.linalg.norm(rel, axis=2).max(axis=1)
     height = structure_height(scene)
-    limit = max(scene.solver.moved_threshold_m, 10 * ONSET_DRIFT * height)
+    limit = _runaway_m(scene)
     w = max(1, int(round(ONSET_WINDOW_S * scene.solver.fps)))
     speed = np.zeros(len(rel))
     speed[w:] = np.linalg.norm(rel[w:] - rel[:-w], axis=2).max(axis=1) / (w / scene.solver.fps)
@@ -231,10 +237,11 @@ def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) ->
     return paths
 
 
-def plot_pushover(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> float | None:
-    """Roof displacement against lateral acceleration, with the collapse multiplier marked."""
+def plot_pushover(scene: Scene, curve: tuple[float | None, np.ndarray, np.ndarray], path: Path) -> None:
+    """Roof displacement against lateral acceleration, with the collapse multiplier marked;
+    ``curve`` is :func:`collapse_multiplier`'s answer."""
     plt = _plt()
-    value, lam, roof = collapse_multiplier(scene, out, m)
+    value, lam, roof = curve
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     ax.plot(lam, roof * 1000, color="C3", lw=1.2)
     if value is not None:
@@ -247,4 +254,3 @@ def plot_pushover(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> float
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return value

@@ -173,14 +173,10 @@ def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
     if config.duration_s <= 0:
         raise InputError(f"--duration {config.duration_s}: must be > 0 seconds")
     geometry, stored = geometry_for_model(model_dir)
-    if config.pushover is not None:
-        scene = scene_from_geometry(geometry, pushover=config.pushover, duration_s=config.pushover.duration_s,
-                                    material=config.material, solver=config.solver, foundation=config.foundation)
-        scene.notes["geometry_stored"] = stored
-        return scene
-    motion = motion_for(config)
-    scene = scene_from_geometry(geometry, motion=motion, duration_s=motion.duration, material=config.material,
-                                solver=config.solver, foundation=config.foundation)
+    motion = motion_for(config) if config.pushover is None else None
+    duration = config.pushover.duration_s if config.pushover is not None else motion.duration
+    scene = scene_from_geometry(geometry, motion=motion, pushover=config.pushover, duration_s=duration,
+                                material=config.material, solver=config.solver, foundation=config.foundation)
     scene.notes["geometry_stored"] = stored
     return scene
 
@@ -197,16 +193,17 @@ def simulate_to_folder(model_dir: str | Path, out: str | Path, config: Simulatio
     scene = scene_for_model(model_dir, config)
     t_scene = time.perf_counter() - t0
     with staged_output(out) as stage:
-        stop = pushover_stop(scene, scene.solver.warmup_frames) if scene.pushover is not None else None
+        stop = pushover_stop(scene) if scene.pushover is not None else None
         result = run(scene, progress=progress, blend_path=stage / "scene.blend", stop=stop)
         m = metrics(scene, result)
+        curve = collapse_multiplier(scene, result, m) if scene.pushover is not None else None
         np.savez_compressed(stage / "poses.npz", time=result.time, positions=result.positions.astype(np.float32),
                             quaternions=result.quaternions.astype(np.float32), plate=result.plate.astype(np.float32),
                             bond_break_time_s=m.bond_break_time_s)
         t1 = time.perf_counter()
         if config.figures:
             if scene.pushover is not None:
-                plot_pushover(scene, result, m, stage / "pushover.png")
+                plot_pushover(scene, curve, stage / "pushover.png")
             else:
                 plot_ground_motion(scene, stage / "ground_motion.png")
             plot_histories(scene, result, m, stage / "histories.png")
@@ -254,12 +251,11 @@ def simulate_to_folder(model_dir: str | Path, out: str | Path, config: Simulatio
                         "stepping": round(result.seconds_stepping, 3), "figures": round(t_fig, 3),
                         "per_frame": round(result.seconds_stepping / max(1, len(result.time) - 1), 4)},
         }
-        if scene.pushover is not None:
-            value = collapse_multiplier(scene, result, m)[0]
+        if curve is not None:
             summary["pushover"] = {"rate_g_per_s": scene.pushover.rate_g_per_s,
                                    "direction_deg": scene.pushover.direction_deg, "max_g": scene.pushover.max_g,
                                    "onset_drift": ONSET_DRIFT}
-            summary["collapse_multiplier_g"] = value
+            summary["collapse_multiplier_g"] = curve[0]
             summary["ground_motion"] = None
         write_json(stage / "summary.json", summary)
     return summary

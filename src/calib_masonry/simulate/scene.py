@@ -204,7 +204,7 @@ class Pushover:
         if not (self.rate_g_per_s > 0 and math.isfinite(self.rate_g_per_s)):
             raise InputError(f"--pushover-rate {self.rate_g_per_s}: must be > 0 g per second")
         if not (self.max_g > 0 and math.isfinite(self.max_g)):
-            raise InputError(f"pushover max_g {self.max_g}: must be > 0 g")
+            raise InputError(f"--pushover-max {self.max_g}: must be > 0 g (the largest lateral acceleration of the ramp)")
         if not math.isfinite(self.direction_deg):
             raise InputError(f"--direction {self.direction_deg}: must be a finite angle in degrees")
 

@@ -50,7 +50,7 @@ def ours(spec, out: Path) -> dict[str, float]:
              for i, (w, tr) in enumerate(zip(spec.walls, traces))]
     t["scale (Eq. 1)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    structure = assemble(spec, walls)
+    structure = assemble(spec.footprint, walls, name=spec.name)
     t["place + bond + extrude"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     export_mesh(structure, out / "ours.stl")

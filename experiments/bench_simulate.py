@@ -27,20 +27,17 @@ from pathlib import Path
 import numpy as np
 
 from calib_masonry.pipeline import build_to_folder
-from calib_masonry.simulate.blender import require_bpy, run
-from calib_masonry.simulate.results import metrics
-from calib_masonry.simulate.run import (SimulationConfig, load_model, rerun_with_fixed_hash_seed, scene_for_model,
+from calib_masonry.simulation.blender import require_bpy, run
+from calib_masonry.simulation.results import metrics
+from calib_masonry.simulation.run import (SimulationConfig, load_model, scene_for_model,
                                        simulate_to_folder)
-from calib_masonry.simulate.scene import scene_geometry
+from calib_masonry.simulation.scene import scene_geometry
 from calib_masonry.spec import load_structure
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
-    code = rerun_with_fixed_hash_seed(sys.argv)  # the same numbers on every run (see that function)
-    if code is not None:
-        sys.exit(code)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--structure", default=str(ROOT / "data_synthetic" / "stylite" / "structure.toml"))
     ap.add_argument("--pga", type=float, default=0.3)

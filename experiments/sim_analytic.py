@@ -14,9 +14,9 @@ import math
 
 import numpy as np
 
-from calib_masonry.simulate.blender import _box, run
-from calib_masonry.simulate.ground_motion import G, constant_acceleration
-from calib_masonry.simulate.scene import Body, Plate, Scene, SolverSettings
+from calib_masonry.simulation.blender import _box, run
+from calib_masonry.simulation.ground_motion import G, constant_acceleration
+from calib_masonry.simulation.scene import Body, Plate, Scene, SolverSettings
 
 
 def block(size, loc, mu=0.6, rotation=(1.0, 0.0, 0.0, 0.0)) -> Body:

@@ -31,10 +31,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from calib_masonry.pipeline import build_to_folder  # noqa: E402
-from calib_masonry.simulate.blender import run  # noqa: E402
-from calib_masonry.simulate.results import metrics  # noqa: E402
-from calib_masonry.simulate.run import SimulationConfig, scene_for_model  # noqa: E402
-from calib_masonry.simulate.scene import SolverSettings  # noqa: E402
+from calib_masonry.simulation.blender import run  # noqa: E402
+from calib_masonry.simulation.results import metrics  # noqa: E402
+from calib_masonry.simulation.run import SimulationConfig, scene_for_model  # noqa: E402
+from calib_masonry.simulation.scene import SolverSettings  # noqa: E402
 from calib_masonry.spec import load_structure  # noqa: E402
 
 DEFAULT = SolverSettings()

@@ -20,18 +20,15 @@ from pathlib import Path
 import numpy as np
 
 from calib_masonry.pipeline import build_to_folder
-from calib_masonry.simulate.blender import run
-from calib_masonry.simulate.results import metrics, outcome
-from calib_masonry.simulate.run import SimulationConfig, rerun_with_fixed_hash_seed, scene_for_model
+from calib_masonry.simulation.blender import run
+from calib_masonry.simulation.results import metrics, outcome
+from calib_masonry.simulation.run import SimulationConfig, scene_for_model
 from calib_masonry.spec import load_structure
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
-    code = rerun_with_fixed_hash_seed(sys.argv)  # the same numbers on every run (see that function)
-    if code is not None:
-        sys.exit(code)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--structure", default=str(ROOT / "data_synthetic" / "paper_example" / "structure.toml"))
     ap.add_argument("--pga", type=float, nargs="+", default=[0.0, 0.05, 0.6])

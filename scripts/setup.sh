@@ -9,6 +9,3 @@ command -v "$PY" >/dev/null 2>&1 || PY=python3
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -c constraints.txt -e '.[all]'
-# bytecode caches up front: a first run that writes them lays out memory differently, and Bullet runs
-# repeat bit for bit only with the same layout (see calib_masonry.simulate.run.rerun_with_fixed_hash_seed)
-.venv/bin/python -m compileall -q src experiments >/dev/null

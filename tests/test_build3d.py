@@ -62,9 +62,9 @@ def test_wall_at_90_starts_at_cumulative_width():
 
 def test_built_bricks_of_wall2_start_at_cumulative_width(make_scenario):
     data = make_scenario([(2.0, 1.2, 0), (1.5, 1.2, 90)], closed=False)
-    from calib_masonry.pipeline import model_from_masks
+    from calib_masonry.pipeline import build
 
-    s = model_from_masks(load_structure(data / "structure.toml"), progress=False).structure
+    s = build(load_structure(data / "structure.toml"), progress=False).structure
     wall2 = np.concatenate([b.solid.vertices for b in s.bricks_of(1)])
     # wall 2 runs along +Y from X = 2.0 with its thickness to -X: its outer face is the plane X = 2.0
     assert math.isclose(wall2[:, 0].max(), 2.0, abs_tol=1e-9)
@@ -94,9 +94,9 @@ def test_interpenetration_detects_overlap():
 def test_rotated_footprint_no_interpenetration(make_scenario, thetas):
     data = make_scenario([(2.4, 1.5, thetas[0]), (1.8, 1.5, thetas[1]), (2.4, 1.5, thetas[2]),
                           (1.8, 1.5, thetas[3])])
-    from calib_masonry.pipeline import model_from_masks
+    from calib_masonry.pipeline import build
 
-    s = model_from_masks(load_structure(data / "structure.toml"), progress=False).structure
+    s = build(load_structure(data / "structure.toml"), progress=False).structure
     inter = max_interpenetration(s.bricks)
     assert inter.pairs_checked > 0  # corners really were checked
     assert inter.max_volume_m3 < 1e-6
@@ -105,9 +105,9 @@ def test_rotated_footprint_no_interpenetration(make_scenario, thetas):
 def test_non_right_angle_corners_no_interpenetration(make_scenario):
     # an equilateral triangle: 120-degree turns at every corner
     data = make_scenario([(3.0, 1.2, 0), (3.0, 1.2, 120), (3.0, 1.2, 240)], t=0.2)
-    from calib_masonry.pipeline import model_from_masks
+    from calib_masonry.pipeline import build
 
-    s = model_from_masks(load_structure(data / "structure.toml"), progress=False).structure
+    s = build(load_structure(data / "structure.toml"), progress=False).structure
     assert max_interpenetration(s.bricks).max_volume_m3 < 1e-6
     for b in s.bricks:
         m = b.solid.to_trimesh()
@@ -117,5 +117,5 @@ def test_non_right_angle_corners_no_interpenetration(make_scenario):
 def test_assemble_removes_given_end_faces():
     spec = load_structure(DATA / "stylite" / "structure.toml")
     walls = [WallPolygons(w, (0, 1), (_rect(0, 0.4, 0, 0.3), _rect(0.5, 1.0, 0, 0.3))) for w in range(4)]
-    s = assemble(spec, walls, end_faces=[{0}, set(), set(), set()])
+    s = assemble(spec.footprint, walls, name=spec.name, end_faces=[{0}, set(), set(), set()])
     assert len(s.bricks) == 7 and s.removed[0] == (0,)

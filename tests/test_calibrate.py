@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calib_masonry.calibrate.fitresult import FitStatus
 from calib_masonry.calibrate.camera import (
     angles_from_rotation,
     heading_from_theta,
@@ -74,7 +75,7 @@ def test_known_homography_recovered_from_exact_observations():
     inp = CalibrationInput(SIZE, order_corners(corners[[2, 0, 3, 1]]), corner_sigma_px=1.0, bed_segments=bed,
                            head_segments=head, camera_height_m=truth[6], camera_height_sigma_m=0.01)
     res = calibrate(inp)
-    assert res.status == "converged"
+    assert res.status is FitStatus.CONVERGED
     h_true = image_from_wall_homography(truth, principal_point(SIZE))
     assert np.allclose(normalise_homography(res.image_from_wall), normalise_homography(h_true), atol=1e-7)
     assert res.width_m == pytest.approx(truth[7], rel=1e-6) and res.height_m == pytest.approx(truth[8], rel=1e-6)
@@ -187,7 +188,7 @@ def test_automatic_mode_finds_corners_and_size(photo_set):
     for t in truth["photos"]:
         cal = calibrate_photo(data / t["photo"], CalibrateConfig(camera_height_m=t["eye_height_m"],
                                                                  camera_height_sigma_m=0.01))
-        assert cal.mode == "automatic" and cal.result.status == "converged"
+        assert cal.mode == "automatic" and cal.result.fit.ok
         assert np.max(np.abs(cal.detection.corners_px - np.array(t["corners_px"]))) < 1.5
         assert cal.result.width_m == pytest.approx(t["width_m"], rel=0.02)
         assert cal.result.height_m == pytest.approx(t["height_m"], rel=0.02)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from calib_masonry.errors import InputError
-from calib_masonry.simulate.ground_motion import (G, constant_acceleration, read_accelerogram,
+from calib_masonry.simulation.ground_motion import (G, constant_acceleration, read_accelerogram,
                                                   synthetic_motion)
 
 
@@ -80,8 +80,8 @@ def test_negative_pga_refused():
 
 
 def test_run_motion_peaks_at_the_pga_as_applied_per_frame():
-    from calib_masonry.simulate.run import SimulationConfig, motion_for
-    from calib_masonry.simulate.scene import SolverSettings
+    from calib_masonry.simulation.run import SimulationConfig, motion_for
+    from calib_masonry.simulation.scene import SolverSettings
 
     for components in (1, 2):
         raw = synthetic_motion(0.6, 10.0, seed=2, components=components)
@@ -100,8 +100,8 @@ def test_run_motion_peaks_at_the_pga_as_applied_per_frame():
 def test_a_record_starts_from_rest():
     # displacement and velocity zero at t = 0 and the first frame's applied acceleration a small
     # fraction of the peak (the record is tapered in over TAPER_S): the structure is not jolted
-    from calib_masonry.simulate.ground_motion import TAPER_S
-    from calib_masonry.simulate.run import SimulationConfig, motion_for
+    from calib_masonry.simulation.ground_motion import TAPER_S
+    from calib_masonry.simulation.run import SimulationConfig, motion_for
 
     for seed in (0, 1, 2):
         m = motion_for(SimulationConfig(pga_g=0.3, seed=seed))

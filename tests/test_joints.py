@@ -7,10 +7,10 @@ import pytest
 import shapely
 
 from calib_masonry.build3d.contacts import OUTLINE_POINTS, joint_axes, patch_section
-from calib_masonry.simulate.blender import _box, _quaternions
-from calib_masonry.simulate.joints import FAILURE_MODES, JointModel, joint_stiffness
-from calib_masonry.simulate.results import rotations
-from calib_masonry.simulate.scene import Body, Bond, Material, Scene
+from calib_masonry.simulation.blender import _box, _quaternions
+from calib_masonry.simulation.joints import FAILURE_MODES, JointModel, joint_stiffness
+from calib_masonry.simulation.results import rotations
+from calib_masonry.simulation.scene import Body, Bond, Material, Scene
 
 G = 9.80665
 DOWN = np.array([0.0, 0.0, -1.0])

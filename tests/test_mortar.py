@@ -3,7 +3,7 @@
 import numpy as np
 import shapely
 
-from calib_masonry.simulate.mortar import mortar_cells
+from calib_masonry.simulation.mortar import mortar_cells
 
 
 def _rect(x0, y0, x1, y1):

@@ -10,10 +10,10 @@ import pytest
 
 pytest.importorskip("bpy")
 
-from calib_masonry.simulate.blender import _box, run  # noqa: E402
-from calib_masonry.simulate.ground_motion import G, constant_acceleration  # noqa: E402
-from calib_masonry.simulate.results import collapse_multiplier, metrics, pushover_stop  # noqa: E402
-from calib_masonry.simulate.scene import Body, Bond, Material, Plate, Pushover, Scene, SolverSettings  # noqa: E402
+from calib_masonry.simulation.blender import _box, run  # noqa: E402
+from calib_masonry.simulation.ground_motion import G, constant_acceleration  # noqa: E402
+from calib_masonry.simulation.results import collapse_multiplier, metrics, pushover_stop  # noqa: E402
+from calib_masonry.simulation.scene import Body, Bond, Material, Plate, Pushover, Scene, SolverSettings  # noqa: E402
 
 
 FPS = SolverSettings().fps  # the production settings: the benchmark runs at the settings tested here
@@ -344,7 +344,7 @@ def test_simulate_bad_input(small_model, tmp_path, case, msg):
 
 
 def test_bottom_course_is_bonded_to_the_plate(small_model):
-    from calib_masonry.simulate.run import SimulationConfig, scene_for_model
+    from calib_masonry.simulation.run import SimulationConfig, scene_for_model
 
     cfg = SimulationConfig(duration_s=0.2, foundation=False)
     assert not any(b.b < 0 for b in scene_for_model(small_model / "model", cfg).bonds)
@@ -367,8 +367,8 @@ def test_paper_example_stands_still_under_gravity(tmp_path):
     from pathlib import Path
 
     from calib_masonry.pipeline import build_to_folder
-    from calib_masonry.simulate.results import metrics
-    from calib_masonry.simulate.run import SimulationConfig, scene_for_model
+    from calib_masonry.simulation.results import metrics
+    from calib_masonry.simulation.run import SimulationConfig, scene_for_model
     from calib_masonry.spec import load_structure
 
     root = Path(__file__).resolve().parents[1]
@@ -399,8 +399,8 @@ def _same_geometry(g, h) -> bool:
 def test_build_stores_the_geometry_simulate_would_compute(small_model, tmp_path, monkeypatch):
     import shutil
 
-    from calib_masonry.simulate.run import GEOMETRY_FILE, geometry_for_model, load_model
-    from calib_masonry.simulate.scene import scene_geometry
+    from calib_masonry.simulation.run import GEOMETRY_FILE, geometry_for_model, load_model
+    from calib_masonry.simulation.scene import scene_geometry
 
     stored, from_file = geometry_for_model(small_model / "model")
     assert from_file
@@ -427,7 +427,7 @@ def test_build_stores_the_geometry_simulate_would_compute(small_model, tmp_path,
     assert not from_file and _same_geometry(again, stored)
 
     # nor one computed by other code (any edit to the modules that compute it)
-    import calib_masonry.simulate.scene as scene_module
+    import calib_masonry.simulation.scene as scene_module
 
     assert geometry_for_model(small_model / "model")[1]
     monkeypatch.setattr(scene_module, "_geometry_code_version", lambda: "edited")

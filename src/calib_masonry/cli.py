@@ -224,14 +224,8 @@ def _cmd_footprint(args) -> int:
 def _cmd_simulate(args) -> int:
     from dataclasses import replace
 
-    from .simulate.run import rerun_with_fixed_hash_seed
-
-    code = rerun_with_fixed_hash_seed(["-m", "calib_masonry", *args.argv])
-    if code is not None:
-        return code
-
-    from .simulate.run import SimulationConfig, simulate_to_folder
-    from .simulate.scene import Pushover, SolverSettings
+    from .simulation.run import SimulationConfig, simulate_to_folder
+    from .simulation.scene import Pushover, SolverSettings
 
     d = SolverSettings()
     solver = replace(d, **{k: v for k, v in (("fps", args.fps), ("substeps", args.substeps),
@@ -355,7 +349,6 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    args.argv = list(sys.argv[1:] if argv is None else map(str, argv))
     warnings.showwarning = _print_warning
     try:
         return int(args.func(args) or 0)

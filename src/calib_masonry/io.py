@@ -6,6 +6,8 @@ image coordinates ``(x, y) = (c, r)``, origin top-left.
 
 from __future__ import annotations
 
+import math
+
 import contextlib
 import json
 import os
@@ -23,6 +25,7 @@ from PIL import Image, UnidentifiedImageError
 from .errors import InputError
 
 __all__ = [
+    "json_bytes",
     "Photo",
     "rc_from_xy",
     "read_json",
@@ -105,13 +108,13 @@ def write_mask(path: Path, mask: np.ndarray) -> None:
     Image.fromarray(np.where(mask, 255, 0).astype(np.uint8), mode="L").save(path, optimize=True)
 
 
-def _jsonable(obj: Any) -> Any:
+def _jsonable(obj: Any, exact: bool = False) -> Any:
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): _jsonable(v, exact) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
+        return [_jsonable(v, exact) for v in obj]
     if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
+        return _jsonable(obj.tolist(), exact)
     if isinstance(obj, (np.floating,)):
         return float(obj)
     if isinstance(obj, (np.integer,)):
@@ -121,13 +124,20 @@ def _jsonable(obj: Any) -> Any:
     if isinstance(obj, Path):
         return obj.as_posix()
     if isinstance(obj, float):
-        return round(obj, 10) if np.isfinite(obj) else None
+        return (obj if exact else round(obj, 10)) if np.isfinite(obj) else None
     return obj
 
 
-def write_json(path: Path, obj: Any) -> None:
-    """Deterministic JSON: sorted floats rounded to 1e-10, two-space indent."""
-    Path(path).write_text(json.dumps(_jsonable(obj), indent=1) + "\n", encoding="utf-8")
+def json_bytes(obj: Any, *, exact: bool = False) -> bytes:
+    """The bytes :func:`write_json` writes for ``obj``."""
+    return (json.dumps(_jsonable(obj, exact), indent=1) + "\n").encode("utf-8")
+
+
+def write_json(path: Path, obj: Any, *, exact: bool = False) -> None:
+    """Deterministic JSON, one-space indent: floats rounded to 1e-10, or with ``exact`` written in
+    full (Python's shortest repr, which reads back to the same float: a model read back from its
+    bricks.json is bit for bit the model that was written)."""
+    Path(path).write_bytes(json_bytes(obj, exact=exact))
 
 
 def read_json(path: str | Path, *, field: str = "file") -> Any:
@@ -197,6 +207,21 @@ class Photo:
     rgb: np.ndarray  # (rows, cols, 3) float32
     focal_px: float | None  # from FocalLength x FocalPlaneXResolution, or the 35 mm equivalent
     heading_deg: float | None  # GPSImgDirection
+
+    def __post_init__(self) -> None:
+        rgb = np.asarray(self.rgb)
+        if rgb.ndim != 3 or rgb.shape[2] not in (3, 4) or min(rgb.shape[:2]) < 32:
+            raise InputError(f"photo {self.path}: rgb must be an image array (rows, cols, 3) of at least 32 x 32 px, "
+                             f"got shape {rgb.shape}")
+        if rgb.dtype == np.uint8:  # 8-bit values, as PIL and most readers give them
+            rgb = rgb[..., :3].astype(np.float32) / 255.0
+        else:
+            rgb = np.asarray(rgb[..., :3], dtype=np.float32)
+            if not np.all(np.isfinite(rgb)) or rgb.min() < 0.0 or rgb.max() > 1.0:
+                raise InputError(f"photo {self.path}: a float image must hold values in [0, 1] (or give uint8 0-255)")
+        object.__setattr__(self, "rgb", rgb)
+        if self.focal_px is not None and not (math.isfinite(self.focal_px) and self.focal_px > 0):
+            raise InputError(f"photo {self.path}: focal_px = {self.focal_px} must be > 0 (pixels) or None")
 
     @property
     def size(self) -> tuple[int, int]:

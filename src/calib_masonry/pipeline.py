@@ -1,4 +1,5 @@
-"""Masks and the parameter table to a 3D brick model, as one call (and its output folder)."""
+"""Masks or photos and the parameter table to a 3D brick model, as one call: :func:`build`
+(in memory); :func:`write_build` and :func:`read_build` at the edge."""
 
 from __future__ import annotations
 
@@ -16,11 +17,12 @@ from .build3d.export import export_mesh, plot_model, plot_walls, write_bricks_js
 from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
-from .io import read_mask, staged_output, warn, write_json
+from .io import read_json, read_mask, staged_output, warn, write_json
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
 
-__all__ = ["BuildResult", "trace_wall", "model_from_masks", "build_to_folder", "closure_warning"]
+__all__ = ["BuildResult", "PhotoWall", "trace_wall", "build", "write_build", "read_build", "build_to_folder",
+           "closure_warning"]
 
 #: A declared or detected closed footprint whose gap exceeds this gets a warning.
 CLOSURE_WARN_M = 1e-3
@@ -28,10 +30,14 @@ CLOSURE_WARN_M = 1e-3
 
 @dataclass(frozen=True)
 class BuildResult:
+    """A build in memory: the structure, every wall's trace, the spec with fitted sizes filled in,
+    the stage times and the photo walls' calibrations by wall name."""
+
     structure: Structure3D
     traces: tuple[TraceResult, ...]
     seconds: dict[str, float] = field(default_factory=dict)
     photos: dict = field(default_factory=dict)  # wall name -> PhotoWall
+    spec: StructureSpec | None = None
 
 
 @dataclass(frozen=True)
@@ -48,7 +54,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     """Calibrate a wall's photo, rectify it onto the wall (W x H) and segment bricks from mortar."""
     from dataclasses import replace
 
-    from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify_image
+    from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify
     from .errors import CalibMasonryError
     from .wall2d.segment import PhotoSegmentConfig, segment_photo
 
@@ -69,8 +75,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     width = res.width_m if math.isnan(wall.width_m) else wall.width_m
     height = res.height_m if math.isnan(wall.height_m) else wall.height_m
     # the fitted wall's frame stretched onto the typed W x H: the photo's outline maps onto the wall
-    stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
-    rect = rectify_image(cal.photo.rgb, stretch @ res.wall_from_image, width, height, spec.photo_px_per_m)
+    rect = rectify(cal, px_per_m=spec.photo_px_per_m, width_m=width, height_m=height)
     mask = segment_photo(rect, PhotoSegmentConfig(window_px=int(round(0.5 * spec.photo_px_per_m))))
     return PhotoWall(calibration=cal, rectified=rect, mask=mask, wall=replace(wall, width_m=width, height_m=height))
 
@@ -133,18 +138,34 @@ def closure_warning(spec: StructureSpec, gap_xy: np.ndarray) -> str | None:
             "check the walls' width_m and theta_deg")
 
 
-def model_from_masks(spec: StructureSpec, *, progress: bool | None = None) -> BuildResult:
-    """Trace every wall's mask, scale to metres (Eq. 1), place, bond and extrude (Eqs. 2-4)."""
+def build(spec: StructureSpec, *, traces: dict[str, TraceResult] | None = None,
+          progress: bool | None = None) -> BuildResult:
+    """Calibrate and segment every photo wall, trace every wall's mask, scale to metres (Eq. 1),
+    place, bond and extrude (Eqs. 2-4); in memory, writing nothing.
+
+    ``traces`` (by wall name) gives walls already traced in memory (:func:`calib_masonry.trace`);
+    their mask or photo is then not read."""
+    traces_given = dict(traces or {})
+    unknown = sorted(set(traces_given) - {w.name for w in spec.walls})
+    if unknown:
+        raise InputError(f"build: traces given for {unknown}, which are not walls of '{spec.name}'; "
+                         f"its walls are {[w.name for w in spec.walls]}")
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
-    spec, photos = resolve_photo_walls(spec, progress=progress)
+    todo = spec.with_walls(tuple(w for w in spec.walls if w.name not in traces_given))
+    resolved, photos = resolve_photo_walls(todo, progress=progress) if todo.walls else (todo, {})
+    fitted = {w.name: w for w in resolved.walls}
+    spec = spec.with_walls(tuple(fitted.get(w.name, w) for w in spec.walls))
     if photos:
         seconds["calibrate_rectify_segment"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     traces = []
     for wall in tqdm(spec.walls, desc="trace walls", unit="wall", disable=None if progress is None else not progress,
                      leave=False):
-        traces.append(trace_wall(wall, spec, photos[wall.name].mask if wall.name in photos else None))
+        if wall.name in traces_given:
+            traces.append(traces_given[wall.name])
+        else:
+            traces.append(trace_wall(wall, spec, photos[wall.name].mask if wall.name in photos else None))
     seconds["trace"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -157,17 +178,17 @@ def model_from_masks(spec: StructureSpec, *, progress: bool | None = None) -> Bu
     seconds["scale"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    structure = assemble(spec, walls)
+    structure = assemble(spec.footprint, walls, name=spec.name)
     seconds["assemble"] = time.perf_counter() - t0
     message = closure_warning(spec, structure.closure_gap_xy)
     if message:
         warn(message)
-    return BuildResult(structure=structure, traces=tuple(traces), seconds=seconds, photos=photos)
+    return BuildResult(structure=structure, traces=tuple(traces), seconds=seconds, photos=photos, spec=spec)
 
 
 def _summary(result: BuildResult, interpenetration) -> dict:
     s = result.structure
-    spec = s.spec
+    spec = result.spec
     walls = []
     for w, (wall, tr) in enumerate(zip(spec.walls, result.traces)):
         own = s.bricks_of(w)
@@ -222,10 +243,30 @@ def _write_photo_wall(pw: PhotoWall, folder: Path, *, figures: bool) -> None:
 
 def build_to_folder(spec: StructureSpec, out: str | Path, *, figures: bool = True,
                     progress: bool | None = None, simulation_geometry: bool = True) -> dict:
-    """Build and write ``model.stl``, ``bricks.json``, ``summary.json``, figures and (with
-    ``simulation_geometry``) the bodies and contact patches ``simulate`` starts from
-    (``sim_geometry.npz``) into ``out``."""
-    result = model_from_masks(spec, progress=progress)
+    """:func:`build` and :func:`write_build`: what ``calib-masonry build`` calls."""
+    return write_build(build(spec, progress=progress), out, figures=figures, simulation_geometry=simulation_geometry)
+
+
+def read_build(model_dir: str | Path) -> Structure3D:
+    """The Structure3D a ``build`` output folder holds (its bricks.json and summary.json)."""
+    from .build3d.assemble import Structure3D
+    from .build3d.place import closure_gap
+    from .simulation.run import load_model
+
+    bricks, frames, cs, footprint = load_model(model_dir)
+    data = read_json(Path(model_dir) / "bricks.json", field="MODEL_DIR bricks.json")
+    removed = tuple(tuple(w.get("removed_corner_pieces", ())) for w in data["walls"])
+    return Structure3D(name=str(data.get("structure", Path(model_dir).name)), footprint=footprint,
+                       frames=tuple(frames), corners=tuple(cs), bricks=tuple(bricks), removed=removed,
+                       closure_gap_xy=closure_gap(footprint))
+
+
+def write_build(result: BuildResult, out: str | Path, *, figures: bool = True, simulation_geometry: bool = True) -> dict:
+    """Write a build into the folder ``out`` (all or nothing): ``model.stl``, ``bricks.json``,
+    ``summary.json``, figures, the photo walls' calibrations and (with ``simulation_geometry``) the
+    bodies and contact patches ``simulate`` starts from (``sim_geometry.npz``), computed from the
+    structure in memory. Returns the summary."""
+    spec = result.spec
     s = result.structure
     t0 = time.perf_counter()
     inter = max_interpenetration(s.bricks)
@@ -251,10 +292,10 @@ def build_to_folder(spec: StructureSpec, out: str | Path, *, figures: bool = Tru
         if simulation_geometry and s.bricks:
             # the simulation's bodies and contact patches, computed once here rather than in every
             # `simulate` run of this model (about 2 s on the Stylite tower, 4 s on the paper example)
-            from .simulate.run import store_geometry
+            from .simulation.run import store_geometry
 
             t0 = time.perf_counter()
-            store_geometry(stage, summary["closed_footprint"])
+            store_geometry(s, stage)
             summary["seconds"]["simulation_geometry"] = round(time.perf_counter() - t0, 4)
         write_json(stage / "summary.json", summary)
     return summary

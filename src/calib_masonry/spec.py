@@ -148,6 +148,15 @@ class StructureSpec:
     def with_walls(self, walls: tuple[WallSpec, ...]) -> "StructureSpec":
         return replace(self, walls=walls)
 
+    @property
+    def footprint(self):
+        """The walls' W, H, theta and t and the declared closure: what build3d places and extrudes
+        (a :class:`~calib_masonry.build3d.place.Footprint`)."""
+        from .build3d.place import Footprint, WallGeometry
+
+        return Footprint(walls=tuple(WallGeometry(w.width_m, w.height_m, w.theta_rad, w.thickness_m, w.name)
+                                     for w in self.walls), closed=self.closed)
+
 
 # ----------------------------------------------------------------------------------------------
 # reading

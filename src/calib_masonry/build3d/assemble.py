@@ -7,10 +7,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
-from ..spec import StructureSpec
 from .bond import CornerTolerances, corner_clip_planes, find_end_faces
 from .extrude import Polyhedron, clip_plan, polygon_area, prism
-from .place import Corner, WallFrame, closure_gap, corners, wall_frames
+from .place import Corner, Footprint, WallFrame, _footprint, closure_gap, corners, wall_frames
 
 __all__ = ["WallPolygons", "Brick", "Structure3D", "assemble", "simple_polygon", "brick_solid"]
 
@@ -43,7 +42,10 @@ class Brick:
 
 @dataclass(frozen=True)
 class Structure3D:
-    spec: StructureSpec
+    """A built structure: every brick's polyhedron, placed on the footprint, in global metres."""
+
+    name: str
+    footprint: Footprint
     frames: tuple[WallFrame, ...]
     corners: tuple[Corner, ...]
     bricks: tuple[Brick, ...]
@@ -84,14 +86,17 @@ def brick_solid(poly: np.ndarray, wall: int, frames: list[WallFrame], corners: l
     return solid
 
 
-def assemble(spec: StructureSpec, walls: list[WallPolygons], *, end_faces: list[set[int]] | None = None,
-             tolerances: CornerTolerances = CornerTolerances()) -> Structure3D:
+def assemble(footprint: Footprint, walls: list[WallPolygons], *, name: str = "structure",
+             end_faces: list[set[int]] | None = None, tolerances: CornerTolerances = CornerTolerances()) -> Structure3D:
     """Remove corner end faces, extrude every brick by its wall's thickness and place it.
 
-    ``end_faces`` (indices into each wall's polygons) overrides the detection, e.g. for truth.
+    ``footprint``: the walls' W, H, theta, t (a :class:`~calib_masonry.build3d.place.Footprint`, or
+    an object with a ``footprint``, such as a StructureSpec). ``end_faces`` (indices into each
+    wall's polygons) overrides the detection, e.g. for truth.
     """
-    frames = wall_frames(spec)
-    cs = corners(spec)
+    footprint = _footprint(footprint)
+    frames = wall_frames(footprint)
+    cs = corners(footprint)
     polys = [[simple_polygon(p) for p in w.polygons_m] for w in walls]
     if end_faces is None:
         end_faces = find_end_faces(polys, frames, cs, tolerances)
@@ -108,5 +113,5 @@ def assemble(spec: StructureSpec, walls: list[WallPolygons], *, end_faces: list[
             bricks.append(Brick(id=len(bricks), wall=w, label=int(wp.ids[i]), polygon_m=poly, solid=solid,
                                 dice=float(wp.dice[i]) if wp.dice else float("nan"),
                                 traced_vertices=int(wp.traced_vertices[i]) if wp.traced_vertices else 0))
-    return Structure3D(spec=spec, frames=tuple(frames), corners=tuple(cs), bricks=tuple(bricks),
-                       removed=tuple(removed), closure_gap_xy=closure_gap(spec))
+    return Structure3D(name=name, footprint=footprint, frames=tuple(frames), corners=tuple(cs), bricks=tuple(bricks),
+                       removed=tuple(removed), closure_gap_xy=closure_gap(footprint))

@@ -47,13 +47,13 @@ def export_mesh(structure: Structure3D, path: Path) -> None:
 
 def bricks_json(structure: Structure3D) -> dict:
     """Per brick: wall, id, outer polygon (wall metres), 3D mesh, volume, centroid, Dice."""
-    names = [w.name for w in structure.spec.walls]
+    names = [w.name for w in structure.footprint.walls]
     return {
-        "structure": structure.spec.name,
+        "structure": structure.name,
         "walls": [{"name": w.name, "width_m": w.width_m, "height_m": w.height_m, "theta_deg": w.theta_deg,
                    "thickness_m": w.thickness_m, "origin_xy": f.origin_xy.tolist(),
                    "removed_corner_pieces": list(structure.removed[i])}
-                  for i, (w, f) in enumerate(zip(structure.spec.walls, structure.frames))],
+                  for i, (w, f) in enumerate(zip(structure.footprint.walls, structure.frames))],
         "bricks": [{"id": b.id, "wall": names[b.wall], "wall_index": b.wall, "label": b.label,
                     "polygon_wall_m": b.polygon_m.tolist(), "vertices": b.solid.vertices.tolist(),
                     "faces": b.solid.faces.tolist(), "volume_m3": b.volume,
@@ -65,7 +65,7 @@ def bricks_json(structure: Structure3D) -> dict:
 
 
 def write_bricks_json(structure: Structure3D, path: Path) -> None:
-    write_json(path, bricks_json(structure))
+    write_json(path, bricks_json(structure), exact=True)
 
 
 def _mpl():
@@ -83,7 +83,7 @@ def plot_walls(structure: Structure3D, path: Path, *, removed_polygons: list[lis
     plt = _mpl()
     from matplotlib.collections import PolyCollection
 
-    spec = structure.spec
+    spec = structure.footprint
     widths = [w.width_m for w in spec.walls]
     fig, axes = plt.subplots(1, len(spec.walls), figsize=(min(24, 2.2 + 1.6 * sum(widths)), 6),
                              gridspec_kw={"width_ratios": widths}, squeeze=False)
@@ -103,7 +103,7 @@ def plot_walls(structure: Structure3D, path: Path, *, removed_polygons: list[lis
         ax.set_aspect("equal")
         ax.set_title(f"{wall.name}\n{wall.width_m:g} x {wall.height_m:g} m, {wall.theta_deg:g} deg", fontsize=8)
         ax.tick_params(labelsize=6)
-    fig.suptitle(title or f"{spec.name}: outer wall surfaces (colour: Dice 0.9-1; red hatched: corner end faces removed)",
+    fig.suptitle(title or f"{structure.name}: outer wall surfaces (colour: Dice 0.9-1; red hatched: corner end faces removed)",
                  fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -142,7 +142,7 @@ def plot_model(structure: Structure3D, path: Path) -> None:
     ax.set_xlabel("X (m)")
     ax.set_ylabel("Y (m)")
     ax.set_zlabel("Z (m)")
-    ax.set_title(f"{structure.spec.name}: {len(structure.bricks)} bricks")
+    ax.set_title(f"{structure.name}: {len(structure.bricks)} bricks")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -15,13 +15,61 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..spec import StructureSpec
+from ..errors import InputError
 
-__all__ = ["WallFrame", "Corner", "wall_frames", "closure_gap", "footprint_is_closed", "corners",
-           "MIN_CORNER_TURN_RAD"]
+__all__ = ["WallGeometry", "Footprint", "WallFrame", "Corner", "wall_frames", "closure_gap", "footprint_is_closed",
+           "corners", "MIN_CORNER_TURN_RAD"]
 
 #: Turns smaller than this (in either sense) are treated as collinear walls that just abut.
 MIN_CORNER_TURN_RAD = math.radians(10.0)
+
+
+@dataclass(frozen=True)
+class WallGeometry:
+    """What placing and extruding one wall needs: its width W, height H, orientation theta
+    (counter-clockwise from global X) and thickness t, in SI units; checked on construction."""
+
+    width_m: float
+    height_m: float
+    theta_rad: float
+    thickness_m: float
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        where = f"wall '{self.name}'" if self.name else "wall"
+        for key in ("width_m", "height_m", "thickness_m"):
+            value = getattr(self, key)
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"{where}: {key} = {value} must be a finite length > 0 (metres)")
+        if not math.isfinite(self.theta_rad):
+            raise InputError(f"{where}: theta = {self.theta_rad} must be a finite angle")
+
+    @property
+    def theta_deg(self) -> float:
+        return math.degrees(self.theta_rad)
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """The walls in footprint order (each starts where the previous one ends) and whether the
+    footprint is declared closed (None: decided from the closure gap, see :func:`footprint_is_closed`)."""
+
+    walls: tuple[WallGeometry, ...]
+    closed: bool | None = None
+
+    def __post_init__(self) -> None:
+        if not self.walls:
+            raise InputError("footprint: it has no walls; give at least one")
+        object.__setattr__(self, "walls", tuple(self.walls))
+
+    @property
+    def is_closed(self) -> bool:
+        return footprint_is_closed(self)
+
+
+def _footprint(obj) -> Footprint:
+    """A Footprint, or the ``footprint`` of an object that has one (a StructureSpec)."""
+    return obj if isinstance(obj, Footprint) else obj.footprint
 
 
 @dataclass(frozen=True)
@@ -49,11 +97,6 @@ class WallFrame:
         plan = (self.origin_xy + xyz[..., :1] * self.direction + xyz[..., 1:2] * self.inward)
         return np.concatenate([plan, xyz[..., 2:3]], axis=-1)
 
-    def wall_from_global_plan(self, xy: np.ndarray) -> np.ndarray:
-        """Global plan points ``(..., 2)`` to wall ``(x, y)``."""
-        rel = np.asarray(xy, dtype=np.float64) - self.origin_xy
-        return np.stack([rel @ self.direction, rel @ self.inward], axis=-1)
-
 
 @dataclass(frozen=True)
 class Corner:
@@ -77,8 +120,9 @@ class Corner:
         return thickness_other / math.sin(self.turn_rad)
 
 
-def wall_frames(spec: StructureSpec) -> list[WallFrame]:
+def wall_frames(footprint: Footprint) -> list[WallFrame]:
     """Frames of all walls, each starting at the previous walls' cumulative width (Eqs. 2-3)."""
+    spec = _footprint(footprint)
     frames = []
     origin = np.zeros(2)
     for i, w in enumerate(spec.walls):
@@ -87,14 +131,16 @@ def wall_frames(spec: StructureSpec) -> list[WallFrame]:
     return frames
 
 
-def closure_gap(spec: StructureSpec) -> np.ndarray:
+def closure_gap(footprint: Footprint) -> np.ndarray:
     """``sum_n W_n (cos theta_n, sin theta_n)``: zero for a footprint that closes."""
+    spec = _footprint(footprint)
     return sum((w.width_m * np.array([math.cos(w.theta_rad), math.sin(w.theta_rad)])
                 for w in spec.walls), start=np.zeros(2))
 
 
-def footprint_is_closed(spec: StructureSpec) -> bool:
+def footprint_is_closed(footprint: Footprint) -> bool:
     """Declared by ``closed`` in the file, else closed when the gap is under 5 % of the perimeter."""
+    spec = _footprint(footprint)
     if spec.closed is not None:
         return spec.closed
     if len(spec.walls) < 3:
@@ -108,8 +154,9 @@ def _wrap(angle: float) -> float:
     return math.pi if a == -math.pi else a
 
 
-def corners(spec: StructureSpec) -> list[Corner]:
+def corners(footprint: Footprint) -> list[Corner]:
     """All junctions between consecutive walls (and last-to-first when the footprint is closed)."""
+    spec = _footprint(footprint)
     n = len(spec.walls)
     pairs = [(i, i + 1) for i in range(n - 1)]
     if footprint_is_closed(spec) and n >= 3:

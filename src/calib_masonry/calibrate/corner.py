@@ -27,18 +27,21 @@ from ..io import Photo, read_photo
 from .camera import angles_from_rotation, intrinsics, principal_point, wall_from_camera_rotation
 from .fit import _line_distances, _pad_segments
 from .lines import DetectConfig, _hough_segments, _vanishing_point
+from .fitresult import FitResult, FitStatus, HasFit, fit_result
 from .lm import least_squares
 
 __all__ = ["CORNER_DETECT", "CornerDetect", "CornerResult", "calibrate_corner_photo", "corner_vanishing_points", "fit_corner"]
 
 _SCALE = np.array([1000.0, 0.1, 0.1, 0.1, 0.1])  # f, yaw, pitch, roll, phi
+CORNER_PARAMS = ("focal_px", "yaw_rad", "pitch_rad", "roll_rad", "turn_rad")
 
 
 @dataclass(frozen=True)
-class CornerResult:
-    params: np.ndarray  # f, yaw, pitch, roll, phi
-    covariance: np.ndarray
-    status: str
+class CornerResult(HasFit):
+    """The fit of a corner photo: its :class:`~calib_masonry.calibrate.fitresult.FitResult` (focal,
+    yaw, pitch, roll, turn) and the segments it used."""
+
+    fit: FitResult
     rms_line_px: float
     n_segments: tuple[int, int, int]  # bed of wall n, bed of wall n+1, head
     segments: tuple = ()  # (bed of wall n, bed of wall n+1) in full-size pixels, for figures
@@ -49,17 +52,16 @@ class CornerResult:
 
     @property
     def turn_sigma_rad(self) -> float:
-        return float(math.sqrt(max(self.covariance[4, 4], 0.0)))
+        return self.fit.sigma("turn_rad")
 
     def to_json(self) -> dict:
         return {"turn_deg": math.degrees(self.turn_rad), "turn_sigma_deg": math.degrees(self.turn_sigma_rad),
                 "focal_px": float(self.params[0]), "yaw_deg": math.degrees(self.params[1]),
                 "pitch_deg": math.degrees(self.params[2]), "roll_deg": math.degrees(self.params[3]),
-                "status": self.status, "rms_line_px": self.rms_line_px,
+                "rms_line_px": self.rms_line_px,
                 "segments": {"bed_left": self.n_segments[0], "bed_right": self.n_segments[1],
                              "head": self.n_segments[2]},
-                "covariance": {"order": ["focal_px", "yaw_rad", "pitch_rad", "roll_rad", "turn_rad"],
-                               "matrix": self.covariance.tolist()}}
+                **self.fit.to_json()}
 
 
 def _vps(p, pp):
@@ -173,21 +175,16 @@ def fit_corner(image_size, bed_a, bed_b, head, *, focal_px: float | None, focal_
     data = {"pp": jnp.asarray(pp), "bed_a": jnp.asarray(ba), "w_a": jnp.asarray(wa), "bed_b": jnp.asarray(bb),
             "w_b": jnp.asarray(wb), "head": jnp.asarray(hd), "w_h": jnp.asarray(wh),
             "prior": jnp.asarray([focal_px or 0.0, 1.0 / f_sigma if focal_px else 0.0])}
-    u, ok, _, jac = _solve(jnp.asarray(np.asarray(start) / _SCALE), data)
-    u, jac = np.asarray(u), np.asarray(jac)
-    try:
-        cov_u = np.linalg.inv(jac.T @ jac)
-    except np.linalg.LinAlgError:
-        raise FitFailed("corner photo: the joint lines do not determine the corner angle; pass --focal-px") from None
-    params = u * _SCALE
-    r = np.asarray(_residuals(jnp.asarray(u), data))
+    u, ok, steps, jac, r = _solve(jnp.asarray(np.asarray(start) / _SCALE), data)
+    fit = fit_result(u, ok, steps, jac, r, CORNER_PARAMS, _SCALE)
+    if fit.status in (FitStatus.SINGULAR, FitStatus.DIVERGED):
+        raise FitFailed(f"corner photo: the joint lines do not determine the corner angle ({fit.status.message})")
+    r = np.asarray(r)
     n = (min(len(bed_a), 1024), min(len(bed_b), 1024), min(len(head), 1024))
     weights = np.concatenate([wa, wb, wh])
     used = weights > 0
     dist = r[:-1][used] / weights[used]  # endpoint distances in px
-    return CornerResult(params=params, covariance=cov_u * np.outer(_SCALE, _SCALE),
-                        status="converged" if bool(ok) else "not converged (step limit)",
-                        rms_line_px=float(np.sqrt(np.mean(dist**2))) if len(dist) else 0.0, n_segments=n)
+    return CornerResult(fit=fit, rms_line_px=float(np.sqrt(np.mean(dist**2))) if len(dist) else 0.0, n_segments=n)
 
 
 def calibrate_corner_photo(photo: Photo | str | Path, *, focal_px: float | None = None,
@@ -221,7 +218,7 @@ def calibrate_corner_photo(photo: Photo | str | Path, *, focal_px: float | None 
     res = fit_corner(photo.size, bed_a, bed_b, np.zeros((0, 4)), focal_px=f,
                      start=np.array([f, yaw, pitch, roll, phi]))
     res = replace(res, segments=(bed_a, bed_b))
-    if res.status != "converged":
-        raise FitFailed(f"{photo.path}: the corner fit did not converge; check that the photo shows two brick walls "
+    if not res.fit.ok:
+        raise FitFailed(f"{photo.path}: the corner fit {res.status.message}; check that the photo shows two brick walls "
                         "meeting at a vertical edge")
     return res

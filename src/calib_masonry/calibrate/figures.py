@@ -57,7 +57,7 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
     cam = res.camera_json()
     a.set_title(f"{cal.photo.path.name}: {cal.mode}, f = {cam['focal_px']:.0f} px ({cal.focal_source}), "
                 f"yaw {cam['yaw_deg']:.1f}, pitch {cam['pitch_deg']:.1f}, roll {cam['roll_deg']:.1f} deg\n"
-                f"RMS residual {res.rms_residual_px:.2f} px, {res.status}", fontsize=9)
+                f"RMS residual {res.rms_residual_px:.2f} px, {res.status.value}", fontsize=9)
     rows, cols = rect.shape[:2]
     b.imshow(np.clip(rect, 0, 1), extent=(0, w_m, 0, h_m))
     for x in np.arange(1.0, w_m, 1.0):

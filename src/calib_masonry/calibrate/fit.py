@@ -32,6 +32,7 @@ from .camera import (
     principal_point,
     project,
 )
+from .fitresult import FitResult, FitStatus, HasFit, fit_result
 from .lm import least_squares
 
 __all__ = [
@@ -74,11 +75,11 @@ class CalibrationInput:
 
 
 @dataclass(frozen=True)
-class CalibrationResult:
-    params: np.ndarray  # PARAM_NAMES order
-    covariance: np.ndarray  # (9, 9) in the same order
-    status: str  # "converged" or the solver's reason for stopping
-    steps: int
+class CalibrationResult(HasFit):
+    """The camera fit of one photo: its :class:`~calib_masonry.calibrate.fitresult.FitResult` (unknowns
+    in PARAM_NAMES order) and what the photo's geometry makes of it."""
+
+    fit: FitResult
     rms_residual_px: float  # over corners and joint-line endpoints
     rms_corner_px: float
     rms_line_px: float
@@ -87,11 +88,10 @@ class CalibrationResult:
     n_head: int
 
     def value(self, name: str) -> float:
-        return float(self.params[PARAM_NAMES.index(name)])
+        return self.fit[name]
 
     def sigma(self, name: str) -> float:
-        i = PARAM_NAMES.index(name)
-        return float(math.sqrt(max(self.covariance[i, i], 0.0)))
+        return self.fit.sigma(name)
 
     @property
     def width_m(self) -> float:
@@ -135,12 +135,11 @@ class CalibrationResult:
             "rms_residual_px": self.rms_residual_px,
             "rms_corner_px": self.rms_corner_px,
             "rms_line_px": self.rms_line_px,
-            "covariance": {"order": list(PARAM_NAMES), "units": "px, rad, m", "matrix": self.covariance.tolist()},
-            "status": self.status,
-            "solver_steps": self.steps,
+            **self.fit.to_json(),
             "image_size": list(self.image_size),
             "corners_px": self.corners_px().tolist(),
             "joint_segments": {"bed": self.n_bed, "head": self.n_head},
+            "covariance_units": "px, rad, m",
         }
 
 
@@ -322,9 +321,9 @@ def residual_vector(u, data):
 
 @jax.jit
 def _solve(u0, data):
-    u, ok, steps, jac = least_squares(residual_vector, u0, data)
+    u, ok, steps, jac, r = least_squares(residual_vector, u0, data)
     corner_px, bed, head = _parts(u * SCALE, data)
-    return u, ok, steps, jac, corner_px, bed, head
+    return u, ok, steps, jac, r, corner_px, bed, head
 
 
 def _inliers(seg: np.ndarray, dist: np.ndarray) -> np.ndarray:
@@ -352,21 +351,15 @@ def calibrate(inp: CalibrationInput, *, start: np.ndarray | None = None, reject_
         start = first.params
     data = pack(inp)
     p0 = initial_params(inp) if start is None else np.asarray(start, dtype=np.float64)
-    u, ok, steps, jac, corner_px, bed, head = _solve(jnp.asarray(p0 / SCALE), {k: jnp.asarray(v) for k, v in data.items()})
-    u, jac = np.asarray(u), np.asarray(jac)
-    params = u * SCALE
-    if not np.all(np.isfinite(params)):
-        raise FitFailed("calibration: the fit diverged (non-finite parameters); check the corners and pass "
-                        "--focal-px or --camera-height")
-    jtj = jac.T @ jac
-    try:
-        cov_u = np.linalg.inv(jtj)
-        if not np.all(np.isfinite(cov_u)) or np.linalg.cond(jtj) > 1e14:
-            raise np.linalg.LinAlgError
-    except np.linalg.LinAlgError:
+    u, ok, steps, jac, residuals, corner_px, bed, head = _solve(jnp.asarray(p0 / SCALE),
+                                                                {k: jnp.asarray(v) for k, v in data.items()})
+    fit = fit_result(u, ok, steps, jac, residuals, PARAM_NAMES, SCALE)
+    if fit.status is FitStatus.DIVERGED:
+        raise FitFailed(f"calibration: the fit {fit.status.message}; check the corners and pass --focal-px or "
+                        "--camera-height")
+    if fit.status is FitStatus.SINGULAR:
         raise FitFailed("calibration: too few constraints to fit the camera (singular Jacobian); pass "
-                        "--focal-px and --camera-height, or give a photo with visible mortar joints") from None
-    cov = cov_u * np.outer(SCALE, SCALE)
+                        "--focal-px and --camera-height, or give a photo with visible mortar joints")
     nb, nh = min(len(inp.bed_segments), MAX_SEGMENTS), min(len(inp.head_segments), MAX_SEGMENTS)
     corner_px = np.asarray(corner_px)
     # each segment's endpoint distance, both endpoints
@@ -374,8 +367,7 @@ def calibrate(inp: CalibrationInput, *, start: np.ndarray | None = None, reject_
     sq = np.concatenate([np.sum(corner_px**2, axis=1), np.repeat(lines**2, 2)])
     rms_line = float(np.sqrt(np.mean(lines**2))) if len(lines) else 0.0
     return CalibrationResult(
-        params=params, covariance=cov, status="converged" if bool(ok) else "not converged (step limit)",
-        steps=int(steps), rms_residual_px=float(np.sqrt(np.mean(sq))),
+        fit=fit, rms_residual_px=float(np.sqrt(np.mean(sq))),
         rms_corner_px=float(np.sqrt(np.mean(np.sum(corner_px**2, axis=1)))), rms_line_px=rms_line,
         image_size=tuple(int(v) for v in inp.image_size), n_bed=nb, n_head=nh,
     )

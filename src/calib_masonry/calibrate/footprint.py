@@ -18,27 +18,46 @@ rotation that the closure cannot see, so its prior is what fixes the ring's orie
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .._jax import jax, jnp
 from ..errors import FitFailed, InputError
+from .fitresult import FitResult, FitStatus, HasFit, fit_result
 from .lm import least_squares
 
 __all__ = ["FootprintResult", "fit_footprint"]
 
 
 @dataclass(frozen=True)
-class FootprintResult:
-    width_m: np.ndarray
-    theta_rad: np.ndarray
-    width_sigma_m: np.ndarray
-    theta_sigma_rad: np.ndarray
-    covariance: np.ndarray  # (2n, 2n): W_1..W_n, theta_1..theta_n
+class FootprintResult(HasFit):
+    """The footprint adjustment: its :class:`~calib_masonry.calibrate.fitresult.FitResult` (unknowns
+    W_1..W_n, theta_1..theta_n) and the closure gap before and after."""
+
+    fit: FitResult
     closure_gap_m: float  # after the fit
     closure_gap_before_m: float
-    status: str
+
+    @property
+    def n(self) -> int:
+        return len(self.fit.value) // 2
+
+    @property
+    def width_m(self) -> np.ndarray:
+        return self.fit.value[: self.n]
+
+    @property
+    def theta_rad(self) -> np.ndarray:
+        return np.mod(self.fit.value[self.n:], 2 * math.pi)
+
+    @property
+    def width_sigma_m(self) -> np.ndarray:
+        return self.fit.sigmas[: self.n]
+
+    @property
+    def theta_sigma_rad(self) -> np.ndarray:
+        return self.fit.sigmas[self.n:]
 
     def to_json(self, names) -> dict:
         return {
@@ -48,9 +67,7 @@ class FootprintResult:
                                                  self.theta_sigma_rad)],
             "closure_gap_m": self.closure_gap_m,
             "closure_gap_before_m": self.closure_gap_before_m,
-            "covariance": {"order": [f"width_m:{n}" for n in names] + [f"theta_rad:{n}" for n in names],
-                           "matrix": self.covariance.tolist()},
-            "status": self.status,
+            **self.fit.to_json(),
         }
 
 
@@ -72,8 +89,7 @@ def _residuals(x, args):
 
 @jax.jit
 def _solve(x0, args):
-    x, ok, _, jac = least_squares(_residuals, x0, args, max_steps=500, tol=1e-12)
-    return x, ok, jac
+    return least_squares(_residuals, x0, args, max_steps=500, tol=1e-12)
 
 
 def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure_sigma_m: float = 1e-6,
@@ -111,26 +127,25 @@ def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure
     t_hat = np.where(np.isinf(st), t_start, t_hat)
     before = float(np.linalg.norm(_gap(w_hat, t_hat)))
     args = tuple(jnp.asarray(a) for a in (w_hat, t_hat, sw, st_inv, closure_sigma_m, ti, tj, tv, 1.0 / ts))
-    x, ok, jac = _solve(jnp.asarray(np.r_[w_hat, t_start]), args)
-    x, jac = np.asarray(x), np.asarray(jac)
+    x, ok, steps, jac, r = _solve(jnp.asarray(np.r_[w_hat, t_start]), args)
     n = len(w_hat)
-    cov = np.linalg.pinv(jac.T @ jac)
+    fit = fit_result(x, ok, steps, jac, r, [f"width_m:{m}" for m in names] + [f"theta_rad:{m}" for m in names])
+    x = fit.value
+    # a ring that closes only by shrinking a wall to (almost) nothing is no footprint: the walls'
+    # thetas do not go round (three copies of one wall, a wall listed twice, a heading off by 180)
+    if fit.status.ok and np.any(x[:n] <= 0.5 * w_hat):
+        fit = replace(fit, status=FitStatus.DEGENERATE)
+    if not fit.status.ok:
+        worst = names[int(np.argmin(x[:n] / w_hat))] if np.all(np.isfinite(x)) else None
+        raise FitFailed(f"footprint: the closure fit {fit.status.message}"
+                        + (f" (wall '{worst}' would shrink from {w_hat[names.index(worst)]:.3f} m to "
+                           f"{x[names.index(worst)]:.3f} m)" if worst is not None and fit.status is FitStatus.DEGENERATE
+                           else ""))
     gap = float(np.linalg.norm(_gap(x[:n], x[n:])))
-    if not bool(ok) or not np.all(np.isfinite(x)):
-        raise FitFailed("footprint: the closure fit did not converge; check that the walls are listed in "
-                        "footprint order and their theta values go round the building")
-    if np.any(x[:n] <= 0):
-        raise FitFailed("footprint: closing the ring needs a negative width; the thetas do not describe a closed "
-                        "footprint (check the wall order and headings)")
-    sig = np.sqrt(np.clip(np.diag(cov), 0, None))
-    return FootprintResult(width_m=x[:n], theta_rad=np.mod(x[n:], 2 * math.pi), width_sigma_m=sig[:n],
-                           theta_sigma_rad=sig[n:], covariance=cov, closure_gap_m=gap,
-                           closure_gap_before_m=before, status="converged")
+    return FootprintResult(fit=fit, closure_gap_m=gap, closure_gap_before_m=before)
 
 
 def _estimates_from_structure(path, config, heading_sigma_deg, theta_sigma_deg):
-    from dataclasses import replace
-
     from ..spec import load_structure
     from .camera import theta_from_heading
     from .rectify import calibrate_photo
@@ -194,7 +209,6 @@ def _estimates_from_json(paths, heading_sigma_deg):
 def footprint_to_folder(inputs, out, *, config=None, heading_sigma_deg: float = 2.0, theta_sigma_deg: float = 1.0,
                         figure: bool = True) -> dict:
     """``calib-masonry footprint``: footprint.json, structure.toml with the adjusted W and theta, a plan figure."""
-    from dataclasses import replace
     from pathlib import Path
 
     from ..io import staged_output, write_json

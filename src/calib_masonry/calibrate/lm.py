@@ -8,7 +8,8 @@ __all__ = ["least_squares"]
 
 
 def least_squares(residual_fn, y0, args, *, max_steps: int = 200, tol: float = 1e-10):
-    """Solve ``min |residual_fn(y, args)|^2``; returns ``(y, converged, steps, jacobian)``.
+    """Solve ``min |residual_fn(y, args)|^2``; returns ``(y, converged, steps, jacobian, residuals)``
+    (hand them to :func:`~calib_masonry.calibrate.fitresult.fit_result` outside ``jax.jit``).
 
     optimistix's LM can keep rejecting steps at a minimum where the cost no longer changes in
     float64, and then reports the step limit. First-order optimality, a gradient ``J^T r`` that
@@ -24,4 +25,4 @@ def least_squares(residual_fn, y0, args, *, max_steps: int = 200, tol: float = 1
     r = residual_fn(y, args)
     curv = jnp.sqrt(jnp.sum(jac**2, axis=0)) * (jnp.sqrt(r @ r) + 1.0)
     stationary = jnp.all(jnp.abs(jac.T @ r) <= 1e-6 * curv)
-    return y, (sol.result == optx.RESULTS.successful) | stationary, sol.stats["num_steps"], jac
+    return y, (sol.result == optx.RESULTS.successful) | stationary, sol.stats["num_steps"], jac, r

@@ -26,6 +26,7 @@ __all__ = [
     "native_px_per_m",
     "parse_corners",
     "rect_from_wall",
+    "rectify",
     "rectify_image",
     "rectify_to_folder",
 ]
@@ -139,9 +140,8 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         raise FitFailed(f"{photo.path}: no focal length in EXIF and too few constraints to fit one "
                         f"(+-{result.sigma('focal_px'):.0f} px); pass --focal-px F")
     if not config.force:
-        if result.status != "converged":
-            raise FitFailed(f"{photo.path}: the calibration did not converge ({result.status}); check the corners, "
-                            "pass --focal-px, or use --force to keep it anyway")
+        if not result.fit.ok:
+            raise FitFailed(f"{photo.path}: the calibration {result.status.message}; or use --force to keep it anyway")
         if result.rms_residual_px > config.max_rms_px:
             raise FitFailed(f"{photo.path}: RMS residual {result.rms_residual_px:.2f} px exceeds {config.max_rms_px:g} px "
                             "(corners or joints do not fit one wall plane); click the corners with --corners, "
@@ -150,6 +150,24 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             raise FitFailed(f"{photo.path}: fitted wall {result.width_m:.2f} x {result.height_m:.2f} m is implausible; "
                             "check --camera-height and the corners")
     return PhotoCalibration(photo=photo, result=result, detection=detection, mode=mode, focal_source=focal_source)
+
+
+def rectify(calibration: PhotoCalibration, *, px_per_m: float | None = None, width_m: float | None = None,
+            height_m: float | None = None) -> np.ndarray:
+    """The metric orthophoto ``(rows, cols, 3)`` of a calibrated photo's wall, at ``px_per_m``
+    (default: the photo's own finest resolution on the wall). ``width_m`` / ``height_m`` stretch the
+    fitted wall onto a measured size (the photo's outline then maps onto the W x H given)."""
+    res = calibration.result
+    width = res.width_m if width_m is None else float(width_m)
+    height = res.height_m if height_m is None else float(height_m)
+    for name, v in (("width_m", width), ("height_m", height)):
+        if not (math.isfinite(v) and v > 0):
+            raise InputError(f"rectify: {name} = {v} must be a length > 0 (metres)")
+    ppm = native_px_per_m(res) if px_per_m is None else float(px_per_m)
+    if not (math.isfinite(ppm) and ppm > 0):
+        raise InputError(f"rectify: px_per_m = {ppm} must be > 0")
+    stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
+    return rectify_image(calibration.photo.rgb, stretch @ res.wall_from_image, width, height, ppm)
 
 
 def rect_from_wall(width_m: float, height_m: float, shape: tuple[int, int]) -> np.ndarray:
@@ -213,7 +231,7 @@ def rectify_to_folder(photo_path: str | Path, out: str | Path, config: Calibrate
         if mask.shape[::-1] != cal.photo.size:
             raise InputError(f"--mask {mask_path}: {mask.shape[1]} x {mask.shape[0]} px, but the photo is "
                              f"{cal.photo.size[0]} x {cal.photo.size[1]}; give the mask of this photo")
-    rect = rectify_image(cal.photo.rgb, res.wall_from_image, res.width_m, res.height_m, px_per_m)
+    rect = rectify(cal, px_per_m=px_per_m)
     doc = cal.to_json()
     doc["px_per_m"] = px_per_m
     doc["rectified_shape"] = list(rect.shape[:2])

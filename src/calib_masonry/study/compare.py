@@ -16,11 +16,11 @@ import numpy as np
 import shapely
 
 from ..build3d.contacts import max_interpenetration
-from ..build3d.export import bricks_from_json
+from ..build3d.assemble import Structure3D
 from ..errors import InputError
 from ..io import read_json
 
-__all__ = ["compare_dirs", "match_polygons", "IOU_MATCH"]
+__all__ = ["compare", "compare_dirs", "match_polygons", "IOU_MATCH"]
 
 IOU_MATCH = 0.5
 
@@ -66,22 +66,32 @@ def _angle_diff_deg(a: float, b: float) -> float:
 
 
 def compare_dirs(run_dir: str | Path, truth_dir: str | Path) -> dict:
-    """Metrics of the build in ``run_dir`` against the synthetic truth in ``truth_dir``."""
+    """Metrics of the build in ``run_dir`` against the synthetic truth in ``truth_dir`` (see :func:`compare`)."""
+    from ..pipeline import read_build
+
     run_dir, truth_dir = Path(run_dir), Path(truth_dir)
     if not run_dir.is_dir():
         raise InputError(f"RUN_DIR {run_dir}: not a folder; give the --out folder of `calib-masonry build`")
     if not truth_dir.is_dir():
         raise InputError(f"TRUTH_DIR {truth_dir}: not a folder; give the truth/ folder written by `calib-masonry synth`")
-    run = read_json(run_dir / "bricks.json", field="RUN_DIR bricks.json")
-    truth = read_json(truth_dir / "bricks.json", field="TRUTH_DIR bricks.json")
+    if not (truth_dir / "bricks.json").is_file():
+        raise InputError(f"TRUTH_DIR {truth_dir}: has no bricks.json; give the truth/ folder written by `calib-masonry synth`")
     truth_meta = read_json(truth_dir / "truth.json", field="TRUTH_DIR truth.json")
-    built = bricks_from_json(run)
-    true = bricks_from_json(truth)
-    run_walls = {w["name"]: (i, w) for i, w in enumerate(run["walls"])}
-    truth_walls = {w["name"]: (i, w) for i, w in enumerate(truth["walls"])}
+    metrics = compare(read_build(run_dir), read_build(truth_dir), where=f"RUN_DIR {run_dir}")
+    return {"run": run_dir.as_posix(), "truth": truth_dir.as_posix(), **metrics,
+            "structure": truth_meta.get("name", metrics["structure"])}
+
+
+def compare(model: Structure3D, truth: Structure3D, *, where: str = "model") -> dict:
+    """Metrics of a built model against the synthetic truth, in memory: brick matching (IoU >=
+    :data:`IOU_MATCH`), precision and recall, Dice and centroid errors of the matched bricks, the
+    walls' W, H and theta errors, the volume error and the largest interpenetration."""
+    built, true = list(model.bricks), list(truth.bricks)
+    run_walls = {w.name: (i, w) for i, w in enumerate(model.footprint.walls)}
+    truth_walls = {w.name: (i, w) for i, w in enumerate(truth.footprint.walls)}
     missing = sorted(set(truth_walls) - set(run_walls))
     if missing:
-        raise InputError(f"RUN_DIR {run_dir}: walls {missing} of the truth are not in the model; "
+        raise InputError(f"{where}: walls {missing} of the truth are not in the model; "
                          "build the structure file that synth wrote beside the truth")
 
     per_wall, all_dice, all_centroid = [], [], []
@@ -104,15 +114,15 @@ def compare_dirs(run_dir: str | Path, truth_dir: str | Path) -> dict:
             "precision": len(matches) / len(b_list) if b_list else 0.0,
             "recall": len(matches) / len(t_list) if t_list else 0.0,
             "dice": _stats(dice), "centroid_error_mm": _stats(cen),
-            "width_error_m": rw["width_m"] - tw["width_m"],
-            "height_error_m": rw["height_m"] - tw["height_m"],
-            "theta_error_deg": _angle_diff_deg(rw["theta_deg"], tw["theta_deg"]),
+            "width_error_m": rw.width_m - tw.width_m,
+            "height_error_m": rw.height_m - tw.height_m,
+            "theta_error_deg": _angle_diff_deg(rw.theta_deg, tw.theta_deg),
         })
     inter = max_interpenetration(built)
     vol_b = float(sum(b.volume for b in built))
     vol_t = float(sum(b.volume for b in true))
     return {
-        "run": run_dir.as_posix(), "truth": truth_dir.as_posix(), "structure": truth_meta.get("name"),
+        "structure": truth.name,
         "precision": total_matched / total_built if total_built else 0.0,
         "recall": total_matched / total_true if total_true else 0.0,
         "built_bricks": total_built, "true_bricks": total_true, "matched": total_matched,

@@ -42,7 +42,7 @@ def truth_structure(spec: StructureSpec):
     walls = [WallPolygons(wall=w, ids=tuple(range(len(p))), polygons_m=tuple(q.polygon_m for q in p))
              for w, p in enumerate(pieces)]
     end_faces = [{i for i, q in enumerate(p) if q.end_face} for p in pieces]
-    return pieces, assemble(spec, walls, end_faces=end_faces)
+    return pieces, assemble(spec.footprint, walls, name=spec.name, end_faces=end_faces)
 
 
 def _photograph(spec: StructureSpec, pieces, photos: PhotoSpec, stage: Path, out: Path, progress) -> list[dict]:

@@ -9,7 +9,7 @@ centres at integers). The traced outline is scikit-image's iso-line at level 0.5
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -25,7 +25,7 @@ from .split import splitting_sequence, visvalingam
 if TYPE_CHECKING:  # pragma: no cover
     from .refine import RefineConfig
 
-__all__ = ["TraceConfig", "TracedBrick", "TraceResult", "trace_mask", "trace_outline"]
+__all__ = ["TraceConfig", "TracedBrick", "TraceResult", "trace_mask", "refine_trace", "trace_outline"]
 
 
 @dataclass(frozen=True)
@@ -223,3 +223,24 @@ def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[Trace
                                area_px=int(region.sum()), dice_splitting=float(sd), refined=bool(refined),
                                note=note, splitting_xy=sp))
     return out
+
+
+def refine_trace(mask: np.ndarray, traced: TraceResult, config: "RefineConfig | None" = None,
+                 segment: SegmentConfig = SegmentConfig()) -> TraceResult:
+    """Refine the polygons of a trace of ``mask`` by soft Dice (:mod:`calib_masonry.wall2d.refine`),
+    keeping every vertex count; no brick ends with a lower Dice than its traced polygon. ``segment``
+    must be the segmentation the trace used (its labels are the bricks' ids)."""
+    from .refine import RefineConfig, refine_polygons
+
+    if tuple(mask.shape) != tuple(traced.image_shape):
+        raise InputError(f"refine: the mask is {mask.shape[1]} x {mask.shape[0]} px but the trace was made on "
+                         f"{traced.image_shape[1]} x {traced.image_shape[0]} px; refine the trace of this mask")
+    labels = label_bricks(mask, segment)
+    bricks = list(traced.bricks)
+    results = refine_polygons(labels, [b.id for b in bricks], [b.vertices_xy for b in bricks],
+                              config or RefineConfig())
+    out = [replace(b, vertices_xy=r.vertices_xy, dice=float(r.dice), refined=bool(r.refined), note=r.reason,
+                   dice_splitting=b.dice if b.dice_splitting is None else b.dice_splitting,
+                   splitting_xy=b.vertices_xy if b.splitting_xy is None else b.splitting_xy)
+           for b, r in zip(bricks, results)]
+    return TraceResult(image_shape=traced.image_shape, bricks=tuple(out))

@@ -2,7 +2,7 @@
 
 Displacements are measured relative to the ground plate (a brick carried rigidly by the ground has
 not moved) and from the end of the gravity warm-up. A bond counts as broken at the frame where the
-joint model cracked it (:mod:`calib_masonry.simulate.joints`).
+joint model cracked it (:mod:`calib_masonry.simulation.joints`).
 
 Pushover: the collapse multiplier is the lateral acceleration (in g) at the last frame where every
 brick still moved slower than ``ONSET_DRIFT`` (0.1 %) of the structure's height per second (its
@@ -99,7 +99,7 @@ def _runaway_m(scene: Scene) -> float:
 
 
 def pushover_stop(scene: Scene, settle_s: float = 1.0):
-    """A ``stop`` for :func:`~calib_masonry.simulate.blender.run`: true ``settle_s`` after the largest
+    """A ``stop`` for :func:`~calib_masonry.simulation.blender.run`: true ``settle_s`` after the largest
     brick displacement (from the end of the warm-up, relative to the plate) has run away."""
     s = scene.solver
     limit = _runaway_m(scene)

@@ -7,7 +7,7 @@ that velocity and displacement return to rest, and scaled so that its peak equal
 displacement is the record integrated twice in the frequency domain, and the acceleration is
 recomputed from the sampled displacement, so the two always agree. The simulation applies the
 motion as the inertial force it puts on every brick in the ground's frame (see
-:meth:`GroundMotion.mean_acceleration` and :mod:`calib_masonry.simulate.blender`).
+:meth:`GroundMotion.mean_acceleration` and :mod:`calib_masonry.simulation.blender`).
 
 Units: seconds, metres, m/s^2; ``pga_g`` is in g at the edges only.
 """

@@ -1,10 +1,10 @@
 """The simulation scene as plain data: bodies, mortar bonds, the ground plate and solver settings.
 
-Nothing here imports Blender: :mod:`calib_masonry.simulate.blender` realises a :class:`Scene` in
+Nothing here imports Blender: :mod:`calib_masonry.simulation.blender` realises a :class:`Scene` in
 Bullet through ``bpy``, and any other engine could read the same description.
 
 Mortar model. The mortar joints are folded into the bricks: each brick's body is its share of the
-wall, up to the middle of each joint around it (:func:`calib_masonry.simulate.mortar.mortar_cells`),
+wall, up to the middle of each joint around it (:func:`calib_masonry.simulation.mortar.mortar_cells`),
 so neighbours touch and, once a joint has cracked, bear on each other with Coulomb friction. Bricks
 whose filled bodies would overlap a brick they are not bonded to (at corners, where walls meet) keep
 their exact shape. The mortar's mass is left out: a body weighs as much as its brick.
@@ -12,7 +12,7 @@ their exact shape. The mortar's mass is left out: a body weighs as much as its b
 Each contact patch between two bricks' facing faces (any orientation) is a mortar joint
 (:class:`Bond`): its centroid, normal, area, second moments and outline. In Bullet an intact joint
 is one rigid, unbreakable constraint and its two bricks do not collide; whether and when it cracks
-is decided by the elastic joint model (:mod:`calib_masonry.simulate.joints`, where every formula
+is decided by the elastic joint model (:mod:`calib_masonry.simulation.joints`, where every formula
 is), not by Bullet's impulses, whose split between the constraints of a statically indeterminate
 structure depends on the solver settings. A cracked joint's constraint is switched off and its
 bricks' contacts come back: it then carries compression, rocking and Coulomb friction only.
@@ -53,7 +53,7 @@ class Material:
     0.6, the ratios Lourenco (1996, "Computational strategies for masonry structures", Table 4.2)
     recommends for unit-mortar interfaces; moduli for a lime-cement mortar (E_m 1 GPa, nu 0.2) and
     clay units or stone (E_u 10 GPa, nu 0.15), a 10 mm joint. Only ratios of the stiffnesses
-    affect the joint forces (see :mod:`calib_masonry.simulate.joints`)."""
+    affect the joint forces (see :mod:`calib_masonry.simulation.joints`)."""
 
     density: float = 1800.0  # kg/m^3
     friction: float = 0.6  # mu: Coulomb friction of brick on brick and of a cracked joint
@@ -194,7 +194,7 @@ class Pushover:
     """A quasi-static collapse analysis: after the warm-up, a uniform lateral acceleration rises
     from 0 at ``rate_g_per_s`` (in g per second) along ``direction_deg`` (from global X), up to
     ``max_g``. The collapse multiplier is the lateral acceleration (in g) at which the structure's
-    displacement runs away (see :func:`calib_masonry.simulate.results.collapse_multiplier`)."""
+    displacement runs away (see :func:`calib_masonry.simulation.results.collapse_multiplier`)."""
 
     rate_g_per_s: float = 0.01
     direction_deg: float = 0.0

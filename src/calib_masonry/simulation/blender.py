@@ -1,4 +1,4 @@
-"""The Blender (bpy) adapter: realise a :class:`~calib_masonry.simulate.scene.Scene` in Bullet and step it.
+"""The Blender (bpy) adapter: realise a :class:`~calib_masonry.simulation.scene.Scene` in Bullet and step it.
 
 This is the only module that imports ``bpy``, lazily, so everything else works without Blender.
 Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
@@ -9,7 +9,7 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
   the corners and blocks rock over early); the ground plate uses the BOX shape;
 * the world is stepped with ``scene.frame_set(f)`` frame by frame, the point cache covering the run;
 * every intact mortar joint is one FIXED constraint that never breaks in Bullet: the joint model
-  (:class:`~calib_masonry.simulate.joints.JointModel`) decides, before every step after the
+  (:class:`~calib_masonry.simulation.joints.JointModel`) decides, before every step after the
   warm-up, which joints the coming step's load cracks, and the run switches those off.
   ``rigid_body_constraint.enabled = False`` is written on the *evaluated* object between
   frames: it reaches the live Bullet constraint at once; writing the original object instead
@@ -114,7 +114,7 @@ def _quaternions(r: np.ndarray) -> np.ndarray:
 
 
 def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:
-    """Quaternion (w, x, y, z) of the joint frame (:func:`~calib_masonry.simulate.scene.joint_axes`)
+    """Quaternion (w, x, y, z) of the joint frame (:func:`~calib_masonry.simulation.scene.joint_axes`)
     whose z axis is ``normal``."""
     x, y, z = (a[0] for a in joint_axes(np.asarray(normal, dtype=np.float64)[None]))
     m = np.column_stack([x, y, z])
@@ -270,7 +270,7 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
         switch_off_s: np.ndarray | None = None, stop=None) -> RunOutput:
     """Simulate ``scene`` in one pass: the warm-up under (ramped) gravity with every joint intact
     and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
-    joint model cracking joints before each step (:class:`~calib_masonry.simulate.joints.CrackTracker`).
+    joint model cracking joints before each step (:class:`~calib_masonry.simulation.joints.CrackTracker`).
 
     Damping is switched, and cracked joints switched off, on the evaluated copies of the objects,
     which hold the live Bullet bodies and constraints (writing the originals tags the depsgraph

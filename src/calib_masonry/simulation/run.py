@@ -1,0 +1,357 @@
+"""``simulate``: a built model + a ground motion or a pushover -> a Bullet run -> a result in memory.
+
+:func:`simulate` is the library call: it takes a :class:`~calib_masonry.build3d.assemble.Structure3D`
+(or its :class:`~calib_masonry.simulation.scene.SceneGeometry`, or a ``build`` output folder) and a
+load (a :class:`~calib_masonry.simulation.ground_motion.GroundMotion` or a
+:class:`~calib_masonry.simulation.scene.Pushover`) and returns a :class:`SimulationResult`; it writes
+no file unless ``blend_path`` is given. :func:`write_simulation` writes a result at the edge, and
+:func:`simulate_to_folder` is what the command line calls.
+
+Determinism: two :func:`simulate` calls with the same inputs give bit-identical poses, in one
+process or in two (tested): every Blender scene is built from an empty file in the order of the
+model's bricks and joints, and nothing in it depends on Python's string hashing.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..build3d.assemble import Structure3D
+from ..build3d.export import bricks_from_json, bricks_json
+from ..build3d.place import Footprint, WallGeometry, corners, wall_frames
+from ..errors import InputError
+from ..io import json_bytes, read_json, staged_output, write_json
+from .ground_motion import G, GroundMotion, read_accelerogram, synthetic_motion
+from .joints import joint_stiffness
+from .scene import (MASONRY, Material, Pushover, Scene, SceneGeometry, SolverSettings, load_geometry, save_geometry,
+                    scene_from_geometry, scene_geometry)
+
+__all__ = ["Pushover", "SimulationConfig", "SimulationResult", "simulate", "write_simulation", "simulate_to_folder",
+           "simulation_geometry", "scene_for", "scene_for_model", "motion_for", "load_model", "model_from_json",
+           "geometry_for_model", "store_geometry", "GEOMETRY_FILE"]
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """What ``calib-masonry simulate`` is asked for, checked on construction: a synthetic ground
+    motion (``pga_g``, ``duration_s``, ``seed``, ``components``), a recorded one (``accelerogram``)
+    or a ``pushover``; the solver, the material and the outputs."""
+
+    pga_g: float = 0.3
+    duration_s: float = 10.0
+    seed: int = 0
+    accelerogram: Path | None = None
+    # two independent horizontal components, as a real earthquake has: with one, along X, the walls
+    # parallel to X are loaded only in their plane and stand, so at most the other walls fall (the
+    # paper example at 0.6 g, seed 0: 43 % of bricks moved with one component, 71-77 % with two)
+    components: int = 2
+    direction_deg: float = 0.0  # of a one-component motion, from global X
+    solver: SolverSettings = SolverSettings()
+    material: Material = MASONRY
+    frames_png: int = 6
+    figures: bool = True
+    # bond the bottom course to the ground (a footing): without it the ground moves the structure
+    # through friction alone, and the whole structure creeps on the plate (a slow turn of ~1 mrad
+    # in 10 s under gravity alone on the paper example, measured)
+    foundation: bool = True
+    # a quasi-static collapse analysis instead of a ground motion (then pga, duration, seed,
+    # accelerogram and components are not used)
+    pushover: Pushover | None = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.pga_g) and self.pga_g >= 0):
+            raise InputError(f"--pga {self.pga_g}: the peak ground acceleration must be >= 0 (in g)")
+        if not (math.isfinite(self.duration_s) and self.duration_s > 0):
+            raise InputError(f"--duration {self.duration_s}: must be > 0 seconds")
+        if self.components not in (1, 2):
+            raise InputError(f"--components {self.components}: give 1 (along --direction) or 2 horizontal components")
+        if self.frames_png < 0:
+            raise InputError(f"--frames {self.frames_png}: must be >= 0 (collapse frames to render)")
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """One run: the scene it simulated, the poses at every frame (:class:`~calib_masonry.simulation.blender.RunOutput`),
+    the metrics read from them, the pushover curve (collapse multiplier in g or None, lateral
+    acceleration in g and roof displacement in m per frame; None for a ground motion) and the
+    summary (what ``summary.json`` holds)."""
+
+    scene: Scene
+    output: object  # blender.RunOutput
+    metrics: object  # results.Metrics
+    curve: tuple | None
+    summary: dict
+
+    @property
+    def collapse_multiplier_g(self) -> float | None:
+        return None if self.curve is None else self.curve[0]
+
+
+GEOMETRY_FILE = "sim_geometry.npz"  # the simulation's bodies and contact patches, stored by `build`
+
+
+def _checked_model_dir(model_dir: str | Path) -> Path:
+    model_dir = Path(model_dir)
+    if not model_dir.is_dir():
+        raise InputError(f"MODEL_DIR {model_dir}: not a folder; give the --out folder of `calib-masonry build`")
+    if not (model_dir / "bricks.json").is_file():
+        raise InputError(f"MODEL_DIR {model_dir}: has no bricks.json; run `calib-masonry build STRUCTURE.toml --out {model_dir}` first")
+    return model_dir
+
+
+def _closed_footprint(model_dir: Path):
+    if (model_dir / "summary.json").is_file():
+        return read_json(model_dir / "summary.json").get("closed_footprint")
+    return None
+
+
+def model_from_json(data: dict, closed, source: str | Path):
+    """Bricks, wall frames, corners and footprint of a ``build`` output's bricks.json contents
+    ``data`` (``closed``: the build summary's closed_footprint)."""
+    try:
+        bricks = bricks_from_json(data)
+        walls = tuple(WallGeometry(width_m=w["width_m"], height_m=w["height_m"], theta_rad=math.radians(w["theta_deg"]),
+                                   thickness_m=w["thickness_m"], name=w["name"]) for w in data["walls"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"MODEL_DIR {source}: bricks.json is not a build output ({exc}); re-run build") from None
+    if not bricks:
+        raise InputError(f"MODEL_DIR {source}: bricks.json holds no bricks; nothing to simulate")
+    footprint = Footprint(walls=walls, closed=closed)
+    return bricks, wall_frames(footprint), corners(footprint), footprint
+
+
+def load_model(model_dir: str | Path):
+    """Bricks, wall frames, corners and footprint of a ``build`` output folder."""
+    model_dir = _checked_model_dir(model_dir)
+    data = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
+    return model_from_json(data, _closed_footprint(model_dir), model_dir)
+
+
+def _geometry_key(bricks_json_bytes: bytes, closed, max_gap_m: float, mortar_fill: bool) -> str:
+    """What a model's simulation geometry is computed from: the bricks.json bytes, whether the
+    footprint is closed, the joint reach and the mortar fill."""
+    import hashlib
+
+    h = hashlib.sha256(bricks_json_bytes)
+    h.update(repr((closed, float(max_gap_m), bool(mortar_fill))).encode())
+    return h.hexdigest()
+
+
+def simulation_geometry(model: Structure3D | SceneGeometry, *, max_gap_m: float = 0.06,
+                        mortar_fill: bool = True) -> SceneGeometry:
+    """The bodies and contact patches of a built structure, in memory."""
+    if isinstance(model, SceneGeometry):
+        return model
+    if not isinstance(model, Structure3D):
+        raise InputError(f"simulate: the model must be a Structure3D (from build), a SceneGeometry or a build "
+                         f"folder, got {type(model).__name__}")
+    return scene_geometry(model.bricks, list(model.frames), list(model.corners), mortar_fill=mortar_fill,
+                          max_gap_m=max_gap_m)
+
+
+def store_geometry(structure: Structure3D, model_dir: str | Path, *, max_gap_m: float = 0.06,
+                   mortar_fill: bool = True) -> SceneGeometry:
+    """Compute the simulation geometry of ``structure`` in memory and store it in ``model_dir`` (a
+    ``build`` stage) as sim_geometry.npz, keyed by the bricks.json that build writes for it."""
+    geometry = simulation_geometry(structure, max_gap_m=max_gap_m, mortar_fill=mortar_fill)
+    key = _geometry_key(json_bytes(bricks_json(structure), exact=True), structure.footprint.is_closed, max_gap_m, mortar_fill)
+    save_geometry(geometry, Path(model_dir) / GEOMETRY_FILE, key)
+    return geometry
+
+
+def geometry_for_model(model_dir: str | Path, *, max_gap_m: float = 0.06, mortar_fill: bool = True
+                       ) -> tuple[SceneGeometry, bool]:
+    """The simulation geometry of a model folder and whether it came from the folder's
+    sim_geometry.npz. The stored copy is used only if it was computed from this bricks.json (its
+    hash), footprint and settings by this version of the code; otherwise (a model built before it
+    was stored, an edited bricks.json) the geometry is computed here from bricks.json."""
+    model_dir = _checked_model_dir(model_dir)
+    raw = (model_dir / "bricks.json").read_bytes()
+    closed = _closed_footprint(model_dir)
+    stored = load_geometry(model_dir / GEOMETRY_FILE, _geometry_key(raw, closed, max_gap_m, mortar_fill))
+    if stored is not None:
+        return stored, True
+    data = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
+    bricks, frames, cs, _ = model_from_json(data, closed, model_dir)
+    return scene_geometry(bricks, frames, cs, mortar_fill=mortar_fill, max_gap_m=max_gap_m), False
+
+
+def motion_for(config: SimulationConfig) -> GroundMotion:
+    """The ground motion of a run. A synthetic record is scaled so that the acceleration the run
+    applies (its mean over each frame) peaks at the PGA: the Kanai-Tajimi record is broadband, and
+    at 25 fps its frame means peak 10-20 % below the peak of the 200 Hz samples (0.49-0.54 g for
+    0.6 g records, seeds 0-2, measured), so scaling the samples would shake the model less than
+    asked. A recorded accelerogram is applied as it is."""
+    if config.accelerogram is not None:
+        return read_accelerogram(config.accelerogram)
+    motion = synthetic_motion(config.pga_g, config.duration_s, seed=config.seed, components=config.components,
+                              direction_deg=config.direction_deg)
+    applied = motion.applied_peak(config.solver.fps)
+    if applied <= 0:
+        return motion
+    return motion.scaled(config.pga_g * G / applied,
+                         source=f"{motion.source} as applied at {config.solver.fps} fps")
+
+
+def scene_for(model: Structure3D | SceneGeometry, load: GroundMotion | Pushover | None, *,
+              solver: SolverSettings = SolverSettings(), material: Material = MASONRY, foundation: bool = True,
+              duration_s: float | None = None) -> Scene:
+    """The Bullet scene of a model under a ground motion, a pushover or (``load`` None, for
+    ``duration_s``) gravity alone."""
+    geometry = simulation_geometry(model)
+    motion = load if isinstance(load, GroundMotion) else None
+    pushover = load if isinstance(load, Pushover) else None
+    if load is not None and motion is None and pushover is None:
+        raise InputError(f"simulate: the load must be a GroundMotion or a Pushover, got {type(load).__name__}")
+    if pushover is not None:
+        duration = pushover.duration_s
+    elif motion is not None:
+        duration = motion.duration
+    elif duration_s is not None and duration_s > 0:
+        duration = duration_s
+    else:
+        raise InputError("simulate: without a ground motion or a pushover, give duration_s > 0 (gravity alone)")
+    return scene_from_geometry(geometry, motion=motion, pushover=pushover, duration_s=duration, material=material,
+                               solver=solver, foundation=foundation)
+
+
+def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
+    """The scene ``simulate_to_folder`` runs for a model folder and a configuration."""
+    geometry, stored = geometry_for_model(model_dir)
+    load = config.pushover if config.pushover is not None else motion_for(config)
+    scene = scene_for(geometry, load, solver=config.solver, material=config.material, foundation=config.foundation)
+    scene.notes["geometry_stored"] = stored
+    return scene
+
+
+def _summary(scene: Scene, out, m, curve, name: str) -> dict:
+    from .results import ONSET_DRIFT, failure_mode_counts, outcome
+
+    s = scene.solver
+    k = joint_stiffness(scene.material)
+    mat = scene.material
+    summary = {
+        "model": name, "bricks": len(scene.bodies), "bonds": len(scene.bonds),
+        # pga_g: the peak of the acceleration the run applies (frame means); record_peak_g: of the samples
+        "ground_motion": {"source": scene.motion.source if scene.motion else None,
+                          "pga_g": scene.motion.applied_peak(s.fps) / G if scene.motion else 0.0,
+                          "record_peak_g": scene.motion.pga / G if scene.motion else 0.0,
+                          "duration_s": scene.motion.duration if scene.motion else 0.0},
+        "solver": {"fps": s.fps, "substeps": s.substeps, "iterations": s.iterations, "warmup_s": s.warmup_s,
+                   "gravity_ramp_s": s.gravity_ramp_s, "warmup_damping": s.warmup_damping,
+                   "contact_gap_m": s.contact_gap_m},
+        "joints": {"model": "elastic interfaces (UDEC/3DEC convention) between rigid bricks; Bullet keeps intact "
+                            "joints rigid, the joint model cracks them (calib_masonry.simulation.joints)",
+                   "normal_stiffness_n_per_m3": k.normal, "shear_stiffness_n_per_m3": k.shear,
+                   "tensile_strength_pa": mat.tensile_strength, "compressive_strength_pa": mat.compressive_strength,
+                   "cohesion_pa": mat.shear_strength, "friction": mat.friction,
+                   "cracked_by": failure_mode_counts(out),
+                   "max_utilisation_at_end_of_warmup": float(out.max_utilisation[min(s.warmup_frames, len(out.time) - 1)])
+                   if out.max_utilisation is not None and len(out.time) else None,
+                   "seconds": round(out.seconds_joints, 3)},
+        "frame": "ground: the plate stays put and the ground motion acts on every brick as an inertial force",
+        "foundation_bonds": int(scene.notes.get("foundation_bonds", 0)),
+        # the bodies and contact patches: read from the model folder's sim_geometry.npz (stored
+        # by build) or, for a model built without it or edited since, computed in this run
+        "geometry_stored_by_build": bool(scene.notes.get("geometry_stored", False)),
+        "mortar": {"fill_volume_fraction": scene.notes.get("mortar_fill_volume"),
+                   "max_hull_volume_change": scene.notes.get("max_hull_volume_change"),
+                   "bricks_without_fill": scene.notes.get("bricks_without_fill", 0)},
+        "moved_fraction_final": float(m.moved_fraction[-1]),
+        "moved_threshold_m": s.moved_threshold_m,
+        "max_roof_drift_m": float(m.roof_drift_m.max()),
+        "collapse_time_s": m.collapse_time_s,
+        "bonds_broken": int(np.isfinite(m.bond_break_time_s).sum()),
+        "bonds_broken_fraction": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
+        "max_brick_displacement_m": float(m.max_displacement_m.max()),
+        "outcome": outcome(float(m.moved_fraction[-1])),
+        "seconds": {"blender_build": round(out.seconds_build, 3), "stepping": round(out.seconds_stepping, 3),
+                    "per_frame": round(out.seconds_stepping / max(1, len(out.time) - 1), 4)},
+    }
+    if curve is not None:
+        summary["pushover"] = {"rate_g_per_s": scene.pushover.rate_g_per_s,
+                               "direction_deg": scene.pushover.direction_deg, "max_g": scene.pushover.max_g,
+                               "onset_drift": ONSET_DRIFT}
+        summary["collapse_multiplier_g"] = curve[0]
+        summary["ground_motion"] = None
+    return summary
+
+
+def _run_scene(scene: Scene, name: str, *, progress: bool | None, blend_path: Path | None) -> SimulationResult:
+    from .blender import require_bpy, run
+    from .results import collapse_multiplier, metrics, pushover_stop
+
+    require_bpy()
+    stop = pushover_stop(scene) if scene.pushover is not None else None
+    out = run(scene, progress=progress, blend_path=blend_path, stop=stop)
+    m = metrics(scene, out)
+    curve = collapse_multiplier(scene, out, m) if scene.pushover is not None else None
+    return SimulationResult(scene=scene, output=out, metrics=m, curve=curve, summary=_summary(scene, out, m, curve, name))
+
+
+def simulate(model, load: GroundMotion | Pushover | None = None,
+             settings: SolverSettings = SolverSettings(), *, material: Material = MASONRY, foundation: bool = True,
+             duration_s: float | None = None, progress: bool | None = None,
+             blend_path: Path | None = None) -> SimulationResult:
+    """Simulate a built model in Bullet under a ground motion, a pushover or (``load`` None, for
+    ``duration_s`` seconds) gravity alone; in memory (writes ``blend_path`` only if given).
+
+    ``model`` is a :class:`~calib_masonry.build3d.assemble.Structure3D` or the BuildResult
+    :func:`calib_masonry.build` returns, its :class:`~calib_masonry.simulation.scene.SceneGeometry`,
+    or a ``build`` output folder."""
+    stored = None
+    if hasattr(model, "structure") and isinstance(model.structure, Structure3D):  # a BuildResult
+        model = model.structure
+    if isinstance(model, (str, Path)):
+        name = str(model)
+        model, stored = geometry_for_model(model)
+    else:
+        name = model.name if isinstance(model, Structure3D) else "model"
+    scene = scene_for(model, load, solver=settings, material=material, foundation=foundation, duration_s=duration_s)
+    if stored is not None:
+        scene.notes["geometry_stored"] = stored
+    return _run_scene(scene, name, progress=progress, blend_path=blend_path)
+
+
+def write_simulation(result: SimulationResult, out: Path, *, figures: bool = True, frames_png: int = 6) -> None:
+    """Write a result into the folder ``out`` (it must exist): summary.json, poses.npz and the figures
+    (ground_motion.png or pushover.png, histories.png, frames/)."""
+    from .results import plot_ground_motion, plot_histories, plot_pushover, render_frames
+
+    scene, r, m = result.scene, result.output, result.metrics
+    np.savez_compressed(out / "poses.npz", time=r.time, positions=r.positions.astype(np.float32),
+                        quaternions=r.quaternions.astype(np.float32), plate=r.plate.astype(np.float32),
+                        bond_break_time_s=m.bond_break_time_s)
+    t1 = time.perf_counter()
+    if figures:
+        if scene.pushover is not None:
+            plot_pushover(scene, result.curve, out / "pushover.png")
+        else:
+            plot_ground_motion(scene, out / "ground_motion.png")
+        plot_histories(scene, r, m, out / "histories.png")
+        render_frames(scene, r, out / "frames", count=frames_png)
+    summary = dict(result.summary)
+    summary["seconds"] = {**summary["seconds"], "figures": round(time.perf_counter() - t1, 3)}
+    write_json(out / "summary.json", summary)
+
+
+def simulate_to_folder(model_dir: str | Path, out: str | Path, config: SimulationConfig = SimulationConfig(), *,
+                       progress: bool | None = None) -> dict:
+    """Run the simulation ``config`` asks for on a model folder and write summary.json, poses.npz,
+    scene.blend, figures and frames/ into ``out`` (all or nothing)."""
+    from .blender import require_bpy
+
+    require_bpy()
+    t0 = time.perf_counter()
+    scene = scene_for_model(model_dir, config)
+    t_scene = time.perf_counter() - t0
+    with staged_output(out) as stage:
+        result = _run_scene(scene, str(model_dir), progress=progress, blend_path=stage / "scene.blend")
+        result.summary["seconds"]["scene"] = round(t_scene, 3)
+        write_simulation(result, stage, figures=config.figures, frames_png=config.frames_png)
+    return read_json(Path(out) / "summary.json")

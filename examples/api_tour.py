@@ -32,18 +32,25 @@ def main() -> None:
     pieces, truth = cm.truth_structure(scenario)
 
     # a perspective photo of it from standing height (an array, with the focal length EXIF would give)
-    shot = photograph_wall(wall, pieces[0], PhotoSpec(distance_m=(6.0, 9.0), max_yaw_deg=20.0),
-                           np.random.default_rng(7))
-    photo = cm.Photo(path=Path(f"{wall.name} (rendered in memory)"), rgb=shot["image"],
-                     focal_px=shot["truth"]["params"]["focal_px"], heading_deg=None)
+    shot = photograph_wall(
+        wall, pieces[0], PhotoSpec(distance_m=(6.0, 9.0), max_yaw_deg=20.0), np.random.default_rng(7)
+    )
+    photo = cm.Photo(
+        path=Path(f"{wall.name} (rendered in memory)"),
+        rgb=shot["image"],
+        focal_px=shot["truth"]["params"]["focal_px"],
+        heading_deg=None,
+    )
 
     # 1. calibrate: camera and wall size, with their covariance (the eye height measured to +- 2 cm)
     eye = shot["truth"]["eye_height_m"]
     cal = cm.calibrate_photo(photo, cm.CalibrateConfig(camera_height_m=eye, camera_height_sigma_m=0.02))
     res = cal.result
-    print(f"calibrate_photo: W = {res.width_m:.3f} +- {res.sigma('width_m'):.3f} m (true {wall.width_m:.3f}), "
-          f"H = {res.height_m:.3f} +- {res.sigma('height_m'):.3f} m (true {wall.height_m:.3f}), "
-          f"yaw {math.degrees(res.value('yaw_rad')):.1f} deg, {res.status.value} in {res.steps} steps")
+    print(
+        f"calibrate_photo: W = {res.width_m:.3f} +- {res.sigma('width_m'):.3f} m (true {wall.width_m:.3f}), "
+        f"H = {res.height_m:.3f} +- {res.sigma('height_m'):.3f} m (true {wall.height_m:.3f}), "
+        f"yaw {math.degrees(res.value('yaw_rad')):.1f} deg, {res.status.value} in {res.steps} steps"
+    )
 
     # 2. rectify and segment: the metric orthophoto and its brick mask
     ortho = cm.rectify(cal, px_per_m=300.0)
@@ -56,21 +63,32 @@ def main() -> None:
     print(f"trace: {len(traced.bricks)} bricks, mean Dice {traced.mean_dice:.4f}; refine: {refined.mean_dice:.4f}")
 
     # 4. build: the wall's measured size and the polygons -> 3D bricks
-    spec = cm.StructureSpec(name="tour", thickness_m=wall.thickness_m, closed=False, walls=(
-        cm.WallSpec(name=wall.name, width_m=res.width_m, height_m=res.height_m, theta_rad=0.0,
-                    thickness_m=wall.thickness_m),))
+    spec = cm.StructureSpec(
+        name="tour",
+        thickness_m=wall.thickness_m,
+        closed=False,
+        walls=(
+            cm.WallSpec(
+                name=wall.name, width_m=res.width_m, height_m=res.height_m, theta_rad=0.0, thickness_m=wall.thickness_m
+            ),
+        ),
+    )
     built = cm.build(spec, traces={wall.name: refined}, progress=False)
     metrics = cm.compare(built.structure, truth)
-    print(f"build: {len(built.structure.bricks)} bricks; compare with truth: precision {metrics['precision']:.3f}, "
-          f"recall {metrics['recall']:.3f}, median Dice {metrics['dice']['median']:.4f}, "
-          f"centroid error {metrics['centroid_error_mm']['mean']:.1f} mm")
+    print(
+        f"build: {len(built.structure.bricks)} bricks; compare with truth: precision {metrics['precision']:.3f}, "
+        f"recall {metrics['recall']:.3f}, median Dice {metrics['dice']['median']:.4f}, "
+        f"centroid error {metrics['centroid_error_mm']['mean']:.1f} mm"
+    )
 
     # 5. simulate: two seconds of a 0.3 g synthetic quake (Bullet through bpy)
     motion = cm.synthetic_motion(0.3, 2.0, seed=0)
     result = cm.simulate(built.structure, motion, progress=False)
     s = result.summary
-    print(f"simulate: {s['outcome']}, {s['moved_fraction_final']:.1%} of bricks moved, "
-          f"{s['bonds_broken']} of {s['bonds']} joints cracked, max roof drift {s['max_roof_drift_m'] * 1000:.1f} mm")
+    print(
+        f"simulate: {s['outcome']}, {s['moved_fraction_final']:.1%} of bricks moved, "
+        f"{s['bonds_broken']} of {s['bonds']} joints cracked, max roof drift {s['max_roof_drift_m'] * 1000:.1f} mm"
+    )
     print(f"tour: {time.perf_counter() - t0:.1f} s, nothing written")
 
 

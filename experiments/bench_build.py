@@ -44,10 +44,15 @@ def ours(spec, out: Path) -> dict[str, float]:
     traces = [trace_mask(m, TraceConfig(vertices=w.vertices)) for m, w in zip(masks, spec.walls)]
     t["label + trace + split + Dice"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    walls = [WallPolygons(i, tuple(b.id for b in tr.bricks),
-                          tuple(wall_from_image(b.vertices_xy, tr.image_shape, w.width_m, w.height_m) for b in tr.bricks),
-                          tuple(b.dice for b in tr.bricks))
-             for i, (w, tr) in enumerate(zip(spec.walls, traces))]
+    walls = [
+        WallPolygons(
+            i,
+            tuple(b.id for b in tr.bricks),
+            tuple(wall_from_image(b.vertices_xy, tr.image_shape, w.width_m, w.height_m) for b in tr.bricks),
+            tuple(b.dice for b in tr.bricks),
+        )
+        for i, (w, tr) in enumerate(zip(spec.walls, traces))
+    ]
     t["scale (Eq. 1)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     structure = assemble(spec.footprint, walls, name=spec.name)
@@ -145,8 +150,10 @@ def main() -> None:
     best_peer = min(runs_peer, key=lambda r: sum(v for k, v in r.items() if not k.startswith("_")))
     total_o = sum(v for k, v in best_ours.items() if not k.startswith("_"))
     total_p = sum(v for k, v in best_peer.items() if not k.startswith("_"))
-    print(f"masks -> STL, {spec.name}: {len(spec.walls)} walls, {best_ours['_bricks']} bricks "
-          f"(best of {args.repeat} runs; peer best of {len(runs_peer)})")
+    print(
+        f"masks -> STL, {spec.name}: {len(spec.walls)} walls, {best_ours['_bricks']} bricks "
+        f"(best of {args.repeat} runs; peer best of {len(runs_peer)})"
+    )
     _table("stage", "ours (s)", best_ours, total_o, "   (aim < 1 s; the method reports < 20 s)")
     print()
     _table("peer stage", "peer (s)", best_peer, total_p, "")

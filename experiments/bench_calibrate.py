@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from calib_masonry.calibrate.camera import project, theta_from_heading
-from calib_masonry.calibrate.fit import CalibrationInput, calibrate, order_corners
 from calib_masonry.calibrate.corner import calibrate_corner_photo
+from calib_masonry.calibrate.fit import CalibrationInput, calibrate, order_corners
 from calib_masonry.calibrate.footprint import fit_footprint
 from calib_masonry.calibrate.lines import detect_wall, refine_quad, segments_in_quad
 from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
@@ -82,11 +82,17 @@ def run(seeds, size, noise_px, heading_sigmas) -> None:
                 quad_clicked = order_corners(clicked)
                 quad = refine_quad(photo.rgb, quad_clicked, (3.0 * noise_px + 1.0, 2.0))
                 snap_ok = not np.array_equal(quad, quad_clicked)
-                inp = CalibrationInput(photo.size, quad, corner_sigma_px=0.5 if snap_ok else noise_px,
-                                       bed_segments=segments_in_quad(det.bed_segments, quad),
-                                       head_segments=segments_in_quad(det.head_segments, quad),
-                                       max_effective_segments=16, camera_height_m=photo_t["eye_height_m"],
-                                       camera_height_sigma_m=0.01, focal_px=photo_t["params"]["focal_px"])
+                inp = CalibrationInput(
+                    photo.size,
+                    quad,
+                    corner_sigma_px=0.5 if snap_ok else noise_px,
+                    bed_segments=segments_in_quad(det.bed_segments, quad),
+                    head_segments=segments_in_quad(det.head_segments, quad),
+                    max_effective_segments=16,
+                    camera_height_m=photo_t["eye_height_m"],
+                    camera_height_sigma_m=0.01,
+                    focal_px=photo_t["params"]["focal_px"],
+                )
                 res = calibrate(inp)
                 t0 = time.perf_counter()
                 calibrate(inp)
@@ -95,28 +101,41 @@ def run(seeds, size, noise_px, heading_sigmas) -> None:
                 res_raw = calibrate(replace(inp, corners_px=quad_clicked, corner_sigma_px=noise_px))
                 known = dict(known_width_m=w_true, known_height_m=h_true, known_sigma_m=0.001)
                 res_raw_known = calibrate(replace(inp, corners_px=quad_clicked, corner_sigma_px=noise_px, **known))
-                res_raw_known_nl = calibrate(replace(inp, corners_px=quad_clicked, corner_sigma_px=noise_px,
-                                                     bed_segments=np.zeros((0, 4)), head_segments=np.zeros((0, 4)),
-                                                     **known))
+                res_raw_known_nl = calibrate(
+                    replace(
+                        inp,
+                        corners_px=quad_clicked,
+                        corner_sigma_px=noise_px,
+                        bed_segments=np.zeros((0, 4)),
+                        head_segments=np.zeros((0, 4)),
+                        **known,
+                    )
+                )
                 dlt = kornia_dlt(quad_clicked, w_true, h_true)
-                rows.append({
-                    "w_err": abs(res.width_m / w_true - 1), "h_err": abs(res.height_m / h_true - 1),
-                    "ours_mm": vertex_rms_mm(res.wall_from_image, h_true_img, verts),
-                    "corners_only_mm": vertex_rms_mm(res_nolines.wall_from_image, h_true_img, verts),
-                    "raw_mm": vertex_rms_mm(res_raw.wall_from_image, h_true_img, verts),
-                    "raw_w_err": abs(res_raw.width_m / w_true - 1), "raw_h_err": abs(res_raw.height_m / h_true - 1),
-                    "snapped": snap_ok,
-                    "raw_known_mm": vertex_rms_mm(res_raw_known.wall_from_image, h_true_img, verts),
-                    "raw_known_nolines_mm": vertex_rms_mm(res_raw_known_nl.wall_from_image, h_true_img, verts),
-                    "dlt_mm": vertex_rms_mm(dlt, h_true_img, verts),
-                })
+                rows.append(
+                    {
+                        "w_err": abs(res.width_m / w_true - 1),
+                        "h_err": abs(res.height_m / h_true - 1),
+                        "ours_mm": vertex_rms_mm(res.wall_from_image, h_true_img, verts),
+                        "corners_only_mm": vertex_rms_mm(res_nolines.wall_from_image, h_true_img, verts),
+                        "raw_mm": vertex_rms_mm(res_raw.wall_from_image, h_true_img, verts),
+                        "raw_w_err": abs(res_raw.width_m / w_true - 1),
+                        "raw_h_err": abs(res_raw.height_m / h_true - 1),
+                        "snapped": snap_ok,
+                        "raw_known_mm": vertex_rms_mm(res_raw_known.wall_from_image, h_true_img, verts),
+                        "raw_known_nolines_mm": vertex_rms_mm(res_raw_known_nl.wall_from_image, h_true_img, verts),
+                        "dlt_mm": vertex_rms_mm(dlt, h_true_img, verts),
+                    }
+                )
                 # automatic
                 try:
-                    cal = calibrate_photo(photo, CalibrateConfig(camera_height_m=photo_t["eye_height_m"],
-                                                                 camera_height_sigma_m=0.01))
+                    cal = calibrate_photo(
+                        photo, CalibrateConfig(camera_height_m=photo_t["eye_height_m"], camera_height_sigma_m=0.01)
+                    )
                     r = cal.result
-                    auto_rows.append({"ok": True, "w_err": abs(r.width_m / w_true - 1),
-                                      "h_err": abs(r.height_m / h_true - 1)})
+                    auto_rows.append(
+                        {"ok": True, "w_err": abs(r.width_m / w_true - 1), "h_err": abs(r.height_m / h_true - 1)}
+                    )
                     fp_w.append(r.width_m)
                     fp_sw.append(r.sigma("width_m"))
                     fp_t.append((photo_t["heading_deg"], r.value("yaw_rad"), r.sigma("yaw_rad")))
@@ -129,8 +148,7 @@ def run(seeds, size, noise_px, heading_sigmas) -> None:
                 turns, turn_err = [], []
                 for c in truth["corner_photos"]:
                     r = calibrate_corner_photo(out / c["photo"])
-                    turns.append((names.index(c["walls"][0]), names.index(c["walls"][1]), r.turn_rad,
-                                  r.turn_sigma_rad))
+                    turns.append((names.index(c["walls"][0]), names.index(c["walls"][1]), r.turn_rad, r.turn_sigma_rad))
                     turn_err.append(abs(math.degrees(r.turn_rad) - c["turn_deg"]))
                 tw, tt = np.array(fp_true).T
                 for hs in heading_sigmas:
@@ -141,11 +159,18 @@ def run(seeds, size, noise_px, heading_sigmas) -> None:
                     for label, tr in ((f"heading +-{hs:g} deg only", []), (f"heading +-{hs:g} deg + corners", turns)):
                         fp = fit_footprint(fp_w, fp_sw, noisy, th_sig, turns=tr)
                         dtheta = np.degrees(np.abs(np.angle(np.exp(1j * (fp.theta_rad - tt)))))
-                        footprints.append({"seed": seed, "label": label, "gap_before_mm": fp.closure_gap_before_m * 1000,
-                                           "gap_mm": fp.closure_gap_m * 1000, "max_dtheta_deg": float(dtheta.max()),
-                                           "max_dtheta_before_deg": float(dtheta0.max()),
-                                           "max_turn_err_deg": float(max(turn_err)) if tr else float("nan"),
-                                           "max_w_err": float(np.max(np.abs(fp.width_m / tw - 1)))})
+                        footprints.append(
+                            {
+                                "seed": seed,
+                                "label": label,
+                                "gap_before_mm": fp.closure_gap_before_m * 1000,
+                                "gap_mm": fp.closure_gap_m * 1000,
+                                "max_dtheta_deg": float(dtheta.max()),
+                                "max_dtheta_before_deg": float(dtheta0.max()),
+                                "max_turn_err_deg": float(max(turn_err)) if tr else float("nan"),
+                                "max_w_err": float(np.max(np.abs(fp.width_m / tw - 1))),
+                            }
+                        )
 
     def med(key, rs):
         return float(np.median([r[key] for r in rs]))
@@ -154,40 +179,68 @@ def run(seeds, size, noise_px, heading_sigmas) -> None:
     print(f"\nclicked corners (N(0, {noise_px} px)), camera height and focal known, {n} photos, seeds {list(seeds)}:")
     print(f"  {'method':<34} {'median W err':>12} {'median H err':>12} {'vertex RMS mm (median)':>23} {'(max)':>8}")
     print(f"  clicks snapped to the outline in {sum(r['snapped'] for r in rows)}/{n} photos")
-    print(f"  {'ours: snapped corners + lines':<34} {med('w_err', rows):>12.3%} {med('h_err', rows):>12.3%} "
-          f"{med('ours_mm', rows):>23.2f} {max(r['ours_mm'] for r in rows):>8.2f}")
-    print(f"  {'ours: raw clicks (no snap) + lines':<34} {med('raw_w_err', rows):>12.3%} {med('raw_h_err', rows):>12.3%} "
-          f"{med('raw_mm', rows):>23.2f} {max(r['raw_mm'] for r in rows):>8.2f}")
-    print(f"  {'ours: snapped corners, no lines':<34} {'':>12} {'':>12} {med('corners_only_mm', rows):>23.2f} "
-          f"{max(r['corners_only_mm'] for r in rows):>8.2f}")
-    print(f"  {'ours: raw clicks + lines, true W, H':<34} {'(given)':>12} {'(given)':>12} "
-          f"{med('raw_known_mm', rows):>23.2f} {max(r['raw_known_mm'] for r in rows):>8.2f}")
-    print(f"  {'ours: raw clicks, no lines, true W,H':<34} {'(given)':>12} {'(given)':>12} "
-          f"{med('raw_known_nolines_mm', rows):>23.2f} {max(r['raw_known_nolines_mm'] for r in rows):>8.2f}")
-    print(f"  {'kornia 4-point DLT, true W and H':<34} {'(given)':>12} {'(given)':>12} {med('dlt_mm', rows):>23.2f} "
-          f"{max(r['dlt_mm'] for r in rows):>8.2f}")
+    print(
+        f"  {'ours: snapped corners + lines':<34} {med('w_err', rows):>12.3%} {med('h_err', rows):>12.3%} "
+        f"{med('ours_mm', rows):>23.2f} {max(r['ours_mm'] for r in rows):>8.2f}"
+    )
+    print(
+        f"  {'ours: raw clicks (no snap) + lines':<34} {med('raw_w_err', rows):>12.3%} {med('raw_h_err', rows):>12.3%} "
+        f"{med('raw_mm', rows):>23.2f} {max(r['raw_mm'] for r in rows):>8.2f}"
+    )
+    print(
+        f"  {'ours: snapped corners, no lines':<34} {'':>12} {'':>12} {med('corners_only_mm', rows):>23.2f} "
+        f"{max(r['corners_only_mm'] for r in rows):>8.2f}"
+    )
+    print(
+        f"  {'ours: raw clicks + lines, true W, H':<34} {'(given)':>12} {'(given)':>12} "
+        f"{med('raw_known_mm', rows):>23.2f} {max(r['raw_known_mm'] for r in rows):>8.2f}"
+    )
+    print(
+        f"  {'ours: raw clicks, no lines, true W,H':<34} {'(given)':>12} {'(given)':>12} "
+        f"{med('raw_known_nolines_mm', rows):>23.2f} {max(r['raw_known_nolines_mm'] for r in rows):>8.2f}"
+    )
+    print(
+        f"  {'kornia 4-point DLT, true W and H':<34} {'(given)':>12} {'(given)':>12} {med('dlt_mm', rows):>23.2f} "
+        f"{max(r['dlt_mm'] for r in rows):>8.2f}"
+    )
     all_ours = math.sqrt(np.mean([r["ours_mm"] ** 2 for r in rows]))
     all_dlt = math.sqrt(np.mean([r["dlt_mm"] ** 2 for r in rows]))
-    print(f"  vertex RMS over all photos: ours {all_ours:.2f} mm, DLT {all_dlt:.2f} mm, ratio DLT / ours = "
-          f"{all_dlt / all_ours:.2f}; photos where ours beats DLT: {sum(r['ours_mm'] < r['dlt_mm'] for r in rows)}/{n}")
+    print(
+        f"  vertex RMS over all photos: ours {all_ours:.2f} mm, DLT {all_dlt:.2f} mm, ratio DLT / ours = "
+        f"{all_dlt / all_ours:.2f}; photos where ours beats DLT: {sum(r['ours_mm'] < r['dlt_mm'] for r in rows)}/{n}"
+    )
     rk = math.sqrt(np.mean([r["raw_known_mm"] ** 2 for r in rows]))
     rkn = math.sqrt(np.mean([r["raw_known_nolines_mm"] ** 2 for r in rows]))
-    print(f"  same clicks and true W, H for all three: joint lines {rk:.2f} mm, corners only {rkn:.2f} mm, DLT "
-          f"{all_dlt:.2f} mm; ratio DLT / (ours with joint lines) = {all_dlt / rk:.2f}")
+    print(
+        f"  same clicks and true W, H for all three: joint lines {rk:.2f} mm, corners only {rkn:.2f} mm, DLT "
+        f"{all_dlt:.2f} mm; ratio DLT / (ours with joint lines) = {all_dlt / rk:.2f}"
+    )
     ok = [r for r in auto_rows if r["ok"]]
-    print(f"\nautomatic mode (no clicks), camera height known: {len(ok)}/{len(auto_rows)} succeed "
-          f"({len(ok) / len(auto_rows):.0%}); median W err {med('w_err', ok):.3%}, median H err {med('h_err', ok):.3%}, "
-          f"max W err {max(r['w_err'] for r in ok):.3%}, max H err {max(r['h_err'] for r in ok):.3%}")
-    print(f"\nfit time per photo after compilation (LM solve, 2 cores): median {np.median(fit_times) * 1000:.1f} ms, "
-          f"max {np.max(fit_times) * 1000:.1f} ms; detection (outline + joints) median {np.median(detect_times):.2f} s")
+    print(
+        f"\nautomatic mode (no clicks), camera height known: {len(ok)}/{len(auto_rows)} succeed "
+        f"({len(ok) / len(auto_rows):.0%}); median W err {med('w_err', ok):.3%}, median H err {med('h_err', ok):.3%}, "
+        f"max W err {max(r['w_err'] for r in ok):.3%}, max H err {max(r['h_err'] for r in ok):.3%}"
+    )
+    print(
+        f"\nfit time per photo after compilation (LM solve, 2 cores): median {np.median(fit_times) * 1000:.1f} ms, "
+        f"max {np.max(fit_times) * 1000:.1f} ms; detection (outline + joints) median {np.median(detect_times):.2f} s"
+    )
     if footprints:
-        print("\nfootprint (per-wall W from the automatic fits, theta from a compass heading with the stated noise plus "
-              "the fitted yaw):")
+        print(
+            "\nfootprint (per-wall W from the automatic fits, theta from a compass heading with the stated noise plus "
+            "the fitted yaw):"
+        )
         for f in footprints:
-            turn = "" if math.isnan(f["max_turn_err_deg"]) else f", max corner-photo turn error {f['max_turn_err_deg']:.3f} deg"
-            print(f"  seed {f['seed']} {f['label']:<32}: gap {f['gap_before_mm']:.1f} mm -> {f['gap_mm']:.2e} mm, "
-                  f"max |theta error| {f['max_dtheta_before_deg']:.3f} -> {f['max_dtheta_deg']:.3f} deg, "
-                  f"max W error {f['max_w_err']:.3%}{turn}")
+            turn = (
+                ""
+                if math.isnan(f["max_turn_err_deg"])
+                else f", max corner-photo turn error {f['max_turn_err_deg']:.3f} deg"
+            )
+            print(
+                f"  seed {f['seed']} {f['label']:<32}: gap {f['gap_before_mm']:.1f} mm -> {f['gap_mm']:.2e} mm, "
+                f"max |theta error| {f['max_dtheta_before_deg']:.3f} -> {f['max_dtheta_deg']:.3f} deg, "
+                f"max W error {f['max_w_err']:.3%}{turn}"
+            )
 
 
 def main() -> None:

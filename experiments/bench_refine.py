@@ -48,13 +48,16 @@ mortar_m = 0.025
 irregularity = 0.8
 px_per_m = 100
 seed = 99
-""" + "".join(f"""
+""" + "".join(
+    f"""
 [[wall]]
 name = "w{i}"
 width_m = {w}
 height_m = 13.5
 theta_deg = {th}
-""" for i, (w, th) in enumerate([(6.4, 0), (6.2, 90), (6.4, 180), (6.2, 270)]))
+"""
+    for i, (w, th) in enumerate([(6.4, 0), (6.2, 90), (6.4, 180), (6.2, 270)])
+)
 
 
 def _jobs(data: Path, vertices: int):
@@ -79,8 +82,9 @@ def ours(jobs, config: RefineConfig):
     t0 = time.perf_counter()
     out = []
     for labels, tr, alts in jobs:
-        out += refine_polygons(labels, [b.id for b in tr.bricks], [b.vertices_xy for b in tr.bricks], config,
-                               alternatives=alts)
+        out += refine_polygons(
+            labels, [b.id for b in tr.bricks], [b.vertices_xy for b in tr.bricks], config, alternatives=alts
+        )
     return out, time.perf_counter() - t0
 
 
@@ -141,8 +145,10 @@ def main() -> None:
     print(f"{'  splitting':34s} {np.mean(split_sub):10.4f}")
     print(f"{'  ours':34s} {np.mean(ours_sub):10.4f}")
     print(f"{'  peer (Powell on shapely Dice)':34s} {np.mean(peer_d):10.4f} {t_peer:10.3f} per stone")
-    print(f"peer scaled to {n} stones: {t_peer * n:.1f} s; speed-up ours (warm) / peer: {t_peer * n / t_warm:.0f}x "
-          f"(first call: {t_peer * n / t_cold:.0f}x)")
+    print(
+        f"peer scaled to {n} stones: {t_peer * n:.1f} s; speed-up ours (warm) / peer: {t_peer * n / t_warm:.0f}x "
+        f"(first call: {t_peer * n / t_cold:.0f}x)"
+    )
     print(f"no brick worse than its start: {all(r.dice >= r.dice_before for r in res)}")
 
     if args.skip_swat:

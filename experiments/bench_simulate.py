@@ -19,7 +19,6 @@ and an overhead ratio <= 1.15.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -29,8 +28,7 @@ import numpy as np
 from calib_masonry.pipeline import build_to_folder
 from calib_masonry.simulation.blender import require_bpy, run
 from calib_masonry.simulation.results import metrics
-from calib_masonry.simulation.run import (SimulationConfig, load_model, scene_for_model,
-                                       simulate_to_folder)
+from calib_masonry.simulation.run import SimulationConfig, load_model, scene_for_model, simulate_to_folder
 from calib_masonry.simulation.scene import scene_geometry
 from calib_masonry.spec import load_structure
 
@@ -43,8 +41,12 @@ def main() -> None:
     ap.add_argument("--pga", type=float, default=0.3)
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--repeats", type=int, default=5, help="pairs of runs (ours, then bare) to take the median of")
-    ap.add_argument("--paper-example", action=argparse.BooleanOptionalAction, default=True,
-                    help="also time one simulate call of the paper example's quake (aim <= 120 s)")
+    ap.add_argument(
+        "--paper-example",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also time one simulate call of the paper example's quake (aim <= 120 s)",
+    )
     args = ap.parse_args()
     config = SimulationConfig(pga_g=args.pga, duration_s=args.duration, seed=0, figures=False)
     with tempfile.TemporaryDirectory() as tmp:
@@ -78,43 +80,65 @@ def main() -> None:
         w = m0.start_frame
         d0 = np.linalg.norm(out0.positions[-1] - out0.positions[w] - (out0.plate[-1] - out0.plate[w]), axis=1)
     s = scene.solver
-    print(f"Stylite model: {len(scene.bodies)} bricks, {len(scene.bonds)} mortar joints (one rigid constraint each), "
-          f"{args.duration:g} s at PGA {args.pga:g} g; {s.fps} fps x {s.substeps} substeps x {s.iterations} iterations, "
-          f"{s.warmup_s:g} s warm-up")
+    print(
+        f"Stylite model: {len(scene.bodies)} bricks, {len(scene.bonds)} mortar joints (one rigid constraint each), "
+        f"{args.duration:g} s at PGA {args.pga:g} g; {s.fps} fps x {s.substeps} substeps x {s.iterations} iterations, "
+        f"{s.warmup_s:g} s warm-up"
+    )
     ratios = np.array(t_ours) / np.array(t_bare)
-    print(f"{'bare Bullet stepping (same scene)':40s} {np.median(t_bare):8.1f} s   median of {args.repeats} "
-          f"({', '.join(f'{t:.1f}' for t in t_bare)}; each replays the joint switches of our run before it, "
-          f"{int(np.isfinite(cracked).sum())} in the last)")
+    print(
+        f"{'bare Bullet stepping (same scene)':40s} {np.median(t_bare):8.1f} s   median of {args.repeats} "
+        f"({', '.join(f'{t:.1f}' for t in t_bare)}; each replays the joint switches of our run before it, "
+        f"{int(np.isfinite(cracked).sum())} in the last)"
+    )
     print(f"{'run() + metrics, poses read every frame':40s} {t_rec:8.1f} s")
     print(f"{'  of which the joint model':40s} {np.median(t_joints):8.1f} s   median")
-    print(f"{'our whole simulate call (no figures)':40s} {np.median(t_ours):8.1f} s   median of {args.repeats} "
-          f"({', '.join(f'{t:.1f}' for t in t_ours)}; aim < 60 s; the method: ~120 s)")
-    print(f"overhead ratio ours / bare: median {np.median(ratios):.3f} (pairs: {', '.join(f'{x:.3f}' for x in ratios)}; "
-          f"aim <= 1.15)")
-    print(f"where it goes: stepping loop ours {np.median(step_ours):.1f} s / bare {np.median(step_bare):.1f} s "
-          f"(medians; ours reads poses and watches joints every frame; the collapse differs from run to run, so "
-          f"Bullet's work does too); ours outside the loop (scene, Blender build, metrics, files): median "
-          f"{np.median(np.array(t_ours) - np.array(step_ours)):.2f} s, bare: {np.median(np.array(t_bare) - np.array(step_bare)):.2f} s")
-    print(f"computing the scene geometry (stored by build): {t_geometry:.2f} s; a call that computed it would have a "
-          f"ratio of {(np.median(t_ours) + t_geometry) / np.median(t_bare):.3f}")
-    print(f"outcome: {summary['outcome']}, moved {summary['moved_fraction_final']:.1%} of bricks, "
-          f"{summary['bonds_broken_fraction']:.1%} of bonds broken, max roof drift {summary['max_roof_drift_m']:.2f} m, "
-          f"collapse time {summary['collapse_time_s']}, {summary['ground_motion']['source']}")
-    print(f"gravity alone, same {args.duration:g} s: moved {m0.moved_fraction[-1]:.1%} of bricks, "
-          f"{np.isfinite(m0.bond_break_time_s).mean():.1%} of bonds cracked, displacement median "
-          f"{np.median(d0) * 1000:.1f} mm, max {d0.max() * 1000:.1f} mm")
+    print(
+        f"{'our whole simulate call (no figures)':40s} {np.median(t_ours):8.1f} s   median of {args.repeats} "
+        f"({', '.join(f'{t:.1f}' for t in t_ours)}; aim < 60 s; the method: ~120 s)"
+    )
+    print(
+        f"overhead ratio ours / bare: median {np.median(ratios):.3f} (pairs: {', '.join(f'{x:.3f}' for x in ratios)}; "
+        f"aim <= 1.15)"
+    )
+    print(
+        f"where it goes: stepping loop ours {np.median(step_ours):.1f} s / bare {np.median(step_bare):.1f} s "
+        f"(medians; ours reads poses and watches joints every frame; the collapse differs from run to run, so "
+        f"Bullet's work does too); ours outside the loop (scene, Blender build, metrics, files): median "
+        f"{np.median(np.array(t_ours) - np.array(step_ours)):.2f} s, bare: {np.median(np.array(t_bare) - np.array(step_bare)):.2f} s"
+    )
+    print(
+        f"computing the scene geometry (stored by build): {t_geometry:.2f} s; a call that computed it would have a "
+        f"ratio of {(np.median(t_ours) + t_geometry) / np.median(t_bare):.3f}"
+    )
+    print(
+        f"outcome: {summary['outcome']}, moved {summary['moved_fraction_final']:.1%} of bricks, "
+        f"{summary['bonds_broken_fraction']:.1%} of bonds broken, max roof drift {summary['max_roof_drift_m']:.2f} m, "
+        f"collapse time {summary['collapse_time_s']}, {summary['ground_motion']['source']}"
+    )
+    print(
+        f"gravity alone, same {args.duration:g} s: moved {m0.moved_fraction[-1]:.1%} of bricks, "
+        f"{np.isfinite(m0.bond_break_time_s).mean():.1%} of bonds cracked, displacement median "
+        f"{np.median(d0) * 1000:.1f} mm, max {d0.max() * 1000:.1f} mm"
+    )
     if args.paper_example:
         with tempfile.TemporaryDirectory() as tmp:
             model = Path(tmp) / "model"
-            build_to_folder(load_structure(ROOT / "data_synthetic" / "paper_example" / "structure.toml"), model,
-                            figures=False, progress=False)
+            build_to_folder(
+                load_structure(ROOT / "data_synthetic" / "paper_example" / "structure.toml"),
+                model,
+                figures=False,
+                progress=False,
+            )
             t0 = time.perf_counter()
             pe = simulate_to_folder(model, Path(tmp) / "sim", config, progress=False)
             t_pe = time.perf_counter() - t0
-        print(f"paper example: {pe['bricks']} bricks, {pe['bonds']} joints, {args.duration:g} s at PGA {args.pga:g} g: "
-              f"our whole simulate call {t_pe:.1f} s (aim <= 120 s; joint model {pe['joints']['seconds']:.1f} s, "
-              f"stepping {pe['seconds']['stepping']:.1f} s); {pe['outcome']}, moved {pe['moved_fraction_final']:.1%}, "
-              f"{pe['bonds_broken_fraction']:.1%} of joints cracked")
+        print(
+            f"paper example: {pe['bricks']} bricks, {pe['bonds']} joints, {args.duration:g} s at PGA {args.pga:g} g: "
+            f"our whole simulate call {t_pe:.1f} s (aim <= 120 s; joint model {pe['joints']['seconds']:.1f} s, "
+            f"stepping {pe['seconds']['stepping']:.1f} s); {pe['outcome']}, moved {pe['moved_fraction_final']:.1%}, "
+            f"{pe['bonds_broken_fraction']:.1%} of joints cracked"
+        )
 
 
 if __name__ == "__main__":

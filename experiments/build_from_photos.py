@@ -31,8 +31,10 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[201, 202])
     a = ap.parse_args()
     base = load_structure(ROOT / "data_synthetic" / "paper_example" / "scenario.toml", require_sources=False)
-    print(f"{'seed':>5} {'W, H':>8} {'precision':>9} {'recall':>7} {'Dice min':>8} {'median':>7} {'centroid mm':>11} "
-          f"{'volume':>7} {'seconds':>7}")
+    print(
+        f"{'seed':>5} {'W, H':>8} {'precision':>9} {'recall':>7} {'Dice min':>8} {'median':>7} {'centroid mm':>11} "
+        f"{'volume':>7} {'seconds':>7}"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for seed in a.seeds:
             spec = replace(base, synthetic=replace(base.synthetic, seed=seed))
@@ -40,16 +42,23 @@ def main() -> None:
             truth = synthesize(spec, data, figures=False, photos=PhotoSpec(), progress=False)
             eye = {p["name"]: p["eye_height_m"] for p in truth["photos"]}
             photo_spec = load_structure(data / "structure_photos.toml")
-            fitted = photo_spec.with_walls(tuple(replace(w, width_m=math.nan, height_m=math.nan,
-                                                         camera_height_m=eye[w.name]) for w in photo_spec.walls))
+            fitted = photo_spec.with_walls(
+                tuple(
+                    replace(w, width_m=math.nan, height_m=math.nan, camera_height_m=eye[w.name])
+                    for w in photo_spec.walls
+                )
+            )
             for label, s in (("typed", photo_spec), ("fitted", fitted)):
                 t0 = time.perf_counter()
                 out = Path(tmp) / f"b{seed}{label}"
                 build_to_folder(s, out, figures=False, progress=False)
                 m = compare_dirs(out, data / "truth")
-                print(f"{seed:>5} {label:>8} {m['precision']:>9.4f} {m['recall']:>7.4f} {m['dice']['min']:>8.4f} "
-                      f"{m['dice']['median']:>7.4f} {m['centroid_error_mm']['mean']:>11.2f} "
-                      f"{m['total_volume_m3']['relative_error']:>+7.2%} {time.perf_counter() - t0:>7.1f}", flush=True)
+                print(
+                    f"{seed:>5} {label:>8} {m['precision']:>9.4f} {m['recall']:>7.4f} {m['dice']['min']:>8.4f} "
+                    f"{m['dice']['median']:>7.4f} {m['centroid_error_mm']['mean']:>11.2f} "
+                    f"{m['total_volume_m3']['relative_error']:>+7.2%} {time.perf_counter() - t0:>7.1f}",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

@@ -29,8 +29,10 @@ def main() -> None:
     s = SolverSettings()
     print(f"solver: {s.fps} fps x {s.substeps} substeps x {s.iterations} iterations (one frame = {1 / s.fps:.3f} s)")
     for h in (1.0, 3.0):
-        out = run(Scene(bodies=(block((0.2, 0.2, 0.2), (0, 0, h + 0.1)),), duration_s=1.2,
-                        solver=SolverSettings(warmup_s=0)), progress=False)
+        out = run(
+            Scene(bodies=(block((0.2, 0.2, 0.2), (0, 0, h + 0.1)),), duration_s=1.2, solver=SolverSettings(warmup_s=0)),
+            progress=False,
+        )
         landed = int(np.argmax(out.positions[:, 0, 2] <= 0.11))
         print(f"free fall from {h:g} m: lands at {out.time[landed]:.3f} s, sqrt(2h/g) = {math.sqrt(2 * h / G):.3f} s")
     mu = 0.5
@@ -46,14 +48,23 @@ def main() -> None:
         keep = out.time >= 0.3
         a_fit = 2 * np.polyfit(out.time[keep], path[keep], 2)[0]
         a = G * (math.sin(th) - mu * math.cos(th))
-        print(f"plane at {tilt:.2f} deg ({factor:g} x atan(mu)): slid {path[-1] * 1000:.1f} mm in 1 s; "
-              f"acceleration fitted {a_fit:.3f}, theory {max(a, 0.0):.3f} m/s^2")
+        print(
+            f"plane at {tilt:.2f} deg ({factor:g} x atan(mu)): slid {path[-1] * 1000:.1f} mm in 1 s; "
+            f"acceleration fitted {a_fit:.3f}, theory {max(a, 0.0):.3f} m/s^2"
+        )
     b_, h_ = 0.1, 0.5
     for factor in (0.9, 0.97, 1.03, 1.05):
         a = factor * G * b_ / h_
-        out = run(Scene(bodies=(block((2 * b_, 0.6, 2 * h_), (0, 0, h_), mu=0.8),), plate=Plate(friction=math.sqrt(0.8)),
-                        motion=constant_acceleration(a, 1.5, dt=0.001), duration_s=1.5,
-                        solver=SolverSettings(warmup_s=0.1)), progress=False)
+        out = run(
+            Scene(
+                bodies=(block((2 * b_, 0.6, 2 * h_), (0, 0, h_), mu=0.8),),
+                plate=Plate(friction=math.sqrt(0.8)),
+                motion=constant_acceleration(a, 1.5, dt=0.001),
+                duration_s=1.5,
+                solver=SolverSettings(warmup_s=0.1),
+            ),
+            progress=False,
+        )
         w = np.abs(out.quaternions[:, 0, 0]).clip(0, 1)
         print(f"rocking block, plate at {factor:g} x g b/h: largest tilt {np.degrees(2 * np.arccos(w)).max():.2f} deg")
 

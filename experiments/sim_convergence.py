@@ -47,18 +47,21 @@ SETTINGS = {
 
 
 def one_run(model: Path, solver: SolverSettings, pga: float, seed: int, duration: float) -> dict:
-    scene = scene_for_model(model, SimulationConfig(pga_g=pga, duration_s=duration, seed=seed, solver=solver,
-                                                   figures=False))
+    scene = scene_for_model(
+        model, SimulationConfig(pga_g=pga, duration_s=duration, seed=seed, solver=solver, figures=False)
+    )
     if pga == 0.0:
         scene = replace(scene, motion=None)
     t = time.perf_counter()
     out = run(scene, progress=False)
     m = metrics(scene, out)
     w = m.start_frame
-    return {"cracked": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
-            "moved": float(m.moved_fraction[-1]),
-            "max_disp_mm": float(np.linalg.norm(out.positions[w:] - out.positions[w], axis=2).max() * 1000),
-            "seconds": time.perf_counter() - t}
+    return {
+        "cracked": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
+        "moved": float(m.moved_fraction[-1]),
+        "max_disp_mm": float(np.linalg.norm(out.positions[w:] - out.positions[w], axis=2).max() * 1000),
+        "seconds": time.perf_counter() - t,
+    }
 
 
 def main() -> None:
@@ -75,21 +78,28 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.models:
             model = Path(tmp) / name
-            build_to_folder(load_structure(ROOT / "data_synthetic" / name / "structure.toml"), model, figures=False,
-                            progress=False)
+            build_to_folder(
+                load_structure(ROOT / "data_synthetic" / name / "structure.toml"), model, figures=False, progress=False
+            )
             for setting in args.settings:
                 solver = SETTINGS[setting]
                 label = f"{name:14s} {setting:14s}"
                 if args.gravity_s > 0:
                     r = one_run(model, solver, 0.0, 0, args.gravity_s)
-                    print(f"{label} gravity {args.gravity_s:g} s: cracked {r['cracked']:6.1%}  largest displacement "
-                          f"{r['max_disp_mm']:8.2f} mm  ({r['seconds']:.0f} s)", flush=True)
+                    print(
+                        f"{label} gravity {args.gravity_s:g} s: cracked {r['cracked']:6.1%}  largest displacement "
+                        f"{r['max_disp_mm']:8.2f} mm  ({r['seconds']:.0f} s)",
+                        flush=True,
+                    )
                 for seed in args.seeds:
                     collapse[(name, setting, seed)] = None
                     for pga in sorted(args.pga):
                         r = one_run(model, solver, pga, seed, args.duration)
-                        print(f"{label} seed {seed} PGA {pga:4.2f} g: cracked {r['cracked']:6.1%}  moved "
-                              f"{r['moved']:6.1%}  ({r['seconds']:.0f} s)", flush=True)
+                        print(
+                            f"{label} seed {seed} PGA {pga:4.2f} g: cracked {r['cracked']:6.1%}  moved "
+                            f"{r['moved']:6.1%}  ({r['seconds']:.0f} s)",
+                            flush=True,
+                        )
                         if r["moved"] > 0.5:
                             collapse[(name, setting, seed)] = pga
                             break

@@ -12,7 +12,6 @@ Each 10 s run takes 2-3 minutes on 2 cores.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -35,29 +34,45 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--components", type=int, choices=(1, 2), default=SimulationConfig.components)
     ap.add_argument("--duration", type=float, default=10.0)
-    ap.add_argument("--foundation", action=argparse.BooleanOptionalAction, default=True,
-                    help="bond the bottom course to the ground plate (default)")
+    ap.add_argument(
+        "--foundation",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="bond the bottom course to the ground plate (default)",
+    )
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         model = Path(tmp) / "model"
         build_to_folder(load_structure(args.structure), model, figures=False, progress=False)
-        print(f"{'PGA g':>6s} {'seed':>4s} {'outcome':>10s} {'moved':>7s} {'broken':>7s} {'max disp mm':>12s} "
-              f"{'roof drift mm':>14s} {'s/frame':>8s} {'seconds':>8s}")
+        print(
+            f"{'PGA g':>6s} {'seed':>4s} {'outcome':>10s} {'moved':>7s} {'broken':>7s} {'max disp mm':>12s} "
+            f"{'roof drift mm':>14s} {'s/frame':>8s} {'seconds':>8s}"
+        )
         for pga in args.pga:
             for seed in args.seeds if pga > 0 else args.seeds[:1]:
                 t0 = time.perf_counter()
-                scene = scene_for_model(model, SimulationConfig(pga_g=pga, duration_s=args.duration, seed=seed,
-                                                                components=args.components,
-                                                                foundation=args.foundation))
+                scene = scene_for_model(
+                    model,
+                    SimulationConfig(
+                        pga_g=pga,
+                        duration_s=args.duration,
+                        seed=seed,
+                        components=args.components,
+                        foundation=args.foundation,
+                    ),
+                )
                 out = run(scene, progress=False)
                 m = metrics(scene, out)
                 disp = float(m.max_displacement_m.max())  # largest brick displacement after the warm-up
                 moved = m.moved_fraction[-1]
                 broken = float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0
                 verdict = outcome(float(moved))
-                print(f"{pga:6.2f} {seed:4d} {verdict:>10s} {moved:7.1%} {broken:7.1%} {disp * 1000:12.2f} "
-                      f"{m.roof_drift_m.max() * 1000:14.1f} {out.seconds_stepping / (len(out.time) - 1):8.2f} "
-                      f"{time.perf_counter() - t0:8.1f}", flush=True)
+                print(
+                    f"{pga:6.2f} {seed:4d} {verdict:>10s} {moved:7.1%} {broken:7.1%} {disp * 1000:12.2f} "
+                    f"{m.roof_drift_m.max() * 1000:14.1f} {out.seconds_stepping / (len(out.time) - 1):8.2f} "
+                    f"{time.perf_counter() - t0:8.1f}",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

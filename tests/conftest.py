@@ -6,14 +6,29 @@ from pathlib import Path
 
 import pytest
 
+try:  # float64 for every JAX computation a test makes, not only those after calib_masonry._jax was imported
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+except ImportError:  # pragma: no cover - the calibration extra is not installed
+    pass
+
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "data_synthetic"
 SWAT = ROOT.parent / "shared" / "data" / "external" / "swat" / "WR2_250_new.png"
 
 
-def scenario_text(walls: list[tuple[float, float, float]], *, layout: str = "stretcher", t: float = 0.18,
-                  vertices: int = 5, px_per_m: float = 200, seed: int = 7, closed: bool | None = None,
-                  extra: str = "") -> str:
+def scenario_text(
+    walls: list[tuple[float, float, float]],
+    *,
+    layout: str = "stretcher",
+    t: float = 0.18,
+    vertices: int = 5,
+    px_per_m: float = 200,
+    seed: int = 7,
+    closed: bool | None = None,
+    extra: str = "",
+) -> str:
     lines = ["[structure]", 'name = "test"', f"thickness_m = {t}", f"vertices = {vertices}"]
     if closed is not None:
         lines.append(f"closed = {'true' if closed else 'false'}")

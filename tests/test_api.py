@@ -26,8 +26,19 @@ def test_public_names_resolve_and_are_documented():
     # the stage functions are functions, not modules, whatever was imported before
     import calib_masonry.simulation.run  # noqa: F401
 
-    for name in ("calibrate_photo", "rectify", "segment", "trace", "refine", "build", "simulate", "compare",
-                 "write_build", "read_build", "write_simulation"):
+    for name in (
+        "calibrate_photo",
+        "rectify",
+        "segment",
+        "trace",
+        "refine",
+        "build",
+        "simulate",
+        "compare",
+        "write_build",
+        "read_build",
+        "write_simulation",
+    ):
         assert callable(getattr(cm, name)) and not isinstance(getattr(cm, name), type(sys))
 
 
@@ -36,8 +47,9 @@ def test_api_tour_runs_in_memory_and_writes_nothing(tmp_path):
     """examples/api_tour.py: photo -> calibration -> polygons -> refined polygons -> model -> simulation."""
     env = {**os.environ, "CALIB_MASONRY_CACHE": "/dev/null/no-cache"}  # not even the compilation cache
     before = set(ROOT.rglob("*"))
-    r = subprocess.run([sys.executable, str(ROOT / "examples" / "api_tour.py")], cwd=tmp_path, env=env,
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, str(ROOT / "examples" / "api_tour.py")], cwd=tmp_path, env=env, capture_output=True, text=True
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     assert list(tmp_path.iterdir()) == []
     created = {p for p in set(ROOT.rglob("*")) - before if "__pycache__" not in p.parts}
@@ -85,8 +97,10 @@ def test_two_simulate_calls_in_one_process_agree(built):
     assert a.summary["bonds_broken"] > 0  # joints cracked: the run exercised the joint model's switches
     sa, sb = a.scene, b.scene
     assert [x.name for x in sa.bodies] == [x.name for x in sb.bodies]
-    assert all(np.array_equal(x.vertices, y.vertices) and np.array_equal(x.location, y.location)
-               for x, y in zip(sa.bodies, sb.bodies))
+    assert all(
+        np.array_equal(x.vertices, y.vertices) and np.array_equal(x.location, y.location)
+        for x, y in zip(sa.bodies, sb.bodies)
+    )
     assert all(np.array_equal(x.location, y.location) and (x.a, x.b) == (y.a, y.b) for x, y in zip(sa.bonds, sb.bonds))
     assert np.array_equal(_gravity_per_frame(sa), _gravity_per_frame(sb))
     again = scene_for(result.structure, motion, material=weak)
@@ -125,7 +139,9 @@ def test_build_writes_the_simulation_geometry_without_reading_what_it_wrote(buil
     assert stored  # the copy build stored matches the bricks.json it wrote, byte for byte
     again = read_build(out)
     assert [b.id for b in again.bricks] == [b.id for b in result.structure.bricks]
-    assert all(np.array_equal(x.solid.vertices, y.solid.vertices) for x, y in zip(again.bricks, result.structure.bricks))
+    assert all(
+        np.array_equal(x.solid.vertices, y.solid.vertices) for x, y in zip(again.bricks, result.structure.bricks)
+    )
 
 
 def test_compare_in_memory_matches_compare_of_folders(built, tmp_path):
@@ -140,14 +156,19 @@ def test_compare_in_memory_matches_compare_of_folders(built, tmp_path):
 
 
 def _cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "calib_masonry", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "calib_masonry", *map(str, args)], capture_output=True, text=True, cwd=cwd
+    )
 
 
 def test_degenerate_footprint_is_a_one_line_error(tmp_path):
     """Three copies of one wall's calibration cannot close into a ring."""
-    doc = {"width_m": 4.0, "width_sigma_m": 0.02, "theta_from_heading_deg": 30.0,
-           "covariance": {"order": ["focal_px", "yaw_rad"], "matrix": [[1.0, 0.0], [0.0, 1e-6]]}}
+    doc = {
+        "width_m": 4.0,
+        "width_sigma_m": 0.02,
+        "theta_from_heading_deg": 30.0,
+        "covariance": {"order": ["focal_px", "yaw_rad"], "matrix": [[1.0, 0.0], [0.0, 1e-6]]},
+    }
     (tmp_path / "calibration.json").write_text(json.dumps(doc))
     c = tmp_path / "calibration.json"
     r = _cli("footprint", c, c, c, "--out", tmp_path / "fp")

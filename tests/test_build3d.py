@@ -92,8 +92,7 @@ def test_interpenetration_detects_overlap():
 
 @pytest.mark.parametrize("thetas", [(30, 120, 210, 300), (15, 105, 195, 285)])
 def test_rotated_footprint_no_interpenetration(make_scenario, thetas):
-    data = make_scenario([(2.4, 1.5, thetas[0]), (1.8, 1.5, thetas[1]), (2.4, 1.5, thetas[2]),
-                          (1.8, 1.5, thetas[3])])
+    data = make_scenario([(2.4, 1.5, thetas[0]), (1.8, 1.5, thetas[1]), (2.4, 1.5, thetas[2]), (1.8, 1.5, thetas[3])])
     from calib_masonry.pipeline import build
 
     s = build(load_structure(data / "structure.toml"), progress=False).structure

@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calib_masonry.calibrate.fitresult import FitStatus
 from calib_masonry.calibrate.camera import (
     angles_from_rotation,
     heading_from_theta,
@@ -29,6 +28,7 @@ from calib_masonry.calibrate.fit import (
     pack,
     residual_vector,
 )
+from calib_masonry.calibrate.fitresult import FitStatus
 from calib_masonry.errors import FitFailed, InputError
 
 from .conftest import scenario_text
@@ -46,10 +46,17 @@ def _observations(params, size=SIZE, *, rng=None, noise=0.0, courses=0.19, strid
     h = image_from_wall_homography(params, principal_point(size))
     w, ht = params[7], params[8]
     corners = project(h, np.array([[0, 0], [w, 0], [w, ht], [0, ht]], dtype=float))
-    bed = [np.r_[project(h, np.array([[0.2, z], [min(w - 0.2, 1.8), z]]))[0], project(h, np.array([[min(w - 0.2, 1.8), z]]))[0]]
-           for z in np.arange(courses, ht - 0.05, courses)]
-    head = [np.r_[project(h, np.array([[x, 0.3]]))[0], project(h, np.array([[x, 0.3 + courses * 0.9]]))[0]]
-            for x in np.arange(stride, w - 0.05, stride)]
+    bed = [
+        np.r_[
+            project(h, np.array([[0.2, z], [min(w - 0.2, 1.8), z]]))[0],
+            project(h, np.array([[min(w - 0.2, 1.8), z]]))[0],
+        ]
+        for z in np.arange(courses, ht - 0.05, courses)
+    ]
+    head = [
+        np.r_[project(h, np.array([[x, 0.3]]))[0], project(h, np.array([[x, 0.3 + courses * 0.9]]))[0]]
+        for x in np.arange(stride, w - 0.05, stride)
+    ]
     bed, head = np.array(bed), np.array(head)
     if rng is not None:
         corners = corners + rng.normal(0, noise, corners.shape)
@@ -72,8 +79,15 @@ def test_rotation_angles_round_trip_and_forward_direction():
 def test_known_homography_recovered_from_exact_observations():
     truth = _camera()
     corners, bed, head = _observations(truth)
-    inp = CalibrationInput(SIZE, order_corners(corners[[2, 0, 3, 1]]), corner_sigma_px=1.0, bed_segments=bed,
-                           head_segments=head, camera_height_m=truth[6], camera_height_sigma_m=0.01)
+    inp = CalibrationInput(
+        SIZE,
+        order_corners(corners[[2, 0, 3, 1]]),
+        corner_sigma_px=1.0,
+        bed_segments=bed,
+        head_segments=head,
+        camera_height_m=truth[6],
+        camera_height_sigma_m=0.01,
+    )
     res = calibrate(inp)
     assert res.status is FitStatus.CONVERGED
     h_true = image_from_wall_homography(truth, principal_point(SIZE))
@@ -89,8 +103,9 @@ def test_residual_gradients_match_central_differences():
 
     truth = _camera(yaw=-0.3, pitch=0.18)
     corners, bed, head = _observations(truth, rng=np.random.default_rng(3), noise=1.0)
-    inp = CalibrationInput(SIZE, order_corners(corners), bed_segments=bed, head_segments=head, focal_px=2400.0,
-                           known_width_m=5.0)
+    inp = CalibrationInput(
+        SIZE, order_corners(corners), bed_segments=bed, head_segments=head, focal_px=2400.0, known_width_m=5.0
+    )
     data = {k: jnp.asarray(v) for k, v in pack(inp).items()}
     u = jnp.asarray(truth / SCALE * 1.01)
     jac = np.asarray(jax.jacfwd(residual_vector)(u, data))
@@ -105,12 +120,20 @@ def test_residual_gradients_match_central_differences():
 def test_covariance_shrinks_as_observations_are_added():
     truth = _camera(yaw=0.25, pitch=0.15)
     corners, bed, head = _observations(truth, rng=np.random.default_rng(5), noise=1.0)
-    base = CalibrationInput(SIZE, order_corners(corners), corner_sigma_px=1.0, line_sigma_px=0.5,
-                            camera_height_m=truth[6], camera_height_sigma_m=0.05)
-    steps = [base,
-             replace(base, bed_segments=bed[:5], head_segments=head[:3]),
-             replace(base, bed_segments=bed, head_segments=head),
-             replace(base, bed_segments=bed, head_segments=head, known_width_m=truth[7])]
+    base = CalibrationInput(
+        SIZE,
+        order_corners(corners),
+        corner_sigma_px=1.0,
+        line_sigma_px=0.5,
+        camera_height_m=truth[6],
+        camera_height_sigma_m=0.05,
+    )
+    steps = [
+        base,
+        replace(base, bed_segments=bed[:5], head_segments=head[:3]),
+        replace(base, bed_segments=bed, head_segments=head),
+        replace(base, bed_segments=bed, head_segments=head, known_width_m=truth[7]),
+    ]
     sig_w = [calibrate(s).sigma("width_m") for s in steps]
     sig_pitch = [calibrate(s).sigma("pitch_rad") for s in steps]
     assert all(a > b for a, b in zip(sig_w, sig_w[1:])), sig_w
@@ -159,8 +182,9 @@ def photo_set(tmp_path_factory):
     sc = tmp / "scenario.toml"
     sc.write_text(scenario_text([(2.4, 2.0, 0.0), (2.0, 2.0, 90.0)], seed=4242, px_per_m=200))
     photos = replace(PhotoSpec(), long_side_px=1500, short_side_px=1000)
-    truth = synthesize(load_structure(sc, require_sources=False), tmp / "data", figures=False, photos=photos,
-                       progress=False)
+    truth = synthesize(
+        load_structure(sc, require_sources=False), tmp / "data", figures=False, photos=photos, progress=False
+    )
     return tmp / "data", truth
 
 
@@ -186,8 +210,9 @@ def test_automatic_mode_finds_corners_and_size(photo_set):
 
     data, truth = photo_set
     for t in truth["photos"]:
-        cal = calibrate_photo(data / t["photo"], CalibrateConfig(camera_height_m=t["eye_height_m"],
-                                                                 camera_height_sigma_m=0.01))
+        cal = calibrate_photo(
+            data / t["photo"], CalibrateConfig(camera_height_m=t["eye_height_m"], camera_height_sigma_m=0.01)
+        )
         assert cal.mode == "automatic" and cal.result.fit.ok
         assert np.max(np.abs(cal.detection.corners_px - np.array(t["corners_px"]))) < 1.5
         assert cal.result.width_m == pytest.approx(t["width_m"], rel=0.02)
@@ -204,8 +229,9 @@ def test_clicked_corners_are_snapped_and_beat_raw_clicks(photo_set):
     t = truth["photos"][0]
     rng = np.random.default_rng(17)
     clicks = np.array(t["corners_px"]) + rng.normal(0, 1.5, (4, 2))
-    cfg = CalibrateConfig(corners_px=tuple(clicks[[1, 3, 0, 2]].ravel()), camera_height_m=t["eye_height_m"],
-                          camera_height_sigma_m=0.01)
+    cfg = CalibrateConfig(
+        corners_px=tuple(clicks[[1, 3, 0, 2]].ravel()), camera_height_m=t["eye_height_m"], camera_height_sigma_m=0.01
+    )
     snapped = calibrate_photo(data / t["photo"], cfg)
     raw = calibrate_photo(data / t["photo"], replace(cfg, snap_corners=False))
     assert snapped.mode.startswith("clicked, snapped")
@@ -230,8 +256,14 @@ def test_rectify_and_segment_recover_the_bricks(photo_set):
     assert dice > 0.93
     assert abs(label_bricks(mask).max() - len(wt["pieces"])) <= max(2, 0.03 * len(wt["pieces"]))
     # a mask rectified with nearest-neighbour stays binary
-    rm = rectify_image(np.ones(photo.rgb.shape[:2], np.float32), np.array(t["image_to_wall"]), t["width_m"],
-                       t["height_m"], 100.0, nearest=True)
+    rm = rectify_image(
+        np.ones(photo.rgb.shape[:2], np.float32),
+        np.array(t["image_to_wall"]),
+        t["width_m"],
+        t["height_m"],
+        100.0,
+        nearest=True,
+    )
     assert set(np.unique(rm)) <= {0.0, 1.0} and rm.mean() > 0.99
 
 
@@ -305,11 +337,27 @@ def test_rectify_cli_writes_calibration_json(photo_set, tmp_path, capsys):
     data, truth = photo_set
     t = truth["photos"][1]
     out = tmp_path / "r"
-    assert _run(["rectify", data / t["photo"], "--camera-height", t["eye_height_m"], "--px-per-m", 150,
-                 "--mask", data / "truth" / "..", "--out", out]) == 2  # a folder is not a mask
+    assert (
+        _run(
+            [
+                "rectify",
+                data / t["photo"],
+                "--camera-height",
+                t["eye_height_m"],
+                "--px-per-m",
+                150,
+                "--mask",
+                data / "truth" / "..",
+                "--out",
+                out,
+            ]
+        )
+        == 2
+    )  # a folder is not a mask
     assert not out.exists()
-    assert _run(["rectify", data / t["photo"], "--camera-height", t["eye_height_m"], "--px-per-m", 150,
-                 "--out", out]) == 0
+    assert (
+        _run(["rectify", data / t["photo"], "--camera-height", t["eye_height_m"], "--px-per-m", 150, "--out", out]) == 0
+    )
     doc = json.loads((out / "calibration.json").read_text())
     for key in ("width_m", "height_m", "image_to_wall", "camera", "rms_residual_px", "covariance", "status"):
         assert key in doc
@@ -322,13 +370,16 @@ def test_rectify_cli_writes_calibration_json(photo_set, tmp_path, capsys):
     assert doc["rectified_shape"] == [round(doc["height_m"] * 150), round(doc["width_m"] * 150)]
 
 
-@pytest.mark.parametrize("extra, message", [
-    (["--corners", "1,2,3"], "exactly 8"),
-    (["--corners", "10,10,500,10,900,10,300,600"], "collinear"),
-    (["--corners", "10,10,500,10,500,400,-50,400"], "outside"),
-    (["--max-rms", "0.0001"], "RMS residual"),
-    (["--focal-px", "-5"], "focal"),
-])
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--corners", "1,2,3"], "exactly 8"),
+        (["--corners", "10,10,500,10,900,10,300,600"], "collinear"),
+        (["--corners", "10,10,500,10,500,400,-50,400"], "outside"),
+        (["--max-rms", "0.0001"], "RMS residual"),
+        (["--focal-px", "-5"], "focal"),
+    ],
+)
 def test_rectify_bad_input_one_line_exit_2(photo_set, tmp_path, capsys, extra, message):
     data, truth = photo_set
     out = tmp_path / "r"
@@ -355,8 +406,21 @@ def test_rectify_missing_corrupt_and_blank_photos(tmp_path, capsys):
 
 def test_rectify_force_keeps_a_high_residual_fit(photo_set, tmp_path):
     data, truth = photo_set
-    assert _run(["rectify", data / truth["photos"][0]["photo"], "--max-rms", "0.0001", "--force", "--no-figures",
-                 "--out", tmp_path / "f"]) == 0
+    assert (
+        _run(
+            [
+                "rectify",
+                data / truth["photos"][0]["photo"],
+                "--max-rms",
+                "0.0001",
+                "--force",
+                "--no-figures",
+                "--out",
+                tmp_path / "f",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "f" / "calibration.json").is_file()
 
 
@@ -366,8 +430,10 @@ def test_footprint_cli_from_calibrations(photo_set, tmp_path, capsys):
     outs = []
     for i, t in enumerate(truth["photos"]):
         out = tmp_path / f"c{i}"
-        assert _run(["rectify", data / t["photo"], "--camera-height", t["eye_height_m"], "--no-figures",
-                     "--out", out]) == 0
+        assert (
+            _run(["rectify", data / t["photo"], "--camera-height", t["eye_height_m"], "--no-figures", "--out", out])
+            == 0
+        )
         outs.append(out / "calibration.json")
     assert _run(["footprint", *outs, "--out", tmp_path / "fp"]) == 2  # two walls cannot close
     assert "at least 3" in capsys.readouterr().err
@@ -391,8 +457,14 @@ def test_corner_photo_recovers_the_turn(tmp_path, turn_deg):
     sc.write_text(scenario_text([(2.6, 2.2, 0.0), (2.2, 2.2, turn_deg)], seed=5151))
     spec = load_structure(sc, require_sources=False)
     pieces, _ = truth_structure(spec)
-    shot = photograph_corner(spec.walls[0], pieces[0], spec.walls[1], pieces[1],
-                             replace(PhotoSpec(), long_side_px=1800, short_side_px=1200), np.random.default_rng(9))
+    shot = photograph_corner(
+        spec.walls[0],
+        pieces[0],
+        spec.walls[1],
+        pieces[1],
+        replace(PhotoSpec(), long_side_px=1800, short_side_px=1200),
+        np.random.default_rng(9),
+    )
     save_jpeg(tmp_path / "c.jpg", shot["image"], focal_35mm=shot["truth"]["focal_35mm"], heading_deg=None)
     res = calibrate_corner_photo(tmp_path / "c.jpg")
     assert shot["truth"]["turn_deg"] == pytest.approx(turn_deg)
@@ -412,8 +484,9 @@ def test_footprint_with_turns_ties_the_walls_together():
     w = np.array([5.73, 4.10, 3.07, 1.23, 2.66, 5.33])
     t = np.radians([0, 90, 180, 90, 180, 270])
     rng = np.random.default_rng(21)
-    turns = [(i, (i + 1) % 6, t[(i + 1) % 6] - t[i] + math.radians(rng.normal(0, 0.05)), math.radians(0.1))
-             for i in range(6)]
+    turns = [
+        (i, (i + 1) % 6, t[(i + 1) % 6] - t[i] + math.radians(rng.normal(0, 0.05)), math.radians(0.1)) for i in range(6)
+    ]
     we, te = w * (1 + rng.normal(0, 0.01, 6)), t + np.radians(rng.normal(0, 2.0, 6))
     free = fit_footprint(we, 0.01 * we, te, math.radians(2.0))
     tied = fit_footprint(we, 0.01 * we, te, math.radians(2.0), turns=turns)
@@ -438,7 +511,7 @@ def test_corner_tables_are_checked_and_written_back(photo_set, tmp_path):
     ok.write_text(text + '\n[[corner]]\nphoto = "photos/w0.jpg"\nwalls = ["w0", "w1"]\n')
     spec = load_structure(ok)
     assert spec.corners[0].walls == ("w0", "w1") and spec.corners[0].photo.is_file()
-    assert 'walls = [' in structure_to_toml(spec, relative_to=data)
+    assert "walls = [" in structure_to_toml(spec, relative_to=data)
     bad = data / "bad_corner.toml"
     bad.write_text(text + '\n[[corner]]\nphoto = "photos/w0.jpg"\nwalls = ["w0", "nope"]\n')
     with pytest.raises(InputError, match="two different walls"):

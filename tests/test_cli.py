@@ -12,8 +12,9 @@ from .conftest import DATA, SWAT
 
 
 def _run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "calib_masonry", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "calib_masonry", *map(str, args)], capture_output=True, text=True, cwd=cwd
+    )
 
 
 def test_trace_cli_writes_polygons_json(tmp_path):
@@ -29,21 +30,26 @@ def test_trace_cli_writes_polygons_json(tmp_path):
 
 def _structure(tmp_path, mask_name="m.png", width=2.0, height=1.0, vertices=5):
     p = tmp_path / "s.toml"
-    p.write_text(f'[structure]\nthickness_m = 0.18\nvertices = {vertices}\n[[wall]]\nname = "a"\nmask = "{mask_name}"\n'
-                 f"width_m = {width}\nheight_m = {height}\ntheta_deg = 0\n")
+    p.write_text(
+        f'[structure]\nthickness_m = 0.18\nvertices = {vertices}\n[[wall]]\nname = "a"\nmask = "{mask_name}"\n'
+        f"width_m = {width}\nheight_m = {height}\ntheta_deg = 0\n"
+    )
     return p
 
 
-@pytest.mark.parametrize("case, expect", [
-    ("missing_mask", "not found"),
-    ("corrupt", "cannot be read"),
-    ("grey", "not a binary-like mask"),
-    ("empty", "flat value"),
-    ("aspect", "aspect ratio"),
-    ("negative_width", "width_m"),
-    ("t_ge_w", "thickness_m"),
-    ("vertices", "vertices"),
-])
+@pytest.mark.parametrize(
+    "case, expect",
+    [
+        ("missing_mask", "not found"),
+        ("corrupt", "cannot be read"),
+        ("grey", "not a binary-like mask"),
+        ("empty", "flat value"),
+        ("aspect", "aspect ratio"),
+        ("negative_width", "width_m"),
+        ("t_ge_w", "thickness_m"),
+        ("vertices", "vertices"),
+    ],
+)
 def test_build_bad_input_one_line_exit_2(tmp_path, case, expect):
     a = np.zeros((100, 200), np.uint8)
     a[10:40, 10:90] = 255
@@ -72,7 +78,7 @@ def test_build_bad_input_one_line_exit_2(tmp_path, case, expect):
     out = tmp_path / "out"
     r = _run("build", s, "--out", out)
     assert r.returncode == 2, r.stderr
-    lines = [l for l in r.stderr.splitlines() if l.strip()]
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error:") and expect in lines[0], r.stderr
     assert not out.exists()
     assert not any(p.name.startswith(".out") for p in tmp_path.iterdir())
@@ -87,7 +93,7 @@ def test_trace_missing_and_compare_bad_dirs(tmp_path):
 
 def test_synth_without_synthetic_table(tmp_path):
     p = tmp_path / "s.toml"
-    p.write_text('[structure]\nthickness_m = 0.18\n[[wall]]\nwidth_m = 2\nheight_m = 1\n')
+    p.write_text("[structure]\nthickness_m = 0.18\n[[wall]]\nwidth_m = 2\nheight_m = 1\n")
     r = _run("synth", p, "--out", tmp_path / "d")
     assert r.returncode == 2 and "[synthetic]" in r.stderr
 

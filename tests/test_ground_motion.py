@@ -2,8 +2,7 @@ import numpy as np
 import pytest
 
 from calib_masonry.errors import InputError
-from calib_masonry.simulation.ground_motion import (G, constant_acceleration, read_accelerogram,
-                                                  synthetic_motion)
+from calib_masonry.simulation.ground_motion import G, constant_acceleration, read_accelerogram, synthetic_motion
 
 
 def test_synthetic_scaled_to_pga_and_seeded():
@@ -63,8 +62,10 @@ def test_accelerogram_csv(tmp_path):
     assert 0.05 * G < m.pga < 0.15 * G
 
 
-@pytest.mark.parametrize("text, msg", [("", "at least 3 rows"), ("t,a\n0,1\n0,2\n0,3\n", "time must increase"),
-                                       ("0,1\n1,x\n2,3\n", "unreadable")])
+@pytest.mark.parametrize(
+    "text, msg",
+    [("", "at least 3 rows"), ("t,a\n0,1\n0,2\n0,3\n", "time must increase"), ("0,1\n1,x\n2,3\n", "unreadable")],
+)
 def test_accelerogram_errors(tmp_path, text, msg):
     p = tmp_path / "bad.csv"
     p.write_text(text)
@@ -87,14 +88,18 @@ def test_run_motion_peaks_at_the_pga_as_applied_per_frame():
         raw = synthetic_motion(0.6, 10.0, seed=2, components=components)
         assert raw.applied_peak(25) < 0.95 * raw.pga  # broadband: frame means peak lower than the samples
         for fps in (25, 50):
-            m = motion_for(SimulationConfig(pga_g=0.6, duration_s=10.0, seed=2, components=components,
-                                            solver=SolverSettings(fps=fps)))
+            m = motion_for(
+                SimulationConfig(
+                    pga_g=0.6, duration_s=10.0, seed=2, components=components, solver=SolverSettings(fps=fps)
+                )
+            )
             assert np.isclose(m.applied_peak(fps), 0.6 * G, rtol=1e-9)
             assert m.pga >= m.applied_peak(fps)
             # the same record, only scaled
             i = np.argmax(np.abs(raw.displacement[:, 0]))
-            np.testing.assert_allclose(m.displacement, raw.displacement * (m.displacement[i, 0] / raw.displacement[i, 0]),
-                                       atol=1e-12)
+            np.testing.assert_allclose(
+                m.displacement, raw.displacement * (m.displacement[i, 0] / raw.displacement[i, 0]), atol=1e-12
+            )
 
 
 def test_a_record_starts_from_rest():

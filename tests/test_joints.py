@@ -8,11 +8,11 @@ import shapely
 
 from calib_masonry.build3d.contacts import OUTLINE_POINTS, joint_axes, patch_section
 from calib_masonry.simulation.blender import _box, _quaternions
+from calib_masonry.simulation.ground_motion import G
 from calib_masonry.simulation.joints import FAILURE_MODES, JointModel, joint_stiffness
 from calib_masonry.simulation.results import rotations
 from calib_masonry.simulation.scene import Body, Bond, Material, Scene
 
-G = 9.80665
 DOWN = np.array([0.0, 0.0, -1.0])
 X = np.array([1.0, 0.0, 0.0])
 UP = np.array([0.0, 0.0, 1.0])
@@ -56,8 +56,13 @@ def test_patch_section_of_a_rectangle_and_a_rotated_one():
 
 
 def test_joint_stiffness_is_the_udec_interface_formula():
-    m = Material(mortar_youngs_modulus=2e9, unit_youngs_modulus=12e9, mortar_poisson=0.25, unit_poisson=0.2,
-                 joint_thickness_m=0.012)
+    m = Material(
+        mortar_youngs_modulus=2e9,
+        unit_youngs_modulus=12e9,
+        mortar_poisson=0.25,
+        unit_poisson=0.2,
+        joint_thickness_m=0.012,
+    )
     k = joint_stiffness(m)
     gm, gu = 2e9 / 2.5, 12e9 / 2.4
     assert k.normal == pytest.approx(12e9 * 2e9 / (0.012 * 10e9))
@@ -112,8 +117,9 @@ def _first_crack(sc, direction=(1.0, 0.0)):
     return hi, FAILURE_MODES[st.mode[int(st.utilisation.argmax())]], int(st.utilisation.argmax())
 
 
-@pytest.mark.parametrize("height, f_t, governs", [(0.6, 0.2e6, "tension"), (6.0, 0.02e6, "tension"),
-                                                  (3.0, 0.0, "tension")])
+@pytest.mark.parametrize(
+    "height, f_t, governs", [(0.6, 0.2e6, "tension"), (6.0, 0.02e6, "tension"), (3.0, 0.0, "tension")]
+)
 def test_base_joint_fails_at_max_of_first_crack_and_rocking(height, f_t, governs):
     # one block of thickness t (along X, the push) on a foundation joint: the base moment is
     # lam W H / 2; a no-tension-stopped crack fails at max(f_t S + N t / 6, N t / 2)

@@ -29,11 +29,14 @@ def test_cells_meet_in_the_middle_of_the_joints_and_never_overlap():
     # the joints are filled: bricks within a joint's width of each other end up touching, or a
     # sliver apart where a corner's cut (between diagonal neighbours) passes by
     shapes = [shapely.Polygon(p) for p in polys]
-    near = [(i, j) for i in range(len(polys)) for j in range(i + 1, len(polys)) if shapes[i].distance(shapes[j]) <= 0.04]
+    near = [
+        (i, j) for i in range(len(polys)) for j in range(i + 1, len(polys)) if shapes[i].distance(shapes[j]) <= 0.04
+    ]
     assert len(near) > len(polys)
     for i, j in near:
         assert cells[i].distance(cells[j]) <= max(0.0025, 0.2 * shapes[i].distance(shapes[j]))
     assert np.median([cells[i].distance(cells[j]) for i, j in near]) < 1e-9
+
 
 def test_two_bricks_across_a_joint_touch_at_its_middle_and_reach_bounds_a_cell():
     a, b = _rect(0.0, 0.0, 0.2, 0.1), _rect(0.22, 0.0, 0.42, 0.1)

@@ -23,15 +23,22 @@ def test_shipped_data_is_reproducible(tmp_path, name):
         a = read_mask(DATA / name / "masks" / f"{w.name}.png")
         b = read_mask(tmp_path / name / "masks" / f"{w.name}.png")
         assert np.array_equal(a, b)
-    assert (json.loads((DATA / name / "truth" / "truth.json").read_text())
-            == json.loads((tmp_path / name / "truth" / "truth.json").read_text()))
+    assert json.loads((DATA / name / "truth" / "truth.json").read_text()) == json.loads(
+        (tmp_path / name / "truth" / "truth.json").read_text()
+    )
 
 
-@pytest.mark.parametrize("layout, walls", [
-    ("stretcher", [(5.73, 6.07, 0), (4.10, 5.88, 90), (3.07, 5.5, 180), (1.23, 5.5, 90), (2.66, 5.5, 180), (5.33, 5.31, 270)]),
-    ("stretcher", [(3.3, 2.0, 0), (2.2, 2.5, 90), (3.3, 2.0, 180), (2.2, 2.2, 270)]),
-    ("stones", [(2.43, 4.0, 0), (2.48, 4.0, 90), (2.43, 4.0, 180), (2.48, 4.0, 270)]),
-])
+@pytest.mark.parametrize(
+    "layout, walls",
+    [
+        (
+            "stretcher",
+            [(5.73, 6.07, 0), (4.10, 5.88, 90), (3.07, 5.5, 180), (1.23, 5.5, 90), (2.66, 5.5, 180), (5.33, 5.31, 270)],
+        ),
+        ("stretcher", [(3.3, 2.0, 0), (2.2, 2.5, 90), (3.3, 2.0, 180), (2.2, 2.2, 270)]),
+        ("stones", [(2.43, 4.0, 0), (2.48, 4.0, 90), (2.43, 4.0, 180), (2.48, 4.0, 270)]),
+    ],
+)
 @pytest.mark.parametrize("seed", [1, 2])
 def test_end_faces_detected_on_true_polygons(tmp_path, layout, walls, seed):
     p = tmp_path / "s.toml"
@@ -55,8 +62,11 @@ def test_build_is_deterministic(make_scenario, tmp_path):
 @pytest.mark.parametrize("seed", [11, 12])
 def test_unseen_brick_walls_match_truth(make_scenario, tmp_path, seed):
     # off-grid brick sizes, so edges fall anywhere between pixel centres
-    data = make_scenario([(3.37, 2.21, 0), (2.13, 2.4, 90), (3.37, 2.3, 180), (2.13, 2.21, 270)], seed=seed,
-                         extra="brick_length_m = 0.3613\nbrick_height_m = 0.1437\nmortar_m = 0.0123")
+    data = make_scenario(
+        [(3.37, 2.21, 0), (2.13, 2.4, 90), (3.37, 2.3, 180), (2.13, 2.21, 270)],
+        seed=seed,
+        extra="brick_length_m = 0.3613\nbrick_height_m = 0.1437\nmortar_m = 0.0123",
+    )
     spec = load_structure(data / "structure.toml")
     summary = build_to_folder(spec, tmp_path / "run", figures=False, progress=False)
     m = compare_dirs(tmp_path / "run", data / "truth")

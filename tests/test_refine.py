@@ -25,11 +25,16 @@ def test_float64_is_on():
 
 def test_gradient_matches_finite_differences():
     pts = _grid(40, 50)
-    target = jnp.asarray(rasterise_polygon(np.array([[8.5, 6.5], [40.5, 9.5], [37.5, 33.5], [10.5, 30.5]]),
-                                           (40, 50)).ravel(), dtype=jnp.float64)
+    target = jnp.asarray(
+        rasterise_polygon(np.array([[8.5, 6.5], [40.5, 9.5], [37.5, 33.5], [10.5, 30.5]]), (40, 50)).ravel(),
+        dtype=jnp.float64,
+    )
     w = jnp.ones(pts.shape[0])
     verts = jnp.asarray([[9.3, 7.1], [39.2, 10.4], [36.1, 32.2], [11.7, 29.3], [9.9, 18.8]])
-    f = lambda v: soft_dice(v, pts, target, w, 1.3)
+
+    def f(v):
+        return soft_dice(v, pts, target, w, 1.3)
+
     g = np.asarray(jax.grad(f)(verts))
     h = 1e-6
     fd = np.zeros_like(g)
@@ -47,7 +52,10 @@ def test_exact_polygon_has_near_zero_gradient():
     rect = np.array([[9.5, 7.5], [49.5, 7.5], [49.5, 29.5], [9.5, 29.5]])  # crack outline of a pixel rectangle
     target = jnp.asarray(rasterise_polygon(rect, (40, 60)).ravel(), dtype=jnp.float64)
     w = jnp.ones(pts.shape[0])
-    f = lambda v: soft_dice(v, pts, target, w, 0.1)
+
+    def f(v):
+        return soft_dice(v, pts, target, w, 0.1)
+
     g_exact = np.abs(np.asarray(jax.grad(f)(jnp.asarray(rect)))).max()
     g_off = np.abs(np.asarray(jax.grad(f)(jnp.asarray(rect + [[1.3, 0.0], [0, -1.1], [0, 0], [0.7, 0.9]])))).max()
     # at temperature tau the residual slope is about (FP + FN) / (|P| + |M|) of a unit one, with
@@ -64,8 +72,9 @@ def test_soft_dice_tends_to_hard_dice(seed):
     target = jnp.asarray(rasterise_polygon(verts + 1.5, (50, 50)).ravel(), dtype=jnp.float64)
     w = jnp.ones(2500)
     hard = float(hard_dice_points(jnp.asarray(verts), pts, target, w))
-    gaps = [abs(float(soft_dice(jnp.asarray(verts), pts, target, w, tau)) - hard)
-            for tau in (1.0, 0.1, 0.01, 1e-3, 1e-5)]
+    gaps = [
+        abs(float(soft_dice(jnp.asarray(verts), pts, target, w, tau)) - hard) for tau in (1.0, 0.1, 0.01, 1e-3, 1e-5)
+    ]
     assert gaps[-1] < 1e-4
     assert all(a >= b - 1e-12 for a, b in zip(gaps, gaps[1:]))
 

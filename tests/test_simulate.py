@@ -15,7 +15,6 @@ from calib_masonry.simulation.ground_motion import G, constant_acceleration  # n
 from calib_masonry.simulation.results import collapse_multiplier, metrics, pushover_stop  # noqa: E402
 from calib_masonry.simulation.scene import Body, Bond, Material, Plate, Pushover, Scene, SolverSettings  # noqa: E402
 
-
 FPS = SolverSettings().fps  # the production settings: the benchmark runs at the settings tested here
 
 
@@ -73,8 +72,16 @@ def test_rocking_block_threshold(factor, overturns):
     a = factor * G * b / h
     motion = constant_acceleration(a, 1.5, dt=0.001)
     block = _block((2 * b, 0.6, 2 * h), (0, 0, h), mu=0.8)
-    out = run(Scene(bodies=(block,), plate=Plate(friction=math.sqrt(0.8)), motion=motion, duration_s=1.5,
-                    solver=_solver(warmup=0.1)), progress=False)
+    out = run(
+        Scene(
+            bodies=(block,),
+            plate=Plate(friction=math.sqrt(0.8)),
+            motion=motion,
+            duration_s=1.5,
+            solver=_solver(warmup=0.1),
+        ),
+        progress=False,
+    )
     w = np.abs(out.quaternions[:, 0, 0]).clip(0, 1)
     tilt = np.degrees(2 * np.arccos(w)).max()
     if overturns:
@@ -92,7 +99,9 @@ def _arm_scene(material, **kw):
     base = _block((0.4, 0.4, 0.4), (0, 0, 0.2))
     arm = _block((0.4, 0.4, 0.2), (0.41, 0, 0.3))
     joint = Bond.rectangle(0, 1, (0.205, 0, 0.3), (1.0, 0, 0), (0, 1.0, 0), 0.4, 0.2)
-    return Scene(bodies=(base, arm), bonds=(joint,), duration_s=1.0, solver=_solver(warmup=0.0), material=material, **kw)
+    return Scene(
+        bodies=(base, arm), bonds=(joint,), duration_s=1.0, solver=_solver(warmup=0.0), material=material, **kw
+    )
 
 
 def test_bond_holds_a_cantilever_and_breaks_when_weak():
@@ -117,8 +126,12 @@ def test_a_cracked_joint_gives_its_bricks_their_contacts_back():
     weak = Bond.rectangle(0, 1, (0.0, 0, 0.4), (0.0, 0, 1.0), (1.0, 0, 0), 0.4, 0.4)
     # pushed sideways a little so that the weak joint cracks in shear
     motion = constant_acceleration(0.05 * G, 1.0, dt=0.001)
-    out = run(Scene(bodies=(base, top), bonds=(weak,), duration_s=1.0, solver=_solver(warmup=0.0), material=WEAK,
-                    motion=motion), progress=False)
+    out = run(
+        Scene(
+            bodies=(base, top), bonds=(weak,), duration_s=1.0, solver=_solver(warmup=0.0), material=WEAK, motion=motion
+        ),
+        progress=False,
+    )
     assert np.isfinite(out.bond_break_time_s).all()
     assert abs(out.positions[-1, 1, 2] - 0.5) < 0.005
 
@@ -132,9 +145,15 @@ def test_bare_run_replays_joint_switches_on_a_schedule():
 
 
 def _pushover(bodies, bonds=(), rate=0.01, max_g=0.6, material=Material(), mu=0.6, direction=0.0, solver=None):
-    scene = Scene(bodies=tuple(bodies), bonds=tuple(bonds), plate=Plate(friction=math.sqrt(mu)), material=material,
-                  pushover=Pushover(rate_g_per_s=rate, max_g=max_g, direction_deg=direction), duration_s=max_g / rate,
-                  solver=solver or _solver(warmup=0.3))
+    scene = Scene(
+        bodies=tuple(bodies),
+        bonds=tuple(bonds),
+        plate=Plate(friction=math.sqrt(mu)),
+        material=material,
+        pushover=Pushover(rate_g_per_s=rate, max_g=max_g, direction_deg=direction),
+        duration_s=max_g / rate,
+        solver=solver or _solver(warmup=0.3),
+    )
     out = run(scene, progress=False, stop=pushover_stop(scene))
     m = metrics(scene, out)
     return collapse_multiplier(scene, out, m)[0], scene, out, m
@@ -152,8 +171,11 @@ def _panel(courses, per_course, length, height, thickness):
     """A dry-stacked running-bond panel: odd courses start with a half brick."""
     blocks = []
     for k in range(courses):
-        edges = np.arange(per_course + 1) * length if k % 2 == 0 else np.concatenate(
-            [[0.0], (np.arange(per_course) + 0.5) * length, [per_course * length]])
+        edges = (
+            np.arange(per_course + 1) * length
+            if k % 2 == 0
+            else np.concatenate([[0.0], (np.arange(per_course) + 0.5) * length, [per_course * length]])
+        )
         for x0, x1 in zip(edges[:-1], edges[1:]):
             blocks.append(((x0, x1), (k * height, (k + 1) * height)))
     return blocks
@@ -176,7 +198,7 @@ def _limit_analysis(blocks, thickness, mu, rho=1800.0):
         if z0 < tol:  # on the ground
             for x in (x0, x1):
                 points.append((i, -1, x, 0.0, (0.0, -1.0)))
-        for j, ((y0, y1), (w0, w1)) in enumerate(blocks):
+        for j, ((y0, y1), (w0, _)) in enumerate(blocks):
             if abs(w0 - z1) < tol and min(x1, y1) - max(x0, y0) > tol:  # j sits on i
                 lo, hi = max(x0, y0), min(x1, y1)
                 for x in (lo, hi):
@@ -225,11 +247,15 @@ def test_limit_analysis_of_one_block_is_the_smaller_of_tipping_and_sliding():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "Bullet's friction between two moving bodies creeps: a block on a block slides 43 mm against it "
-    "by 0.2 g with mu = 0.6 (a single block on the plate: 0.000 mm), whatever the iterations (10, 50, "
-    "200), substeps (10, 20, 40), collision shape (hull, BOX) or margin (0 to 0.5 mm); split impulse "
-    "halves it. The dry panel therefore creeps away at about 0.01 g; see the issue note."))
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "Bullet's friction between two moving bodies creeps: a block on a block slides 43 mm against it "
+        "by 0.2 g with mu = 0.6 (a single block on the plate: 0.000 mm), whatever the iterations (10, 50, "
+        "200), substeps (10, 20, 40), collision shape (hull, BOX) or margin (0 to 0.5 mm); split impulse "
+        "halves it. The dry panel therefore creeps away at about 0.01 g; see the issue note."
+    ),
+)
 def test_pushover_of_a_dry_stacked_panel_matches_limit_analysis():
     # 12 courses of 3 bricks (0.3 x 0.15 x 0.2 m), running bond, no mortar, pushed in its plane:
     # taller than wide, so the panel rocks rather than slides (mu = 0.6): for a rocking mechanism
@@ -237,13 +263,20 @@ def test_pushover_of_a_dry_stacked_panel_matches_limit_analysis():
     L, H, T, mu = 0.3, 0.15, 0.2, 0.6
     blocks = _panel(12, 3, L, H, T)
     expected = _limit_analysis(blocks, T, mu)
-    bodies = [_block((x1 - x0, T, z1 - z0), ((x0 + x1) / 2, 0.0, (z0 + z1) / 2), mu=mu) for (x0, x1), (z0, z1) in blocks]
+    bodies = [
+        _block((x1 - x0, T, z1 - z0), ((x0 + x1) / 2, 0.0, (z0 + z1) / 2), mu=mu) for (x0, x1), (z0, z1) in blocks
+    ]
     value, *_ = _pushover(bodies, mu=mu, max_g=2 * expected)
     assert value == pytest.approx(expected, rel=0.10)
 
 
-@pytest.mark.parametrize("substeps, iterations", [(SolverSettings().substeps, SolverSettings().iterations),
-                                                  (2 * SolverSettings().substeps, 2 * SolverSettings().iterations)])
+@pytest.mark.parametrize(
+    "substeps, iterations",
+    [
+        (SolverSettings().substeps, SolverSettings().iterations),
+        (2 * SolverSettings().substeps, 2 * SolverSettings().iterations),
+    ],
+)
 def test_pushover_cracks_a_bonded_wall_out_of_plane_at_the_analytic_moment(substeps, iterations):
     # at the default solver settings and at twice the substeps and iterations: the answer is the
     # mechanics', not the solver's
@@ -260,12 +293,18 @@ def test_pushover_cracks_a_bonded_wall_out_of_plane_at_the_analytic_moment(subst
     for i in range(n_along):
         bonds.append(Bond.rectangle(idx(i, 0), -1, (lx * (i + 0.5), 0, 0), (0, 0, -1.0), (1.0, 0, 0), lx, t))
         for k in range(n_up - 1):
-            bonds.append(Bond.rectangle(idx(i, k), idx(i, k + 1), (lx * (i + 0.5), 0, h * (k + 1)), (0, 0, 1.0),
-                                        (1.0, 0, 0), lx, t))
+            bonds.append(
+                Bond.rectangle(
+                    idx(i, k), idx(i, k + 1), (lx * (i + 0.5), 0, h * (k + 1)), (0, 0, 1.0), (1.0, 0, 0), lx, t
+                )
+            )
         if i + 1 < n_along:
             for k in range(n_up):
-                bonds.append(Bond.rectangle(idx(i, k), idx(i + 1, k), (lx * (i + 1), 0, h * (k + 0.5)), (1.0, 0, 0),
-                                            (0, 0, 1.0), h, t))
+                bonds.append(
+                    Bond.rectangle(
+                        idx(i, k), idx(i + 1, k), (lx * (i + 1), 0, h * (k + 0.5)), (1.0, 0, 0), (0, 0, 1.0), h, t
+                    )
+                )
     solver = SolverSettings(warmup_s=0.3, substeps=substeps, iterations=iterations)
     value, scene, out, m = _pushover(bodies, bonds, material=material, direction=90.0, max_g=1.0, solver=solver)
     W = n_up * bodies[0].mass * G  # one column
@@ -314,8 +353,21 @@ def test_simulate_cli_outputs(small_model):
 
 def test_simulate_cli_pushover(small_model):
     out = small_model / "push"
-    r = _cli("simulate", small_model / "model", "--pushover", "--pushover-rate", "0.1", "--pushover-max", "0.3",
-             "--direction", "90", "--frames", "2", "--out", out)
+    r = _cli(
+        "simulate",
+        small_model / "model",
+        "--pushover",
+        "--pushover-rate",
+        "0.1",
+        "--pushover-max",
+        "0.3",
+        "--direction",
+        "90",
+        "--frames",
+        "2",
+        "--out",
+        out,
+    )
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["pushover"]["direction_deg"] == 90.0 and s["ground_motion"] is None
@@ -323,8 +375,9 @@ def test_simulate_cli_pushover(small_model):
     assert (out / "pushover.png").is_file() and not (out / "ground_motion.png").exists()
 
 
-@pytest.mark.parametrize("case, msg", [("nobricks", "no bricks.json"), ("negative", "--pga"),
-                                       ("badcsv", "accelerogram")])
+@pytest.mark.parametrize(
+    "case, msg", [("nobricks", "no bricks.json"), ("negative", "--pga"), ("badcsv", "accelerogram")]
+)
 def test_simulate_bad_input(small_model, tmp_path, case, msg):
     model = small_model / "model"
     args = ["simulate", model, "--duration", "1", "--out", tmp_path / "o"]
@@ -338,7 +391,7 @@ def test_simulate_bad_input(small_model, tmp_path, case, msg):
         args += ["--accelerogram", tmp_path / "x.csv"]
     r = _cli(*args)
     assert r.returncode == 2
-    lines = [l for l in r.stderr.splitlines() if l.strip()]
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error:") and msg in lines[0], r.stderr
     assert not (tmp_path / "o").exists()
 
@@ -372,8 +425,12 @@ def test_paper_example_stands_still_under_gravity(tmp_path):
     from calib_masonry.spec import load_structure
 
     root = Path(__file__).resolve().parents[1]
-    build_to_folder(load_structure(root / "data_synthetic" / "paper_example" / "structure.toml"), tmp_path / "m",
-                    figures=False, progress=False)
+    build_to_folder(
+        load_structure(root / "data_synthetic" / "paper_example" / "structure.toml"),
+        tmp_path / "m",
+        figures=False,
+        progress=False,
+    )
     scene = scene_for_model(tmp_path / "m", SimulationConfig(pga_g=0.0, duration_s=10.0))
     out = run(scene, progress=False)
     m = metrics(scene, out)

@@ -29,11 +29,14 @@ def test_roundtrip(tmp_path):
     assert again.vertices == 8
 
 
-@pytest.mark.parametrize("walls, extra, field", [
-    ([(-1.0, 2.0, 0)], "", "width_m"),
-    ([(1.0, 0.0, 0)], "", "height_m"),
-    ([(0.15, 2.0, 0)], "", "thickness_m"),
-])
+@pytest.mark.parametrize(
+    "walls, extra, field",
+    [
+        ([(-1.0, 2.0, 0)], "", "width_m"),
+        ([(1.0, 0.0, 0)], "", "height_m"),
+        ([(0.15, 2.0, 0)], "", "thickness_m"),
+    ],
+)
 def test_impossible_dimensions(tmp_path, walls, extra, field):
     p = tmp_path / "s.toml"
     p.write_text(scenario_text(walls, extra=extra))

@@ -12,7 +12,7 @@ from .conftest import SWAT
 
 def _rect_mask(shape, r0, r1, c0, c1):
     m = np.zeros(shape, bool)
-    m[r0:r1 + 1, c0:c1 + 1] = True
+    m[r0 : r1 + 1, c0 : c1 + 1] = True
     return m
 
 
@@ -56,10 +56,10 @@ def test_outline_area_equals_pixel_count():
 
 def test_border_bricks_kept_specks_dropped_holes_filled():
     m = np.zeros((50, 80), bool)
-    m[0:20, 0:30] = True       # touches the top-left border
-    m[25:50, 40:80] = True     # touches bottom and right borders
-    m[30, 10] = True           # a speck
-    m[35:38, 55:57] = False    # a hole inside a brick
+    m[0:20, 0:30] = True  # touches the top-left border
+    m[25:50, 40:80] = True  # touches bottom and right borders
+    m[30, 10] = True  # a speck
+    m[35:38, 55:57] = False  # a hole inside a brick
     res = trace_mask(m, TraceConfig(vertices=4))
     assert len(res.bricks) == 2
     assert {b.area_px for b in res.bricks} == {600, 1000}

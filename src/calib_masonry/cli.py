@@ -22,14 +22,16 @@ def _print_warning(message, category, filename, lineno, file=None, line=None) ->
 
 
 def _cmd_synth(args) -> int:
+    from dataclasses import replace
+
     from .spec import load_structure
     from .synthetic.truth import synthesize
 
-    from dataclasses import replace
-
     spec = load_structure(args.scenario, require_sources=False)
     if spec.synthetic is None:
-        raise InputError(f"{args.scenario}: no [synthetic] table; add one (layout, px_per_m, seed, ...) to make a data set")
+        raise InputError(
+            f"{args.scenario}: no [synthetic] table; add one (layout, px_per_m, seed, ...) to make a data set"
+        )
     photos = None
     if args.photos:
         from .spec import PhotoSpec
@@ -38,8 +40,10 @@ def _cmd_synth(args) -> int:
         if args.photo_size:
             photos = replace(photos, long_side_px=max(args.photo_size), short_side_px=min(args.photo_size))
     truth = synthesize(spec, args.out, figures=not args.no_figures, photos=photos)
-    print(f"synth: {spec.name}: {len(truth['walls'])} walls, {truth['bricks']} bricks, "
-          f"{truth['end_faces']} corner end faces -> {args.out}")
+    print(
+        f"synth: {spec.name}: {len(truth['walls'])} walls, {truth['bricks']} bricks, "
+        f"{truth['end_faces']} corner end faces -> {args.out}"
+    )
     return 0
 
 
@@ -55,8 +59,9 @@ def _cmd_trace(args) -> int:
         from .wall2d.refine import RefineConfig
 
         refine = RefineConfig()
-    config = TraceConfig(vertices=args.vertices if args.vertices or args.target_dice else 5,
-                         target_dice=args.target_dice, refine=refine)
+    config = TraceConfig(
+        vertices=args.vertices if args.vertices or args.target_dice else 5, target_dice=args.target_dice, refine=refine
+    )
     mask = read_mask(args.mask, field="MASK")
     t0 = time.perf_counter()
     result = trace_mask(mask, config)
@@ -76,9 +81,11 @@ def _cmd_trace(args) -> int:
     if args.no_figures:
         figure.unlink(missing_ok=True)
     before = f"splitting {result.mean_dice_splitting:.4f} -> refined " if result.refined else ""
-    print(f"trace: {len(result.bricks)} bricks, mean Dice {before}{result.mean_dice:.4f}, "
-          f"mean vertices {sum(len(b.vertices_xy) for b in result.bricks) / len(result.bricks):.2f}, "
-          f"{seconds:.2f} s -> {out}")
+    print(
+        f"trace: {len(result.bricks)} bricks, mean Dice {before}{result.mean_dice:.4f}, "
+        f"mean vertices {sum(len(b.vertices_xy) for b in result.bricks) / len(result.bricks):.2f}, "
+        f"{seconds:.2f} s -> {out}"
+    )
     return 0
 
 
@@ -97,14 +104,18 @@ def _cmd_build(args) -> int:
 
 
 def _print_build(summary: dict, out) -> None:
-    print(f"build: {summary['structure']}: {summary['bricks']} bricks "
-          f"({summary['corner_pieces_removed']} corner pieces removed), mean Dice {summary['mean_dice']:.4f}, "
-          f"closure error {summary['closure_error_m'] * 1000:.2f} mm, "
-          f"max interpenetration {summary['max_interpenetration_m3']:.2e} m^3 -> {out}")
+    print(
+        f"build: {summary['structure']}: {summary['bricks']} bricks "
+        f"({summary['corner_pieces_removed']} corner pieces removed), mean Dice {summary['mean_dice']:.4f}, "
+        f"closure error {summary['closure_error_m'] * 1000:.2f} mm, "
+        f"max interpenetration {summary['max_interpenetration_m3']:.2e} m^3 -> {out}"
+    )
     for w in summary["walls"]:
         ref = f" (splitting {w['mean_dice_splitting']:.4f})" if "mean_dice_splitting" in w else ""
-        print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, mean Dice {w['mean_dice']:.4f}{ref}, "
-              f"{w['corner_pieces_removed']} corner pieces removed")
+        print(
+            f"  {w['name']:>10}: {w['bricks']:5d} bricks, mean Dice {w['mean_dice']:.4f}{ref}, "
+            f"{w['corner_pieces_removed']} corner pieces removed"
+        )
 
 
 def _cmd_compare(args) -> int:
@@ -120,24 +131,32 @@ def _cmd_compare(args) -> int:
 
 
 def _print_compare(m: dict, out) -> None:
-    print(f"compare: precision {m['precision']:.4f}, recall {m['recall']:.4f}, "
-          f"Dice vs truth min {m['dice']['min']:.4f} / median {m['dice']['median']:.4f}, "
-          f"centroid error mean {m['centroid_error_mm']['mean']:.2f} mm (max {m['centroid_error_mm']['max']:.2f}), "
-          f"volume error {m['total_volume_m3']['relative_error']:+.2%}, "
-          f"max interpenetration {m['max_interpenetration_m3']:.2e} m^3 -> {out}")
+    print(
+        f"compare: precision {m['precision']:.4f}, recall {m['recall']:.4f}, "
+        f"Dice vs truth min {m['dice']['min']:.4f} / median {m['dice']['median']:.4f}, "
+        f"centroid error mean {m['centroid_error_mm']['mean']:.2f} mm (max {m['centroid_error_mm']['max']:.2f}), "
+        f"volume error {m['total_volume_m3']['relative_error']:+.2%}, "
+        f"max interpenetration {m['max_interpenetration_m3']:.2e} m^3 -> {out}"
+    )
 
 
 def _find_demo_data(explicit: str | None) -> Path:
-    candidates = [Path(explicit)] if explicit else [
-        Path.cwd() / "data_synthetic" / "paper_example",
-        Path(__file__).resolve().parents[2] / "data_synthetic" / "paper_example",
-    ]
+    candidates = (
+        [Path(explicit)]
+        if explicit
+        else [
+            Path.cwd() / "data_synthetic" / "paper_example",
+            Path(__file__).resolve().parents[2] / "data_synthetic" / "paper_example",
+        ]
+    )
     for c in candidates:
         if (c / "structure.toml").is_file():
             return c
-    raise InputError("demo: data_synthetic/paper_example/structure.toml not found; run from the project folder "
-                     "or give --data DIR (re-create it with `calib-masonry synth data_synthetic/paper_example/scenario.toml "
-                     "--out data_synthetic/paper_example`)")
+    raise InputError(
+        "demo: data_synthetic/paper_example/structure.toml not found; run from the project folder "
+        "or give --data DIR (re-create it with `calib-masonry synth data_synthetic/paper_example/scenario.toml "
+        "--out data_synthetic/paper_example`)"
+    )
 
 
 def _cmd_demo(args) -> int:
@@ -163,8 +182,10 @@ def _cmd_demo(args) -> int:
     }
     for name, ok in checks.items():
         print(f"  [{'ok' if ok else 'FAIL'}] {name}")
-    print(f"demo: {time.perf_counter() - t0:.1f} s; model in {Path(args.out) / 'model.stl'}, "
-          f"figures {Path(args.out) / 'walls.png'} and {Path(args.out) / 'model.png'}")
+    print(
+        f"demo: {time.perf_counter() - t0:.1f} s; model in {Path(args.out) / 'model.stl'}, "
+        f"figures {Path(args.out) / 'walls.png'} and {Path(args.out) / 'model.png'}"
+    )
     return 0 if all(checks.values()) else 1
 
 
@@ -174,7 +195,9 @@ def _calibrate_config(args):
     kwargs = {}
     if args.camera_height is not None:
         if not 0 < args.camera_height < 100:
-            raise InputError(f"--camera-height {args.camera_height}: give the eye height above the wall's base in metres")
+            raise InputError(
+                f"--camera-height {args.camera_height}: give the eye height above the wall's base in metres"
+            )
         kwargs.update(camera_height_m=args.camera_height, camera_height_sigma_m=args.camera_height_sigma or 0.02)
     elif args.camera_height_sigma is not None:
         kwargs.update(camera_height_sigma_m=args.camera_height_sigma)
@@ -198,26 +221,43 @@ def _cmd_rectify(args) -> int:
 
     if args.known_width is not None and args.known_height is not None:
         raise InputError("rectify: give --known-width or --known-height, not both")
-    doc = rectify_to_folder(args.photo, args.out, _calibrate_config(args), px_per_m=args.px_per_m,
-                            mask_path=args.mask, figure=not args.no_figures)
+    doc = rectify_to_folder(
+        args.photo,
+        args.out,
+        _calibrate_config(args),
+        px_per_m=args.px_per_m,
+        mask_path=args.mask,
+        figure=not args.no_figures,
+    )
     cam = doc["camera"]
-    print(f"rectify: {doc['mode']} corners, W = {doc['width_m']:.3f} +- {doc['width_sigma_m']:.3f} m, "
-          f"H = {doc['height_m']:.3f} +- {doc['height_sigma_m']:.3f} m, f = {cam['focal_px']:.0f} px ({doc['focal_source']}), "
-          f"yaw {cam['yaw_deg']:.1f} deg, RMS {doc['rms_residual_px']:.2f} px, {doc['status']} -> {args.out}")
+    print(
+        f"rectify: {doc['mode']} corners, W = {doc['width_m']:.3f} +- {doc['width_sigma_m']:.3f} m, "
+        f"H = {doc['height_m']:.3f} +- {doc['height_sigma_m']:.3f} m, f = {cam['focal_px']:.0f} px ({doc['focal_source']}), "
+        f"yaw {cam['yaw_deg']:.1f} deg, RMS {doc['rms_residual_px']:.2f} px, {doc['status']} -> {args.out}"
+    )
     return 0
 
 
 def _cmd_footprint(args) -> int:
     from .calibrate.footprint import footprint_to_folder
 
-    doc = footprint_to_folder(args.inputs, args.out, config=_calibrate_config(args),
-                              heading_sigma_deg=args.heading_sigma, theta_sigma_deg=args.theta_sigma,
-                              figure=not args.no_figures)
-    print(f"footprint: {len(doc['walls'])} walls, gap {doc['closure_gap_before_m'] * 1000:.1f} mm before, "
-          f"{doc['closure_gap_m'] * 1000:.3g} mm after -> {args.out}")
+    doc = footprint_to_folder(
+        args.inputs,
+        args.out,
+        config=_calibrate_config(args),
+        heading_sigma_deg=args.heading_sigma,
+        theta_sigma_deg=args.theta_sigma,
+        figure=not args.no_figures,
+    )
+    print(
+        f"footprint: {len(doc['walls'])} walls, gap {doc['closure_gap_before_m'] * 1000:.1f} mm before, "
+        f"{doc['closure_gap_m'] * 1000:.3g} mm after -> {args.out}"
+    )
     for w in doc["walls"]:
-        print(f"  {w['name']:>10}: W = {w['width_m']:.3f} +- {w['width_sigma_m']:.3f} m, "
-              f"theta = {w['theta_deg']:.2f} +- {w['theta_sigma_deg']:.2f} deg")
+        print(
+            f"  {w['name']:>10}: W = {w['width_m']:.3f} +- {w['width_sigma_m']:.3f} m, "
+            f"theta = {w['theta_deg']:.2f} +- {w['theta_sigma_deg']:.2f} deg"
+        )
     return 0
 
 
@@ -228,25 +268,42 @@ def _cmd_simulate(args) -> int:
     from .simulation.scene import Pushover, SolverSettings
 
     d = SolverSettings()
-    solver = replace(d, **{k: v for k, v in (("fps", args.fps), ("substeps", args.substeps),
-                                              ("iterations", args.iterations)) if v is not None})
-    config = SimulationConfig(pga_g=args.pga, duration_s=args.duration, seed=args.seed,
-                              accelerogram=Path(args.accelerogram) if args.accelerogram else None,
-                              components=args.components or SimulationConfig.components, solver=solver,
-                              frames_png=args.frames,
-                              figures=not args.no_figures, foundation=args.foundation,
-                              pushover=Pushover(rate_g_per_s=args.pushover_rate, direction_deg=args.direction,
-                                                max_g=args.pushover_max) if args.pushover else None)
+    solver = replace(
+        d,
+        **{
+            k: v
+            for k, v in (("fps", args.fps), ("substeps", args.substeps), ("iterations", args.iterations))
+            if v is not None
+        },
+    )
+    config = SimulationConfig(
+        pga_g=args.pga,
+        duration_s=args.duration,
+        seed=args.seed,
+        accelerogram=Path(args.accelerogram) if args.accelerogram else None,
+        components=args.components or SimulationConfig.components,
+        solver=solver,
+        frames_png=args.frames,
+        figures=not args.no_figures,
+        foundation=args.foundation,
+        pushover=Pushover(rate_g_per_s=args.pushover_rate, direction_deg=args.direction, max_g=args.pushover_max)
+        if args.pushover
+        else None,
+    )
     s = simulate_to_folder(args.model_dir, args.out, config)
     if args.pushover:
         value = s["collapse_multiplier_g"]
-        print(f"pushover: {s['bricks']} bricks, {s['bonds']} bonds, along {args.direction:g} deg: collapse multiplier "
-              + (f"{value:.3f} g" if value is not None else f"above {args.pushover_max:g} g (no collapse)")
-              + f"; {s['bonds_broken_fraction']:.1%} of bonds broken; stepping {s['seconds']['stepping']:.1f} s -> {args.out}")
+        print(
+            f"pushover: {s['bricks']} bricks, {s['bonds']} bonds, along {args.direction:g} deg: collapse multiplier "
+            + (f"{value:.3f} g" if value is not None else f"above {args.pushover_max:g} g (no collapse)")
+            + f"; {s['bonds_broken_fraction']:.1%} of bonds broken; stepping {s['seconds']['stepping']:.1f} s -> {args.out}"
+        )
         return 0
-    print(f"simulate: {s['bricks']} bricks, {s['bonds']} bonds, {s['ground_motion']['source']}: {s['outcome']}; "
-          f"moved {s['moved_fraction_final']:.1%} of bricks, {s['bonds_broken_fraction']:.1%} of bonds broken, "
-          f"max roof drift {s['max_roof_drift_m'] * 1000:.0f} mm; stepping {s['seconds']['stepping']:.1f} s -> {args.out}")
+    print(
+        f"simulate: {s['bricks']} bricks, {s['bonds']} bonds, {s['ground_motion']['source']}: {s['outcome']}; "
+        f"moved {s['moved_fraction_final']:.1%} of bricks, {s['bonds_broken_fraction']:.1%} of bonds broken, "
+        f"max roof drift {s['max_roof_drift_m'] * 1000:.0f} mm; stepping {s['seconds']['stepping']:.1f} s -> {args.out}"
+    )
     return 0
 
 
@@ -264,12 +321,23 @@ def _parser() -> argparse.ArgumentParser:
 
     def calib_flags(q, *, corners: bool) -> None:
         if corners:
-            q.add_argument("--corners", default=None, help="x1,y1,...,x4,y4: the wall's corners in pixels, any order "
-                                                           "(default: find them automatically)")
-        q.add_argument("--camera-height", type=float, default=None,
-                       help="eye height above the wall's base in m (default 1.6 +- 0.1)")
-        q.add_argument("--camera-height-sigma", type=float, default=None, help="its uncertainty in m (default 0.02 if given)")
-        q.add_argument("--focal-px", type=float, default=None, help="focal length in pixels (default: EXIF, else fitted)")
+            q.add_argument(
+                "--corners",
+                default=None,
+                help="x1,y1,...,x4,y4: the wall's corners in pixels, any order (default: find them automatically)",
+            )
+        q.add_argument(
+            "--camera-height",
+            type=float,
+            default=None,
+            help="eye height above the wall's base in m (default 1.6 +- 0.1)",
+        )
+        q.add_argument(
+            "--camera-height-sigma", type=float, default=None, help="its uncertainty in m (default 0.02 if given)"
+        )
+        q.add_argument(
+            "--focal-px", type=float, default=None, help="focal length in pixels (default: EXIF, else fitted)"
+        )
         q.add_argument("--max-rms", type=float, default=3.0, help="refuse a fit above this RMS residual in px")
         q.add_argument("--force", action="store_true", help="keep a fit above --max-rms or not converged")
         q.add_argument("--no-figures", action="store_true")
@@ -285,7 +353,9 @@ def _parser() -> argparse.ArgumentParser:
     r.set_defaults(func=_cmd_rectify)
 
     f = sub.add_parser("footprint", help="close the footprint: adjust every wall's W and theta jointly")
-    f.add_argument("inputs", nargs="+", help="a structure TOML naming photos, or calibration.json files in footprint order")
+    f.add_argument(
+        "inputs", nargs="+", help="a structure TOML naming photos, or calibration.json files in footprint order"
+    )
     calib_flags(f, corners=False)
     f.add_argument("--heading-sigma", type=float, default=2.0, help="compass heading uncertainty in deg (default 2)")
     f.add_argument("--theta-sigma", type=float, default=1.0, help="uncertainty of typed theta_deg values in deg")
@@ -320,29 +390,43 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--pga", type=float, default=0.3, help="peak ground acceleration in g (synthetic motion)")
     m.add_argument("--duration", type=float, default=10.0, help="seconds of ground motion")
     m.add_argument("--seed", type=int, default=0)
-    m.add_argument("--components", type=int, default=None, choices=(1, 2),
-                   help="horizontal components of the synthetic motion (default 2, as in a real earthquake; "
-                        "1 shakes along X only and spares the walls parallel to it)")
+    m.add_argument(
+        "--components",
+        type=int,
+        default=None,
+        choices=(1, 2),
+        help="horizontal components of the synthetic motion (default 2, as in a real earthquake; "
+        "1 shakes along X only and spares the walls parallel to it)",
+    )
     m.add_argument("--accelerogram", default=None, help="CSV of time, acceleration (g) instead of --pga")
     m.add_argument("--fps", type=int, default=None, help="frames per second (default: the tested settings, 25)")
     m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")
     m.add_argument("--iterations", type=int, default=None, help="solver iterations per substep (default 50)")
-    m.add_argument("--pushover", action="store_true",
-                   help="quasi-static collapse analysis: ramp a uniform lateral acceleration until the structure "
-                        "runs away; writes collapse_multiplier_g and pushover.png")
+    m.add_argument(
+        "--pushover",
+        action="store_true",
+        help="quasi-static collapse analysis: ramp a uniform lateral acceleration until the structure "
+        "runs away; writes collapse_multiplier_g and pushover.png",
+    )
     m.add_argument("--direction", type=float, default=0.0, help="pushover direction in degrees from global X")
     m.add_argument("--pushover-rate", type=float, default=0.01, help="pushover ramp in g per second (default 0.01)")
     m.add_argument("--pushover-max", type=float, default=1.0, help="pushover's largest lateral acceleration in g")
     m.add_argument("--frames", type=int, default=6, help="collapse frames to render as PNG")
-    m.add_argument("--foundation", action=argparse.BooleanOptionalAction, default=True,
-                   help="bond the bottom course to the ground, a footing (default; --no-foundation: friction only)")
+    m.add_argument(
+        "--foundation",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="bond the bottom course to the ground, a footing (default; --no-foundation: friction only)",
+    )
     m.add_argument("--no-figures", action="store_true")
     m.add_argument("--out", default="out/simulate")
     m.set_defaults(func=_cmd_simulate)
 
     d = sub.add_parser("demo", help="build the paper example from its masks and compare with its truth")
     d.add_argument("--out", default="out/demo")
-    d.add_argument("--data", default=None, help="folder with structure.toml and truth/ (default data_synthetic/paper_example)")
+    d.add_argument(
+        "--data", default=None, help="folder with structure.toml and truth/ (default data_synthetic/paper_example)"
+    )
     d.set_defaults(func=_cmd_demo)
     return p
 

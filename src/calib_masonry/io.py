@@ -6,10 +6,9 @@ image coordinates ``(x, y) = (c, r)``, origin top-left.
 
 from __future__ import annotations
 
-import math
-
 import contextlib
 import json
+import math
 import os
 import shutil
 import tempfile
@@ -27,7 +26,6 @@ from .errors import InputError
 __all__ = [
     "json_bytes",
     "Photo",
-    "rc_from_xy",
     "read_json",
     "read_mask",
     "read_photo",
@@ -49,11 +47,6 @@ def xy_from_rc(rc: np.ndarray) -> np.ndarray:
     """scikit-image ``(row, col)`` points, shape ``(M, 2)``, to image ``(x, y)`` = ``(col, row)``."""
     rc = np.asarray(rc, dtype=np.float64)
     return rc[..., ::-1].copy()
-
-
-def rc_from_xy(xy: np.ndarray) -> np.ndarray:
-    """Image ``(x, y)`` points to scikit-image ``(row, col)``."""
-    return xy_from_rc(xy)
 
 
 @contextlib.contextmanager
@@ -86,8 +79,10 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
             pass  # alpha ignored
         spread = np.ptp(chans, axis=-1)
         if np.mean(spread > 0.2 * max(1.0, float(chans.max()))) > max_gray_fraction:
-            raise InputError(f"{field} {path}: looks like a colour photo, not a mask; give a binary "
-                             "mask (bricks white, mortar black)")
+            raise InputError(
+                f"{field} {path}: looks like a colour photo, not a mask; give a binary "
+                "mask (bricks white, mortar black)"
+            )
         arr = chans.mean(axis=-1)
     arr = arr.astype(np.float64)
     if arr.size == 0 or min(arr.shape) < 2:
@@ -98,8 +93,10 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
     norm = (arr - lo) / (hi - lo)
     grey = np.mean((norm > 0.2) & (norm < 0.8))
     if grey > max_gray_fraction:
-        raise InputError(f"{field} {path}: not a binary-like mask ({grey:.0%} of pixels are mid-grey); "
-                         "threshold it to black mortar and white bricks first")
+        raise InputError(
+            f"{field} {path}: not a binary-like mask ({grey:.0%} of pixels are mid-grey); "
+            "threshold it to black mortar and white bricks first"
+        )
     return norm >= 0.5
 
 
@@ -211,8 +208,10 @@ class Photo:
     def __post_init__(self) -> None:
         rgb = np.asarray(self.rgb)
         if rgb.ndim != 3 or rgb.shape[2] not in (3, 4) or min(rgb.shape[:2]) < 32:
-            raise InputError(f"photo {self.path}: rgb must be an image array (rows, cols, 3) of at least 32 x 32 px, "
-                             f"got shape {rgb.shape}")
+            raise InputError(
+                f"photo {self.path}: rgb must be an image array (rows, cols, 3) of at least 32 x 32 px, "
+                f"got shape {rgb.shape}"
+            )
         if rgb.dtype == np.uint8:  # 8-bit values, as PIL and most readers give them
             rgb = rgb[..., :3].astype(np.float32) / 255.0
         else:

@@ -21,8 +21,16 @@ from .io import read_json, read_mask, staged_output, warn, write_json
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
 
-__all__ = ["BuildResult", "PhotoWall", "trace_wall", "build", "write_build", "read_build", "build_to_folder",
-           "closure_warning"]
+__all__ = [
+    "BuildResult",
+    "PhotoWall",
+    "trace_wall",
+    "build",
+    "write_build",
+    "read_build",
+    "build_to_folder",
+    "closure_warning",
+]
 
 #: A declared or detected closed footprint whose gap exceeds this gets a warning.
 CLOSURE_WARN_M = 1e-3
@@ -85,8 +93,13 @@ def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) ->
     photos = {}
     walls = []
     todo = [w for w in spec.walls if w.mask is None and w.image is not None]
-    bar = tqdm(total=len(todo), desc="calibrate photos", unit="photo", disable=None if progress is None else not progress,
-               leave=False)
+    bar = tqdm(
+        total=len(todo),
+        desc="calibrate photos",
+        unit="photo",
+        disable=None if progress is None else not progress,
+        leave=False,
+    )
     for wall in spec.walls:
         if wall in todo:
             pw = photo_wall(wall, spec)
@@ -111,19 +124,23 @@ def trace_wall(wall: WallSpec, spec: StructureSpec, mask: np.ndarray | None = No
         raise InputError(
             f"wall '{wall.name}' mask {wall.mask}: aspect ratio {cols}/{rows} = {cols / rows:.3f} disagrees with "
             f"width_m/height_m = {wall.width_m:g}/{wall.height_m:g} = {wall.width_m / wall.height_m:.3f} by "
-            f"{mismatch:.1%} (tolerance {spec.aspect_tolerance:.0%}); check W and H or crop the mask to the wall")
+            f"{mismatch:.1%} (tolerance {spec.aspect_tolerance:.0%}); check W and H or crop the mask to the wall"
+        )
     refine = None
     if wall.refine:
         from .wall2d.refine import RefineConfig
 
         refine = RefineConfig()
-    config = TraceConfig(vertices=wall.vertices, target_dice=wall.target_dice if wall.vertices is None else None,
-                         refine=refine)
+    config = TraceConfig(
+        vertices=wall.vertices, target_dice=wall.target_dice if wall.vertices is None else None, refine=refine
+    )
     result = trace_mask(mask, config)
     if not result.bricks:
         source = f"mask {wall.mask}" if wall.mask is not None else f"photo {wall.image}"
-        raise InputError(f"wall '{wall.name}' {source}: no bricks found; "
-                         "bricks must be white on black mortar (or give a mask instead of the photo)")
+        raise InputError(
+            f"wall '{wall.name}' {source}: no bricks found; "
+            "bricks must be white on black mortar (or give a mask instead of the photo)"
+        )
     return result
 
 
@@ -132,14 +149,19 @@ def closure_warning(spec: StructureSpec, gap_xy: np.ndarray) -> str | None:
     if spec.closed is False or gap <= CLOSURE_WARN_M:
         return None
     if spec.closed is None and not footprint_is_closed(spec):
-        return (f"footprint is open: its end is {gap:.3f} m (dx {gap_xy[0]:+.3f}, dy {gap_xy[1]:+.3f}) from its start; "
-                "set closed = false in [structure] if that is intended, else check width_m and theta_deg")
-    return (f"footprint does not close: gap {gap * 1000:.1f} mm (dx {gap_xy[0] * 1000:+.1f}, dy {gap_xy[1] * 1000:+.1f} mm); "
-            "check the walls' width_m and theta_deg")
+        return (
+            f"footprint is open: its end is {gap:.3f} m (dx {gap_xy[0]:+.3f}, dy {gap_xy[1]:+.3f}) from its start; "
+            "set closed = false in [structure] if that is intended, else check width_m and theta_deg"
+        )
+    return (
+        f"footprint does not close: gap {gap * 1000:.1f} mm (dx {gap_xy[0] * 1000:+.1f}, dy {gap_xy[1] * 1000:+.1f} mm); "
+        "check the walls' width_m and theta_deg"
+    )
 
 
-def build(spec: StructureSpec, *, traces: dict[str, TraceResult] | None = None,
-          progress: bool | None = None) -> BuildResult:
+def build(
+    spec: StructureSpec, *, traces: dict[str, TraceResult] | None = None, progress: bool | None = None
+) -> BuildResult:
     """Calibrate and segment every photo wall, trace every wall's mask, scale to metres (Eq. 1),
     place, bond and extrude (Eqs. 2-4); in memory, writing nothing.
 
@@ -148,8 +170,10 @@ def build(spec: StructureSpec, *, traces: dict[str, TraceResult] | None = None,
     traces_given = dict(traces or {})
     unknown = sorted(set(traces_given) - {w.name for w in spec.walls})
     if unknown:
-        raise InputError(f"build: traces given for {unknown}, which are not walls of '{spec.name}'; "
-                         f"its walls are {[w.name for w in spec.walls]}")
+        raise InputError(
+            f"build: traces given for {unknown}, which are not walls of '{spec.name}'; "
+            f"its walls are {[w.name for w in spec.walls]}"
+        )
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     todo = spec.with_walls(tuple(w for w in spec.walls if w.name not in traces_given))
@@ -160,8 +184,9 @@ def build(spec: StructureSpec, *, traces: dict[str, TraceResult] | None = None,
         seconds["calibrate_rectify_segment"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     traces = []
-    for wall in tqdm(spec.walls, desc="trace walls", unit="wall", disable=None if progress is None else not progress,
-                     leave=False):
+    for wall in tqdm(
+        spec.walls, desc="trace walls", unit="wall", disable=None if progress is None else not progress, leave=False
+    ):
         if wall.name in traces_given:
             traces.append(traces_given[wall.name])
         else:
@@ -172,9 +197,15 @@ def build(spec: StructureSpec, *, traces: dict[str, TraceResult] | None = None,
     walls = []
     for w, (wall, tr) in enumerate(zip(spec.walls, traces)):
         polys = tuple(wall_from_image(b.vertices_xy, tr.image_shape, wall.width_m, wall.height_m) for b in tr.bricks)
-        walls.append(WallPolygons(wall=w, ids=tuple(b.id for b in tr.bricks), polygons_m=polys,
-                                  dice=tuple(b.dice for b in tr.bricks),
-                                  traced_vertices=tuple(b.traced_vertices for b in tr.bricks)))
+        walls.append(
+            WallPolygons(
+                wall=w,
+                ids=tuple(b.id for b in tr.bricks),
+                polygons_m=polys,
+                dice=tuple(b.dice for b in tr.bricks),
+                traced_vertices=tuple(b.traced_vertices for b in tr.bricks),
+            )
+        )
     seconds["scale"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -193,22 +224,44 @@ def _summary(result: BuildResult, interpenetration) -> dict:
     for w, (wall, tr) in enumerate(zip(spec.walls, result.traces)):
         own = s.bricks_of(w)
         kept = {x.label for x in own}
-        walls.append({
-            "name": wall.name, "width_m": wall.width_m, "height_m": wall.height_m, "theta_deg": wall.theta_deg,
-            "thickness_m": wall.thickness_m, "mask": wall.mask, "image_shape": list(tr.image_shape),
-            "vertices": wall.vertices, "target_dice": wall.target_dice,
-            "traced_pieces": len(tr.bricks), "bricks": len(own), "corner_pieces_removed": len(s.removed[w]),
-            "mean_dice": float(np.mean([b.dice for b in own])) if own else None,
-            "mean_dice_all_pieces": tr.mean_dice,
-            "refine": wall.refine,
-            **({"photo": str(wall.image), "calibration": f"photos/{wall.name}/calibration.json",
-                "fitted_width_m": result.photos[wall.name].calibration.result.width_m,
-                "fitted_height_m": result.photos[wall.name].calibration.result.height_m}
-               if wall.name in result.photos else {}),
-            **({"mean_dice_splitting": float(np.mean([b.dice_splitting for b in tr.bricks if b.id in kept])),
-                "bricks_refined": int(sum(b.refined for b in tr.bricks))} if tr.refined else {}),
-            "mean_vertices": float(np.mean([len(b.polygon_m) for b in own])) if own else None,
-        })
+        walls.append(
+            {
+                "name": wall.name,
+                "width_m": wall.width_m,
+                "height_m": wall.height_m,
+                "theta_deg": wall.theta_deg,
+                "thickness_m": wall.thickness_m,
+                "mask": wall.mask,
+                "image_shape": list(tr.image_shape),
+                "vertices": wall.vertices,
+                "target_dice": wall.target_dice,
+                "traced_pieces": len(tr.bricks),
+                "bricks": len(own),
+                "corner_pieces_removed": len(s.removed[w]),
+                "mean_dice": float(np.mean([b.dice for b in own])) if own else None,
+                "mean_dice_all_pieces": tr.mean_dice,
+                "refine": wall.refine,
+                **(
+                    {
+                        "photo": str(wall.image),
+                        "calibration": f"photos/{wall.name}/calibration.json",
+                        "fitted_width_m": result.photos[wall.name].calibration.result.width_m,
+                        "fitted_height_m": result.photos[wall.name].calibration.result.height_m,
+                    }
+                    if wall.name in result.photos
+                    else {}
+                ),
+                **(
+                    {
+                        "mean_dice_splitting": float(np.mean([b.dice_splitting for b in tr.bricks if b.id in kept])),
+                        "bricks_refined": int(sum(b.refined for b in tr.bricks)),
+                    }
+                    if tr.refined
+                    else {}
+                ),
+                "mean_vertices": float(np.mean([len(b.polygon_m) for b in own])) if own else None,
+            }
+        )
     return {
         "structure": spec.name,
         "walls": walls,
@@ -241,8 +294,14 @@ def _write_photo_wall(pw: PhotoWall, folder: Path, *, figures: bool) -> None:
         plot_calibration(pw.calibration, pw.rectified, folder / "overlay.png")
 
 
-def build_to_folder(spec: StructureSpec, out: str | Path, *, figures: bool = True,
-                    progress: bool | None = None, simulation_geometry: bool = True) -> dict:
+def build_to_folder(
+    spec: StructureSpec,
+    out: str | Path,
+    *,
+    figures: bool = True,
+    progress: bool | None = None,
+    simulation_geometry: bool = True,
+) -> dict:
     """:func:`build` and :func:`write_build`: what ``calib-masonry build`` calls."""
     return write_build(build(spec, progress=progress), out, figures=figures, simulation_geometry=simulation_geometry)
 
@@ -256,12 +315,20 @@ def read_build(model_dir: str | Path) -> Structure3D:
     bricks, frames, cs, footprint = load_model(model_dir)
     data = read_json(Path(model_dir) / "bricks.json", field="MODEL_DIR bricks.json")
     removed = tuple(tuple(w.get("removed_corner_pieces", ())) for w in data["walls"])
-    return Structure3D(name=str(data.get("structure", Path(model_dir).name)), footprint=footprint,
-                       frames=tuple(frames), corners=tuple(cs), bricks=tuple(bricks), removed=removed,
-                       closure_gap_xy=closure_gap(footprint))
+    return Structure3D(
+        name=str(data.get("structure", Path(model_dir).name)),
+        footprint=footprint,
+        frames=tuple(frames),
+        corners=tuple(cs),
+        bricks=tuple(bricks),
+        removed=removed,
+        closure_gap_xy=closure_gap(footprint),
+    )
 
 
-def write_build(result: BuildResult, out: str | Path, *, figures: bool = True, simulation_geometry: bool = True) -> dict:
+def write_build(
+    result: BuildResult, out: str | Path, *, figures: bool = True, simulation_geometry: bool = True
+) -> dict:
     """Write a build into the folder ``out`` (all or nothing): ``model.stl``, ``bricks.json``,
     ``summary.json``, figures, the photo walls' calibrations and (with ``simulation_geometry``) the
     bodies and contact patches ``simulate`` starts from (``sim_geometry.npz``), computed from the
@@ -281,8 +348,13 @@ def write_build(result: BuildResult, out: str | Path, *, figures: bool = True, s
             removed = []
             for w, (wall, tr) in enumerate(zip(spec.walls, result.traces)):
                 gone = set(s.removed[w])
-                removed.append([wall_from_image(b.vertices_xy, tr.image_shape, wall.width_m, wall.height_m)
-                                for b in tr.bricks if b.id in gone])
+                removed.append(
+                    [
+                        wall_from_image(b.vertices_xy, tr.image_shape, wall.width_m, wall.height_m)
+                        for b in tr.bricks
+                        if b.id in gone
+                    ]
+                )
             plot_walls(s, stage / "walls.png", removed_polygons=removed)
             plot_model(s, stage / "model.png")
             result.seconds["figures"] = time.perf_counter() - t0

@@ -154,8 +154,10 @@ class StructureSpec:
         (a :class:`~calib_masonry.build3d.place.Footprint`)."""
         from .build3d.place import Footprint, WallGeometry
 
-        return Footprint(walls=tuple(WallGeometry(w.width_m, w.height_m, w.theta_rad, w.thickness_m, w.name)
-                                     for w in self.walls), closed=self.closed)
+        return Footprint(
+            walls=tuple(WallGeometry(w.width_m, w.height_m, w.theta_rad, w.thickness_m, w.name) for w in self.walls),
+            closed=self.closed,
+        )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -223,8 +225,12 @@ def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
                 raise InputError(f"{where}: 'seed' must be a whole number, got {value!r}")
             kwargs[key] = value
         elif key in ("stone_length_m", "stone_height_m"):
-            if (not isinstance(value, list) or len(value) != 2
-                    or not all(isinstance(v, (int, float)) for v in value) or not 0 < value[0] <= value[1]):
+            if (
+                not isinstance(value, list)
+                or len(value) != 2
+                or not all(isinstance(v, (int, float)) for v in value)
+                or not 0 < value[0] <= value[1]
+            ):
                 raise InputError(f"{where}: '{key}' must be [min, max] in metres with 0 < min <= max, got {value!r}")
             kwargs[key] = (float(value[0]), float(value[1]))
         else:
@@ -240,7 +246,8 @@ def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
         raise InputError(
             f"{where}: the mortar joint ({spec.mortar_m} m) is only {mortar_px:.1f} px at "
             f"px_per_m = {spec.px_per_m:g}; bricks would merge. Raise px_per_m to at least "
-            f"{math.ceil(2.0 / spec.mortar_m)} or widen mortar_m")
+            f"{math.ceil(2.0 / spec.mortar_m)} or widen mortar_m"
+        )
     return spec
 
 
@@ -252,8 +259,12 @@ def _photos_from(tbl: dict, where: str) -> PhotoSpec:
     for key, value in tbl.items():
         default = getattr(PhotoSpec, key)
         if isinstance(default, tuple):
-            if (not isinstance(value, list) or len(value) != 2 or not all(isinstance(v, (int, float)) for v in value)
-                    or value[0] > value[1]):
+            if (
+                not isinstance(value, list)
+                or len(value) != 2
+                or not all(isinstance(v, (int, float)) for v in value)
+                or value[0] > value[1]
+            ):
                 raise InputError(f"{where}: '{key}' must be [min, max] with min <= max, got {value!r}")
             kwargs[key] = (float(value[0]), float(value[1]))
         elif isinstance(default, int):
@@ -358,28 +369,49 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
                 else:
                     image = p
         if require_sources and mask is None and image is None:
-            raise InputError(f"{where}: neither 'mask' nor 'image' (photo) is given; name the wall's mask or photo file")
+            raise InputError(
+                f"{where}: neither 'mask' nor 'image' (photo) is given; name the wall's mask or photo file"
+            )
         if mask is None and image is None and (math.isnan(width) or math.isnan(height)):
-            raise InputError(f"{where}: width_m and height_m are missing; give them (metres) or a photo to fit them from")
+            raise InputError(
+                f"{where}: width_m and height_m are missing; give them (metres) or a photo to fit them from"
+            )
         cam_h = _num(w, "camera_height_m", where, default=None)
         if cam_h is not None and not 0.0 < cam_h < 100.0:
-            raise InputError(f"{where}: camera_height_m = {cam_h} must be the eye height above the wall's base in "
-                             "metres (e.g. 1.6)")
+            raise InputError(
+                f"{where}: camera_height_m = {cam_h} must be the eye height above the wall's base in metres (e.g. 1.6)"
+            )
         focal = _num(w, "focal_px", where, default=None)
         if focal is not None and focal <= 0:
             raise InputError(f"{where}: focal_px = {focal} must be > 0 (pixels)")
         corners = w.get("corners_px")
         if corners is not None:
-            if (not isinstance(corners, list) or len(corners) != 8
-                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in corners)):
-                raise InputError(f"{where}: corners_px must be 8 numbers [x1, y1, ..., x4, y4] (pixels), got {corners!r}")
+            if (
+                not isinstance(corners, list)
+                or len(corners) != 8
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in corners)
+            ):
+                raise InputError(
+                    f"{where}: corners_px must be 8 numbers [x1, y1, ..., x4, y4] (pixels), got {corners!r}"
+                )
             corners = tuple(float(v) for v in corners)
-        walls.append(WallSpec(name=wname, width_m=float(width), height_m=float(height),
-                              theta_rad=math.radians(theta_deg), thickness_m=float(t), mask=mask,
-                              image=image, vertices=n, target_dice=d,
-                              refine=_flag(w, "refine", where, refine_default),
-                              camera_height_m=None if cam_h is None else float(cam_h), corners_px=corners,
-                              focal_px=None if focal is None else float(focal)))
+        walls.append(
+            WallSpec(
+                name=wname,
+                width_m=float(width),
+                height_m=float(height),
+                theta_rad=math.radians(theta_deg),
+                thickness_m=float(t),
+                mask=mask,
+                image=image,
+                vertices=n,
+                target_dice=d,
+                refine=_flag(w, "refine", where, refine_default),
+                camera_height_m=None if cam_h is None else float(cam_h),
+                corners_px=corners,
+                focal_px=None if focal is None else float(focal),
+            )
+        )
     corners = []
     for i, c in enumerate(data.get("corner", []) or [], start=1):
         where = _where(path, f"[[corner]] {i}")
@@ -387,19 +419,31 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
             raise InputError(f"{where}: needs photo = 'PATH' and walls = ['A', 'B']")
         pair = c.get("walls")
         if not (isinstance(pair, list) and len(pair) == 2 and all(p in names for p in pair) and pair[0] != pair[1]):
-            raise InputError(f"{where}: walls = {pair!r} must name two different walls of this file, the left one "
-                             "(as seen from outside) first")
+            raise InputError(
+                f"{where}: walls = {pair!r} must name two different walls of this file, the left one "
+                "(as seen from outside) first"
+            )
         p = Path(c["photo"])
         p = p if p.is_absolute() else base / p
         if require_sources and not p.is_file():
             raise InputError(f"{where}: photo file {p} not found; fix the path (relative to {path.name})")
         focal = _num(c, "focal_px", where, default=None)
         corners.append(CornerSpec(photo=p, walls=(pair[0], pair[1]), focal_px=None if focal is None else float(focal)))
-    return StructureSpec(name=str(name), walls=tuple(walls),
-                         thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),
-                         vertices=n_default, target_dice=d_default, closed=closed,
-                         aspect_tolerance=aspect_tol, refine=refine_default, photo_px_per_m=photo_ppm,
-                         synthetic=synthetic, photos=photos, corners=tuple(corners), source=path)
+    return StructureSpec(
+        name=str(name),
+        walls=tuple(walls),
+        thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),
+        vertices=n_default,
+        target_dice=d_default,
+        closed=closed,
+        aspect_tolerance=aspect_tol,
+        refine=refine_default,
+        photo_px_per_m=photo_ppm,
+        synthetic=synthetic,
+        photos=photos,
+        corners=tuple(corners),
+        source=path,
+    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -410,8 +454,7 @@ def _clean(value: float) -> float:
     return float(round(value, 12))
 
 
-def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
-                      include_synthetic: bool = False) -> str:
+def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None, include_synthetic: bool = False) -> str:
     """TOML text of ``spec``; paths are written relative to ``relative_to`` when given."""
     st: dict[str, Any] = {"name": spec.name, "thickness_m": _clean(spec.thickness_m)}
     if spec.vertices is not None:
@@ -427,8 +470,7 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
         st["refine"] = True
     doc: dict[str, Any] = {"structure": st}
     if include_synthetic and spec.synthetic is not None:
-        syn = {k: (list(v) if isinstance(v, tuple) else v)
-               for k, v in spec.synthetic.__dict__.items()}
+        syn = {k: (list(v) if isinstance(v, tuple) else v) for k, v in spec.synthetic.__dict__.items()}
         doc["synthetic"] = syn
     walls = []
     for w in spec.walls:
@@ -436,8 +478,7 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
         for key in ("mask", "image"):
             p = getattr(w, key)
             if p is not None:
-                row[key] = (Path(p).relative_to(relative_to).as_posix() if relative_to
-                            else Path(p).as_posix())
+                row[key] = Path(p).relative_to(relative_to).as_posix() if relative_to else Path(p).as_posix()
         if not math.isnan(w.width_m):
             row["width_m"] = _clean(w.width_m)
         if not math.isnan(w.height_m):
@@ -457,7 +498,14 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None,
         walls.append(row)
     doc["wall"] = walls
     if spec.corners:
-        doc["corner"] = [{"photo": (Path(c.photo).relative_to(relative_to).as_posix() if relative_to
-                                    else Path(c.photo).as_posix()), "walls": list(c.walls),
-                          **({"focal_px": c.focal_px} if c.focal_px else {})} for c in spec.corners]
+        doc["corner"] = [
+            {
+                "photo": (
+                    Path(c.photo).relative_to(relative_to).as_posix() if relative_to else Path(c.photo).as_posix()
+                ),
+                "walls": list(c.walls),
+                **({"focal_px": c.focal_px} if c.focal_px else {}),
+            }
+            for c in spec.corners
+        ]
     return tomli_w.dumps(doc)

@@ -86,8 +86,14 @@ def brick_solid(poly: np.ndarray, wall: int, frames: list[WallFrame], corners: l
     return solid
 
 
-def assemble(footprint: Footprint, walls: list[WallPolygons], *, name: str = "structure",
-             end_faces: list[set[int]] | None = None, tolerances: CornerTolerances = CornerTolerances()) -> Structure3D:
+def assemble(
+    footprint: Footprint,
+    walls: list[WallPolygons],
+    *,
+    name: str = "structure",
+    end_faces: list[set[int]] | None = None,
+    tolerances: CornerTolerances = CornerTolerances(),
+) -> Structure3D:
     """Remove corner end faces, extrude every brick by its wall's thickness and place it.
 
     ``footprint``: the walls' W, H, theta, t (a :class:`~calib_masonry.build3d.place.Footprint`, or
@@ -110,8 +116,23 @@ def assemble(footprint: Footprint, walls: list[WallPolygons], *, name: str = "st
             solid = brick_solid(poly, w, frames, cs)
             if solid is None:
                 continue
-            bricks.append(Brick(id=len(bricks), wall=w, label=int(wp.ids[i]), polygon_m=poly, solid=solid,
-                                dice=float(wp.dice[i]) if wp.dice else float("nan"),
-                                traced_vertices=int(wp.traced_vertices[i]) if wp.traced_vertices else 0))
-    return Structure3D(name=name, footprint=footprint, frames=tuple(frames), corners=tuple(cs), bricks=tuple(bricks),
-                       removed=tuple(removed), closure_gap_xy=closure_gap(footprint))
+            bricks.append(
+                Brick(
+                    id=len(bricks),
+                    wall=w,
+                    label=int(wp.ids[i]),
+                    polygon_m=poly,
+                    solid=solid,
+                    dice=float(wp.dice[i]) if wp.dice else float("nan"),
+                    traced_vertices=int(wp.traced_vertices[i]) if wp.traced_vertices else 0,
+                )
+            )
+    return Structure3D(
+        name=name,
+        footprint=footprint,
+        frames=tuple(frames),
+        corners=tuple(cs),
+        bricks=tuple(bricks),
+        removed=tuple(removed),
+        closure_gap_xy=closure_gap(footprint),
+    )

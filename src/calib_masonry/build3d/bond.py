@@ -41,8 +41,12 @@ def _z_shared(e1, e2, frac: float) -> bool:
     return hi - lo >= frac * min(e1[3] - e1[2], e2[3] - e2[2])
 
 
-def find_end_faces(polygons: list[list[np.ndarray]], frames: list[WallFrame], corners: list[Corner],
-                   tol: CornerTolerances = CornerTolerances()) -> list[set[int]]:
+def find_end_faces(
+    polygons: list[list[np.ndarray]],
+    frames: list[WallFrame],
+    corners: list[Corner],
+    tol: CornerTolerances = CornerTolerances(),
+) -> list[set[int]]:
     """Indices (into ``polygons[n]``) of the end-face pieces to remove from each wall.
 
     ``polygons[n]`` are wall ``n``'s outer-face polygons in wall metres ``(k, 2)``.
@@ -60,13 +64,19 @@ def find_end_faces(polygons: list[list[np.ndarray]], frames: list[WallFrame], co
 
         def cand_a(e) -> bool:
             width = e[1] - e[0]
-            return (e[1] >= fa.width_m - edge_a and fa.width_m - 0.5 * (e[0] + e[1]) <= tol.centre * w_a
-                    and tol.width_lo * w_a <= width <= tol.width_hi * w_a)
+            return (
+                e[1] >= fa.width_m - edge_a
+                and fa.width_m - 0.5 * (e[0] + e[1]) <= tol.centre * w_a
+                and tol.width_lo * w_a <= width <= tol.width_hi * w_a
+            )
 
         def cand_b(e) -> bool:
             width = e[1] - e[0]
-            return (e[0] <= edge_b and 0.5 * (e[0] + e[1]) <= tol.centre * w_b
-                    and tol.width_lo * w_b <= width <= tol.width_hi * w_b)
+            return (
+                e[0] <= edge_b
+                and 0.5 * (e[0] + e[1]) <= tol.centre * w_b
+                and tol.width_lo * w_b <= width <= tol.width_hi * w_b
+            )
 
         at_end_a = [i for i, e in enumerate(ext[c.a]) if e[1] >= fa.width_m - edge_a]
         at_start_b = [i for i, e in enumerate(ext[c.b]) if e[0] <= edge_b]
@@ -99,8 +109,9 @@ def find_end_faces(polygons: list[list[np.ndarray]], frames: list[WallFrame], co
     return remove
 
 
-def corner_clip_planes(poly: np.ndarray, wall: int, frames: list[WallFrame], corners: list[Corner]
-                       ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+def corner_clip_planes(
+    poly: np.ndarray, wall: int, frames: list[WallFrame], corners: list[Corner]
+) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
     """The polygon, extended where it runs through a corner, and the vertical planes that cut it.
 
     A brick that reaches a corner (it owns that course) is extended past the wall end and cut by

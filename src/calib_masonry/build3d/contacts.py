@@ -7,19 +7,26 @@ exactly as solids (manifold3d).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import manifold3d
 import numpy as np
 import shapely
 
-from typing import Sequence
-
 from .assemble import Brick
 from .extrude import Polyhedron
 
-__all__ = ["Interpenetration", "max_interpenetration", "intersection_volume", "ContactPatch", "contact_patches",
-           "joint_axes", "patch_section", "OUTLINE_POINTS"]
+__all__ = [
+    "Interpenetration",
+    "max_interpenetration",
+    "intersection_volume",
+    "ContactPatch",
+    "contact_patches",
+    "joint_axes",
+    "patch_section",
+    "OUTLINE_POINTS",
+]
 
 OUTLINE_POINTS = 16  # a patch's outline (its convex hull) is stored with this many corners, padded by repeats
 
@@ -32,8 +39,10 @@ class Interpenetration:
 
 
 def _manifold(p: Polyhedron, origin: np.ndarray) -> manifold3d.Manifold:
-    mesh = manifold3d.Mesh(vert_properties=np.ascontiguousarray(p.vertices - origin, dtype=np.float32),
-                           tri_verts=np.ascontiguousarray(p.faces, dtype=np.uint32))
+    mesh = manifold3d.Mesh(
+        vert_properties=np.ascontiguousarray(p.vertices - origin, dtype=np.float32),
+        tri_verts=np.ascontiguousarray(p.faces, dtype=np.uint32),
+    )
     return manifold3d.Manifold(mesh=mesh)
 
 
@@ -134,13 +143,21 @@ def _ring_moments(xy: np.ndarray) -> np.ndarray:
     signed by its orientation (Green's theorem)."""
     x0, y0, x1, y1 = xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1]
     c = x0 * y1 - x1 * y0
-    return np.array([c.sum() / 2, (c * (x0 + x1)).sum() / 6, (c * (y0 + y1)).sum() / 6,
-                     (c * (x0**2 + x0 * x1 + x1**2)).sum() / 12, (c * (y0**2 + y0 * y1 + y1**2)).sum() / 12,
-                     (c * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)).sum() / 24])
+    return np.array(
+        [
+            c.sum() / 2,
+            (c * (x0 + x1)).sum() / 6,
+            (c * (y0 + y1)).sum() / 6,
+            (c * (x0**2 + x0 * x1 + x1**2)).sum() / 12,
+            (c * (y0**2 + y0 * y1 + y1**2)).sum() / 12,
+            (c * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)).sum() / 24,
+        ]
+    )
 
 
-def patch_section(poly: shapely.Geometry, basis: np.ndarray, normal: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def patch_section(
+    poly: shapely.Geometry, basis: np.ndarray, normal: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """A joint patch's section in its joint frame: the patch ``poly`` is in the 2D coordinates of
     ``basis`` ``(2, 3)`` (rows: the plane's axes in 3D); returns its centroid's offset in those
     2D coordinates ``(2,)``, the second moments ``(I_uu, I_vv, I_uv)`` about the centroid in the
@@ -172,7 +189,9 @@ def patch_section(poly: shapely.Geometry, basis: np.ndarray, normal: np.ndarray
     return np.array([cx, cy]), np.array([J[0, 0], J[1, 1], J[0, 1]]), outline, float(area)
 
 
-def _planar_faces(p: Polyhedron, angle_tol: float = 1e-3) -> list[tuple[np.ndarray, float, shapely.Geometry, np.ndarray]]:
+def _planar_faces(
+    p: Polyhedron, angle_tol: float = 1e-3
+) -> list[tuple[np.ndarray, float, shapely.Geometry, np.ndarray]]:
     """Planar faces of a polyhedron: (unit normal, offset n.x, polygon in the plane's 2D basis, basis)."""
     v = p.vertices[p.faces]
     n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
@@ -220,8 +239,9 @@ def _min_width(poly: shapely.Geometry) -> float:
     return float(np.ptp(centred @ vt[1]))
 
 
-def contact_patches(bricks: Sequence[Brick], *, max_gap_m: float = 0.03, min_area_m2: float = 1e-4,
-                    angle_deg: float = 10.0) -> list[ContactPatch]:
+def contact_patches(
+    bricks: Sequence[Brick], *, max_gap_m: float = 0.03, min_area_m2: float = 1e-4, angle_deg: float = 10.0
+) -> list[ContactPatch]:
     """Patches where two bricks' faces face each other across at most ``max_gap_m``.
 
     Any orientation: faces are matched by anti-parallel normals (within ``angle_deg``) and plane
@@ -251,8 +271,18 @@ def contact_patches(bricks: Sequence[Brick], *, max_gap_m: float = 0.03, min_are
             area, normal, da, gap, inter, basis = best
             c2, moments, outline, _ = patch_section(inter, basis, normal)
             centroid = c2 @ basis + (da + 0.5 * gap) * normal
-            out.append(ContactPatch(a=bricks[a].id, b=bricks[b].id, normal=normal, centroid=centroid,
-                                    area_m2=float(area), gap_m=float(gap), min_width_m=_min_width(inter),
-                                    moments=moments, outline=outline))
+            out.append(
+                ContactPatch(
+                    a=bricks[a].id,
+                    b=bricks[b].id,
+                    normal=normal,
+                    centroid=centroid,
+                    area_m2=float(area),
+                    gap_m=float(gap),
+                    min_width_m=_min_width(inter),
+                    moments=moments,
+                    outline=outline,
+                )
+            )
     out.sort(key=lambda c: (c.a, c.b))
     return out

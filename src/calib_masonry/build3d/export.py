@@ -15,7 +15,16 @@ from ..errors import InputError
 from ..io import write_json
 from .assemble import Structure3D
 
-__all__ = ["EXPORTERS", "export_mesh", "bricks_json", "bricks_from_json", "write_bricks_json", "plot_walls", "plot_model", "structure_mesh"]
+__all__ = [
+    "EXPORTERS",
+    "export_mesh",
+    "bricks_json",
+    "bricks_from_json",
+    "write_bricks_json",
+    "plot_walls",
+    "plot_model",
+    "structure_mesh",
+]
 
 EXPORTERS = {".stl": "stl", ".glb": "glb", ".ply": "ply", ".obj": "obj"}
 
@@ -37,8 +46,7 @@ def export_mesh(structure: Structure3D, path: Path) -> None:
     if kind == "glb":
         scene = trimesh.Scene()
         for b in structure.bricks:
-            scene.add_geometry(b.solid.to_trimesh(), node_name=f"brick_{b.id:05d}",
-                               geom_name=f"brick_{b.id:05d}")
+            scene.add_geometry(b.solid.to_trimesh(), node_name=f"brick_{b.id:05d}", geom_name=f"brick_{b.id:05d}")
         data = scene.export(file_type="glb")
     else:
         data = mesh.export(file_type=kind)
@@ -50,17 +58,34 @@ def bricks_json(structure: Structure3D) -> dict:
     names = [w.name for w in structure.footprint.walls]
     return {
         "structure": structure.name,
-        "walls": [{"name": w.name, "width_m": w.width_m, "height_m": w.height_m, "theta_deg": w.theta_deg,
-                   "thickness_m": w.thickness_m, "origin_xy": f.origin_xy.tolist(),
-                   "removed_corner_pieces": list(structure.removed[i])}
-                  for i, (w, f) in enumerate(zip(structure.footprint.walls, structure.frames))],
-        "bricks": [{"id": b.id, "wall": names[b.wall], "wall_index": b.wall, "label": b.label,
-                    "polygon_wall_m": b.polygon_m.tolist(), "vertices": b.solid.vertices.tolist(),
-                    "faces": b.solid.faces.tolist(), "volume_m3": b.volume,
-                    "centroid": b.solid.centroid.tolist(),
-                    "dice": None if not np.isfinite(b.dice) else b.dice,
-                    "traced_vertices": b.traced_vertices}
-                   for b in structure.bricks],
+        "walls": [
+            {
+                "name": w.name,
+                "width_m": w.width_m,
+                "height_m": w.height_m,
+                "theta_deg": w.theta_deg,
+                "thickness_m": w.thickness_m,
+                "origin_xy": f.origin_xy.tolist(),
+                "removed_corner_pieces": list(structure.removed[i]),
+            }
+            for i, (w, f) in enumerate(zip(structure.footprint.walls, structure.frames))
+        ],
+        "bricks": [
+            {
+                "id": b.id,
+                "wall": names[b.wall],
+                "wall_index": b.wall,
+                "label": b.label,
+                "polygon_wall_m": b.polygon_m.tolist(),
+                "vertices": b.solid.vertices.tolist(),
+                "faces": b.solid.faces.tolist(),
+                "volume_m3": b.volume,
+                "centroid": b.solid.centroid.tolist(),
+                "dice": None if not np.isfinite(b.dice) else b.dice,
+                "traced_vertices": b.traced_vertices,
+            }
+            for b in structure.bricks
+        ],
     }
 
 
@@ -68,43 +93,45 @@ def write_bricks_json(structure: Structure3D, path: Path) -> None:
     write_json(path, bricks_json(structure), exact=True)
 
 
-def _mpl():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def plot_walls(structure: Structure3D, path: Path, *, removed_polygons: list[list[np.ndarray]] | None = None,
-               title: str = "") -> None:
+def plot_walls(
+    structure: Structure3D, path: Path, *, removed_polygons: list[list[np.ndarray]] | None = None, title: str = ""
+) -> None:
     """The outer wall surfaces side by side (the method's Fig. 8), bricks coloured by Dice."""
-    plt = _mpl()
     from matplotlib.collections import PolyCollection
+
+    from .. import _figure as plt
 
     spec = structure.footprint
     widths = [w.width_m for w in spec.walls]
-    fig, axes = plt.subplots(1, len(spec.walls), figsize=(min(24, 2.2 + 1.6 * sum(widths)), 6),
-                             gridspec_kw={"width_ratios": widths}, squeeze=False)
+    fig, axes = plt.subplots(
+        1,
+        len(spec.walls),
+        figsize=(min(24, 2.2 + 1.6 * sum(widths)), 6),
+        gridspec_kw={"width_ratios": widths},
+        squeeze=False,
+    )
     cmap = plt.get_cmap("viridis")
     for w, ax in enumerate(axes[0]):
         own = structure.bricks_of(w)
         dice = np.array([b.dice for b in own])
         colours = [cmap(0.5) if not np.isfinite(d) else cmap(np.clip((d - 0.9) / 0.1, 0, 1)) for d in dice]
-        ax.add_collection(PolyCollection([b.polygon_m for b in own], facecolors=colours,
-                                         edgecolors="k", linewidths=0.2))
+        ax.add_collection(
+            PolyCollection([b.polygon_m for b in own], facecolors=colours, edgecolors="k", linewidths=0.2)
+        )
         if removed_polygons:
-            ax.add_collection(PolyCollection(removed_polygons[w], facecolors="none", edgecolors="r",
-                                             linewidths=0.6, hatch="///"))
+            ax.add_collection(
+                PolyCollection(removed_polygons[w], facecolors="none", edgecolors="r", linewidths=0.6, hatch="///")
+            )
         wall = spec.walls[w]
         ax.set_xlim(0, wall.width_m)
         ax.set_ylim(0, wall.height_m)
         ax.set_aspect("equal")
         ax.set_title(f"{wall.name}\n{wall.width_m:g} x {wall.height_m:g} m, {wall.theta_deg:g} deg", fontsize=8)
         ax.tick_params(labelsize=6)
-    fig.suptitle(title or f"{structure.name}: outer wall surfaces (colour: Dice 0.9-1; red hatched: corner end faces removed)",
-                 fontsize=9)
+    fig.suptitle(
+        title or f"{structure.name}: outer wall surfaces (colour: Dice 0.9-1; red hatched: corner end faces removed)",
+        fontsize=9,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -112,8 +139,9 @@ def plot_walls(structure: Structure3D, path: Path, *, removed_polygons: list[lis
 
 def plot_model(structure: Structure3D, path: Path) -> None:
     """An axonometric view of the 3D brick model."""
-    plt = _mpl()
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from .. import _figure as plt
 
     fig = plt.figure(figsize=(8, 8))
     ax = fig.add_subplot(projection="3d")
@@ -156,8 +184,15 @@ def bricks_from_json(data: dict) -> list:
     out = []
     for b in data["bricks"]:
         solid = Polyhedron(np.asarray(b["vertices"], dtype=np.float64), np.asarray(b["faces"], dtype=np.int64))
-        out.append(Brick(id=int(b["id"]), wall=int(b["wall_index"]), label=int(b["label"]),
-                         polygon_m=np.asarray(b["polygon_wall_m"], dtype=np.float64), solid=solid,
-                         dice=float("nan") if b.get("dice") is None else float(b["dice"]),
-                         traced_vertices=int(b.get("traced_vertices", 0))))
+        out.append(
+            Brick(
+                id=int(b["id"]),
+                wall=int(b["wall_index"]),
+                label=int(b["label"]),
+                polygon_m=np.asarray(b["polygon_wall_m"], dtype=np.float64),
+                solid=solid,
+                dice=float("nan") if b.get("dice") is None else float(b["dice"]),
+                traced_vertices=int(b.get("traced_vertices", 0)),
+            )
+        )
     return out

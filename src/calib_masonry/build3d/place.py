@@ -17,8 +17,17 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["WallGeometry", "Footprint", "WallFrame", "Corner", "wall_frames", "closure_gap", "footprint_is_closed",
-           "corners", "MIN_CORNER_TURN_RAD"]
+__all__ = [
+    "WallGeometry",
+    "Footprint",
+    "WallFrame",
+    "Corner",
+    "wall_frames",
+    "closure_gap",
+    "footprint_is_closed",
+    "corners",
+    "MIN_CORNER_TURN_RAD",
+]
 
 #: Turns smaller than this (in either sense) are treated as collinear walls that just abut.
 MIN_CORNER_TURN_RAD = math.radians(10.0)
@@ -94,7 +103,7 @@ class WallFrame:
     def global_from_wall(self, xyz: np.ndarray) -> np.ndarray:
         """Wall points ``(..., 3)`` as (x along, y inward, z up) to global ``(..., 3)`` (X, Y, Z)."""
         xyz = np.asarray(xyz, dtype=np.float64)
-        plan = (self.origin_xy + xyz[..., :1] * self.direction + xyz[..., 1:2] * self.inward)
+        plan = self.origin_xy + xyz[..., :1] * self.direction + xyz[..., 1:2] * self.inward
         return np.concatenate([plan, xyz[..., 2:3]], axis=-1)
 
 
@@ -134,8 +143,9 @@ def wall_frames(footprint: Footprint) -> list[WallFrame]:
 def closure_gap(footprint: Footprint) -> np.ndarray:
     """``sum_n W_n (cos theta_n, sin theta_n)``: zero for a footprint that closes."""
     spec = _footprint(footprint)
-    return sum((w.width_m * np.array([math.cos(w.theta_rad), math.sin(w.theta_rad)])
-                for w in spec.walls), start=np.zeros(2))
+    return sum(
+        (w.width_m * np.array([math.cos(w.theta_rad), math.sin(w.theta_rad)]) for w in spec.walls), start=np.zeros(2)
+    )
 
 
 def footprint_is_closed(footprint: Footprint) -> bool:

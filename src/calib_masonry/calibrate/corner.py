@@ -26,11 +26,18 @@ from ..errors import FitFailed, InputError
 from ..io import Photo, read_photo
 from .camera import angles_from_rotation, intrinsics, principal_point, wall_from_camera_rotation
 from .fit import _line_distances, _pad_segments
-from .lines import DetectConfig, _hough_segments, _vanishing_point
 from .fitresult import FitResult, FitStatus, HasFit, fit_result
+from .lines import DetectConfig, _hough_segments, _vanishing_point
 from .lm import least_squares
 
-__all__ = ["CORNER_DETECT", "CornerDetect", "CornerResult", "calibrate_corner_photo", "corner_vanishing_points", "fit_corner"]
+__all__ = [
+    "CORNER_DETECT",
+    "CornerDetect",
+    "CornerResult",
+    "calibrate_corner_photo",
+    "corner_vanishing_points",
+    "fit_corner",
+]
 
 _SCALE = np.array([1000.0, 0.1, 0.1, 0.1, 0.1])  # f, yaw, pitch, roll, phi
 CORNER_PARAMS = ("focal_px", "yaw_rad", "pitch_rad", "roll_rad", "turn_rad")
@@ -55,13 +62,17 @@ class CornerResult(HasFit):
         return self.fit.sigma("turn_rad")
 
     def to_json(self) -> dict:
-        return {"turn_deg": math.degrees(self.turn_rad), "turn_sigma_deg": math.degrees(self.turn_sigma_rad),
-                "focal_px": float(self.params[0]), "yaw_deg": math.degrees(self.params[1]),
-                "pitch_deg": math.degrees(self.params[2]), "roll_deg": math.degrees(self.params[3]),
-                "rms_line_px": self.rms_line_px,
-                "segments": {"bed_left": self.n_segments[0], "bed_right": self.n_segments[1],
-                             "head": self.n_segments[2]},
-                **self.fit.to_json()}
+        return {
+            "turn_deg": math.degrees(self.turn_rad),
+            "turn_sigma_deg": math.degrees(self.turn_sigma_rad),
+            "focal_px": float(self.params[0]),
+            "yaw_deg": math.degrees(self.params[1]),
+            "pitch_deg": math.degrees(self.params[2]),
+            "roll_deg": math.degrees(self.params[3]),
+            "rms_line_px": self.rms_line_px,
+            "segments": {"bed_left": self.n_segments[0], "bed_right": self.n_segments[1], "head": self.n_segments[2]},
+            **self.fit.to_json(),
+        }
 
 
 def _vps(p, pp):
@@ -74,12 +85,14 @@ def _vps(p, pp):
 def _residuals(u, data):
     p = u * _SCALE
     vp_a, vp_b, vp_z = _vps(p, data["pp"])
-    return jnp.concatenate([
-        _line_distances(vp_a, data["bed_a"]) * data["w_a"],
-        _line_distances(vp_b, data["bed_b"]) * data["w_b"],
-        _line_distances(vp_z, data["head"]) * data["w_h"],
-        jnp.atleast_1d((p[0] - data["prior"][0]) * data["prior"][1]),
-    ])
+    return jnp.concatenate(
+        [
+            _line_distances(vp_a, data["bed_a"]) * data["w_a"],
+            _line_distances(vp_b, data["bed_b"]) * data["w_b"],
+            _line_distances(vp_z, data["head"]) * data["w_h"],
+            jnp.atleast_1d((p[0] - data["prior"][0]) * data["prior"][1]),
+        ]
+    )
 
 
 @jax.jit
@@ -162,8 +175,18 @@ def _direction(k_inv, vp, positive_axis, sign):
     return d if d[positive_axis] * sign >= 0 else -d
 
 
-def fit_corner(image_size, bed_a, bed_b, head, *, focal_px: float | None, focal_sigma_px: float | None = None,
-               line_sigma_px: float = 1.0, max_effective_segments: int = 64, start=None) -> CornerResult:
+def fit_corner(
+    image_size,
+    bed_a,
+    bed_b,
+    head,
+    *,
+    focal_px: float | None,
+    focal_sigma_px: float | None = None,
+    line_sigma_px: float = 1.0,
+    max_effective_segments: int = 64,
+    start=None,
+) -> CornerResult:
     """Fit focal, orientation and the turn angle to the three segment families of a corner photo."""
     pp = principal_point(image_size)
     if start is None:
@@ -172,9 +195,16 @@ def fit_corner(image_size, bed_a, bed_b, head, *, focal_px: float | None, focal_
     bb, wb = _pad_segments(bed_b, line_sigma_px, max_effective_segments)
     hd, wh = _pad_segments(head, line_sigma_px, max_effective_segments)
     f_sigma = focal_sigma_px or (0.002 * focal_px if focal_px else None)
-    data = {"pp": jnp.asarray(pp), "bed_a": jnp.asarray(ba), "w_a": jnp.asarray(wa), "bed_b": jnp.asarray(bb),
-            "w_b": jnp.asarray(wb), "head": jnp.asarray(hd), "w_h": jnp.asarray(wh),
-            "prior": jnp.asarray([focal_px or 0.0, 1.0 / f_sigma if focal_px else 0.0])}
+    data = {
+        "pp": jnp.asarray(pp),
+        "bed_a": jnp.asarray(ba),
+        "w_a": jnp.asarray(wa),
+        "bed_b": jnp.asarray(bb),
+        "w_b": jnp.asarray(wb),
+        "head": jnp.asarray(hd),
+        "w_h": jnp.asarray(wh),
+        "prior": jnp.asarray([focal_px or 0.0, 1.0 / f_sigma if focal_px else 0.0]),
+    }
     u, ok, steps, jac, r = _solve(jnp.asarray(np.asarray(start) / _SCALE), data)
     fit = fit_result(u, ok, steps, jac, r, CORNER_PARAMS, _SCALE)
     if fit.status in (FitStatus.SINGULAR, FitStatus.DIVERGED):
@@ -187,8 +217,9 @@ def fit_corner(image_size, bed_a, bed_b, head, *, focal_px: float | None, focal_
     return CornerResult(fit=fit, rms_line_px=float(np.sqrt(np.mean(dist**2))) if len(dist) else 0.0, n_segments=n)
 
 
-def calibrate_corner_photo(photo: Photo | str | Path, *, focal_px: float | None = None,
-                           config: CornerDetect = CORNER_DETECT) -> CornerResult:
+def calibrate_corner_photo(
+    photo: Photo | str | Path, *, focal_px: float | None = None, config: CornerDetect = CORNER_DETECT
+) -> CornerResult:
     """The turn angle between the two walls of a corner photo (wall n on the left)."""
     if not isinstance(photo, Photo):
         photo = read_photo(photo)
@@ -215,10 +246,11 @@ def calibrate_corner_photo(photo: Photo | str | Path, *, focal_px: float | None 
     # biases the vertical vanishing point towards the image's vertical; with the focal length
     # known the two walls' bed joints fix the vertical anyway (it is normal to both), so the head
     # joints only seed the start
-    res = fit_corner(photo.size, bed_a, bed_b, np.zeros((0, 4)), focal_px=f,
-                     start=np.array([f, yaw, pitch, roll, phi]))
+    res = fit_corner(photo.size, bed_a, bed_b, np.zeros((0, 4)), focal_px=f, start=np.array([f, yaw, pitch, roll, phi]))
     res = replace(res, segments=(bed_a, bed_b))
     if not res.fit.ok:
-        raise FitFailed(f"{photo.path}: the corner fit {res.status.message}; check that the photo shows two brick walls "
-                        "meeting at a vertical edge")
+        raise FitFailed(
+            f"{photo.path}: the corner fit {res.status.message}; check that the photo shows two brick walls "
+            "meeting at a vertical edge"
+        )
     return res

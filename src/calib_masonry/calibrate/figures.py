@@ -16,11 +16,9 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
     """Left: the photo, the fitted wall outline (green), the clicked or detected corners (red),
     bed (orange) and head (cyan) joint segments used by the fit, the vanishing directions.
     Right: the rectified orthophoto with a 1 m grid."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.collections import LineCollection
+
+    from .. import _figure as plt
 
     res = cal.result
     rgb = cal.photo.rgb
@@ -31,8 +29,14 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
     w_m, h_m = res.width_m, res.height_m
     # fitted outline, and 1 m grid lines of the wall drawn through the camera
     t = np.linspace(0, 1, 50)
-    edge = np.concatenate([np.c_[t * w_m, 0 * t], np.c_[w_m + 0 * t, t * h_m], np.c_[(1 - t) * w_m, h_m + 0 * t],
-                           np.c_[0 * t, (1 - t) * h_m]])
+    edge = np.concatenate(
+        [
+            np.c_[t * w_m, 0 * t],
+            np.c_[w_m + 0 * t, t * h_m],
+            np.c_[(1 - t) * w_m, h_m + 0 * t],
+            np.c_[0 * t, (1 - t) * h_m],
+        ]
+    )
     e = project(h, edge)
     a.plot(e[:, 0], e[:, 1], "-", color="lime", lw=1.2, label="fitted outline")
     grid = [project(h, np.array([[x, 0], [x, h_m]])) for x in np.arange(1.0, w_m, 1.0)]
@@ -49,15 +53,19 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
     if det is not None:
         for seg, col, name in ((det.bed_segments, "orange", "bed joints"), (det.head_segments, "cyan", "head joints")):
             if len(seg):
-                a.add_collection(LineCollection(seg.reshape(-1, 2, 2), colors=col, linewidths=0.6,
-                                                label=f"{name} ({len(seg)})"))
+                a.add_collection(
+                    LineCollection(seg.reshape(-1, 2, 2), colors=col, linewidths=0.6, label=f"{name} ({len(seg)})")
+                )
     a.set_xlim(-0.5, rgb.shape[1] - 0.5)
     a.set_ylim(rgb.shape[0] - 0.5, -0.5)
     a.legend(loc="lower left", fontsize=7, framealpha=0.8)
     cam = res.camera_json()
-    a.set_title(f"{cal.photo.path.name}: {cal.mode}, f = {cam['focal_px']:.0f} px ({cal.focal_source}), "
-                f"yaw {cam['yaw_deg']:.1f}, pitch {cam['pitch_deg']:.1f}, roll {cam['roll_deg']:.1f} deg\n"
-                f"RMS residual {res.rms_residual_px:.2f} px, {res.status.value}", fontsize=9)
+    a.set_title(
+        f"{cal.photo.path.name}: {cal.mode}, f = {cam['focal_px']:.0f} px ({cal.focal_source}), "
+        f"yaw {cam['yaw_deg']:.1f}, pitch {cam['pitch_deg']:.1f}, roll {cam['roll_deg']:.1f} deg\n"
+        f"RMS residual {res.rms_residual_px:.2f} px, {res.status.value}",
+        fontsize=9,
+    )
     rows, cols = rect.shape[:2]
     b.imshow(np.clip(rect, 0, 1), extent=(0, w_m, 0, h_m))
     for x in np.arange(1.0, w_m, 1.0):
@@ -66,8 +74,11 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
         b.axhline(z, color="white", lw=0.5, alpha=0.7)
     b.set_xlabel("x along the wall [m]")
     b.set_ylabel("z [m]")
-    b.set_title(f"orthophoto {cols} x {rows} px: W = {w_m:.3f} +- {res.sigma('width_m'):.3f} m, "
-                f"H = {h_m:.3f} +- {res.sigma('height_m'):.3f} m", fontsize=9)
+    b.set_title(
+        f"orthophoto {cols} x {rows} px: W = {w_m:.3f} +- {res.sigma('width_m'):.3f} m, "
+        f"H = {h_m:.3f} +- {res.sigma('height_m'):.3f} m",
+        fontsize=9,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -76,10 +87,7 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
 def plot_footprint(widths, thetas, adjusted_w, adjusted_t, names, path: Path, *, title: str = "") -> None:
     """Plan view of the footprint from the per-wall estimates (dashed, not closing) and after the
     closure-constrained fit (solid)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .. import _figure as plt
 
     def walk(w, t):
         steps = np.c_[np.cos(t) * w, np.sin(t) * w]
@@ -106,24 +114,28 @@ def plot_footprint(widths, thetas, adjusted_w, adjusted_t, names, path: Path, *,
 def plot_corner(rgb: np.ndarray, result, path: Path, *, names=("wall n", "wall n+1"), title: str = "") -> None:
     """A corner photo with the bed-joint segments of the left (orange) and right (cyan) wall that
     fixed the turn angle between them."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.collections import LineCollection
+
+    from .. import _figure as plt
 
     step = max(1, int(math.ceil(max(rgb.shape[:2]) / 1600)))
     fig, ax = plt.subplots(figsize=(10, 10 * rgb.shape[0] / rgb.shape[1] + 0.6))
     ax.imshow(rgb[::step, ::step], extent=(-0.5, rgb.shape[1] - 0.5, rgb.shape[0] - 0.5, -0.5))
     for seg, col, name in zip(result.segments, ("orange", "cyan"), names):
         if len(seg):
-            ax.add_collection(LineCollection(seg.reshape(-1, 2, 2), colors=col, linewidths=0.8,
-                                             label=f"{name}: {len(seg)} bed-joint segments"))
+            ax.add_collection(
+                LineCollection(
+                    seg.reshape(-1, 2, 2), colors=col, linewidths=0.8, label=f"{name}: {len(seg)} bed-joint segments"
+                )
+            )
     ax.set_xlim(-0.5, rgb.shape[1] - 0.5)
     ax.set_ylim(rgb.shape[0] - 0.5, -0.5)
     ax.legend(loc="lower left", fontsize=8)
-    ax.set_title(f"{title} turn {math.degrees(result.turn_rad):.2f} +- {math.degrees(result.turn_sigma_rad):.2f} deg, "
-                 f"RMS {result.rms_line_px:.2f} px".strip(), fontsize=9)
+    ax.set_title(
+        f"{title} turn {math.degrees(result.turn_rad):.2f} +- {math.degrees(result.turn_sigma_rad):.2f} deg, "
+        f"RMS {result.rms_line_px:.2f} px".strip(),
+        fontsize=9,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

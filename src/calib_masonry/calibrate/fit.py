@@ -164,11 +164,14 @@ def order_corners(points: np.ndarray, *, where: str = "--corners") -> np.ndarray
     nxt = np.roll(edges, -1, axis=0)
     cross = edges[:, 0] * nxt[:, 1] - edges[:, 1] * nxt[:, 0]
     if span < 4.0 or np.min(np.abs(cross)) < 1e-3 * span**2:
-        raise InputError(f"{where}: the corners are repeated or three of them are collinear; click the wall's "
-                         "four corners")
+        raise InputError(
+            f"{where}: the corners are repeated or three of them are collinear; click the wall's four corners"
+        )
     if not (np.all(cross > 0) or np.all(cross < 0)):
-        raise InputError(f"{where}: the corners do not form a convex quadrilateral (self-crossing or dented); "
-                         "click the wall's four outer corners")
+        raise InputError(
+            f"{where}: the corners do not form a convex quadrilateral (self-crossing or dented); "
+            "click the wall's four outer corners"
+        )
     # start from the lower-left: of the two lowest points in the image (largest y), the left one
     low = np.argsort(-ccw[:, 1])[:2]
     start = low[np.argmin(ccw[low, 0])]
@@ -269,17 +272,26 @@ def pack(inp: CalibrationInput) -> dict:
     head, head_w = _pad_segments(inp.head_segments, inp.line_sigma_px, inp.max_effective_segments)
     f0 = inp.focal_px or 0.0
     f_sigma = inp.focal_sigma_px if inp.focal_sigma_px else (0.002 * f0 if f0 else None)
-    prior = np.array([
-        inp.camera_height_m, 1.0 / inp.camera_height_sigma_m,
-        f0, 1.0 / f_sigma if inp.focal_px else 0.0,
-        inp.known_width_m or 0.0, 1.0 / inp.known_sigma_m if inp.known_width_m else 0.0,
-        inp.known_height_m or 0.0, 1.0 / inp.known_sigma_m if inp.known_height_m else 0.0,
-    ])
+    prior = np.array(
+        [
+            inp.camera_height_m,
+            1.0 / inp.camera_height_sigma_m,
+            f0,
+            1.0 / f_sigma if inp.focal_px else 0.0,
+            inp.known_width_m or 0.0,
+            1.0 / inp.known_sigma_m if inp.known_width_m else 0.0,
+            inp.known_height_m or 0.0,
+            1.0 / inp.known_sigma_m if inp.known_height_m else 0.0,
+        ]
+    )
     return {
         "pp": np.array(principal_point(inp.image_size)),
         "corners": np.asarray(inp.corners_px, dtype=np.float64),
         "corner_w": np.full(4, 1.0 / inp.corner_sigma_px),
-        "bed": bed, "bed_w": bed_w, "head": head, "head_w": head_w,
+        "bed": bed,
+        "bed_w": bed_w,
+        "head": head,
+        "head_w": head_w,
         "prior": prior,
     }
 
@@ -309,14 +321,17 @@ def residual_vector(u, data):
     params = u * SCALE
     corner_px, bed, head = _parts(params, data)
     pr = data["prior"]
-    priors = jnp.stack([
-        (params[6] - pr[0]) * pr[1],
-        (params[0] - pr[2]) * pr[3],
-        (params[7] - pr[4]) * pr[5],
-        (params[8] - pr[6]) * pr[7],
-    ])
-    return jnp.concatenate([(corner_px * data["corner_w"][:, None]).ravel(), bed * data["bed_w"],
-                            head * data["head_w"], priors])
+    priors = jnp.stack(
+        [
+            (params[6] - pr[0]) * pr[1],
+            (params[0] - pr[2]) * pr[3],
+            (params[7] - pr[4]) * pr[5],
+            (params[8] - pr[6]) * pr[7],
+        ]
+    )
+    return jnp.concatenate(
+        [(corner_px * data["corner_w"][:, None]).ravel(), bed * data["bed_w"], head * data["head_w"], priors]
+    )
 
 
 @jax.jit
@@ -335,7 +350,9 @@ def _inliers(seg: np.ndarray, dist: np.ndarray) -> np.ndarray:
     return seg[d <= cut]
 
 
-def calibrate(inp: CalibrationInput, *, start: np.ndarray | None = None, reject_outliers: bool = True) -> CalibrationResult:
+def calibrate(
+    inp: CalibrationInput, *, start: np.ndarray | None = None, reject_outliers: bool = True
+) -> CalibrationResult:
     """Fit one photo. Raises FitFailed when the data cannot determine the camera.
 
     With ``reject_outliers`` the fit runs twice: joint segments more than three robust sigmas
@@ -351,15 +368,19 @@ def calibrate(inp: CalibrationInput, *, start: np.ndarray | None = None, reject_
         start = first.params
     data = pack(inp)
     p0 = initial_params(inp) if start is None else np.asarray(start, dtype=np.float64)
-    u, ok, steps, jac, residuals, corner_px, bed, head = _solve(jnp.asarray(p0 / SCALE),
-                                                                {k: jnp.asarray(v) for k, v in data.items()})
+    u, ok, steps, jac, residuals, corner_px, bed, head = _solve(
+        jnp.asarray(p0 / SCALE), {k: jnp.asarray(v) for k, v in data.items()}
+    )
     fit = fit_result(u, ok, steps, jac, residuals, PARAM_NAMES, SCALE)
     if fit.status is FitStatus.DIVERGED:
-        raise FitFailed(f"calibration: the fit {fit.status.message}; check the corners and pass --focal-px or "
-                        "--camera-height")
+        raise FitFailed(
+            f"calibration: the fit {fit.status.message}; check the corners and pass --focal-px or --camera-height"
+        )
     if fit.status is FitStatus.SINGULAR:
-        raise FitFailed("calibration: too few constraints to fit the camera (singular Jacobian); pass "
-                        "--focal-px and --camera-height, or give a photo with visible mortar joints")
+        raise FitFailed(
+            "calibration: too few constraints to fit the camera (singular Jacobian); pass "
+            "--focal-px and --camera-height, or give a photo with visible mortar joints"
+        )
     nb, nh = min(len(inp.bed_segments), MAX_SEGMENTS), min(len(inp.head_segments), MAX_SEGMENTS)
     corner_px = np.asarray(corner_px)
     # each segment's endpoint distance, both endpoints
@@ -367,8 +388,11 @@ def calibrate(inp: CalibrationInput, *, start: np.ndarray | None = None, reject_
     sq = np.concatenate([np.sum(corner_px**2, axis=1), np.repeat(lines**2, 2)])
     rms_line = float(np.sqrt(np.mean(lines**2))) if len(lines) else 0.0
     return CalibrationResult(
-        fit=fit, rms_residual_px=float(np.sqrt(np.mean(sq))),
-        rms_corner_px=float(np.sqrt(np.mean(np.sum(corner_px**2, axis=1)))), rms_line_px=rms_line,
-        image_size=tuple(int(v) for v in inp.image_size), n_bed=nb, n_head=nh,
+        fit=fit,
+        rms_residual_px=float(np.sqrt(np.mean(sq))),
+        rms_corner_px=float(np.sqrt(np.mean(np.sum(corner_px**2, axis=1)))),
+        rms_line_px=rms_line,
+        image_size=tuple(int(v) for v in inp.image_size),
+        n_bed=nb,
+        n_head=nh,
     )
-

@@ -42,13 +42,13 @@ class FitStatus(enum.Enum):
 _MESSAGES = {
     FitStatus.CONVERGED: "converged: the gradient vanishes at the solution",
     FitStatus.STEP_LIMIT: "did not converge within the step limit; check the inputs (corners, headings, wall "
-                          "order) or give more prior information (--focal-px, --camera-height)",
+    "order) or give more prior information (--focal-px, --camera-height)",
     FitStatus.SINGULAR: "too few constraints: the Jacobian is singular, so some unknowns are not determined; give "
-                        "the missing information (--focal-px and --camera-height, visible mortar joints, a heading "
-                        "or theta per wall)",
+    "the missing information (--focal-px and --camera-height, visible mortar joints, a heading "
+    "or theta per wall)",
     FitStatus.DIVERGED: "diverged to non-finite values; check the inputs and start from better estimates",
     FitStatus.DEGENERATE: "the solution is degenerate (a length driven to zero or below); the measurements do not "
-                          "describe a possible structure: check the wall order and their headings or theta values",
+    "describe a possible structure: check the wall order and their headings or theta values",
 }
 
 
@@ -86,8 +86,12 @@ class FitResult:
         return float(np.sqrt(np.mean(r**2))) if r.size else 0.0
 
     def to_json(self) -> dict:
-        return {"status": self.status.value, "status_message": self.status.message, "solver_steps": self.steps,
-                "covariance": {"order": list(self.names), "matrix": self.covariance.tolist()}}
+        return {
+            "status": self.status.value,
+            "status_message": self.status.message,
+            "solver_steps": self.steps,
+            "covariance": {"order": list(self.names), "matrix": self.covariance.tolist()},
+        }
 
 
 class HasFit:

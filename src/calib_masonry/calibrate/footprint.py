@@ -49,7 +49,7 @@ class FootprintResult(HasFit):
 
     @property
     def theta_rad(self) -> np.ndarray:
-        return np.mod(self.fit.value[self.n:], 2 * math.pi)
+        return np.mod(self.fit.value[self.n :], 2 * math.pi)
 
     @property
     def width_sigma_m(self) -> np.ndarray:
@@ -57,14 +57,22 @@ class FootprintResult(HasFit):
 
     @property
     def theta_sigma_rad(self) -> np.ndarray:
-        return self.fit.sigmas[self.n:]
+        return self.fit.sigmas[self.n :]
 
     def to_json(self, names) -> dict:
         return {
-            "walls": [{"name": n, "width_m": float(w), "width_sigma_m": float(sw),
-                       "theta_deg": math.degrees(t) % 360.0, "theta_sigma_deg": math.degrees(st)}
-                      for n, w, t, sw, st in zip(names, self.width_m, self.theta_rad, self.width_sigma_m,
-                                                 self.theta_sigma_rad)],
+            "walls": [
+                {
+                    "name": n,
+                    "width_m": float(w),
+                    "width_sigma_m": float(sw),
+                    "theta_deg": math.degrees(t) % 360.0,
+                    "theta_sigma_deg": math.degrees(st),
+                }
+                for n, w, t, sw, st in zip(
+                    names, self.width_m, self.theta_rad, self.width_sigma_m, self.theta_sigma_rad
+                )
+            ],
             "closure_gap_m": self.closure_gap_m,
             "closure_gap_before_m": self.closure_gap_before_m,
             **self.fit.to_json(),
@@ -92,8 +100,9 @@ def _solve(x0, args):
     return least_squares(_residuals, x0, args, max_steps=500, tol=1e-12)
 
 
-def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure_sigma_m: float = 1e-6,
-                  names=None, turns=()) -> FootprintResult:
+def fit_footprint(
+    width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure_sigma_m: float = 1e-6, names=None, turns=()
+) -> FootprintResult:
     """Adjust per-wall (W, theta) estimates with their sigmas so the footprint closes.
 
     ``theta_sigma_rad`` may be ``inf`` for a wall with no own orientation estimate. ``turns`` are
@@ -107,8 +116,10 @@ def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure
         raise InputError(f"footprint: {len(w_hat)} walls; a closed footprint needs at least 3 with W and theta each")
     for i, n in enumerate(names):
         if not (w_hat[i] > 0 and sw[i] > 0 and st[i] > 0 and (np.isfinite(t_hat[i]) or np.isinf(st[i]))):
-            raise InputError(f"footprint: wall '{n}' needs width_m > 0, a width sigma > 0, a theta and a theta "
-                             "sigma > 0; check its calibration.json or the structure file")
+            raise InputError(
+                f"footprint: wall '{n}' needs width_m > 0, a width sigma > 0, a theta and a theta "
+                "sigma > 0; check its calibration.json or the structure file"
+            )
     turns = list(turns)
     ti = np.array([t[0] for t in turns], dtype=np.int64)
     tj = np.array([t[1] for t in turns], dtype=np.int64)
@@ -118,7 +129,9 @@ def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure
         raise InputError("footprint: a corner measurement names a wall that is not there or has sigma <= 0")
     st_inv = np.where(np.isinf(st), 0.0, 1.0 / st)
     if not np.any(st_inv > 0):
-        raise InputError("footprint: no wall has an orientation estimate (EXIF heading or theta_deg); give one at least")
+        raise InputError(
+            "footprint: no wall has an orientation estimate (EXIF heading or theta_deg); give one at least"
+        )
     t_start = np.where(np.isinf(st), 0.0, t_hat)
     # walls with no own theta take theirs from a measured turn (in footprint order), for the start
     for i, j, v, _ in sorted(turns, key=lambda q: q[1]):
@@ -137,10 +150,15 @@ def fit_footprint(width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure
         fit = replace(fit, status=FitStatus.DEGENERATE)
     if not fit.status.ok:
         worst = names[int(np.argmin(x[:n] / w_hat))] if np.all(np.isfinite(x)) else None
-        raise FitFailed(f"footprint: the closure fit {fit.status.message}"
-                        + (f" (wall '{worst}' would shrink from {w_hat[names.index(worst)]:.3f} m to "
-                           f"{x[names.index(worst)]:.3f} m)" if worst is not None and fit.status is FitStatus.DEGENERATE
-                           else ""))
+        raise FitFailed(
+            f"footprint: the closure fit {fit.status.message}"
+            + (
+                f" (wall '{worst}' would shrink from {w_hat[names.index(worst)]:.3f} m to "
+                f"{x[names.index(worst)]:.3f} m)"
+                if worst is not None and fit.status is FitStatus.DEGENERATE
+                else ""
+            )
+        )
     gap = float(np.linalg.norm(_gap(x[:n], x[n:])))
     return FootprintResult(fit=fit, closure_gap_m=gap, closure_gap_before_m=before)
 
@@ -198,16 +216,24 @@ def _estimates_from_json(paths, heading_sigma_deg):
             raise InputError(f"{p}: no EXIF heading in this calibration; pass a structure TOML with theta_deg instead")
         try:
             yaw_sigma = math.sqrt(doc["covariance"]["matrix"][1][1])
-            rows.append((str(p), float(doc["width_m"]), float(doc["width_sigma_m"]),
-                         math.radians(doc["theta_from_heading_deg"]),
-                         math.hypot(math.radians(heading_sigma_deg), yaw_sigma), "EXIF heading + fitted yaw"))
+            rows.append(
+                (
+                    str(p),
+                    float(doc["width_m"]),
+                    float(doc["width_sigma_m"]),
+                    math.radians(doc["theta_from_heading_deg"]),
+                    math.hypot(math.radians(heading_sigma_deg), yaw_sigma),
+                    "EXIF heading + fitted yaw",
+                )
+            )
         except (KeyError, TypeError, IndexError, ValueError):
             raise InputError(f"{p}: not a calibration.json written by `calib-masonry rectify`") from None
     return None, rows
 
 
-def footprint_to_folder(inputs, out, *, config=None, heading_sigma_deg: float = 2.0, theta_sigma_deg: float = 1.0,
-                        figure: bool = True) -> dict:
+def footprint_to_folder(
+    inputs, out, *, config=None, heading_sigma_deg: float = 2.0, theta_sigma_deg: float = 1.0, figure: bool = True
+) -> dict:
     """``calib-masonry footprint``: footprint.json, structure.toml with the adjusted W and theta, a plan figure."""
     from pathlib import Path
 
@@ -233,18 +259,31 @@ def footprint_to_folder(inputs, out, *, config=None, heading_sigma_deg: float = 
     doc = res.to_json(names)
     doc["corners"] = [{k: v for k, v in d.items() if k != "_result"} for d in corner_docs]
     for row, est in zip(doc["walls"], rows):
-        row.update(estimate_width_m=est[1], estimate_width_sigma_m=est[2], estimate_theta_deg=math.degrees(est[3]) % 360,
-                   estimate_theta_sigma_deg=math.degrees(est[4]), theta_source=est[5])
+        row.update(
+            estimate_width_m=est[1],
+            estimate_width_sigma_m=est[2],
+            estimate_theta_deg=math.degrees(est[3]) % 360,
+            estimate_theta_sigma_deg=math.degrees(est[4]),
+            theta_source=est[5],
+        )
     with staged_output(out) as stage:
         write_json(stage / "footprint.json", doc)
         if spec is not None:
-            walls = tuple(replace(wall, width_m=float(res.width_m[i]), theta_rad=float(res.theta_rad[i]),
-                                  image=wall.image.resolve() if wall.image else None,
-                                  mask=wall.mask.resolve() if wall.mask else None)
-                          for i, wall in enumerate(spec.walls))
+            walls = tuple(
+                replace(
+                    wall,
+                    width_m=float(res.width_m[i]),
+                    theta_rad=float(res.theta_rad[i]),
+                    image=wall.image.resolve() if wall.image else None,
+                    mask=wall.mask.resolve() if wall.mask else None,
+                )
+                for i, wall in enumerate(spec.walls)
+            )
             (stage / "structure.toml").write_text(
                 "# Written by `calib-masonry footprint`: W and theta adjusted so the footprint closes.\n"
-                + structure_to_toml(replace(spec, walls=walls, closed=True), relative_to=None), encoding="utf-8")
+                + structure_to_toml(replace(spec, walls=walls, closed=True), relative_to=None),
+                encoding="utf-8",
+            )
         if figure and corner_docs:
             from ..io import read_photo
             from .figures import plot_corner
@@ -252,9 +291,21 @@ def footprint_to_folder(inputs, out, *, config=None, heading_sigma_deg: float = 
             (stage / "corners").mkdir()
             for d in corner_docs:
                 a, b = d["walls"]
-                plot_corner(read_photo(d["photo"]).rgb, d["_result"], stage / "corners" / f"{a}_{b}.png", names=(a, b),
-                            title=f"corner {a} / {b}:")
+                plot_corner(
+                    read_photo(d["photo"]).rgb,
+                    d["_result"],
+                    stage / "corners" / f"{a}_{b}.png",
+                    names=(a, b),
+                    title=f"corner {a} / {b}:",
+                )
         if figure:
-            plot_footprint(w, t, res.width_m, res.theta_rad, names, stage / "footprint.png",
-                           title=f"footprint of {len(names)} walls")
+            plot_footprint(
+                w,
+                t,
+                res.width_m,
+                res.theta_rad,
+                names,
+                stage / "footprint.png",
+                title=f"footprint of {len(names)} walls",
+            )
     return doc

@@ -122,15 +122,16 @@ def _hough_segments(gray: np.ndarray, cfg: DetectConfig, *, ridges: bool = False
     from skimage.transform import probabilistic_hough_line
 
     points, sub = _ridge_points(gray, cfg.ridge_sigma_px) if ridges else _edge_points(gray, cfg)
-    segs = probabilistic_hough_line(points, threshold=cfg.hough_threshold, line_length=cfg.min_length_px,
-                                    line_gap=cfg.line_gap_px, rng=cfg.seed)
+    segs = probabilistic_hough_line(
+        points, threshold=cfg.hough_threshold, line_length=cfg.min_length_px, line_gap=cfg.line_gap_px, rng=cfg.seed
+    )
     out = []
     rows, cols = points.shape
     for (x0, y0), (x1, y1) in segs:
         a, b = np.array([x0, y0], float), np.array([x1, y1], float)
         lo = np.maximum(np.floor(np.minimum(a, b)) - 3, 0).astype(int)
         hi = np.minimum(np.ceil(np.maximum(a, b)) + 4, [cols, rows]).astype(int)
-        yy, xx = np.nonzero(points[lo[1]:hi[1], lo[0]:hi[0]])
+        yy, xx = np.nonzero(points[lo[1] : hi[1], lo[0] : hi[0]])
         pts = sub[yy + lo[1], xx + lo[0]]
         length = np.linalg.norm(b - a)
         # re-select the points near the current line and refit, three times: points picked in the
@@ -168,7 +169,9 @@ def _dist_to_vp(seg: np.ndarray, vp: np.ndarray) -> np.ndarray:
     return 0.5 * np.abs(cross) / (np.linalg.norm(to, axis=1) + 1e-300)
 
 
-def _vanishing_point(seg: np.ndarray, tol: float, cfg: DetectConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _vanishing_point(
+    seg: np.ndarray, tol: float, cfg: DetectConfig, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """RANSAC + weighted least squares. Returns (vp, inlier mask); coordinates as given."""
     if len(seg) < 3:
         raise FitFailed("automatic mode: too few joint lines found to locate a vanishing point")
@@ -209,7 +212,7 @@ def _densest_run(pos: np.ndarray, weight: np.ndarray, trim: float = 0.015) -> tu
             if total > best_w:
                 best, best_w = (start, k), total
             start = k
-    p, w = p[best[0]:best[1]], w[best[0]:best[1]]
+    p, w = p[best[0] : best[1]], w[best[0] : best[1]]
     cum = np.cumsum(w) / w.sum()
     lo = int(np.searchsorted(cum, trim, side="right"))
     hi = int(np.searchsorted(cum, 1.0 - trim, side="left"))
@@ -228,8 +231,9 @@ def _refine_side(rgb_s: np.ndarray, a: np.ndarray, b: np.ndarray, half: float) -
     offs = np.arange(-half, half + 0.25, 0.5)
     pts = a[None, None, :] + ts[:, None, None] * (b - a)[None, None, :] + offs[None, :, None] * n[None, None, :]
     coords = [pts[..., 1].ravel(), pts[..., 0].ravel()]
-    prof = np.stack([ndimage.map_coordinates(rgb_s[..., c], coords, order=1, mode="nearest")
-                     for c in range(3)], axis=-1).reshape(len(ts), len(offs), 3)
+    prof = np.stack(
+        [ndimage.map_coordinates(rgb_s[..., c], coords, order=1, mode="nearest") for c in range(3)], axis=-1
+    ).reshape(len(ts), len(offs), 3)
     grad = np.linalg.norm(np.diff(prof, axis=1), axis=-1)  # between samples
     k = np.argmax(grad, axis=1)
     kk = np.clip(k, 1, grad.shape[1] - 2)
@@ -322,7 +326,9 @@ def _snap_to_mask(mask: np.ndarray, quad: np.ndarray, vps: tuple[np.ndarray, np.
         pts = []
         for t in np.linspace(0.1, 0.9, 40):
             line = a + t * (b - a) + steps[:, None] * n
-            inside = ndimage.map_coordinates(mask.astype(float), [line[:, 1], line[:, 0]], order=1, mode="constant") > 0.5
+            inside = (
+                ndimage.map_coordinates(mask.astype(float), [line[:, 1], line[:, 0]], order=1, mode="constant") > 0.5
+            )
             change = np.nonzero(inside[:-1] & ~inside[1:])[0]  # wall -> outside, going outwards
             if len(change):
                 k = change[np.argmin(np.abs(steps[change]))]
@@ -392,8 +398,10 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     small, s = working_gray(rgb, config.work_long_side_px)
     seg = _hough_segments(small, config)
     if len(seg) < 8:
-        raise FitFailed("automatic mode: no wall found (almost no straight edges in the photo); click the corners "
-                        "with --corners x1,y1,...,x4,y4")
+        raise FitFailed(
+            "automatic mode: no wall found (almost no straight edges in the photo); click the corners "
+            "with --corners x1,y1,...,x4,y4"
+        )
     ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
     from_h = np.minimum(ang, 180.0 - ang)
     horiz = seg[from_h < config.horizontal_max_deg]
@@ -411,12 +419,16 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
         vp_b, inl_b = _vanishing_point(hn, config.vp_inlier_px / scale, config, rng)
         vp_h, inl_h = _vanishing_point(vn, config.vp_inlier_px / scale, config, rng)
     except FitFailed:
-        raise FitFailed("automatic mode: no wall found (too few horizontal or vertical joint lines); click the "
-                        "corners with --corners x1,y1,...,x4,y4") from None
+        raise FitFailed(
+            "automatic mode: no wall found (too few horizontal or vertical joint lines); click the "
+            "corners with --corners x1,y1,...,x4,y4"
+        ) from None
     bed, head = hn[inl_b], vn[inl_h]
     if len(bed) < 4 or len(head) < 4:
-        raise FitFailed("automatic mode: no wall found (too few mortar-joint lines agree on a wall plane); click the "
-                        "corners with --corners x1,y1,...,x4,y4")
+        raise FitFailed(
+            "automatic mode: no wall found (too few mortar-joint lines agree on a wall plane); click the "
+            "corners with --corners x1,y1,...,x4,y4"
+        )
     # rectify: vp_b -> (1, 0, 0), vp_h -> (0, 1, 0)
     o = np.array([0.0, 0.0, 1.0])
     vanishing_line = np.cross(vp_b, vp_h)
@@ -441,7 +453,10 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     quad_r = np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]])
     q = np.c_[quad_r, np.ones(4)] @ np.linalg.inv(p).T
     quad_n = q[:, :2] / q[:, 2:3]
-    to_full = lambda pts: (pts * scale + centre + 0.5) / s - 0.5
+
+    def to_full(pts):
+        return (pts * scale + centre + 0.5) / s - 0.5
+
     # snap the sides to where the wall's colours end (joint-free strips at the edges, weak edges)
     rgb_small = np.stack([rescale(rgb[..., k], s, anti_aliasing=True) if s < 1 else rgb[..., k] for k in range(3)], -1)
     quad_small = order_corners(quad_n * scale + centre, where="automatic mode")
@@ -463,7 +478,14 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     quad = refine_quad(rgb, quad, (config.refine_halfwidth_px or 6.0 / s, 2.5 / s))
     bed_full = np.c_[to_full(bed[:, :2]), to_full(bed[:, 2:])]
     head_full = np.c_[to_full(head[:, :2]), to_full(head[:, 2:])]
-    unscale = np.array([[scale / s, 0, (centre[0] + 0.5) / s - 0.5], [0, scale / s, (centre[1] + 0.5) / s - 0.5], [0, 0, 1.0]])
-    return Detection(corners_px=quad, bed_segments=segments_in_quad(bed_full, quad),
-                     head_segments=segments_in_quad(head_full, quad), vp_bed=unscale @ vp_b, vp_head=unscale @ vp_h,
-                     n_segments=len(seg))
+    unscale = np.array(
+        [[scale / s, 0, (centre[0] + 0.5) / s - 0.5], [0, scale / s, (centre[1] + 0.5) / s - 0.5], [0, 0, 1.0]]
+    )
+    return Detection(
+        corners_px=quad,
+        bed_segments=segments_in_quad(bed_full, quad),
+        head_segments=segments_in_quad(head_full, quad),
+        vp_bed=unscale @ vp_b,
+        vp_head=unscale @ vp_h,
+        n_segments=len(seg),
+    )

@@ -18,8 +18,9 @@ def least_squares(residual_fn, y0, args, *, max_steps: int = 200, tol: float = 1
     """
     import optimistix as optx
 
-    sol = optx.least_squares(residual_fn, optx.LevenbergMarquardt(rtol=tol, atol=tol), y0, args=args,
-                             max_steps=max_steps, throw=False)
+    sol = optx.least_squares(
+        residual_fn, optx.LevenbergMarquardt(rtol=tol, atol=tol), y0, args=args, max_steps=max_steps, throw=False
+    )
     y = sol.value
     jac = jax.jacfwd(residual_fn)(y, args)
     r = residual_fn(y, args)

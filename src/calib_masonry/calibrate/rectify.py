@@ -69,7 +69,8 @@ class PhotoCalibration:
             from .camera import theta_from_heading
 
             doc["theta_from_heading_deg"] = math.degrees(
-                theta_from_heading(math.radians(self.photo.heading_deg), self.result.value("yaw_rad")))
+                theta_from_heading(math.radians(self.photo.heading_deg), self.result.value("yaw_rad"))
+            )
         return doc
 
 
@@ -94,14 +95,17 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     if focal is None:
         focal_source = "fitted"
     if focal is not None and not 0.1 * max(w, h) < focal < 20 * max(w, h):
-        raise InputError(f"{photo.path}: focal length {focal:.0f} px is implausible for a {w} x {h} photo; "
-                         "pass --focal-px with the right value")
+        raise InputError(
+            f"{photo.path}: focal length {focal:.0f} px is implausible for a {w} x {h} photo; "
+            "pass --focal-px with the right value"
+        )
     detection = None
     if config.corners_px is not None:
         corners = order_corners(np.array(config.corners_px).reshape(4, 2))
         if np.any(corners < -0.5) or np.any(corners[:, 0] > w - 0.5) or np.any(corners[:, 1] > h - 0.5):
-            raise InputError(f"--corners: a corner lies outside the {w} x {h} photo {photo.path.name}; "
-                             "click inside the image")
+            raise InputError(
+                f"--corners: a corner lies outside the {w} x {h} photo {photo.path.name}; click inside the image"
+            )
         mode = "clicked"
         sigma = config.corner_sigma_px or 1.5
         if config.snap_corners:
@@ -127,33 +131,53 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         mode = "automatic"
         sigma = config.corner_sigma_px or 1.0
     inp = CalibrationInput(
-        image_size=(w, h), corners_px=corners, corner_sigma_px=sigma, bed_segments=bed, head_segments=head,
-        line_sigma_px=config.line_sigma_px, max_effective_segments=config.max_effective_segments,
-        camera_height_m=config.camera_height_m, camera_height_sigma_m=config.camera_height_sigma_m,
-        focal_px=focal, focal_sigma_px=config.focal_sigma_px, known_width_m=config.known_width_m,
-        known_height_m=config.known_height_m)
+        image_size=(w, h),
+        corners_px=corners,
+        corner_sigma_px=sigma,
+        bed_segments=bed,
+        head_segments=head,
+        line_sigma_px=config.line_sigma_px,
+        max_effective_segments=config.max_effective_segments,
+        camera_height_m=config.camera_height_m,
+        camera_height_sigma_m=config.camera_height_sigma_m,
+        focal_px=focal,
+        focal_sigma_px=config.focal_sigma_px,
+        known_width_m=config.known_width_m,
+        known_height_m=config.known_height_m,
+    )
     try:
         result = calibrate(inp)
     except FitFailed as exc:
         raise FitFailed(f"{photo.path}: {exc}") from None
     if focal is None and result.sigma("focal_px") > 0.2 * result.value("focal_px"):
-        raise FitFailed(f"{photo.path}: no focal length in EXIF and too few constraints to fit one "
-                        f"(+-{result.sigma('focal_px'):.0f} px); pass --focal-px F")
+        raise FitFailed(
+            f"{photo.path}: no focal length in EXIF and too few constraints to fit one "
+            f"(+-{result.sigma('focal_px'):.0f} px); pass --focal-px F"
+        )
     if not config.force:
         if not result.fit.ok:
             raise FitFailed(f"{photo.path}: the calibration {result.status.message}; or use --force to keep it anyway")
         if result.rms_residual_px > config.max_rms_px:
-            raise FitFailed(f"{photo.path}: RMS residual {result.rms_residual_px:.2f} px exceeds {config.max_rms_px:g} px "
-                            "(corners or joints do not fit one wall plane); click the corners with --corners, "
-                            "or use --force to keep it anyway")
+            raise FitFailed(
+                f"{photo.path}: RMS residual {result.rms_residual_px:.2f} px exceeds {config.max_rms_px:g} px "
+                "(corners or joints do not fit one wall plane); click the corners with --corners, "
+                "or use --force to keep it anyway"
+            )
         if not (0.2 < result.width_m < 500 and 0.2 < result.height_m < 500):
-            raise FitFailed(f"{photo.path}: fitted wall {result.width_m:.2f} x {result.height_m:.2f} m is implausible; "
-                            "check --camera-height and the corners")
+            raise FitFailed(
+                f"{photo.path}: fitted wall {result.width_m:.2f} x {result.height_m:.2f} m is implausible; "
+                "check --camera-height and the corners"
+            )
     return PhotoCalibration(photo=photo, result=result, detection=detection, mode=mode, focal_source=focal_source)
 
 
-def rectify(calibration: PhotoCalibration, *, px_per_m: float | None = None, width_m: float | None = None,
-            height_m: float | None = None) -> np.ndarray:
+def rectify(
+    calibration: PhotoCalibration,
+    *,
+    px_per_m: float | None = None,
+    width_m: float | None = None,
+    height_m: float | None = None,
+) -> np.ndarray:
     """The metric orthophoto ``(rows, cols, 3)`` of a calibrated photo's wall, at ``px_per_m``
     (default: the photo's own finest resolution on the wall). ``width_m`` / ``height_m`` stretch the
     fitted wall onto a measured size (the photo's outline then maps onto the W x H given)."""
@@ -173,12 +197,18 @@ def rectify(calibration: PhotoCalibration, *, px_per_m: float | None = None, wid
 def rect_from_wall(width_m: float, height_m: float, shape: tuple[int, int]) -> np.ndarray:
     """3x3 map of wall metres (x, z, 1) to orthophoto pixels, the Eq. 1 convention of build3d.scale."""
     rows, cols = shape
-    return np.array([[cols / width_m, 0.0, -0.5], [0.0, -rows / height_m, rows - 0.5],
-                     [0.0, 0.0, 1.0]])
+    return np.array([[cols / width_m, 0.0, -0.5], [0.0, -rows / height_m, rows - 0.5], [0.0, 0.0, 1.0]])
 
 
-def rectify_image(image: np.ndarray, wall_from_image: np.ndarray, width_m: float, height_m: float,
-                  px_per_m: float, *, nearest: bool = False) -> np.ndarray:
+def rectify_image(
+    image: np.ndarray,
+    wall_from_image: np.ndarray,
+    width_m: float,
+    height_m: float,
+    px_per_m: float,
+    *,
+    nearest: bool = False,
+) -> np.ndarray:
     """Resample a photo ``(rows, cols[, C])`` into the wall's orthophoto at ``px_per_m``."""
     import torch
     from kornia.filters import gaussian_blur2d
@@ -203,14 +233,25 @@ def rectify_image(image: np.ndarray, wall_from_image: np.ndarray, width_m: float
             sigma = 0.45 * s
             k = int(2 * math.ceil(3 * sigma) + 1)
             src = gaussian_blur2d(src, (k, k), (sigma, sigma))
-    out = warp_perspective(src, torch.from_numpy(m)[None], shape, mode="nearest" if nearest else "bilinear",
-                           align_corners=True)[0].permute(1, 2, 0).numpy()
+    out = (
+        warp_perspective(
+            src, torch.from_numpy(m)[None], shape, mode="nearest" if nearest else "bilinear", align_corners=True
+        )[0]
+        .permute(1, 2, 0)
+        .numpy()
+    )
     return out[..., 0] if img.ndim == 2 else out
 
 
-def rectify_to_folder(photo_path: str | Path, out: str | Path, config: CalibrateConfig = CalibrateConfig(), *,
-                      px_per_m: float | None = None, mask_path: str | Path | None = None,
-                      figure: bool = True) -> dict:
+def rectify_to_folder(
+    photo_path: str | Path,
+    out: str | Path,
+    config: CalibrateConfig = CalibrateConfig(),
+    *,
+    px_per_m: float | None = None,
+    mask_path: str | Path | None = None,
+    figure: bool = True,
+) -> dict:
     """``calib-masonry rectify``: calibration.json, rectified.png (and rectified_mask.png), overlay.png."""
     from PIL import Image
 
@@ -221,16 +262,20 @@ def rectify_to_folder(photo_path: str | Path, out: str | Path, config: Calibrate
     if px_per_m is None:  # the photo's own resolution at the wall's centre, rounded
         px_per_m = native_px_per_m(res)
     if px_per_m <= 0 or res.width_m * px_per_m * res.height_m * px_per_m > 1.2e8:
-        raise InputError(f"--px-per-m {px_per_m:g}: the orthophoto would be "
-                         f"{res.width_m * px_per_m:.0f} x {res.height_m * px_per_m:.0f} px; choose a smaller value")
+        raise InputError(
+            f"--px-per-m {px_per_m:g}: the orthophoto would be "
+            f"{res.width_m * px_per_m:.0f} x {res.height_m * px_per_m:.0f} px; choose a smaller value"
+        )
     mask = None
     if mask_path is not None:
         from ..io import read_mask
 
         mask = read_mask(mask_path, field="--mask")
         if mask.shape[::-1] != cal.photo.size:
-            raise InputError(f"--mask {mask_path}: {mask.shape[1]} x {mask.shape[0]} px, but the photo is "
-                             f"{cal.photo.size[0]} x {cal.photo.size[1]}; give the mask of this photo")
+            raise InputError(
+                f"--mask {mask_path}: {mask.shape[1]} x {mask.shape[0]} px, but the photo is "
+                f"{cal.photo.size[0]} x {cal.photo.size[1]}; give the mask of this photo"
+            )
     rect = rectify(cal, px_per_m=px_per_m)
     doc = cal.to_json()
     doc["px_per_m"] = px_per_m
@@ -250,4 +295,3 @@ def native_px_per_m(res: CalibrationResult) -> float:
     """Photo pixels per wall metre at the wall's centre (rounded to 10), a natural orthophoto scale."""
     scale = float(px_per_m(res.image_from_wall, [res.width_m / 2, res.height_m / 2], eps=0.01)[0])
     return float(max(10.0, round(scale / 10.0) * 10.0))
-

@@ -36,13 +36,14 @@ from .scene import Scene, joint_axes
 __all__ = ["RunOutput", "run", "require_bpy"]
 
 
-
 def require_bpy():
     try:
         import bpy  # noqa: PLC0415 - the one place bpy is imported
     except ImportError as exc:
-        raise BackendMissing("simulate: Blender's bpy module is not installed; install it with "
-                             "pip install -c constraints.txt 'bpy==5.0.*' (Python 3.11 only)") from exc
+        raise BackendMissing(
+            "simulate: Blender's bpy module is not installed; install it with "
+            "pip install -c constraints.txt 'bpy==5.0.*' (Python 3.11 only)"
+        ) from exc
     return bpy
 
 
@@ -82,10 +83,34 @@ def _mesh_object(bpy, name: str, vertices: np.ndarray, faces: np.ndarray, locati
 
 def _box(size) -> tuple[np.ndarray, np.ndarray]:
     sx, sy, sz = (s / 2 for s in size)
-    v = np.array([(-sx, -sy, -sz), (sx, -sy, -sz), (sx, sy, -sz), (-sx, sy, -sz),
-                  (-sx, -sy, sz), (sx, -sy, sz), (sx, sy, sz), (-sx, sy, sz)])
-    f = np.array([(0, 3, 2), (0, 2, 1), (4, 5, 6), (4, 6, 7), (0, 1, 5), (0, 5, 4), (1, 2, 6), (1, 6, 5),
-                  (2, 3, 7), (2, 7, 6), (3, 0, 4), (3, 4, 7)])
+    v = np.array(
+        [
+            (-sx, -sy, -sz),
+            (sx, -sy, -sz),
+            (sx, sy, -sz),
+            (-sx, sy, -sz),
+            (-sx, -sy, sz),
+            (sx, -sy, sz),
+            (sx, sy, sz),
+            (-sx, sy, sz),
+        ]
+    )
+    f = np.array(
+        [
+            (0, 3, 2),
+            (0, 2, 1),
+            (4, 5, 6),
+            (4, 6, 7),
+            (0, 1, 5),
+            (0, 5, 4),
+            (1, 2, 6),
+            (1, 6, 5),
+            (2, 3, 7),
+            (2, 7, 6),
+            (3, 0, 4),
+            (3, 4, 7),
+        ]
+    )
     return v, f
 
 
@@ -105,8 +130,15 @@ def _quaternions(r: np.ndarray) -> np.ndarray:
     a10, a20, a21 = m[:, 1, 0] + m[:, 0, 1], m[:, 2, 0] + m[:, 0, 2], m[:, 2, 1] + m[:, 1, 2]
     big = 1.0 + d[np.arange(len(k)), k]
     # the four candidate (un-normalised) quaternions, each 2 sqrt(big) times the true one
-    cand = np.stack([np.stack([big, s21, s02, s10], axis=1), np.stack([s21, big, a10, a20], axis=1),
-                     np.stack([s02, a10, big, a21], axis=1), np.stack([s10, a20, a21, big], axis=1)], axis=1)
+    cand = np.stack(
+        [
+            np.stack([big, s21, s02, s10], axis=1),
+            np.stack([s21, big, a10, a20], axis=1),
+            np.stack([s02, a10, big, a21], axis=1),
+            np.stack([s10, a20, a21, big], axis=1),
+        ],
+        axis=1,
+    )
     q = cand[np.arange(len(k)), k]
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     q *= np.where(q[:, :1] < 0, -1.0, 1.0)
@@ -266,8 +298,15 @@ def build_scene(scene: Scene):
     return bpy, objects, plate, constraints
 
 
-def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None = None, record: bool = True,
-        switch_off_s: np.ndarray | None = None, stop=None) -> RunOutput:
+def run(
+    scene: Scene,
+    *,
+    progress: bool | None = None,
+    blend_path: Path | None = None,
+    record: bool = True,
+    switch_off_s: np.ndarray | None = None,
+    stop=None,
+) -> RunOutput:
     """Simulate ``scene`` in one pass: the warm-up under (ramped) gravity with every joint intact
     and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
     joint model cracking joints before each step (:class:`~calib_masonry.simulation.joints.CrackTracker`).
@@ -335,14 +374,26 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
         grab(0)
     if warm == 0:
         end_warmup(0)
-    for f in tqdm(range(1, frames + 1), desc="simulate", unit="frame",
-                  disable=None if progress is None else not progress, leave=False):
+    for f in tqdm(
+        range(1, frames + 1),
+        desc="simulate",
+        unit="frame",
+        disable=None if progress is None else not progress,
+        leave=False,
+    ):
         i = f if record else 0
         if tracker is not None:
             # the joints the coming step's load cracks, given the poses now (frame f - 1)
             p = i - 1
-            switch_off(tracker.step((f - 1) / s.fps, gravity[f], mats[p, :, :3, 3].astype(np.float64),
-                                    mats[p, :, :3, :3].astype(np.float64), plate_pos[p]))
+            switch_off(
+                tracker.step(
+                    (f - 1) / s.fps,
+                    gravity[f],
+                    mats[p, :, :3, 3].astype(np.float64),
+                    mats[p, :, :3, :3].astype(np.float64),
+                    plate_pos[p],
+                )
+            )
             utilisation[p] = tracker.max_utilisation
         elif f - 1 in schedule:
             switch_off(schedule[f - 1])
@@ -361,10 +412,15 @@ def run(scene: Scene, *, progress: bool | None = None, blend_path: Path | None =
     if blend_path is not None:
         sc.frame_set(1)
         bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), check_existing=False, compress=True)
-    return RunOutput(time=np.arange(n) / s.fps, positions=mats[:, :, :3, 3].astype(np.float64),
-                     quaternions=_quaternions(mats[:, :, :3, :3].astype(np.float64)), plate=plate_pos,
-                     seconds_build=seconds_build, seconds_stepping=seconds_stepping,
-                     bond_break_time_s=tracker.break_time_s if tracker is not None else None,
-                     bond_break_mode=tracker.break_mode if tracker is not None else None,
-                     max_utilisation=utilisation if record else None,
-                     seconds_joints=tracker.seconds if tracker is not None else 0.0)
+    return RunOutput(
+        time=np.arange(n) / s.fps,
+        positions=mats[:, :, :3, 3].astype(np.float64),
+        quaternions=_quaternions(mats[:, :, :3, :3].astype(np.float64)),
+        plate=plate_pos,
+        seconds_build=seconds_build,
+        seconds_stepping=seconds_stepping,
+        bond_break_time_s=tracker.break_time_s if tracker is not None else None,
+        bond_break_mode=tracker.break_mode if tracker is not None else None,
+        max_utilisation=utilisation if record else None,
+        seconds_joints=tracker.seconds if tracker is not None else 0.0,
+    )

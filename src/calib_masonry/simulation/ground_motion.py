@@ -22,8 +22,17 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["G", "GroundMotion", "KanaiTajimi", "synthetic_motion", "read_accelerogram", "constant_acceleration",
-           "motion_from_acceleration", "start_from_rest", "TAPER_S"]
+__all__ = [
+    "G",
+    "GroundMotion",
+    "KanaiTajimi",
+    "synthetic_motion",
+    "read_accelerogram",
+    "constant_acceleration",
+    "motion_from_acceleration",
+    "start_from_rest",
+    "TAPER_S",
+]
 
 G = 9.80665
 
@@ -71,8 +80,9 @@ class GroundMotion:
         tk = np.concatenate([[0.0], (np.arange(len(v_mid)) + 0.5) * self.dt, [self.duration]])
         t = np.asarray(t, dtype=np.float64)
         v_end = 1.5 * v_mid[-1] - 0.5 * v_mid[-2] if len(v_mid) > 1 else v_mid[-1]
-        v = np.column_stack([np.interp(t, tk, np.concatenate([[0.0], v_mid[:, k], [v_end[k]]]), left=0.0)
-                             for k in range(2)])
+        v = np.column_stack(
+            [np.interp(t, tk, np.concatenate([[0.0], v_mid[:, k], [v_end[k]]]), left=0.0) for k in range(2)]
+        )
         return np.diff(v, axis=0) / np.diff(t)[:, None]
 
     def frame_means(self, fps: float) -> tuple[np.ndarray, np.ndarray]:
@@ -89,8 +99,12 @@ class GroundMotion:
         return float(np.abs(a).max()) if a.size else 0.0
 
     def scaled(self, factor: float, source: str | None = None) -> "GroundMotion":
-        return GroundMotion(dt=self.dt, displacement=self.displacement * factor,
-                            acceleration=self.acceleration * factor, source=self.source if source is None else source)
+        return GroundMotion(
+            dt=self.dt,
+            displacement=self.displacement * factor,
+            acceleration=self.acceleration * factor,
+            source=self.source if source is None else source,
+        )
 
     def displacement_at(self, t: np.ndarray) -> np.ndarray:
         """Linear interpolation of the displacement at times ``t`` ``(K,)`` -> ``(K, 2)``."""
@@ -138,8 +152,16 @@ def motion_from_acceleration(acc: np.ndarray, dt: float, *, highpass_hz: float =
     return GroundMotion(dt=dt, displacement=disp, acceleration=_second_difference(disp, dt), source=source)
 
 
-def synthetic_motion(pga_g: float, duration_s: float, *, seed: int, dt: float = 0.005, components: int = 1,
-                     model: KanaiTajimi = KanaiTajimi(), direction_deg: float = 0.0) -> GroundMotion:
+def synthetic_motion(
+    pga_g: float,
+    duration_s: float,
+    *,
+    seed: int,
+    dt: float = 0.005,
+    components: int = 1,
+    model: KanaiTajimi = KanaiTajimi(),
+    direction_deg: float = 0.0,
+) -> GroundMotion:
     """A seeded Kanai-Tajimi accelerogram scaled to ``pga_g`` (one or two horizontal components).
 
     With one component the motion is along ``direction_deg`` (from global X).
@@ -153,13 +175,18 @@ def synthetic_motion(pga_g: float, duration_s: float, *, seed: int, dt: float = 
     n = int(round(duration_s / dt)) + 1
     rng = np.random.default_rng(seed)
     t = np.arange(n) * dt
-    env = np.where(t < model.rise_s, (t / model.rise_s) ** 2,
-                   np.where(t < model.rise_s + model.strong_s, 1.0,
-                            np.exp(-model.decay_per_s * (t - model.rise_s - model.strong_s))))
+    env = np.where(
+        t < model.rise_s,
+        (t / model.rise_s) ** 2,
+        np.where(
+            t < model.rise_s + model.strong_s, 1.0, np.exp(-model.decay_per_s * (t - model.rise_s - model.strong_s))
+        ),
+    )
     f = np.fft.rfftfreq(n, dt)
     w = 2 * math.pi * f
     h = (model.omega_g**2 + 2j * model.zeta_g * model.omega_g * w) / (
-        model.omega_g**2 - w**2 + 2j * model.zeta_g * model.omega_g * w)
+        model.omega_g**2 - w**2 + 2j * model.zeta_g * model.omega_g * w
+    )
     comps = []
     for _ in range(components):
         noise = rng.standard_normal(n)
@@ -172,13 +199,17 @@ def synthetic_motion(pga_g: float, duration_s: float, *, seed: int, dt: float = 
     motion = motion_from_acceleration(acc, dt, highpass_hz=model.highpass_hz, source="Kanai-Tajimi")
     peak = motion.pga
     scale = 0.0 if peak == 0 else pga_g * G / peak
-    return GroundMotion(dt=dt, displacement=motion.displacement * scale, acceleration=motion.acceleration * scale,
-                        source=f"Kanai-Tajimi seed {seed}, {'two components' if components == 2 else 'one component'}, "
-                               f"PGA {pga_g:g} g")
+    return GroundMotion(
+        dt=dt,
+        displacement=motion.displacement * scale,
+        acceleration=motion.acceleration * scale,
+        source=f"Kanai-Tajimi seed {seed}, {'two components' if components == 2 else 'one component'}, PGA {pga_g:g} g",
+    )
 
 
-def constant_acceleration(a: float, duration_s: float, *, dt: float = 0.001, direction_deg: float = 0.0,
-                          ramp_s: float = 0.0) -> GroundMotion:
+def constant_acceleration(
+    a: float, duration_s: float, *, dt: float = 0.001, direction_deg: float = 0.0, ramp_s: float = 0.0
+) -> GroundMotion:
     """The plate accelerates at a constant ``a`` (m/s^2) from rest: ``x = a t^2 / 2``."""
     n = int(round(duration_s / dt)) + 1
     t = np.arange(n) * dt
@@ -191,8 +222,9 @@ def constant_acceleration(a: float, duration_s: float, *, dt: float = 0.001, dir
         x = 0.5 * a * t**2
     d = math.radians(direction_deg)
     disp = np.column_stack([x * math.cos(d), x * math.sin(d)])
-    return GroundMotion(dt=dt, displacement=disp, acceleration=_second_difference(disp, dt),
-                        source=f"constant {a:.4g} m/s^2")
+    return GroundMotion(
+        dt=dt, displacement=disp, acceleration=_second_difference(disp, dt), source=f"constant {a:.4g} m/s^2"
+    )
 
 
 def read_accelerogram(path: str | Path, *, units: str = "g", highpass_hz: float = 0.1) -> GroundMotion:
@@ -215,7 +247,9 @@ def read_accelerogram(path: str | Path, *, units: str = "g", highpass_hz: float 
                     raise
                 continue  # header
     except (UnicodeDecodeError, ValueError) as exc:
-        raise InputError(f"--accelerogram {path}: unreadable ({exc}); give numbers as time, acceleration per line") from None
+        raise InputError(
+            f"--accelerogram {path}: unreadable ({exc}); give numbers as time, acceleration per line"
+        ) from None
     if len(rows) < 3 or len({len(r) for r in rows}) != 1 or len(rows[0]) not in (2, 3):
         raise InputError(f"--accelerogram {path}: expected at least 3 rows of 'time, acceleration[, acceleration_y]'")
     data = np.asarray(rows)

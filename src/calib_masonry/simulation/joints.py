@@ -104,8 +104,11 @@ def joint_stiffness(material: Material) -> JointStiffness:
     m = material
     gu = m.unit_youngs_modulus / (2.0 * (1.0 + m.unit_poisson))
     gm = m.mortar_youngs_modulus / (2.0 * (1.0 + m.mortar_poisson))
-    kn = m.unit_youngs_modulus * m.mortar_youngs_modulus / (
-        m.joint_thickness_m * (m.unit_youngs_modulus - m.mortar_youngs_modulus))
+    kn = (
+        m.unit_youngs_modulus
+        * m.mortar_youngs_modulus
+        / (m.joint_thickness_m * (m.unit_youngs_modulus - m.mortar_youngs_modulus))
+    )
     ks = gu * gm / (m.joint_thickness_m * (gu - gm))
     return JointStiffness(normal=float(kn), shear=float(ks))
 
@@ -113,8 +116,14 @@ def joint_stiffness(material: Material) -> JointStiffness:
 def _skew(r: np.ndarray) -> np.ndarray:
     """``[r]x`` ``(N, 3, 3)`` of vectors ``(N, 3)``: ``[r]x w = r x w``."""
     z = np.zeros(len(r))
-    return np.stack([np.stack([z, -r[:, 2], r[:, 1]], -1), np.stack([r[:, 2], z, -r[:, 0]], -1),
-                     np.stack([-r[:, 1], r[:, 0], z], -1)], -2)
+    return np.stack(
+        [
+            np.stack([z, -r[:, 2], r[:, 1]], -1),
+            np.stack([r[:, 2], z, -r[:, 0]], -1),
+            np.stack([-r[:, 1], r[:, 0], z], -1),
+        ],
+        -2,
+    )
 
 
 @dataclass(frozen=True)
@@ -200,8 +209,9 @@ class JointModel:
     small-displacement, about that state.
     """
 
-    def __init__(self, scene: Scene, *, eps_per_s2: float = 1e-2, contact_gap_m: float = 1e-3,
-                 max_rounds: int = 40) -> None:
+    def __init__(
+        self, scene: Scene, *, eps_per_s2: float = 1e-2, contact_gap_m: float = 1e-3, max_rounds: int = 40
+    ) -> None:
         self.material = scene.material
         self.stiffness = joint_stiffness(self.material)
         self.contact_gap_m = float(contact_gap_m)
@@ -217,8 +227,12 @@ class JointModel:
         self.x = np.array([b.location for b in bodies], dtype=np.float64).reshape(-1, 3)
         size = np.array([np.cbrt(max(b.volume, 1e-9)) for b in bodies])
         # weak springs to the body's place: eps m on translations, eps m l^2 on rotations
-        reg = np.column_stack([np.repeat(eps_per_s2 * self.mass[:, None], 3, axis=1),
-                               np.repeat((eps_per_s2 * self.mass * size**2)[:, None], 3, axis=1)])
+        reg = np.column_stack(
+            [
+                np.repeat(eps_per_s2 * self.mass[:, None], 3, axis=1),
+                np.repeat((eps_per_s2 * self.mass * size**2)[:, None], 3, axis=1),
+            ]
+        )
         self._reg = sp.diags(reg.ravel())
         self._lu: dict = {}
         self._joint_part: tuple | None = None
@@ -258,8 +272,9 @@ class JointModel:
         L[:, 3:] = Rt @ B[:, 3:]
         self.L = L
         self.Kj = np.transpose(L, (0, 2, 1)) @ D @ L  # (J, 12, 12)
-        self.dofs = np.concatenate([6 * self.a[:, None] + np.arange(6), 6 * self.bb[:, None] + np.arange(6)],
-                                   axis=1)  # (J, 12); ground columns are zero in L
+        self.dofs = np.concatenate(
+            [6 * self.a[:, None] + np.arange(6), 6 * self.bb[:, None] + np.arange(6)], axis=1
+        )  # (J, 12); ground columns are zero in L
         # contact corners of each joint: global positions at the reference state and their B rows
         self.corner_mask = self._unique_corners()
         self._corner_L, self._corner_k = self._corner_rows()
@@ -296,7 +311,7 @@ class JointModel:
     def _pad(self, intact: np.ndarray) -> np.ndarray:
         """``intact`` over the mortar joints, extended over the plate contacts (never intact)."""
         out = np.zeros(self.n_all, dtype=bool)
-        out[:self.nj] = np.asarray(intact, dtype=bool)
+        out[: self.nj] = np.asarray(intact, dtype=bool)
         return out
 
     def _joint_matrix(self, intact: np.ndarray) -> sp.csc_matrix:
@@ -348,8 +363,9 @@ class JointModel:
             self._lu.pop(next(iter(self._lu)))
         return lu.solve(rhs)
 
-    def solve(self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None
-              ) -> tuple[JointState, np.ndarray]:
+    def solve(
+        self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None
+    ) -> tuple[JointState, np.ndarray]:
         """The joints' state under the load ``m g`` on every body (``g`` (3,) m/s^2), with the joints
         ``intact`` (J,) as mortar and the others as compression-only contacts at their corners
         where ``closed`` (J', K) (default: every corner of every cracked joint; J' counts the plate
@@ -408,13 +424,14 @@ class JointModel:
         crit = np.stack([tension, compression, shear], axis=1)
         return JointState(utilisation=crit.max(axis=1), mode=crit.argmax(axis=1), forces=forces, relative=rel)
 
-    def crack(self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray, JointState]:
+    def crack(
+        self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, JointState]:
         """The joints that crack under the load ``m g``, event by event: solve, crack the intact
         joints whose utilisation is over 1 and within 10 % of the worst, solve again on what is
         left, until no intact joint is over 1 (or ``max_rounds``). Returns the indices cracked (in
         order), the criterion each failed by, and the last state."""
-        intact = np.asarray(intact, dtype=bool)[:self.nj].copy()
+        intact = np.asarray(intact, dtype=bool)[: self.nj].copy()
         closed = None if closed is None else np.asarray(closed, dtype=bool).copy()
         cracked: list[np.ndarray] = []
         modes: list[np.ndarray] = []
@@ -435,8 +452,15 @@ class JointModel:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), state
         return np.concatenate(cracked), np.concatenate(modes), state
 
-    def corner_gaps(self, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray,
-                    ref_positions: np.ndarray, ref_rotations: np.ndarray, plate0: np.ndarray) -> np.ndarray:
+    def corner_gaps(
+        self,
+        positions: np.ndarray,
+        rotations: np.ndarray,
+        plate: np.ndarray,
+        ref_positions: np.ndarray,
+        ref_rotations: np.ndarray,
+        plate0: np.ndarray,
+    ) -> np.ndarray:
         """How far each joint's outline corners have opened ``(J, K)`` (m, along the joint normal as
         brick a carries it) between the reference poses and these."""
         p = self.corner_points()
@@ -451,8 +475,10 @@ class JointModel:
         return np.einsum("jka,ja->jk", pb - pa, n)
 
     def __repr__(self) -> str:
-        return (f"JointModel({self.nb} bodies, {self.nj} joints, k_n={self.stiffness.normal:.3g} N/m^3, "
-                f"k_s={self.stiffness.shear:.3g} N/m^3)")
+        return (
+            f"JointModel({self.nb} bodies, {self.nj} joints, k_n={self.stiffness.normal:.3g} N/m^3, "
+            f"k_s={self.stiffness.shear:.3g} N/m^3)"
+        )
 
 
 class CrackTracker:
@@ -464,13 +490,17 @@ class CrackTracker:
     linear in ``g``: the three unit-load solutions are computed once and combined, so a structure
     that stands costs one factorisation."""
 
-    def __init__(self, scene: Scene, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray,
-                 time_s: float) -> None:
+    def __init__(
+        self, scene: Scene, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray, time_s: float
+    ) -> None:
         self.model = JointModel(scene, contact_gap_m=scene.solver.contact_gap_m)
         n = self.model.nj
         self.t0 = float(time_s)
-        self.ref = (np.asarray(positions, dtype=np.float64).copy(), np.asarray(rotations, dtype=np.float64).copy(),
-                    np.asarray(plate, dtype=np.float64).copy())
+        self.ref = (
+            np.asarray(positions, dtype=np.float64).copy(),
+            np.asarray(rotations, dtype=np.float64).copy(),
+            np.asarray(plate, dtype=np.float64).copy(),
+        )
         self.intact = np.ones(n, dtype=bool)
         self.break_time_s = np.full(n, np.nan)
         self.break_mode = np.full(n, -1, dtype=np.int64)
@@ -484,8 +514,9 @@ class CrackTracker:
             self._unit = [self.model.solve(eye[k], self.intact)[0] for k in range(3)]
         return self._unit
 
-    def step(self, time_s: float, g: np.ndarray, positions: np.ndarray, rotations: np.ndarray,
-             plate: np.ndarray) -> np.ndarray:
+    def step(
+        self, time_s: float, g: np.ndarray, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray
+    ) -> np.ndarray:
         """The joints that crack under the coming step's load ``g`` (3,), given the current poses;
         returns their indices."""
         t = time.perf_counter()
@@ -512,4 +543,3 @@ class CrackTracker:
             return new
         finally:
             self.seconds += time.perf_counter() - t
-

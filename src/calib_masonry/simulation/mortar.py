@@ -15,7 +15,7 @@ that separates the two bricks widest.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import shapely
@@ -29,8 +29,9 @@ def _half_plane(c: np.ndarray, n: np.ndarray, size: float) -> shapely.Polygon:
     return shapely.Polygon([c + size * t, c - size * t, c - size * t - size * n, c + size * t - size * n])
 
 
-def _separate(a: shapely.Polygon, b: shapely.Polygon, ha: shapely.Polygon, hb: shapely.Polygon
-              ) -> tuple[shapely.Polygon, shapely.Polygon]:
+def _separate(
+    a: shapely.Polygon, b: shapely.Polygon, ha: shapely.Polygon, hb: shapely.Polygon
+) -> tuple[shapely.Polygon, shapely.Polygon]:
     """Cut two overlapping convex cells apart along the line that separates their bricks' hulls
     ``ha`` and ``hb`` widest: the perpendicular bisector of the two hulls' closest points (two
     disjoint convex polygons always lie on either side of it). Hulls that touch are cut square to
@@ -88,8 +89,14 @@ def mortar_cells(polygons: Sequence[np.ndarray], reach: float, *, pixel: float =
     start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
     cmin, cmax = np.minimum.reduceat(c, start), np.maximum.reduceat(c, start)
     klab, krow = np.divmod(key[start], ny)
-    ends = np.concatenate([np.column_stack([cmin, krow]), np.column_stack([cmin, krow + 1]),
-                           np.column_stack([cmax + 1, krow]), np.column_stack([cmax + 1, krow + 1])]) * pixel + [x0, y0]
+    ends = np.concatenate(
+        [
+            np.column_stack([cmin, krow]),
+            np.column_stack([cmin, krow + 1]),
+            np.column_stack([cmax + 1, krow]),
+            np.column_stack([cmax + 1, krow + 1]),
+        ]
+    ) * pixel + [x0, y0]
     ends_lab = np.tile(klab, 4)
     cells = []
     for i, h in enumerate(hulls):

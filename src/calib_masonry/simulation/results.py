@@ -23,26 +23,42 @@ from pathlib import Path
 import numpy as np
 
 from .blender import RunOutput
+from .ground_motion import G
 from .joints import FAILURE_MODES
 from .scene import Scene
 
 ONSET_DRIFT = 1e-3  # a pushover's onset of collapse: a brick moves faster than this fraction of the height per second
 ONSET_WINDOW_S = 0.2  # ... measured over this window
 
-__all__ = ["Metrics", "rotations", "metrics", "outcome", "plot_histories", "plot_ground_motion",
-           "render_frames", "structure_height", "pushover_stop", "collapse_multiplier", "plot_pushover", "ONSET_DRIFT",
-           "ONSET_WINDOW_S",
-           "failure_mode_counts"]
+__all__ = [
+    "Metrics",
+    "rotations",
+    "metrics",
+    "outcome",
+    "plot_histories",
+    "plot_ground_motion",
+    "render_frames",
+    "structure_height",
+    "pushover_stop",
+    "collapse_multiplier",
+    "plot_pushover",
+    "ONSET_DRIFT",
+    "ONSET_WINDOW_S",
+    "failure_mode_counts",
+]
 
 
 def rotations(q: np.ndarray) -> np.ndarray:
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (w, x, y, z)."""
     w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
 
 
 @dataclass(frozen=True)
@@ -74,11 +90,20 @@ def metrics(scene: Scene, out: RunOutput) -> Metrics:
     drift = np.linalg.norm(rel[:, top, :2].mean(axis=1), axis=1)
     breaks = out.bond_break_time_s if out.bond_break_time_s is not None else np.full(len(scene.bonds), np.nan)
     t_rel = out.time - out.time[start]
-    broken = (np.array([(breaks <= t).sum() for t in t_rel]) / max(1, len(breaks))) if len(breaks) else np.zeros(len(t_rel))
+    broken = (
+        (np.array([(breaks <= t).sum() for t in t_rel]) / max(1, len(breaks))) if len(breaks) else np.zeros(len(t_rel))
+    )
     idx = np.flatnonzero(moved >= 0.5)
     collapse = float(t_rel[idx[0]]) if idx.size else None
-    return Metrics(start_frame=start, moved_fraction=moved, roof_drift_m=drift, max_displacement_m=dist.max(axis=0),
-                   bond_break_time_s=breaks, broken_fraction=broken, collapse_time_s=collapse)
+    return Metrics(
+        start_frame=start,
+        moved_fraction=moved,
+        roof_drift_m=drift,
+        max_displacement_m=dist.max(axis=0),
+        bond_break_time_s=breaks,
+        broken_fraction=broken,
+        collapse_time_s=collapse,
+    )
 
 
 def failure_mode_counts(out: RunOutput) -> dict:
@@ -136,38 +161,39 @@ def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float
     run_away = np.flatnonzero(dmax > limit)
     value = None
     if run_away.size:
-        calm = np.flatnonzero(speed[:run_away[0]] <= ONSET_DRIFT * height)
+        calm = np.flatnonzero(speed[: run_away[0]] <= ONSET_DRIFT * height)
         value = float(lam[calm[-1]]) if calm.size else 0.0
     return value, lam, m.roof_drift_m[start:]
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_ground_motion(scene: Scene, path: Path) -> None:
-    plt = _plt()
+    from .. import _figure as plt
+
     m = scene.motion
     fig, ax = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
     if m is not None:
-        ax[0].plot(m.time, m.acceleration[:, 0] / 9.80665, lw=0.7, label="X")
-        ax[0].plot(m.time, m.acceleration[:, 1] / 9.80665, lw=0.7, label="Y")
+        ax[0].plot(m.time, m.acceleration[:, 0] / G, lw=0.7, label="X")
+        ax[0].plot(m.time, m.acceleration[:, 1] / G, lw=0.7, label="Y")
         fps = scene.solver.fps
         tf, applied = m.frame_means(fps)
-        applied = applied / 9.80665
+        applied = applied / G
         for k, name in enumerate("XY"):
             if np.any(applied[:, k]):
-                ax[0].step(tf, applied[:, k], where="post", lw=0.9, color="k" if k == 0 else "0.4",
-                           label=f"{name} as applied (mean over each frame)")
+                ax[0].step(
+                    tf,
+                    applied[:, k],
+                    where="post",
+                    lw=0.9,
+                    color="k" if k == 0 else "0.4",
+                    label=f"{name} as applied (mean over each frame)",
+                )
         ax[1].plot(m.time, m.displacement[:, 0] * 1000, lw=0.9, label="X")
         ax[1].plot(m.time, m.displacement[:, 1] * 1000, lw=0.9, label="Y")
-        ax[0].set_title(f"ground motion: {m.source}\napplied peak {m.applied_peak(fps) / 9.80665:.3f} g at {fps} fps, "
-                        f"record peak {m.pga / 9.80665:.3f} g", fontsize=9)
+        ax[0].set_title(
+            f"ground motion: {m.source}\napplied peak {m.applied_peak(fps) / G:.3f} g at {fps} fps, "
+            f"record peak {m.pga / G:.3f} g",
+            fontsize=9,
+        )
     ax[0].set_ylabel("acceleration (g)")
     ax[1].set_ylabel("plate displacement (mm)")
     ax[1].set_xlabel("time (s)")
@@ -178,7 +204,8 @@ def plot_ground_motion(scene: Scene, path: Path) -> None:
 
 
 def plot_histories(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> None:
-    plt = _plt()
+    from .. import _figure as plt
+
     t = out.time - out.time[m.start_frame]
     fig, ax = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
     ax[0].plot(t, m.roof_drift_m * 1000, color="C3")
@@ -197,8 +224,9 @@ def plot_histories(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> None
 
 def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) -> list[Path]:
     """The collapse sequence: ``count`` axonometric views of the bricks at evenly spaced times."""
-    plt = _plt()
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from .. import _figure as plt
 
     folder.mkdir(parents=True, exist_ok=True)
     R = rotations(out.quaternions)
@@ -220,15 +248,19 @@ def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) ->
         n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         sh = 0.35 + 0.6 * np.clip(n @ light, 0, 1)
-        ax.add_collection3d(Poly3DCollection(tri, facecolors=np.column_stack([0.75 * sh, 0.45 * sh, 0.32 * sh,
-                                                                            np.ones_like(sh)]), linewidths=0))
+        ax.add_collection3d(
+            Poly3DCollection(
+                tri, facecolors=np.column_stack([0.75 * sh, 0.45 * sh, 0.32 * sh, np.ones_like(sh)]), linewidths=0
+            )
+        )
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_zlim(min(lo[2], 0.0), hi[2])
         ax.set_box_aspect((hi[0] - lo[0] + 2 * pad, hi[1] - lo[1] + 2 * pad, hi[2] - min(lo[2], 0.0)))
         ax.view_init(elev=20, azim=-60)
-        ax.set_title(f"t = {out.time[f]:.2f} s (ground moves from {out.time[0] + scene.solver.warmup_s:.2f} s)",
-                     fontsize=9)
+        ax.set_title(
+            f"t = {out.time[f]:.2f} s (ground moves from {out.time[0] + scene.solver.warmup_s:.2f} s)", fontsize=9
+        )
         p = folder / f"frame_{k:03d}.png"
         fig.tight_layout()
         fig.savefig(p, dpi=90)
@@ -240,7 +272,8 @@ def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) ->
 def plot_pushover(scene: Scene, curve: tuple[float | None, np.ndarray, np.ndarray], path: Path) -> None:
     """Roof displacement against lateral acceleration, with the collapse multiplier marked;
     ``curve`` is :func:`collapse_multiplier`'s answer."""
-    plt = _plt()
+    from .. import _figure as plt
+
     value, lam, roof = curve
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     ax.plot(lam, roof * 1000, color="C3", lw=1.2)

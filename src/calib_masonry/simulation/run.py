@@ -28,12 +28,36 @@ from ..errors import InputError
 from ..io import json_bytes, read_json, staged_output, write_json
 from .ground_motion import G, GroundMotion, read_accelerogram, synthetic_motion
 from .joints import joint_stiffness
-from .scene import (MASONRY, Material, Pushover, Scene, SceneGeometry, SolverSettings, load_geometry, save_geometry,
-                    scene_from_geometry, scene_geometry)
+from .scene import (
+    MASONRY,
+    Material,
+    Pushover,
+    Scene,
+    SceneGeometry,
+    SolverSettings,
+    load_geometry,
+    save_geometry,
+    scene_from_geometry,
+    scene_geometry,
+)
 
-__all__ = ["Pushover", "SimulationConfig", "SimulationResult", "simulate", "write_simulation", "simulate_to_folder",
-           "simulation_geometry", "scene_for", "scene_for_model", "motion_for", "load_model", "model_from_json",
-           "geometry_for_model", "store_geometry", "GEOMETRY_FILE"]
+__all__ = [
+    "Pushover",
+    "SimulationConfig",
+    "SimulationResult",
+    "simulate",
+    "write_simulation",
+    "simulate_to_folder",
+    "simulation_geometry",
+    "scene_for",
+    "scene_for_model",
+    "motion_for",
+    "load_model",
+    "model_from_json",
+    "geometry_for_model",
+    "store_geometry",
+    "GEOMETRY_FILE",
+]
 
 
 @dataclass(frozen=True)
@@ -100,7 +124,9 @@ def _checked_model_dir(model_dir: str | Path) -> Path:
     if not model_dir.is_dir():
         raise InputError(f"MODEL_DIR {model_dir}: not a folder; give the --out folder of `calib-masonry build`")
     if not (model_dir / "bricks.json").is_file():
-        raise InputError(f"MODEL_DIR {model_dir}: has no bricks.json; run `calib-masonry build STRUCTURE.toml --out {model_dir}` first")
+        raise InputError(
+            f"MODEL_DIR {model_dir}: has no bricks.json; run `calib-masonry build STRUCTURE.toml --out {model_dir}` first"
+        )
     return model_dir
 
 
@@ -115,8 +141,16 @@ def model_from_json(data: dict, closed, source: str | Path):
     ``data`` (``closed``: the build summary's closed_footprint)."""
     try:
         bricks = bricks_from_json(data)
-        walls = tuple(WallGeometry(width_m=w["width_m"], height_m=w["height_m"], theta_rad=math.radians(w["theta_deg"]),
-                                   thickness_m=w["thickness_m"], name=w["name"]) for w in data["walls"])
+        walls = tuple(
+            WallGeometry(
+                width_m=w["width_m"],
+                height_m=w["height_m"],
+                theta_rad=math.radians(w["theta_deg"]),
+                thickness_m=w["thickness_m"],
+                name=w["name"],
+            )
+            for w in data["walls"]
+        )
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"MODEL_DIR {source}: bricks.json is not a build output ({exc}); re-run build") from None
     if not bricks:
@@ -142,30 +176,38 @@ def _geometry_key(bricks_json_bytes: bytes, closed, max_gap_m: float, mortar_fil
     return h.hexdigest()
 
 
-def simulation_geometry(model: Structure3D | SceneGeometry, *, max_gap_m: float = 0.06,
-                        mortar_fill: bool = True) -> SceneGeometry:
+def simulation_geometry(
+    model: Structure3D | SceneGeometry, *, max_gap_m: float = 0.06, mortar_fill: bool = True
+) -> SceneGeometry:
     """The bodies and contact patches of a built structure, in memory."""
     if isinstance(model, SceneGeometry):
         return model
     if not isinstance(model, Structure3D):
-        raise InputError(f"simulate: the model must be a Structure3D (from build), a SceneGeometry or a build "
-                         f"folder, got {type(model).__name__}")
-    return scene_geometry(model.bricks, list(model.frames), list(model.corners), mortar_fill=mortar_fill,
-                          max_gap_m=max_gap_m)
+        raise InputError(
+            f"simulate: the model must be a Structure3D (from build), a SceneGeometry or a build "
+            f"folder, got {type(model).__name__}"
+        )
+    return scene_geometry(
+        model.bricks, list(model.frames), list(model.corners), mortar_fill=mortar_fill, max_gap_m=max_gap_m
+    )
 
 
-def store_geometry(structure: Structure3D, model_dir: str | Path, *, max_gap_m: float = 0.06,
-                   mortar_fill: bool = True) -> SceneGeometry:
+def store_geometry(
+    structure: Structure3D, model_dir: str | Path, *, max_gap_m: float = 0.06, mortar_fill: bool = True
+) -> SceneGeometry:
     """Compute the simulation geometry of ``structure`` in memory and store it in ``model_dir`` (a
     ``build`` stage) as sim_geometry.npz, keyed by the bricks.json that build writes for it."""
     geometry = simulation_geometry(structure, max_gap_m=max_gap_m, mortar_fill=mortar_fill)
-    key = _geometry_key(json_bytes(bricks_json(structure), exact=True), structure.footprint.is_closed, max_gap_m, mortar_fill)
+    key = _geometry_key(
+        json_bytes(bricks_json(structure), exact=True), structure.footprint.is_closed, max_gap_m, mortar_fill
+    )
     save_geometry(geometry, Path(model_dir) / GEOMETRY_FILE, key)
     return geometry
 
 
-def geometry_for_model(model_dir: str | Path, *, max_gap_m: float = 0.06, mortar_fill: bool = True
-                       ) -> tuple[SceneGeometry, bool]:
+def geometry_for_model(
+    model_dir: str | Path, *, max_gap_m: float = 0.06, mortar_fill: bool = True
+) -> tuple[SceneGeometry, bool]:
     """The simulation geometry of a model folder and whether it came from the folder's
     sim_geometry.npz. The stored copy is used only if it was computed from this bricks.json (its
     hash), footprint and settings by this version of the code; otherwise (a model built before it
@@ -189,18 +231,28 @@ def motion_for(config: SimulationConfig) -> GroundMotion:
     asked. A recorded accelerogram is applied as it is."""
     if config.accelerogram is not None:
         return read_accelerogram(config.accelerogram)
-    motion = synthetic_motion(config.pga_g, config.duration_s, seed=config.seed, components=config.components,
-                              direction_deg=config.direction_deg)
+    motion = synthetic_motion(
+        config.pga_g,
+        config.duration_s,
+        seed=config.seed,
+        components=config.components,
+        direction_deg=config.direction_deg,
+    )
     applied = motion.applied_peak(config.solver.fps)
     if applied <= 0:
         return motion
-    return motion.scaled(config.pga_g * G / applied,
-                         source=f"{motion.source} as applied at {config.solver.fps} fps")
+    return motion.scaled(config.pga_g * G / applied, source=f"{motion.source} as applied at {config.solver.fps} fps")
 
 
-def scene_for(model: Structure3D | SceneGeometry, load: GroundMotion | Pushover | None, *,
-              solver: SolverSettings = SolverSettings(), material: Material = MASONRY, foundation: bool = True,
-              duration_s: float | None = None) -> Scene:
+def scene_for(
+    model: Structure3D | SceneGeometry,
+    load: GroundMotion | Pushover | None,
+    *,
+    solver: SolverSettings = SolverSettings(),
+    material: Material = MASONRY,
+    foundation: bool = True,
+    duration_s: float | None = None,
+) -> Scene:
     """The Bullet scene of a model under a ground motion, a pushover or (``load`` None, for
     ``duration_s``) gravity alone."""
     geometry = simulation_geometry(model)
@@ -216,8 +268,15 @@ def scene_for(model: Structure3D | SceneGeometry, load: GroundMotion | Pushover 
         duration = duration_s
     else:
         raise InputError("simulate: without a ground motion or a pushover, give duration_s > 0 (gravity alone)")
-    return scene_from_geometry(geometry, motion=motion, pushover=pushover, duration_s=duration, material=material,
-                               solver=solver, foundation=foundation)
+    return scene_from_geometry(
+        geometry,
+        motion=motion,
+        pushover=pushover,
+        duration_s=duration,
+        material=material,
+        solver=solver,
+        foundation=foundation,
+    )
 
 
 def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
@@ -236,32 +295,50 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
     k = joint_stiffness(scene.material)
     mat = scene.material
     summary = {
-        "model": name, "bricks": len(scene.bodies), "bonds": len(scene.bonds),
+        "model": name,
+        "bricks": len(scene.bodies),
+        "bonds": len(scene.bonds),
         # pga_g: the peak of the acceleration the run applies (frame means); record_peak_g: of the samples
-        "ground_motion": {"source": scene.motion.source if scene.motion else None,
-                          "pga_g": scene.motion.applied_peak(s.fps) / G if scene.motion else 0.0,
-                          "record_peak_g": scene.motion.pga / G if scene.motion else 0.0,
-                          "duration_s": scene.motion.duration if scene.motion else 0.0},
-        "solver": {"fps": s.fps, "substeps": s.substeps, "iterations": s.iterations, "warmup_s": s.warmup_s,
-                   "gravity_ramp_s": s.gravity_ramp_s, "warmup_damping": s.warmup_damping,
-                   "contact_gap_m": s.contact_gap_m},
-        "joints": {"model": "elastic interfaces (UDEC/3DEC convention) between rigid bricks; Bullet keeps intact "
-                            "joints rigid, the joint model cracks them (calib_masonry.simulation.joints)",
-                   "normal_stiffness_n_per_m3": k.normal, "shear_stiffness_n_per_m3": k.shear,
-                   "tensile_strength_pa": mat.tensile_strength, "compressive_strength_pa": mat.compressive_strength,
-                   "cohesion_pa": mat.shear_strength, "friction": mat.friction,
-                   "cracked_by": failure_mode_counts(out),
-                   "max_utilisation_at_end_of_warmup": float(out.max_utilisation[min(s.warmup_frames, len(out.time) - 1)])
-                   if out.max_utilisation is not None and len(out.time) else None,
-                   "seconds": round(out.seconds_joints, 3)},
+        "ground_motion": {
+            "source": scene.motion.source if scene.motion else None,
+            "pga_g": scene.motion.applied_peak(s.fps) / G if scene.motion else 0.0,
+            "record_peak_g": scene.motion.pga / G if scene.motion else 0.0,
+            "duration_s": scene.motion.duration if scene.motion else 0.0,
+        },
+        "solver": {
+            "fps": s.fps,
+            "substeps": s.substeps,
+            "iterations": s.iterations,
+            "warmup_s": s.warmup_s,
+            "gravity_ramp_s": s.gravity_ramp_s,
+            "warmup_damping": s.warmup_damping,
+            "contact_gap_m": s.contact_gap_m,
+        },
+        "joints": {
+            "model": "elastic interfaces (UDEC/3DEC convention) between rigid bricks; Bullet keeps intact "
+            "joints rigid, the joint model cracks them (calib_masonry.simulation.joints)",
+            "normal_stiffness_n_per_m3": k.normal,
+            "shear_stiffness_n_per_m3": k.shear,
+            "tensile_strength_pa": mat.tensile_strength,
+            "compressive_strength_pa": mat.compressive_strength,
+            "cohesion_pa": mat.shear_strength,
+            "friction": mat.friction,
+            "cracked_by": failure_mode_counts(out),
+            "max_utilisation_at_end_of_warmup": float(out.max_utilisation[min(s.warmup_frames, len(out.time) - 1)])
+            if out.max_utilisation is not None and len(out.time)
+            else None,
+            "seconds": round(out.seconds_joints, 3),
+        },
         "frame": "ground: the plate stays put and the ground motion acts on every brick as an inertial force",
         "foundation_bonds": int(scene.notes.get("foundation_bonds", 0)),
         # the bodies and contact patches: read from the model folder's sim_geometry.npz (stored
         # by build) or, for a model built without it or edited since, computed in this run
         "geometry_stored_by_build": bool(scene.notes.get("geometry_stored", False)),
-        "mortar": {"fill_volume_fraction": scene.notes.get("mortar_fill_volume"),
-                   "max_hull_volume_change": scene.notes.get("max_hull_volume_change"),
-                   "bricks_without_fill": scene.notes.get("bricks_without_fill", 0)},
+        "mortar": {
+            "fill_volume_fraction": scene.notes.get("mortar_fill_volume"),
+            "max_hull_volume_change": scene.notes.get("max_hull_volume_change"),
+            "bricks_without_fill": scene.notes.get("bricks_without_fill", 0),
+        },
         "moved_fraction_final": float(m.moved_fraction[-1]),
         "moved_threshold_m": s.moved_threshold_m,
         "max_roof_drift_m": float(m.roof_drift_m.max()),
@@ -270,13 +347,19 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
         "bonds_broken_fraction": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
         "max_brick_displacement_m": float(m.max_displacement_m.max()),
         "outcome": outcome(float(m.moved_fraction[-1])),
-        "seconds": {"blender_build": round(out.seconds_build, 3), "stepping": round(out.seconds_stepping, 3),
-                    "per_frame": round(out.seconds_stepping / max(1, len(out.time) - 1), 4)},
+        "seconds": {
+            "blender_build": round(out.seconds_build, 3),
+            "stepping": round(out.seconds_stepping, 3),
+            "per_frame": round(out.seconds_stepping / max(1, len(out.time) - 1), 4),
+        },
     }
     if curve is not None:
-        summary["pushover"] = {"rate_g_per_s": scene.pushover.rate_g_per_s,
-                               "direction_deg": scene.pushover.direction_deg, "max_g": scene.pushover.max_g,
-                               "onset_drift": ONSET_DRIFT}
+        summary["pushover"] = {
+            "rate_g_per_s": scene.pushover.rate_g_per_s,
+            "direction_deg": scene.pushover.direction_deg,
+            "max_g": scene.pushover.max_g,
+            "onset_drift": ONSET_DRIFT,
+        }
         summary["collapse_multiplier_g"] = curve[0]
         summary["ground_motion"] = None
     return summary
@@ -291,13 +374,22 @@ def _run_scene(scene: Scene, name: str, *, progress: bool | None, blend_path: Pa
     out = run(scene, progress=progress, blend_path=blend_path, stop=stop)
     m = metrics(scene, out)
     curve = collapse_multiplier(scene, out, m) if scene.pushover is not None else None
-    return SimulationResult(scene=scene, output=out, metrics=m, curve=curve, summary=_summary(scene, out, m, curve, name))
+    return SimulationResult(
+        scene=scene, output=out, metrics=m, curve=curve, summary=_summary(scene, out, m, curve, name)
+    )
 
 
-def simulate(model, load: GroundMotion | Pushover | None = None,
-             settings: SolverSettings = SolverSettings(), *, material: Material = MASONRY, foundation: bool = True,
-             duration_s: float | None = None, progress: bool | None = None,
-             blend_path: Path | None = None) -> SimulationResult:
+def simulate(
+    model,
+    load: GroundMotion | Pushover | None = None,
+    settings: SolverSettings = SolverSettings(),
+    *,
+    material: Material = MASONRY,
+    foundation: bool = True,
+    duration_s: float | None = None,
+    progress: bool | None = None,
+    blend_path: Path | None = None,
+) -> SimulationResult:
     """Simulate a built model in Bullet under a ground motion, a pushover or (``load`` None, for
     ``duration_s`` seconds) gravity alone; in memory (writes ``blend_path`` only if given).
 
@@ -324,9 +416,14 @@ def write_simulation(result: SimulationResult, out: Path, *, figures: bool = Tru
     from .results import plot_ground_motion, plot_histories, plot_pushover, render_frames
 
     scene, r, m = result.scene, result.output, result.metrics
-    np.savez_compressed(out / "poses.npz", time=r.time, positions=r.positions.astype(np.float32),
-                        quaternions=r.quaternions.astype(np.float32), plate=r.plate.astype(np.float32),
-                        bond_break_time_s=m.bond_break_time_s)
+    np.savez_compressed(
+        out / "poses.npz",
+        time=r.time,
+        positions=r.positions.astype(np.float32),
+        quaternions=r.quaternions.astype(np.float32),
+        plate=r.plate.astype(np.float32),
+        bond_break_time_s=m.bond_break_time_s,
+    )
     t1 = time.perf_counter()
     if figures:
         if scene.pushover is not None:
@@ -340,8 +437,13 @@ def write_simulation(result: SimulationResult, out: Path, *, figures: bool = Tru
     write_json(out / "summary.json", summary)
 
 
-def simulate_to_folder(model_dir: str | Path, out: str | Path, config: SimulationConfig = SimulationConfig(), *,
-                       progress: bool | None = None) -> dict:
+def simulate_to_folder(
+    model_dir: str | Path,
+    out: str | Path,
+    config: SimulationConfig = SimulationConfig(),
+    *,
+    progress: bool | None = None,
+) -> dict:
     """Run the simulation ``config`` asks for on a model folder and write summary.json, poses.npz,
     scene.blend, figures and frames/ into ``out`` (all or nothing)."""
     from .blender import require_bpy

@@ -24,9 +24,9 @@ over each brick's footprint (a footing).
 from __future__ import annotations
 
 import math
-from pathlib import Path
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
+from pathlib import Path
 
 import numpy as np
 import shapely
@@ -36,12 +36,26 @@ from ..build3d.contacts import OUTLINE_POINTS, ContactPatch, contact_patches, jo
 from ..build3d.extrude import Polyhedron
 from ..build3d.place import Corner, WallFrame
 from ..errors import InputError
-from .ground_motion import GroundMotion
+from .ground_motion import G, GroundMotion
 from .mortar import mortar_cells
 
-__all__ = ["Material", "SolverSettings", "Body", "Bond", "Plate", "Pushover", "Scene", "SceneGeometry",
-           "scene_geometry", "scene_from_geometry", "save_geometry", "load_geometry", "MASONRY", "joint_axes",
-           "footing_patches"]
+__all__ = [
+    "Material",
+    "SolverSettings",
+    "Body",
+    "Bond",
+    "Plate",
+    "Pushover",
+    "Scene",
+    "SceneGeometry",
+    "scene_geometry",
+    "scene_from_geometry",
+    "save_geometry",
+    "load_geometry",
+    "MASONRY",
+    "joint_axes",
+    "footing_patches",
+]
 
 
 @dataclass(frozen=True)
@@ -68,17 +82,24 @@ class Material:
     joint_thickness_m: float = 0.01  # t_j
 
     def __post_init__(self) -> None:
-        for name in ("density", "compressive_strength", "mortar_youngs_modulus", "unit_youngs_modulus",
-                     "joint_thickness_m"):
+        for name in (
+            "density",
+            "compressive_strength",
+            "mortar_youngs_modulus",
+            "unit_youngs_modulus",
+            "joint_thickness_m",
+        ):
             if not getattr(self, name) > 0:
                 raise InputError(f"material {name} = {getattr(self, name)}: must be > 0")
         for name in ("friction", "restitution", "tensile_strength", "shear_strength"):
             if not getattr(self, name) >= 0:
                 raise InputError(f"material {name} = {getattr(self, name)}: must be >= 0")
         if not self.unit_youngs_modulus > self.mortar_youngs_modulus:
-            raise InputError(f"material: unit_youngs_modulus ({self.unit_youngs_modulus:g} Pa) must exceed "
-                             f"mortar_youngs_modulus ({self.mortar_youngs_modulus:g} Pa) for the joint stiffness "
-                             "E_u E_m / (t (E_u - E_m)); give the bricks' and the mortar's moduli")
+            raise InputError(
+                f"material: unit_youngs_modulus ({self.unit_youngs_modulus:g} Pa) must exceed "
+                f"mortar_youngs_modulus ({self.mortar_youngs_modulus:g} Pa) for the joint stiffness "
+                "E_u E_m / (t (E_u - E_m)); give the bricks' and the mortar's moduli"
+            )
         for name in ("mortar_poisson", "unit_poisson"):
             if not 0 <= getattr(self, name) < 0.5:
                 raise InputError(f"material {name} = {getattr(self, name)}: must be in [0, 0.5)")
@@ -119,8 +140,10 @@ class SolverSettings:
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or self.substeps <= 0 or self.iterations <= 0:
-            raise InputError(f"solver settings: fps, substeps and iterations must be > 0 (got {self.fps}, "
-                             f"{self.substeps}, {self.iterations})")
+            raise InputError(
+                f"solver settings: fps, substeps and iterations must be > 0 (got {self.fps}, "
+                f"{self.substeps}, {self.iterations})"
+            )
 
     @property
     def warmup_frames(self) -> int:
@@ -171,10 +194,16 @@ class Bond:
         e1 = e1 - (e1 @ n) * n
         e1 /= np.linalg.norm(e1)
         basis = np.vstack([e1, np.cross(n, e1)])
-        _, moments, outline, area = patch_section(
-            shapely.box(-length / 2, -width / 2, length / 2, width / 2), basis, n)
-        return cls(a=a, b=b, location=np.asarray(location, dtype=np.float64), normal=n, area_m2=area,
-                   moments=moments, outline=outline)
+        _, moments, outline, area = patch_section(shapely.box(-length / 2, -width / 2, length / 2, width / 2), basis, n)
+        return cls(
+            a=a,
+            b=b,
+            location=np.asarray(location, dtype=np.float64),
+            normal=n,
+            area_m2=area,
+            moments=moments,
+            outline=outline,
+        )
 
 
 @dataclass(frozen=True)
@@ -204,7 +233,9 @@ class Pushover:
         if not (self.rate_g_per_s > 0 and math.isfinite(self.rate_g_per_s)):
             raise InputError(f"--pushover-rate {self.rate_g_per_s}: must be > 0 g per second")
         if not (self.max_g > 0 and math.isfinite(self.max_g)):
-            raise InputError(f"--pushover-max {self.max_g}: must be > 0 g (the largest lateral acceleration of the ramp)")
+            raise InputError(
+                f"--pushover-max {self.max_g}: must be > 0 g (the largest lateral acceleration of the ramp)"
+            )
         if not math.isfinite(self.direction_deg):
             raise InputError(f"--direction {self.direction_deg}: must be a finite angle in degrees")
 
@@ -227,7 +258,7 @@ class Scene:
     material: Material = MASONRY
     duration_s: float = 1.0
     solver: SolverSettings = SolverSettings()
-    gravity: float = 9.80665
+    gravity: float = G
     notes: dict = field(default_factory=dict)
 
     @property
@@ -235,24 +266,53 @@ class Scene:
         return int(round((self.solver.warmup_s + self.duration_s) * self.solver.fps))
 
 
-def _body(name: str, vertices: np.ndarray, faces: np.ndarray, location: np.ndarray, volume: float,
-          material: Material, hull_volume_change: float = 0.0) -> Body:
+def _body(
+    name: str,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    location: np.ndarray,
+    volume: float,
+    material: Material,
+    hull_volume_change: float = 0.0,
+) -> Body:
     """A body of ``volume`` m^3 of ``material``: the one place a body's mass, friction and
     restitution come from (Bullet multiplies the two bodies' frictions, hence the square root)."""
-    return Body(name=name, vertices=vertices, faces=faces, location=location, mass=material.density * volume,
-                friction=math.sqrt(material.friction), restitution=material.restitution, volume=float(volume),
-                hull_volume_change=float(hull_volume_change))
+    return Body(
+        name=name,
+        vertices=vertices,
+        faces=faces,
+        location=location,
+        mass=material.density * volume,
+        friction=math.sqrt(material.friction),
+        restitution=material.restitution,
+        volume=float(volume),
+        hull_volume_change=float(hull_volume_change),
+    )
 
 
-def body_from_polyhedron(name: str, solid: Polyhedron, material: Material, *, mass_volume: float | None = None,
-                         hull_volume_change: float = 0.0) -> Body:
+def body_from_polyhedron(
+    name: str,
+    solid: Polyhedron,
+    material: Material,
+    *,
+    mass_volume: float | None = None,
+    hull_volume_change: float = 0.0,
+) -> Body:
     c = solid.centroid
-    return _body(name, solid.vertices - c, solid.faces, c, solid.volume if mass_volume is None else mass_volume,
-                 material, hull_volume_change)
+    return _body(
+        name,
+        solid.vertices - c,
+        solid.faces,
+        c,
+        solid.volume if mass_volume is None else mass_volume,
+        material,
+        hull_volume_change,
+    )
 
 
-def _cell_solid(brick: Brick, outline: np.ndarray | None, frames: list[WallFrame], corners: list[Corner]
-                ) -> tuple[Polyhedron, float]:
+def _cell_solid(
+    brick: Brick, outline: np.ndarray | None, frames: list[WallFrame], corners: list[Corner]
+) -> tuple[Polyhedron, float]:
     """The prism of ``outline`` (the brick's mortar cell in wall 2D, or its convex hull if None),
     extruded and cut at corners; and the relative area change from taking the brick's hull."""
     poly = shapely.Polygon(brick.polygon_m)
@@ -270,8 +330,13 @@ def _hull_overlap_depth(ha: np.ndarray, hb: np.ndarray) -> float:
 
     h = np.vstack([ha, hb])
     norm = np.linalg.norm(h[:, :3], axis=1)
-    res = linprog([0.0, 0.0, 0.0, -1.0], A_ub=np.column_stack([h[:, :3], norm]), b_ub=-h[:, 3],
-                  bounds=[(None, None)] * 3 + [(0.0, None)], method="highs")
+    res = linprog(
+        [0.0, 0.0, 0.0, -1.0],
+        A_ub=np.column_stack([h[:, :3], norm]),
+        b_ub=-h[:, 3],
+        bounds=[(None, None)] * 3 + [(0.0, None)],
+        method="highs",
+    )
     return float(res.x[3]) if res.success else 0.0
 
 
@@ -281,9 +346,7 @@ def _overlapping_unbonded(bodies: Sequence[Body], bonded: set[tuple[int, int]], 
     whose corners nearly touch, overlap once grown)."""
     lo = np.array([b.location + b.vertices.min(axis=0) for b in bodies])
     hi = np.array([b.location + b.vertices.max(axis=0) for b in bodies])
-    from scipy.spatial import cKDTree
-
-    from scipy.spatial import ConvexHull
+    from scipy.spatial import ConvexHull, cKDTree
 
     centre, half = (lo + hi) / 2, (hi - lo) / 2
     tree = cKDTree(centre)
@@ -325,8 +388,17 @@ def footing_patches(bodies: Sequence[Body], tol_m: float, bottom: float | None =
         if hull.area <= 1e-6:
             continue
         c2, moments, outline, area = patch_section(hull, basis, down)
-        out.append(Bond(a=i, b=-1, location=np.array([c2[0], c2[1], bottom]), normal=down, area_m2=area,
-                        moments=moments, outline=outline))
+        out.append(
+            Bond(
+                a=i,
+                b=-1,
+                location=np.array([c2[0], c2[1], bottom]),
+                normal=down,
+                area_m2=area,
+                moments=moments,
+                outline=outline,
+            )
+        )
     return tuple(out)
 
 
@@ -366,8 +438,14 @@ class SceneGeometry:
     mortar_fill: bool
 
 
-def scene_geometry(bricks: Sequence[Brick], frames: list[WallFrame], corners: list[Corner], *,
-                   mortar_fill: bool = True, max_gap_m: float = 0.06) -> SceneGeometry:
+def scene_geometry(
+    bricks: Sequence[Brick],
+    frames: list[WallFrame],
+    corners: list[Corner],
+    *,
+    mortar_fill: bool = True,
+    max_gap_m: float = 0.06,
+) -> SceneGeometry:
     """Bodies and contact patches of a built structure (see the module docstring for the mortar model)."""
     if not bricks:
         raise InputError("model: it has no bricks; build it first with `calib-masonry build`")
@@ -382,8 +460,9 @@ def scene_geometry(bricks: Sequence[Brick], frames: list[WallFrame], corners: li
 
     def make_body(i: int, outline: np.ndarray | None) -> Body:
         solid, change = _cell_solid(bricks[i], outline, frames, corners)
-        return body_from_polyhedron(f"brick_{bricks[i].id:05d}", solid, MASONRY, mass_volume=bricks[i].volume,
-                                    hull_volume_change=change)
+        return body_from_polyhedron(
+            f"brick_{bricks[i].id:05d}", solid, MASONRY, mass_volume=bricks[i].volume, hull_volume_change=change
+        )
 
     bodies = [make_body(i, o) for i, o in enumerate(outlines)]
     pairs = np.array([(index[p.a], index[p.b]) for p in patches], dtype=np.int64).reshape(-1, 2)
@@ -403,19 +482,24 @@ def scene_geometry(bricks: Sequence[Brick], frames: list[WallFrame], corners: li
 
     fill = sum(ConvexHull(bd.vertices).volume for bd in bodies) / max(1e-12, sum(b.volume for b in bricks)) - 1.0
     return SceneGeometry(
-        names=tuple(bd.name for bd in bodies), vertices=tuple(bd.vertices for bd in bodies),
+        names=tuple(bd.name for bd in bodies),
+        vertices=tuple(bd.vertices for bd in bodies),
         faces=tuple(np.asarray(bd.faces, dtype=np.int64) for bd in bodies),
         locations=np.array([bd.location for bd in bodies], dtype=np.float64).reshape(-1, 3),
         brick_volumes=np.array([b.volume for b in bricks], dtype=np.float64),
         hull_volume_change=np.array([bd.hull_volume_change for bd in bodies], dtype=np.float64),
-        patch_pairs=pairs, patch_centroids=np.array([p.centroid for p in patches], dtype=np.float64).reshape(-1, 3),
+        patch_pairs=pairs,
+        patch_centroids=np.array([p.centroid for p in patches], dtype=np.float64).reshape(-1, 3),
         patch_normals=np.array([p.normal for p in patches], dtype=np.float64).reshape(-1, 3),
         patch_areas=np.array([p.area_m2 for p in patches], dtype=np.float64),
         patch_widths=np.array([p.min_width_m for p in patches], dtype=np.float64),
         patch_moments=np.array([p.moments for p in patches], dtype=np.float64).reshape(-1, 3),
         patch_outlines=np.array([p.outline for p in patches], dtype=np.float64).reshape(-1, OUTLINE_POINTS, 2),
-        mortar_fill_volume=float(fill), bricks_without_fill=len(ungrown), max_gap_m=float(max_gap_m),
-        mortar_fill=bool(mortar_fill))
+        mortar_fill_volume=float(fill),
+        bricks_without_fill=len(ungrown),
+        max_gap_m=float(max_gap_m),
+        mortar_fill=bool(mortar_fill),
+    )
 
 
 def _geometry_code_version() -> str:
@@ -440,13 +524,26 @@ def save_geometry(geometry: SceneGeometry, path: Path, key: str) -> None:
     nv = np.array([len(v) for v in g.vertices], dtype=np.int64)
     nf = np.array([len(f) for f in g.faces], dtype=np.int64)
     with open(path, "wb") as fh:
-        np.savez(fh, key=np.array(f"{_geometry_code_version()}:{key}"), names=np.array(g.names),
-                 vertex_counts=nv, vertices=np.concatenate(g.vertices).reshape(-1, 3),
-                 face_counts=nf, faces=np.concatenate(g.faces).reshape(-1, 3),
-                 locations=g.locations, brick_volumes=g.brick_volumes, hull_volume_change=g.hull_volume_change,
-                 patch_pairs=g.patch_pairs, patch_centroids=g.patch_centroids, patch_normals=g.patch_normals,
-                 patch_areas=g.patch_areas, patch_widths=g.patch_widths, patch_moments=g.patch_moments,
-                 patch_outlines=g.patch_outlines, scalars=np.array([g.mortar_fill_volume, g.bricks_without_fill, g.max_gap_m, float(g.mortar_fill)]))
+        np.savez(
+            fh,
+            key=np.array(f"{_geometry_code_version()}:{key}"),
+            names=np.array(g.names),
+            vertex_counts=nv,
+            vertices=np.concatenate(g.vertices).reshape(-1, 3),
+            face_counts=nf,
+            faces=np.concatenate(g.faces).reshape(-1, 3),
+            locations=g.locations,
+            brick_volumes=g.brick_volumes,
+            hull_volume_change=g.hull_volume_change,
+            patch_pairs=g.patch_pairs,
+            patch_centroids=g.patch_centroids,
+            patch_normals=g.patch_normals,
+            patch_areas=g.patch_areas,
+            patch_widths=g.patch_widths,
+            patch_moments=g.patch_moments,
+            patch_outlines=g.patch_outlines,
+            scalars=np.array([g.mortar_fill_volume, g.bricks_without_fill, g.max_gap_m, float(g.mortar_fill)]),
+        )
 
 
 def load_geometry(path: Path, key: str) -> SceneGeometry | None:
@@ -465,16 +562,33 @@ def load_geometry(path: Path, key: str) -> SceneGeometry | None:
         names=tuple(str(n) for n in d["names"]),
         vertices=tuple(np.split(d["vertices"], np.cumsum(d["vertex_counts"])[:-1])),
         faces=tuple(np.split(d["faces"], np.cumsum(d["face_counts"])[:-1])),
-        locations=d["locations"], brick_volumes=d["brick_volumes"], hull_volume_change=d["hull_volume_change"],
-        patch_pairs=d["patch_pairs"], patch_centroids=d["patch_centroids"], patch_normals=d["patch_normals"],
-        patch_areas=d["patch_areas"], patch_widths=d["patch_widths"], patch_moments=d["patch_moments"],
-        patch_outlines=d["patch_outlines"], mortar_fill_volume=fill,
-        bricks_without_fill=int(without), max_gap_m=gap, mortar_fill=bool(filled))
+        locations=d["locations"],
+        brick_volumes=d["brick_volumes"],
+        hull_volume_change=d["hull_volume_change"],
+        patch_pairs=d["patch_pairs"],
+        patch_centroids=d["patch_centroids"],
+        patch_normals=d["patch_normals"],
+        patch_areas=d["patch_areas"],
+        patch_widths=d["patch_widths"],
+        patch_moments=d["patch_moments"],
+        patch_outlines=d["patch_outlines"],
+        mortar_fill_volume=fill,
+        bricks_without_fill=int(without),
+        max_gap_m=gap,
+        mortar_fill=bool(filled),
+    )
 
 
-def scene_from_geometry(geometry: SceneGeometry, *, motion: GroundMotion | None = None, duration_s: float,
-                        material: Material = MASONRY, solver: SolverSettings = SolverSettings(),
-                        foundation: bool = False, pushover: Pushover | None = None) -> Scene:
+def scene_from_geometry(
+    geometry: SceneGeometry,
+    *,
+    motion: GroundMotion | None = None,
+    duration_s: float,
+    material: Material = MASONRY,
+    solver: SolverSettings = SolverSettings(),
+    foundation: bool = False,
+    pushover: Pushover | None = None,
+) -> Scene:
     """The scene of a structure's geometry under ``material``, ``solver`` and a ground ``motion`` or
     a ``pushover``: masses, frictions and the mortar joints.
 
@@ -482,20 +596,42 @@ def scene_from_geometry(geometry: SceneGeometry, *, motion: GroundMotion | None 
     mortar bed over its bottom face: a wall stands on a footing, and without it the ground moves
     the structure only through friction (0.6 g at most)."""
     g = geometry
-    bodies = [_body(n, v, f, c, vol, material, h) for n, v, f, c, vol, h in zip(
-        g.names, g.vertices, g.faces, g.locations, g.brick_volumes, g.hull_volume_change)]
-    bonds = tuple(Bond(a=int(a), b=int(b), location=c, normal=n, area_m2=float(area), moments=mom, outline=out)
-                  for (a, b), c, n, area, mom, out in zip(g.patch_pairs, g.patch_centroids, g.patch_normals,
-                                                         g.patch_areas, g.patch_moments, g.patch_outlines))
+    bodies = [
+        _body(n, v, f, c, vol, material, h)
+        for n, v, f, c, vol, h in zip(g.names, g.vertices, g.faces, g.locations, g.brick_volumes, g.hull_volume_change)
+    ]
+    bonds = tuple(
+        Bond(a=int(a), b=int(b), location=c, normal=n, area_m2=float(area), moments=mom, outline=out)
+        for (a, b), c, n, area, mom, out in zip(
+            g.patch_pairs, g.patch_centroids, g.patch_normals, g.patch_areas, g.patch_moments, g.patch_outlines
+        )
+    )
     if foundation:
         bonds = bonds + footing_patches(bodies, g.max_gap_m)
     lo = np.min([b.location + b.vertices.min(axis=0) for b in bodies], axis=0)
     hi = np.max([b.location + b.vertices.max(axis=0) for b in bodies], axis=0)
     span = float(max(hi[0] - lo[0], hi[1] - lo[1]))
-    plate = Plate(size=(span + 40.0, span + 40.0, 0.5), centre=(float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2)),
-                  top_z=float(lo[2]), friction=math.sqrt(material.friction))
-    notes = {"mortar_fill_volume": g.mortar_fill_volume, "bricks_without_fill": g.bricks_without_fill,
-             "bonds": len(bonds), "foundation_bonds": sum(bd.b < 0 for bd in bonds),
-             "max_hull_volume_change": float(g.hull_volume_change.max(initial=0.0))}
-    return Scene(bodies=tuple(bodies), bonds=bonds, plate=plate, motion=motion, pushover=pushover,
-                 duration_s=duration_s, solver=solver, material=material, notes=notes)
+    plate = Plate(
+        size=(span + 40.0, span + 40.0, 0.5),
+        centre=(float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2)),
+        top_z=float(lo[2]),
+        friction=math.sqrt(material.friction),
+    )
+    notes = {
+        "mortar_fill_volume": g.mortar_fill_volume,
+        "bricks_without_fill": g.bricks_without_fill,
+        "bonds": len(bonds),
+        "foundation_bonds": sum(bd.b < 0 for bd in bonds),
+        "max_hull_volume_change": float(g.hull_volume_change.max(initial=0.0)),
+    }
+    return Scene(
+        bodies=tuple(bodies),
+        bonds=bonds,
+        plate=plate,
+        motion=motion,
+        pushover=pushover,
+        duration_s=duration_s,
+        solver=solver,
+        material=material,
+        notes=notes,
+    )

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import shapely
 
-from ..build3d.contacts import max_interpenetration
 from ..build3d.assemble import Structure3D
+from ..build3d.contacts import max_interpenetration
 from ..errors import InputError
 from ..io import read_json
 
@@ -25,8 +25,9 @@ __all__ = ["compare", "compare_dirs", "match_polygons", "IOU_MATCH"]
 IOU_MATCH = 0.5
 
 
-def match_polygons(built: list[np.ndarray], truth: list[np.ndarray], threshold: float = IOU_MATCH
-                   ) -> list[tuple[int, int, float, float]]:
+def match_polygons(
+    built: list[np.ndarray], truth: list[np.ndarray], threshold: float = IOU_MATCH
+) -> list[tuple[int, int, float, float]]:
     """One-to-one matches ``(built index, truth index, IoU, Dice)`` with IoU > ``threshold``."""
     gb = [shapely.Polygon(p) for p in built]
     gt = [shapely.Polygon(p) for p in truth]
@@ -73,13 +74,21 @@ def compare_dirs(run_dir: str | Path, truth_dir: str | Path) -> dict:
     if not run_dir.is_dir():
         raise InputError(f"RUN_DIR {run_dir}: not a folder; give the --out folder of `calib-masonry build`")
     if not truth_dir.is_dir():
-        raise InputError(f"TRUTH_DIR {truth_dir}: not a folder; give the truth/ folder written by `calib-masonry synth`")
+        raise InputError(
+            f"TRUTH_DIR {truth_dir}: not a folder; give the truth/ folder written by `calib-masonry synth`"
+        )
     if not (truth_dir / "bricks.json").is_file():
-        raise InputError(f"TRUTH_DIR {truth_dir}: has no bricks.json; give the truth/ folder written by `calib-masonry synth`")
+        raise InputError(
+            f"TRUTH_DIR {truth_dir}: has no bricks.json; give the truth/ folder written by `calib-masonry synth`"
+        )
     truth_meta = read_json(truth_dir / "truth.json", field="TRUTH_DIR truth.json")
     metrics = compare(read_build(run_dir), read_build(truth_dir), where=f"RUN_DIR {run_dir}")
-    return {"run": run_dir.as_posix(), "truth": truth_dir.as_posix(), **metrics,
-            "structure": truth_meta.get("name", metrics["structure"])}
+    return {
+        "run": run_dir.as_posix(),
+        "truth": truth_dir.as_posix(),
+        **metrics,
+        "structure": truth_meta.get("name", metrics["structure"]),
+    }
 
 
 def compare(model: Structure3D, truth: Structure3D, *, where: str = "model") -> dict:
@@ -91,8 +100,10 @@ def compare(model: Structure3D, truth: Structure3D, *, where: str = "model") -> 
     truth_walls = {w.name: (i, w) for i, w in enumerate(truth.footprint.walls)}
     missing = sorted(set(truth_walls) - set(run_walls))
     if missing:
-        raise InputError(f"{where}: walls {missing} of the truth are not in the model; "
-                         "build the structure file that synth wrote beside the truth")
+        raise InputError(
+            f"{where}: walls {missing} of the truth are not in the model; "
+            "build the structure file that synth wrote beside the truth"
+        )
 
     per_wall, all_dice, all_centroid = [], [], []
     total_matched = total_built = total_true = 0
@@ -102,22 +113,30 @@ def compare(model: Structure3D, truth: Structure3D, *, where: str = "model") -> 
         t_list = [b for b in true if b.wall == ti]
         matches = match_polygons([b.polygon_m for b in b_list], [b.polygon_m for b in t_list])
         dice = [m[3] for m in matches]
-        cen = [1000.0 * float(np.linalg.norm(b_list[i].solid.centroid - t_list[j].solid.centroid))
-               for i, j, _, _ in matches]
+        cen = [
+            1000.0 * float(np.linalg.norm(b_list[i].solid.centroid - t_list[j].solid.centroid))
+            for i, j, _, _ in matches
+        ]
         all_dice += dice
         all_centroid += cen
         total_matched += len(matches)
         total_built += len(b_list)
         total_true += len(t_list)
-        per_wall.append({
-            "wall": name, "built": len(b_list), "true": len(t_list), "matched": len(matches),
-            "precision": len(matches) / len(b_list) if b_list else 0.0,
-            "recall": len(matches) / len(t_list) if t_list else 0.0,
-            "dice": _stats(dice), "centroid_error_mm": _stats(cen),
-            "width_error_m": rw.width_m - tw.width_m,
-            "height_error_m": rw.height_m - tw.height_m,
-            "theta_error_deg": _angle_diff_deg(rw.theta_deg, tw.theta_deg),
-        })
+        per_wall.append(
+            {
+                "wall": name,
+                "built": len(b_list),
+                "true": len(t_list),
+                "matched": len(matches),
+                "precision": len(matches) / len(b_list) if b_list else 0.0,
+                "recall": len(matches) / len(t_list) if t_list else 0.0,
+                "dice": _stats(dice),
+                "centroid_error_mm": _stats(cen),
+                "width_error_m": rw.width_m - tw.width_m,
+                "height_error_m": rw.height_m - tw.height_m,
+                "theta_error_deg": _angle_diff_deg(rw.theta_deg, tw.theta_deg),
+            }
+        )
     inter = max_interpenetration(built)
     vol_b = float(sum(b.volume for b in built))
     vol_t = float(sum(b.volume for b in true))
@@ -125,15 +144,21 @@ def compare(model: Structure3D, truth: Structure3D, *, where: str = "model") -> 
         "structure": truth.name,
         "precision": total_matched / total_built if total_built else 0.0,
         "recall": total_matched / total_true if total_true else 0.0,
-        "built_bricks": total_built, "true_bricks": total_true, "matched": total_matched,
+        "built_bricks": total_built,
+        "true_bricks": total_true,
+        "matched": total_matched,
         "dice": _stats(all_dice),
         "dice_below_0.98": int(sum(d < 0.98 for d in all_dice)),
         "centroid_error_mm": _stats(all_centroid),
         "max_abs_width_error_m": max(abs(w["width_error_m"]) for w in per_wall),
         "max_abs_height_error_m": max(abs(w["height_error_m"]) for w in per_wall),
         "max_abs_theta_error_deg": max(abs(w["theta_error_deg"]) for w in per_wall),
-        "total_volume_m3": {"built": vol_b, "true": vol_t, "error": vol_b - vol_t,
-                            "relative_error": (vol_b - vol_t) / vol_t if vol_t else math.nan},
+        "total_volume_m3": {
+            "built": vol_b,
+            "true": vol_t,
+            "error": vol_b - vol_t,
+            "relative_error": (vol_b - vol_t) / vol_t if vol_t else math.nan,
+        },
         "max_interpenetration_m3": inter.max_volume_m3,
         "worst_pair": inter.pair,
         "walls": per_wall,

@@ -68,8 +68,9 @@ def _owner(corner_index: int, course: int, a_has: bool, b_has: bool, corner: Cor
     return corner.a if (course + corner_index) % 2 == 0 else corner.b
 
 
-def _lengths(span: float, syn: SyntheticSpec, rng: np.random.Generator, *, half_first: bool,
-             avoid: float) -> list[float]:
+def _lengths(
+    span: float, syn: SyntheticSpec, rng: np.random.Generator, *, half_first: bool, avoid: float
+) -> list[float]:
     """Piece lengths filling ``span`` with mortar joints between them.
 
     The last piece is never a sliver: a leftover shorter than half a unit is merged with the piece
@@ -77,8 +78,7 @@ def _lengths(span: float, syn: SyntheticSpec, rng: np.random.Generator, *, half_
     end-face width) are avoided next to corners so the corner pieces stay recognisable.
     """
     m = syn.mortar_m
-    unit_lo, unit_hi = ((syn.brick_length_m, syn.brick_length_m) if syn.layout == "stretcher"
-                        else syn.stone_length_m)
+    unit_lo, unit_hi = (syn.brick_length_m, syn.brick_length_m) if syn.layout == "stretcher" else syn.stone_length_m
     lengths: list[float] = []
     pos = 0.0
     first = True
@@ -116,11 +116,17 @@ def _stone(x0: float, x1: float, z0: float, z1: float, irr: float, rng: np.rando
     """An irregular stone inside the cell [x0, x1] x [z0, z1]: chamfered, tilted, at most 8 vertices."""
     w, h = x1 - x0, z1 - z0
     s = min(w, h)
+
     # inward shifts of the four corners tilt the edges slightly
     def shift() -> float:
         return float(rng.uniform(0.0, 0.06 * irr * s))
-    corners_xy = [(x0 + shift(), z0 + shift()), (x1 - shift(), z0 + shift()),
-                  (x1 - shift(), z1 - shift()), (x0 + shift(), z1 - shift())]
+
+    corners_xy = [
+        (x0 + shift(), z0 + shift()),
+        (x1 - shift(), z0 + shift()),
+        (x1 - shift(), z1 - shift()),
+        (x0 + shift(), z1 - shift()),
+    ]
     pts: list[tuple[float, float]] = []
     for k, (cx, cz) in enumerate(corners_xy):
         prev_pt = np.array(corners_xy[k - 1])
@@ -152,8 +158,7 @@ def layout_structure(spec: StructureSpec) -> list[list[Piece]]:
     nominal_h = syn.brick_height_m if syn.layout == "stretcher" else syn.stone_height_m[0]
 
     def has_course(wall: int, course: Course) -> bool:
-        return course.z0 + MIN_TOP_COURSE_FRACTION * min(nominal_h, course.z1 - course.z0) \
-            <= spec.walls[wall].height_m
+        return course.z0 + MIN_TOP_COURSE_FRACTION * min(nominal_h, course.z1 - course.z0) <= spec.walls[wall].height_m
 
     out: list[list[Piece]] = []
     for n, wall in enumerate(spec.walls):

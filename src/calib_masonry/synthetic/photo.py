@@ -13,6 +13,7 @@ with ``heading_sigma_deg`` of noise).
 from __future__ import annotations
 
 import math
+
 import numpy as np
 from scipy import ndimage
 from skimage.draw import polygon as draw_polygon
@@ -25,16 +26,25 @@ from ..calibrate.camera import (
     intrinsics,
     principal_point,
     project,
-    px_per_m as photo_px_per_m,
     wall_from_camera_rotation,
+)
+from ..calibrate.camera import (
+    px_per_m as photo_px_per_m,
 )
 from ..errors import InputError
 from ..spec import PhotoSpec, WallSpec
 from .layouts import Piece
 from .render import mask_shape
 
-__all__ = ["corner_homographies", "photograph_corner", "photograph_wall", "render_photo", "sample_camera", "save_jpeg",
-           "wall_texture"]
+__all__ = [
+    "corner_homographies",
+    "photograph_corner",
+    "photograph_wall",
+    "render_photo",
+    "sample_camera",
+    "save_jpeg",
+    "wall_texture",
+]
 
 
 def wall_texture(wall: WallSpec, pieces: list[Piece], px_per_m: float, rng: np.random.Generator) -> np.ndarray:
@@ -50,10 +60,13 @@ def wall_texture(wall: WallSpec, pieces: list[Piece], px_per_m: float, rng: np.r
     colours[0] = np.array([0.74, 0.71, 0.65]) * rng.uniform(0.93, 1.05)
     img = colours[labels]
     small = (max(2, shape[0] // 16), max(2, shape[1] // 16))
-    weather = ndimage.zoom(ndimage.gaussian_filter(rng.normal(size=small), 2.0), (shape[0] / small[0], shape[1] / small[1]),
-                           order=1)[: shape[0], : shape[1]]
+    weather = ndimage.zoom(
+        ndimage.gaussian_filter(rng.normal(size=small), 2.0), (shape[0] / small[0], shape[1] / small[1]), order=1
+    )[: shape[0], : shape[1]]
     weather = np.pad(weather, ((0, shape[0] - weather.shape[0]), (0, shape[1] - weather.shape[1])), mode="edge")
-    streaks = ndimage.gaussian_filter1d(rng.normal(size=shape[1]), 3.0)[None, :] * np.linspace(1.0, 0.2, shape[0])[:, None]
+    streaks = (
+        ndimage.gaussian_filter1d(rng.normal(size=shape[1]), 3.0)[None, :] * np.linspace(1.0, 0.2, shape[0])[:, None]
+    )
     shade = 1.0 + 0.5 * weather / max(np.std(weather), 1e-9) * 0.1 - 0.03 * streaks / max(np.std(streaks), 1e-9)
     img = img * shade[..., None]
     grain = ndimage.gaussian_filter(rng.normal(0.0, 0.05, shape), 0.8)
@@ -74,8 +87,12 @@ def _in_frame(params, size, wall, margin) -> bool:
         return False
     xy = pts[:, :2] / pts[:, 2:]
     w, hh = size
-    return bool(np.all(xy[:, 0] > margin * w) and np.all(xy[:, 0] < (1 - margin) * w)
-                and np.all(xy[:, 1] > margin * hh) and np.all(xy[:, 1] < (1 - margin) * hh))
+    return bool(
+        np.all(xy[:, 0] > margin * w)
+        and np.all(xy[:, 0] < (1 - margin) * w)
+        and np.all(xy[:, 1] > margin * hh)
+        and np.all(xy[:, 1] < (1 - margin) * hh)
+    )
 
 
 def _aimed(wall: WallSpec, aim: tuple, d: float) -> np.ndarray:
@@ -112,8 +129,10 @@ def sample_camera(wall: WallSpec, spec: PhotoSpec, rng: np.random.Generator) -> 
         if not _in_frame(params, size, wall, spec.margin):
             d, params = d_fit, _aimed(wall, aim, d_fit)
         return {"params": params, "image_size": size, "focal_35mm": f35, "distance_m": d, "eye_height_m": eye}
-    raise InputError(f"wall '{wall.name}': no standing-height camera {spec.distance_m[0]:g}-{spec.distance_m[1]:g} m "
-                     f"away frames a {wall.width_m:g} x {wall.height_m:g} m wall; widen [photos] distance_m or focal_35mm")
+    raise InputError(
+        f"wall '{wall.name}': no standing-height camera {spec.distance_m[0]:g}-{spec.distance_m[1]:g} m "
+        f"away frames a {wall.width_m:g} x {wall.height_m:g} m wall; widen [photos] distance_m or focal_35mm"
+    )
 
 
 def _scale_of(h: np.ndarray, wall: WallSpec) -> np.ndarray:
@@ -134,7 +153,9 @@ def _background(params, size, rng) -> np.ndarray:
     rays = np.stack([xs, ys, np.ones_like(xs)], axis=-1) @ (r @ k_inv).T
     rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
     elev = rays[..., 2]
-    sky = np.array([0.62, 0.74, 0.90]) + np.clip(elev, 0, 1)[..., None] * (np.array([0.30, 0.48, 0.82]) - [0.62, 0.74, 0.90])
+    sky = np.array([0.62, 0.74, 0.90]) + np.clip(elev, 0, 1)[..., None] * (
+        np.array([0.30, 0.48, 0.82]) - [0.62, 0.74, 0.90]
+    )
     t = np.where(elev < -1e-6, -params[6] / np.minimum(elev, -1e-6), 0.0)
     gx, gy = params[4] + t * rays[..., 0], params[5] + t * rays[..., 1]
     pattern = 0.5 + 0.25 * np.sin(2.3 * gx) * np.sin(1.7 * gy) + 0.25 * np.sin(7.1 * gx + 3.3 * gy)
@@ -154,24 +175,40 @@ def _warp_layer(texture: np.ndarray, wall: WallSpec, image_from_wall: np.ndarray
 
     rows, cols = texture.shape[:2]
     # texture pixel (u, v) -> wall metres (Eq. 1 convention) -> photo pixel
-    wall_from_tex = np.array([[wall.width_m / cols, 0, 0.5 * wall.width_m / cols],
-                              [0, -wall.height_m / rows, wall.height_m - 0.5 * wall.height_m / rows],
-                              [0, 0, 1.0]])
+    wall_from_tex = np.array(
+        [
+            [wall.width_m / cols, 0, 0.5 * wall.width_m / cols],
+            [0, -wall.height_m / rows, wall.height_m - 0.5 * wall.height_m / rows],
+            [0, 0, 1.0],
+        ]
+    )
     photo_from_tex = image_from_wall @ wall_from_tex
-    src = torch.from_numpy(np.concatenate([texture, np.ones((rows, cols, 1), np.float32)], axis=-1)).permute(2, 0, 1)[None]
+    src = torch.from_numpy(np.concatenate([texture, np.ones((rows, cols, 1), np.float32)], axis=-1)).permute(2, 0, 1)[
+        None
+    ]
     tex_per_photo = (cols / wall.width_m) / float(np.min(_scale_of(image_from_wall, wall)))
     if tex_per_photo > 1.2:  # antialias: the texture is shrunk
         s = 0.45 * tex_per_photo
         k = int(2 * math.ceil(3 * s) + 1)
         src = gaussian_blur2d(src, (k, k), (s, s))
     w, h = size
-    warped = warp_perspective(src.double(), torch.from_numpy(photo_from_tex)[None], (h, w), mode="bilinear",
-                              align_corners=True)[0].permute(1, 2, 0).numpy()
+    warped = (
+        warp_perspective(
+            src.double(), torch.from_numpy(photo_from_tex)[None], (h, w), mode="bilinear", align_corners=True
+        )[0]
+        .permute(1, 2, 0)
+        .numpy()
+    )
     return warped[..., :3], np.clip(warped[..., 3:4], 0, 1)
 
 
-def render_photo(layers: list[tuple[np.ndarray, WallSpec, np.ndarray]], params: np.ndarray, size: tuple[int, int],
-                 spec: PhotoSpec, rng: np.random.Generator) -> np.ndarray:
+def render_photo(
+    layers: list[tuple[np.ndarray, WallSpec, np.ndarray]],
+    params: np.ndarray,
+    size: tuple[int, int],
+    spec: PhotoSpec,
+    rng: np.random.Generator,
+) -> np.ndarray:
     """The photo (h, w, 3) uint8 of textured walls ``(texture, wall, image_from_wall)`` seen by the
     camera ``params`` (which also places the sky and the ground), with blur and noise."""
     img = _background(params, size, rng)
@@ -180,7 +217,11 @@ def render_photo(layers: list[tuple[np.ndarray, WallSpec, np.ndarray]], params: 
         img = rgb + (1 - alpha) * img
     blur = rng.uniform(*spec.blur_px)
     img = ndimage.gaussian_filter(img, (blur, blur, 0))
-    img = img + rng.normal(0, spec.noise, img.shape) + rng.normal(0, 1, img.shape) * spec.noise * np.sqrt(np.clip(img, 0, 1))
+    img = (
+        img
+        + rng.normal(0, spec.noise, img.shape)
+        + rng.normal(0, 1, img.shape) * spec.noise * np.sqrt(np.clip(img, 0, 1))
+    )
     return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
@@ -229,15 +270,26 @@ def photograph_wall(wall: WallSpec, pieces: list[Piece], spec: PhotoSpec, rng: n
         "image": img,
         "truth": {
             "image_size": list(size),
-            "params": dict(zip(("focal_px", "yaw_rad", "pitch_rad", "roll_rad", "cx_m", "cy_m", "cz_m", "width_m",
-                                "height_m"), map(float, params))),
-            "yaw_deg": math.degrees(params[1]), "pitch_deg": math.degrees(params[2]), "roll_deg": math.degrees(params[3]),
-            "focal_35mm": cam["focal_35mm"], "distance_m": cam["distance_m"], "eye_height_m": cam["eye_height_m"],
+            "params": dict(
+                zip(
+                    ("focal_px", "yaw_rad", "pitch_rad", "roll_rad", "cx_m", "cy_m", "cz_m", "width_m", "height_m"),
+                    map(float, params),
+                )
+            ),
+            "yaw_deg": math.degrees(params[1]),
+            "pitch_deg": math.degrees(params[2]),
+            "roll_deg": math.degrees(params[3]),
+            "focal_35mm": cam["focal_35mm"],
+            "distance_m": cam["distance_m"],
+            "eye_height_m": cam["eye_height_m"],
             "image_from_wall": (h / h[2, 2]).tolist(),
             "image_to_wall": (np.linalg.inv(h) / np.linalg.inv(h)[2, 2]).tolist(),
             "corners_px": project(h, _corners_m(wall)).tolist(),
-            "width_m": wall.width_m, "height_m": wall.height_m, "theta_deg": wall.theta_deg,
-            "heading_deg": true_heading, "exif_heading_deg": exif_heading,
+            "width_m": wall.width_m,
+            "height_m": wall.height_m,
+            "theta_deg": wall.theta_deg,
+            "heading_deg": true_heading,
+            "exif_heading_deg": exif_heading,
             "texture_px_per_m": tex_res,
         },
     }
@@ -255,8 +307,14 @@ def corner_homographies(params: np.ndarray, pp, wall_a: WallSpec, turn_rad: floa
     return h_a, h_b
 
 
-def photograph_corner(wall_a: WallSpec, pieces_a: list[Piece], wall_b: WallSpec, pieces_b: list[Piece],
-                      spec: PhotoSpec, rng: np.random.Generator) -> dict:
+def photograph_corner(
+    wall_a: WallSpec,
+    pieces_a: list[Piece],
+    wall_b: WallSpec,
+    pieces_b: list[Piece],
+    spec: PhotoSpec,
+    rng: np.random.Generator,
+) -> dict:
     """A photo of the corner where wall_a ends and wall_b starts, taken from outside along the
     corner's bisector (+-8 degrees), the corner edge in frame. Truth: the turn angle and the camera."""
     turn = (wall_b.theta_rad - wall_a.theta_rad + math.pi) % (2 * math.pi) - math.pi
@@ -272,8 +330,12 @@ def photograph_corner(wall_a: WallSpec, pieces_a: list[Piece], wall_b: WallSpec,
         f = focal_px_from_35mm(rng.uniform(*spec.focal_35mm), size)
         eye = rng.uniform(*spec.eye_height_m)
         jitter = math.radians(rng.uniform(-8.0, 8.0))
-        fwd = -np.array([bis[0] * math.cos(jitter) - bis[1] * math.sin(jitter),
-                         bis[0] * math.sin(jitter) + bis[1] * math.cos(jitter)])
+        fwd = -np.array(
+            [
+                bis[0] * math.cos(jitter) - bis[1] * math.sin(jitter),
+                bis[0] * math.sin(jitter) + bis[1] * math.cos(jitter),
+            ]
+        )
         yaw = math.atan2(fwd[0], fwd[1])
         roll = math.radians(rng.uniform(-spec.max_roll_deg, spec.max_roll_deg))
         z_top = min(wall_a.height_m, wall_b.height_m)
@@ -298,10 +360,22 @@ def photograph_corner(wall_a: WallSpec, pieces_a: list[Piece], wall_b: WallSpec,
         tex_a = wall_texture(wall_a, pieces_a, res, rng)
         tex_b = wall_texture(wall_b, pieces_b, res, rng)
         img = render_photo([(tex_b, wall_b, h_b), (tex_a, wall_a, h_a)], params, size, spec, rng)
-        return {"image": img, "truth": {"walls": [wall_a.name, wall_b.name], "turn_deg": math.degrees(turn),
-                                        "image_size": list(size), "focal_px": float(f), "eye_height_m": eye,
-                                        "yaw_deg": math.degrees(yaw), "pitch_deg": math.degrees(pitch),
-                                        "roll_deg": math.degrees(roll), "distance_m": float(d),
-                                        "focal_35mm": float(f * math.hypot(36, 24) / math.hypot(*size))}}
-    raise InputError(f"corner {wall_a.name}/{wall_b.name}: no camera {spec.distance_m[0]:g}-{spec.distance_m[1]:g} m "
-                     "away frames it; widen [photos] distance_m")
+        return {
+            "image": img,
+            "truth": {
+                "walls": [wall_a.name, wall_b.name],
+                "turn_deg": math.degrees(turn),
+                "image_size": list(size),
+                "focal_px": float(f),
+                "eye_height_m": eye,
+                "yaw_deg": math.degrees(yaw),
+                "pitch_deg": math.degrees(pitch),
+                "roll_deg": math.degrees(roll),
+                "distance_m": float(d),
+                "focal_35mm": float(f * math.hypot(36, 24) / math.hypot(*size)),
+            },
+        }
+    raise InputError(
+        f"corner {wall_a.name}/{wall_b.name}: no camera {spec.distance_m[0]:g}-{spec.distance_m[1]:g} m "
+        "away frames it; widen [photos] distance_m"
+    )

@@ -8,7 +8,6 @@ the result is thresholded at one half.
 
 from __future__ import annotations
 
-
 import numpy as np
 from scipy import ndimage
 from skimage.draw import polygon as draw_polygon
@@ -24,8 +23,9 @@ def mask_shape(wall: WallSpec, px_per_m: float) -> tuple[int, int]:
     return (max(2, int(round(wall.height_m * px_per_m))), max(2, int(round(wall.width_m * px_per_m))))
 
 
-def rasterise_wall(wall: WallSpec, pieces: list[Piece], syn: SyntheticSpec,
-                   rng: np.random.Generator) -> tuple[np.ndarray, list[np.ndarray]]:
+def rasterise_wall(
+    wall: WallSpec, pieces: list[Piece], syn: SyntheticSpec, rng: np.random.Generator
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """Mask ``(rows, cols)`` of a wall and each piece's polygon in image pixels (x, y)."""
     shape = mask_shape(wall, syn.px_per_m)
     mask = np.zeros(shape, dtype=bool)
@@ -43,5 +43,3 @@ def rasterise_wall(wall: WallSpec, pieces: list[Piece], syn: SyntheticSpec,
             f = f + rng.uniform(-syn.edge_noise, syn.edge_noise, size=shape)
         mask = f > 0.5
     return mask, polys_px
-
-

@@ -7,10 +7,9 @@ the region's crop. Between two polygons the areas are exact (shapely).
 from __future__ import annotations
 
 import numpy as np
-import shapely
 from skimage.draw import polygon as draw_polygon
 
-__all__ = ["rasterise_polygon", "dice_masks", "dice_polygon_region", "dice_polygons", "iou_polygons"]
+__all__ = ["rasterise_polygon", "dice_masks", "dice_polygon_region"]
 
 
 def rasterise_polygon(poly_xy: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -46,22 +45,3 @@ def dice_masks(a: np.ndarray, b: np.ndarray) -> float:
 def dice_polygon_region(poly_xy: np.ndarray, region: np.ndarray) -> float:
     """Dice of a polygon (crop pixel coordinates) against a boolean region crop ``(rows, cols)``."""
     return dice_masks(rasterise_polygon(poly_xy, region.shape), region)
-
-
-def _poly(p) -> shapely.Polygon:
-    g = p if isinstance(p, shapely.Geometry) else shapely.Polygon(np.asarray(p, dtype=np.float64))
-    return g if g.is_valid else shapely.make_valid(g)
-
-
-def dice_polygons(p, q) -> float:
-    """Exact Dice of two polygons (arrays ``(k, 2)`` or shapely geometries)."""
-    a, b = _poly(p), _poly(q)
-    denom = a.area + b.area
-    return 0.0 if denom == 0 else 2.0 * a.intersection(b).area / denom
-
-
-def iou_polygons(p, q) -> float:
-    a, b = _poly(p), _poly(q)
-    inter = a.intersection(b).area
-    union = a.area + b.area - inter
-    return 0.0 if union == 0 else inter / union

@@ -13,11 +13,9 @@ __all__ = ["plot_trace"]
 
 def plot_trace(mask: np.ndarray, result: TraceResult, path: Path, *, title: str = "") -> None:
     """The mask in grey with every brick's polygon and vertices, coloured by its Dice."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
+
+    from .. import _figure as plt
 
     rows, cols = mask.shape
     scale = 9.0 / max(rows, cols)
@@ -25,16 +23,30 @@ def plot_trace(mask: np.ndarray, result: TraceResult, path: Path, *, title: str 
     ax.imshow(mask, cmap="gray", vmin=-0.6, vmax=1.3, interpolation="nearest")
     cmap = plt.get_cmap("plasma")
     dice = np.array([b.dice for b in result.bricks])
-    coll = PolyCollection([b.vertices_xy for b in result.bricks], facecolors="none",
-                          edgecolors=[cmap(np.clip((d - 0.9) / 0.1, 0, 1)) for d in dice], linewidths=1.0)
+    coll = PolyCollection(
+        [b.vertices_xy for b in result.bricks],
+        facecolors="none",
+        edgecolors=[cmap(np.clip((d - 0.9) / 0.1, 0, 1)) for d in dice],
+        linewidths=1.0,
+    )
     ax.add_collection(coll)
     if result.refined:
-        ax.add_collection(PolyCollection([b.splitting_xy for b in result.bricks if b.splitting_xy is not None],
-                                         facecolors="none", edgecolors="c", linewidths=0.6, linestyles="--"))
+        ax.add_collection(
+            PolyCollection(
+                [b.splitting_xy for b in result.bricks if b.splitting_xy is not None],
+                facecolors="none",
+                edgecolors="c",
+                linewidths=0.6,
+                linestyles="--",
+            )
+        )
         title = (f"{title}  splitting (dashed) mean Dice {result.mean_dice_splitting:.4f} -> refined (solid)").strip()
     pts = np.concatenate([b.vertices_xy for b in result.bricks])
     ax.plot(pts[:, 0], pts[:, 1], ".", ms=2, color="c")
-    sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0.9, 1.0))
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    sm = ScalarMappable(cmap=cmap, norm=Normalize(0.9, 1.0))
     fig.colorbar(sm, ax=ax, fraction=0.046, pad=0.02, label="Dice")
     ax.set_xlim(-0.5, cols - 0.5)
     ax.set_ylim(rows - 0.5, -0.5)

@@ -33,8 +33,15 @@ from scipy import ndimage
 from .._jax import jax, jnp
 from .dice import rasterise_polygon
 
-__all__ = ["RefineConfig", "RefinedPolygon", "soft_inside", "soft_dice", "hard_dice_points",
-           "refine_polygons", "signed_distance"]
+__all__ = [
+    "RefineConfig",
+    "RefinedPolygon",
+    "soft_inside",
+    "soft_dice",
+    "hard_dice_points",
+    "refine_polygons",
+    "signed_distance",
+]
 
 
 @dataclass(frozen=True)
@@ -130,7 +137,7 @@ def _loss(params, args):
     dice = 2.0 * tp / (jnp.sum(weight * p) + const + m)
     # a barrier keeps every vertex inside the crop, where the pixels that judge it are
     outside = jnp.maximum(jnp.abs(verts) - box, 0.0)
-    return m * (1.0 - dice) + penalty * jnp.sum(weight * forbid * p) + 100.0 * penalty * jnp.sum(outside ** 2)
+    return m * (1.0 - dice) + penalty * jnp.sum(weight * forbid * p) + 100.0 * penalty * jnp.sum(outside**2)
 
 
 @partial(jax.jit, static_argnames=("max_steps", "rtol", "atol"))
@@ -139,8 +146,14 @@ def _refine_batch(params0, n, points, target, forbid, weight, const, box, penalt
 
     def one(p0, n_, pts, tgt, fb, w, c, bx):
         def stage(y, tau):
-            sol = optx.minimise(_loss, optx.BFGS(rtol=rtol, atol=atol), y,
-                                args=(n_, pts, tgt, fb, w, c, bx, tau, penalty), max_steps=max_steps, throw=False)
+            sol = optx.minimise(
+                _loss,
+                optx.BFGS(rtol=rtol, atol=atol),
+                y,
+                args=(n_, pts, tgt, fb, w, c, bx, tau, penalty),
+                max_steps=max_steps,
+                throw=False,
+            )
             return jnp.where(jnp.all(jnp.isfinite(sol.value)), sol.value, y), None
 
         y, _ = jax.lax.scan(stage, p0, taus)
@@ -155,7 +168,7 @@ def _refine_batch(params0, n, points, target, forbid, weight, const, box, penalt
 
 def _bucket(size: int) -> int:
     k = max(6, math.ceil(math.log2(max(size, 1))))
-    lo = 2 ** k
+    lo = 2**k
     return int(0.75 * lo) if size <= 0.75 * lo else lo
 
 
@@ -172,8 +185,15 @@ class _Brick:
     allowed: np.ndarray  # (rows, cols) crop bool
 
 
-def _prepare(labels: np.ndarray, owner: np.ndarray, label: int, bbox: tuple[slice, slice], margin: int,
-             start: np.ndarray, band: float) -> _Brick:
+def _prepare(
+    labels: np.ndarray,
+    owner: np.ndarray,
+    label: int,
+    bbox: tuple[slice, slice],
+    margin: int,
+    start: np.ndarray,
+    band: float,
+) -> _Brick:
     rows, cols = labels.shape
     r0, r1 = bbox[0].start - margin, bbox[0].stop + margin
     c0, c1 = bbox[1].start - margin, bbox[1].stop + margin
@@ -181,16 +201,18 @@ def _prepare(labels: np.ndarray, owner: np.ndarray, label: int, bbox: tuple[slic
     region = np.zeros(shape, bool)
     allowed = np.zeros(shape, bool)
     rr0, rr1, cc0, cc1 = max(r0, 0), min(r1, rows), max(c0, 0), min(c1, cols)
-    region[rr0 - r0:rr1 - r0, cc0 - c0:cc1 - c0] = labels[rr0:rr1, cc0:cc1] == label
-    allowed[rr0 - r0:rr1 - r0, cc0 - c0:cc1 - c0] = owner[rr0:rr1, cc0:cc1] == label
+    region[rr0 - r0 : rr1 - r0, cc0 - c0 : cc1 - c0] = labels[rr0:rr1, cc0:cc1] == label
+    allowed[rr0 - r0 : rr1 - r0, cc0 - c0 : cc1 - c0] = owner[rr0:rr1, cc0:cc1] == label
     origin = np.array([c0, r0], float)
     raster = rasterise_polygon(start - origin, shape)
     # only pixels near either outline (or where they disagree) can change; the rest are constants
     disagree = region != raster
     if disagree.any():
         # how far the start strays from the outline: the band must cover the moves that undo it
-        dev = max(float(ndimage.distance_transform_edt(~raster)[region & ~raster].max(initial=0.0)),
-                  float(ndimage.distance_transform_edt(raster)[raster & ~region].max(initial=0.0)))
+        dev = max(
+            float(ndimage.distance_transform_edt(~raster)[region & ~raster].max(initial=0.0)),
+            float(ndimage.distance_transform_edt(raster)[raster & ~region].max(initial=0.0)),
+        )
         band = band + dev
     near = np.zeros(shape, bool)
     for m in (region, raster):
@@ -201,9 +223,17 @@ def _prepare(labels: np.ndarray, owner: np.ndarray, label: int, bbox: tuple[slic
     yy, xx = np.nonzero(near)
     centre = np.array([(shape[1] - 1) / 2.0, (shape[0] - 1) / 2.0])
     points = np.column_stack([xx, yy]).astype(np.float64) - centre
-    return _Brick(origin=origin, shape=shape, points=points, centre=centre,
-                  target=region[yy, xx].astype(np.float64), forbid=(~allowed[yy, xx]).astype(np.float64),
-                  const=const, region=region, allowed=allowed)
+    return _Brick(
+        origin=origin,
+        shape=shape,
+        points=points,
+        centre=centre,
+        target=region[yy, xx].astype(np.float64),
+        forbid=(~allowed[yy, xx]).astype(np.float64),
+        const=const,
+        region=region,
+        allowed=allowed,
+    )
 
 
 def _owner_map(labels: np.ndarray) -> np.ndarray:
@@ -221,9 +251,14 @@ def _hard_dice(poly_crop: np.ndarray, region: np.ndarray, raster: np.ndarray | N
     return 1.0 if total == 0 else 2.0 * float((raster & region).sum()) / float(total)
 
 
-def refine_polygons(labels: np.ndarray, ids: list[int], starts: list[np.ndarray],
-                    config: RefineConfig = RefineConfig(), *,
-                    alternatives: list[np.ndarray] | None = None) -> list[RefinedPolygon]:
+def refine_polygons(
+    labels: np.ndarray,
+    ids: list[int],
+    starts: list[np.ndarray],
+    config: RefineConfig = RefineConfig(),
+    *,
+    alternatives: list[np.ndarray] | None = None,
+) -> list[RefinedPolygon]:
     """Refine the polygons ``starts`` (image pixels, ``(n_i, 2)``) of the bricks ``ids`` of ``labels``.
 
     ``labels`` is the labelled mask ``(rows, cols)`` (0 = mortar) the polygons were traced from.
@@ -252,8 +287,9 @@ def refine_polygons(labels: np.ndarray, ids: list[int], starts: list[np.ndarray]
         else:
             jobs.append((i, s, False))
             jobs.append((i, a, False))
-    bricks = [_prepare(labels, owner, ids[i], slices[ids[i] - 1], config.margin_px, s, config.band_px)
-              for i, s, _ in jobs]
+    bricks = [
+        _prepare(labels, owner, ids[i], slices[ids[i] - 1], config.margin_px, s, config.band_px) for i, s, _ in jobs
+    ]
     fits = _run_jobs(bricks, [s for _, s, _ in jobs], [e for _, _, e in jobs], config)
     best: dict[int, RefinedPolygon] = {}
     keep: dict[int, _Brick] = {}
@@ -265,8 +301,9 @@ def refine_polygons(labels: np.ndarray, ids: list[int], starts: list[np.ndarray]
     return _resolve_overlaps([keep[i] for i in order], splitting, [best[i] for i in order])
 
 
-def _run_jobs(bricks: list[_Brick], starts: list[np.ndarray], easy: list[bool], config: RefineConfig
-              ) -> list[np.ndarray | None]:
+def _run_jobs(
+    bricks: list[_Brick], starts: list[np.ndarray], easy: list[bool], config: RefineConfig
+) -> list[np.ndarray | None]:
     n_max = 4 * math.ceil(max(len(s) for s in starts) / 4)  # few vertex-count shapes to compile
     results: list[np.ndarray | None] = [None] * len(bricks)
     buckets: dict[tuple[bool, int], list[int]] = {}
@@ -277,7 +314,7 @@ def _run_jobs(bricks: list[_Brick], starts: list[np.ndarray], easy: list[bool], 
         taus = config.easy_temperatures if is_easy else config.temperatures
         steps = config.easy_steps if is_easy else config.max_steps
         for c in range(0, len(members), config.chunk):
-            chunk = members[c:c + config.chunk]
+            chunk = members[c : c + config.chunk]
             pad = min(config.chunk, 2 ** math.ceil(math.log2(len(chunk)))) - len(chunk)
             idx = chunk + [chunk[0]] * pad  # pad the batch with repeats (results ignored)
             pts = np.full((len(idx), size, 2), 1e4)
@@ -298,16 +335,27 @@ def _run_jobs(bricks: list[_Brick], starts: list[np.ndarray], easy: list[bool], 
                 const[r] = b.const
                 box[r] = b.centre - 0.5  # half the crop, less half a pixel
                 s = starts[i] - b.origin - b.centre
-                p0[r, :len(s)] = s
-                p0[r, len(s):] = s[-1]
+                p0[r, : len(s)] = s
+                p0[r, len(s) :] = s[-1]
                 n[r] = len(s)
-            out = _refine_batch(jnp.asarray(p0, dt), jnp.asarray(n), jnp.asarray(pts, dt), jnp.asarray(tgt, dt),
-                                jnp.asarray(fb, dt), jnp.asarray(w, dt), jnp.asarray(const, dt), jnp.asarray(box, dt),
-                                jnp.asarray(config.penalty, dt), jnp.asarray(taus, dtype=dt), max_steps=steps,
-                                rtol=config.rtol, atol=config.atol)
+            out = _refine_batch(
+                jnp.asarray(p0, dt),
+                jnp.asarray(n),
+                jnp.asarray(pts, dt),
+                jnp.asarray(tgt, dt),
+                jnp.asarray(fb, dt),
+                jnp.asarray(w, dt),
+                jnp.asarray(const, dt),
+                jnp.asarray(box, dt),
+                jnp.asarray(config.penalty, dt),
+                jnp.asarray(taus, dtype=dt),
+                max_steps=steps,
+                rtol=config.rtol,
+                atol=config.atol,
+            )
             out = np.asarray(out)
             for r, i in enumerate(chunk):
-                results[i] = out[r, :len(starts[i])] + bricks[i].centre + bricks[i].origin
+                results[i] = out[r, : len(starts[i])] + bricks[i].centre + bricks[i].origin
     return results
 
 
@@ -346,8 +394,9 @@ def _accept_one(b: _Brick, splitting: np.ndarray, start: np.ndarray, fit: np.nda
     return RefinedPolygon(splitting, d0, d0, False, reason)
 
 
-def _resolve_overlaps(bricks: list[_Brick], starts: list[np.ndarray], out: list[RefinedPolygon]
-                      ) -> list[RefinedPolygon]:
+def _resolve_overlaps(
+    bricks: list[_Brick], starts: list[np.ndarray], out: list[RefinedPolygon]
+) -> list[RefinedPolygon]:
     """Refined neighbours that overlap (between pixel centres) are moved back toward their starts.
 
     Each refined polygon of an overlapping pair is blended ``start + a (refined - start)`` with the
@@ -373,8 +422,11 @@ def _resolve_overlaps(bricks: list[_Brick], starts: list[np.ndarray], out: list[
                 d = _hard_dice(v - bricks[k].origin, bricks[k].region)
                 if a > 0 and d < p.dice_before:
                     continue
-                out[k] = (RefinedPolygon(v, p.dice_before, d, True) if a > 0 else
-                          RefinedPolygon(starts[k], p.dice_before, p.dice_before, False, "overlapped a neighbour"))
+                out[k] = (
+                    RefinedPolygon(v, p.dice_before, d, True)
+                    if a > 0
+                    else RefinedPolygon(starts[k], p.dice_before, p.dice_before, False, "overlapped a neighbour")
+                )
                 geoms[k] = g
                 changed = True
                 break

@@ -113,7 +113,9 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
     # in a Gaussian window, so faint joints far from the camera get their own threshold
     likely = best > max(config.floor, 0.5 * threshold_otsu(best))
     sigma = max(1.0, config.window_px / 4)
-    level = ndimage.gaussian_filter(best * likely, sigma) / np.maximum(ndimage.gaussian_filter(likely * 1.0, sigma), 1e-6)
+    level = ndimage.gaussian_filter(best * likely, sigma) / np.maximum(
+        ndimage.gaussian_filter(likely * 1.0, sigma), 1e-6
+    )
     mortar = (best > 0.5 * level) & (best > config.floor)
     bricks = ~mortar
     if config.separate_px > 0:

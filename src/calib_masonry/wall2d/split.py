@@ -9,7 +9,7 @@ outline and keep its order, so the result follows the outline's orientation.
 from __future__ import annotations
 
 import heapq
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
@@ -74,10 +74,7 @@ def splitting_sequence(points: np.ndarray, max_vertices: int) -> Iterator[np.nda
 
 def split_outline(points: np.ndarray, n_vertices: int) -> np.ndarray:
     """Sorted indices of ``n_vertices`` outline points chosen by the splitting method."""
-    last = None
-    for last in splitting_sequence(points, n_vertices):
-        pass
-    return last
+    return list(splitting_sequence(points, n_vertices))[-1]
 
 
 def visvalingam(points: np.ndarray, n_vertices: int) -> np.ndarray:

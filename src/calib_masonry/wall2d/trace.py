@@ -73,12 +73,26 @@ class TraceResult:
     def to_json(self) -> dict:
         return {
             "image_shape": list(self.image_shape),
-            "bricks": [{"id": b.id, "vertices_xy": b.vertices_xy.tolist(),
-                        "traced_vertices": b.traced_vertices, "dice": b.dice, "area_px": b.area_px,
-                        **({"dice_splitting": b.dice_splitting, "refined": b.refined, "note": b.note,
-                    "splitting_vertices_xy": b.splitting_xy.tolist()}
-                           if b.dice_splitting is not None else {})}
-                       for b in self.bricks],
+            "bricks": [
+                {
+                    "id": b.id,
+                    "vertices_xy": b.vertices_xy.tolist(),
+                    "traced_vertices": b.traced_vertices,
+                    "dice": b.dice,
+                    "area_px": b.area_px,
+                    **(
+                        {
+                            "dice_splitting": b.dice_splitting,
+                            "refined": b.refined,
+                            "note": b.note,
+                            "splitting_vertices_xy": b.splitting_xy.tolist(),
+                        }
+                        if b.dice_splitting is not None
+                        else {}
+                    ),
+                }
+                for b in self.bricks
+            ],
             "mean_dice": self.mean_dice,
             **({"mean_dice_splitting": self.mean_dice_splitting} if self.refined else {}),
         }
@@ -169,16 +183,22 @@ def trace_mask(mask: np.ndarray, config: TraceConfig = TraceConfig()) -> TraceRe
         bricks = []
         for k, region, outline, offset in items:
             poly, dice = _simplify(outline, region, config)
-            bricks.append(TracedBrick(id=k, vertices_xy=poly + offset, traced_vertices=_corner_count(outline),
-                                      dice=float(dice), area_px=int(region.sum())))
+            bricks.append(
+                TracedBrick(
+                    id=k,
+                    vertices_xy=poly + offset,
+                    traced_vertices=_corner_count(outline),
+                    dice=float(dice),
+                    area_px=int(region.sum()),
+                )
+            )
     return TraceResult(image_shape=tuple(int(s) for s in mask.shape), bricks=tuple(bricks))
 
 
 def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[TracedBrick]:
     from .refine import refine_polygons
 
-    counts = ([config.vertices] if config.vertices is not None
-              else list(range(3, config.max_vertices + 1)))
+    counts = [config.vertices] if config.vertices is not None else list(range(3, config.max_vertices + 1))
     best: dict[int, tuple] = {}
     pending = list(range(len(items)))
     for n in counts:
@@ -191,7 +211,7 @@ def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[Trace
                 continue
             m = min(n, len(outline))
             idx = dense = None
-            for j, seq in enumerate(splitting_sequence(outline, max(m, min(4 * m, len(outline))))):
+            for seq in splitting_sequence(outline, max(m, min(4 * m, len(outline)))):
                 if len(seq) == m:
                     idx = seq
                 dense = seq
@@ -219,28 +239,51 @@ def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[Trace
             d = dice_polygon_region(outline, region)
             best[i] = (outline + offset, d, d, False, "outline shorter than the vertex count", outline + offset)
         v, d, sd, refined, note, sp = best[i]
-        out.append(TracedBrick(id=k, vertices_xy=v, traced_vertices=_corner_count(outline), dice=float(d),
-                               area_px=int(region.sum()), dice_splitting=float(sd), refined=bool(refined),
-                               note=note, splitting_xy=sp))
+        out.append(
+            TracedBrick(
+                id=k,
+                vertices_xy=v,
+                traced_vertices=_corner_count(outline),
+                dice=float(d),
+                area_px=int(region.sum()),
+                dice_splitting=float(sd),
+                refined=bool(refined),
+                note=note,
+                splitting_xy=sp,
+            )
+        )
     return out
 
 
-def refine_trace(mask: np.ndarray, traced: TraceResult, config: "RefineConfig | None" = None,
-                 segment: SegmentConfig = SegmentConfig()) -> TraceResult:
+def refine_trace(
+    mask: np.ndarray,
+    traced: TraceResult,
+    config: "RefineConfig | None" = None,
+    segment: SegmentConfig = SegmentConfig(),
+) -> TraceResult:
     """Refine the polygons of a trace of ``mask`` by soft Dice (:mod:`calib_masonry.wall2d.refine`),
     keeping every vertex count; no brick ends with a lower Dice than its traced polygon. ``segment``
     must be the segmentation the trace used (its labels are the bricks' ids)."""
     from .refine import RefineConfig, refine_polygons
 
     if tuple(mask.shape) != tuple(traced.image_shape):
-        raise InputError(f"refine: the mask is {mask.shape[1]} x {mask.shape[0]} px but the trace was made on "
-                         f"{traced.image_shape[1]} x {traced.image_shape[0]} px; refine the trace of this mask")
+        raise InputError(
+            f"refine: the mask is {mask.shape[1]} x {mask.shape[0]} px but the trace was made on "
+            f"{traced.image_shape[1]} x {traced.image_shape[0]} px; refine the trace of this mask"
+        )
     labels = label_bricks(mask, segment)
     bricks = list(traced.bricks)
-    results = refine_polygons(labels, [b.id for b in bricks], [b.vertices_xy for b in bricks],
-                              config or RefineConfig())
-    out = [replace(b, vertices_xy=r.vertices_xy, dice=float(r.dice), refined=bool(r.refined), note=r.reason,
-                   dice_splitting=b.dice if b.dice_splitting is None else b.dice_splitting,
-                   splitting_xy=b.vertices_xy if b.splitting_xy is None else b.splitting_xy)
-           for b, r in zip(bricks, results)]
+    results = refine_polygons(labels, [b.id for b in bricks], [b.vertices_xy for b in bricks], config or RefineConfig())
+    out = [
+        replace(
+            b,
+            vertices_xy=r.vertices_xy,
+            dice=float(r.dice),
+            refined=bool(r.refined),
+            note=r.reason,
+            dice_splitting=b.dice if b.dice_splitting is None else b.dice_splitting,
+            splitting_xy=b.vertices_xy if b.splitting_xy is None else b.splitting_xy,
+        )
+        for b, r in zip(bricks, results)
+    ]
     return TraceResult(image_shape=traced.image_shape, bricks=tuple(out))

@@ -1,0 +1,28 @@
+"""Figures without pyplot: matplotlib's :class:`~matplotlib.figure.Figure` needs no backend, so the
+library never selects one (no ``matplotlib.use``), keeps no global figure state, and draws the
+same in a terminal, a notebook, a thread or a Dask worker. The names mirror pyplot's."""
+
+from __future__ import annotations
+
+__all__ = ["figure", "subplots", "close", "get_cmap"]
+
+
+def figure(figsize=None, **kwargs):
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=figsize, **kwargs)
+
+
+def subplots(*args, figsize=None, **kwargs):
+    fig = figure(figsize=figsize)
+    return fig, fig.subplots(*args, **kwargs)
+
+
+def close(fig) -> None:
+    """Nothing to do: a Figure not registered with pyplot is freed with its last reference."""
+
+
+def get_cmap(name: str):
+    import matplotlib
+
+    return matplotlib.colormaps[name]

@@ -77,3 +77,41 @@ def test_degrees_only_at_edges(tmp_path):
     p.write_text(scenario_text([(2.0, 2.0, 30.0)]))
     spec = load_structure(p, require_sources=False)
     assert math.isclose(spec.walls[0].theta_rad, math.radians(30.0))
+
+
+@pytest.mark.parametrize(
+    "table, line, expect",
+    [
+        ("wall", "widht_m = 2.0", "unknown field 'widht_m'; did you mean width_m?"),
+        ("structure", "thicknes_m = 0.2", "unknown field 'thicknes_m'; did you mean thickness_m?"),
+        ("synthetic", "px_per_mm = 100", "did you mean px_per_m?"),
+        ("wall", "colour = 'red'", "unknown field 'colour'; valid fields are"),
+    ],
+)
+def test_unknown_keys_name_the_closest_valid_one(tmp_path, table, line, expect):
+    text = scenario_text([(2.0, 1.0, 0.0)])
+    marker = {"wall": 'name = "w0"', "structure": 'name = "test"', "synthetic": 'layout = "stretcher"'}[table]
+    (tmp_path / "s.toml").write_text(text.replace(marker, marker + "\n" + line, 1))
+    with pytest.raises(InputError, match=expect.replace("?", r"\?").replace("(", r"\(")):
+        load_structure(tmp_path / "s.toml", require_sources=False)
+
+
+def test_unknown_table_is_named(tmp_path):
+    (tmp_path / "s.toml").write_text(scenario_text([(2.0, 1.0, 0.0)]) + "\n[walls]\nx = 1\n")
+    with pytest.raises(InputError, match="unknown table 'walls'; did you mean wall"):
+        load_structure(tmp_path / "s.toml", require_sources=False)
+
+
+def test_specs_check_themselves_on_construction():
+    from calib_masonry.build3d.place import Footprint, WallGeometry
+    from calib_masonry.spec import StructureSpec, WallSpec
+
+    with pytest.raises(InputError, match="width_m = -1"):
+        WallSpec(name="a", width_m=-1.0, height_m=2.0, theta_rad=0.0, thickness_m=0.2)
+    with pytest.raises(InputError, match="thickness_m = 0"):
+        WallGeometry(2.0, 2.0, 0.0, 0.0, "a")
+    w = WallSpec(name="a", width_m=2.0, height_m=2.0, theta_rad=0.0, thickness_m=0.2)
+    with pytest.raises(InputError, match="repeat"):
+        StructureSpec(name="s", walls=(w, w), thickness_m=0.2)
+    with pytest.raises(InputError, match="no walls"):
+        Footprint(walls=())

@@ -12,7 +12,7 @@ import time
 import warnings
 from pathlib import Path
 
-from .errors import CalibMasonryError, InputError
+from .errors import CalibMasonryError
 
 __all__ = ["main"]
 
@@ -22,24 +22,11 @@ def _print_warning(message, category, filename, lineno, file=None, line=None) ->
 
 
 def _cmd_synth(args) -> int:
-    from dataclasses import replace
+    from .synthetic.truth import synth_to_folder
 
-    from .spec import load_structure
-    from .synthetic.truth import synthesize
-
-    spec = load_structure(args.scenario, require_sources=False)
-    if spec.synthetic is None:
-        raise InputError(
-            f"{args.scenario}: no [synthetic] table; add one (layout, px_per_m, seed, ...) to make a data set"
-        )
-    photos = None
-    if args.photos:
-        from .spec import PhotoSpec
-
-        photos = spec.photos or PhotoSpec()
-        if args.photo_size:
-            photos = replace(photos, long_side_px=max(args.photo_size), short_side_px=min(args.photo_size))
-    truth = synthesize(spec, args.out, figures=not args.no_figures, photos=photos)
+    spec, truth = synth_to_folder(
+        args.scenario, args.out, figures=not args.no_figures, photos=args.photos, photo_size=args.photo_size
+    )
     print(
         f"synth: {spec.name}: {len(truth['walls'])} walls, {truth['bricks']} bricks, "
         f"{truth['end_faces']} corner end faces -> {args.out}"
@@ -48,38 +35,16 @@ def _cmd_synth(args) -> int:
 
 
 def _cmd_trace(args) -> int:
-    from .io import read_mask, staged_file, write_json
-    from .wall2d.figures import plot_trace
-    from .wall2d.trace import TraceConfig, trace_mask
+    from .wall2d.trace import TraceConfig, trace_to_file
 
-    if args.vertices and args.target_dice:
-        raise InputError("trace: give --vertices or --target-dice, not both")
     refine = None
     if args.refine:
         from .wall2d.refine import RefineConfig
 
         refine = RefineConfig()
-    config = TraceConfig(
-        vertices=args.vertices if args.vertices or args.target_dice else 5, target_dice=args.target_dice, refine=refine
-    )
-    mask = read_mask(args.mask, field="MASK")
-    t0 = time.perf_counter()
-    result = trace_mask(mask, config)
-    if not result.bricks:
-        raise InputError(f"MASK {args.mask}: no bricks found (no white regions); bricks must be white on black")
-    seconds = time.perf_counter() - t0
+    config = TraceConfig(vertices=args.vertices, target_dice=args.target_dice, refine=refine)
+    result, seconds, _ = trace_to_file(args.mask, args.out, config, figure=args.figure, figures=not args.no_figures)
     out = Path(args.out)
-    figure = Path(args.figure) if args.figure else out.with_suffix(".png")
-    with staged_file(out) as tmp_json, staged_file(figure) as tmp_png:
-        doc = result.to_json()
-        doc["mask"] = str(args.mask)
-        doc["vertices"] = args.vertices
-        doc["target_dice"] = args.target_dice
-        write_json(tmp_json, doc)
-        if not args.no_figures:
-            plot_trace(mask, result, tmp_png, title=f"{Path(args.mask).name}")
-    if args.no_figures:
-        figure.unlink(missing_ok=True)
     before = f"splitting {result.mean_dice_splitting:.4f} -> refined " if result.refined else ""
     print(
         f"trace: {len(result.bricks)} bricks, mean Dice {before}{result.mean_dice:.4f}, "
@@ -119,13 +84,9 @@ def _print_build(summary: dict, out) -> None:
 
 
 def _cmd_compare(args) -> int:
-    from .io import staged_file, write_json
-    from .study.compare import compare_dirs
+    from .study.compare import compare_to_file
 
-    metrics = compare_dirs(args.run_dir, args.truth_dir)
-    out = Path(args.out) if args.out else Path(args.run_dir) / "compare.json"
-    with staged_file(out) as tmp:
-        write_json(tmp, metrics)
+    metrics, out = compare_to_file(args.run_dir, args.truth_dir, args.out)
     _print_compare(metrics, out)
     return 0
 
@@ -140,46 +101,13 @@ def _print_compare(m: dict, out) -> None:
     )
 
 
-def _find_demo_data(explicit: str | None) -> Path:
-    candidates = (
-        [Path(explicit)]
-        if explicit
-        else [
-            Path.cwd() / "data_synthetic" / "paper_example",
-            Path(__file__).resolve().parents[2] / "data_synthetic" / "paper_example",
-        ]
-    )
-    for c in candidates:
-        if (c / "structure.toml").is_file():
-            return c
-    raise InputError(
-        "demo: data_synthetic/paper_example/structure.toml not found; run from the project folder "
-        "or give --data DIR (re-create it with `calib-masonry synth data_synthetic/paper_example/scenario.toml "
-        "--out data_synthetic/paper_example`)"
-    )
-
-
 def _cmd_demo(args) -> int:
-    from .io import write_json
-    from .pipeline import build_to_folder
-    from .spec import load_structure
-    from .study.compare import compare_dirs
+    from .pipeline import demo
 
-    data = _find_demo_data(args.data)
-    spec = load_structure(data / "structure.toml")
     t0 = time.perf_counter()
-    summary = build_to_folder(spec, args.out, figures=True)
+    summary, metrics, checks, data = demo(args.out, args.data)
     _print_build(summary, args.out)
-    metrics = compare_dirs(args.out, data / "truth")
-    write_json(Path(args.out) / "compare.json", metrics)
     _print_compare(metrics, Path(args.out) / "compare.json")
-    checks = {
-        "precision == 1": metrics["precision"] == 1.0,
-        "recall == 1": metrics["recall"] == 1.0,
-        "every brick's Dice vs truth >= 0.98": (metrics["dice"]["min"] or 0) >= 0.98,
-        "closure error < 1 mm": summary["closure_error_m"] < 1e-3,
-        "max interpenetration <= 1e-6 m^3": metrics["max_interpenetration_m3"] <= 1e-6,
-    }
     for name, ok in checks.items():
         print(f"  [{'ok' if ok else 'FAIL'}] {name}")
     print(
@@ -194,23 +122,14 @@ def _calibrate_config(args):
 
     kwargs = {}
     if args.camera_height is not None:
-        if not 0 < args.camera_height < 100:
-            raise InputError(
-                f"--camera-height {args.camera_height}: give the eye height above the wall's base in metres"
-            )
         kwargs.update(camera_height_m=args.camera_height, camera_height_sigma_m=args.camera_height_sigma or 0.02)
     elif args.camera_height_sigma is not None:
         kwargs.update(camera_height_sigma_m=args.camera_height_sigma)
     if args.focal_px is not None:
-        if args.focal_px <= 0:
-            raise InputError(f"--focal-px {args.focal_px}: must be > 0 (pixels)")
         kwargs["focal_px"] = args.focal_px
     for flag, key in (("known_width", "known_width_m"), ("known_height", "known_height_m")):
-        v = getattr(args, flag, None)
-        if v is not None:
-            if v <= 0:
-                raise InputError(f"--{flag.replace('_', '-')} {v}: must be > 0 (metres)")
-            kwargs[key] = v
+        if getattr(args, flag, None) is not None:
+            kwargs[key] = getattr(args, flag)
     if getattr(args, "corners", None):
         kwargs["corners_px"] = parse_corners(args.corners)
     return CalibrateConfig(max_rms_px=args.max_rms, force=args.force, **kwargs)
@@ -219,8 +138,6 @@ def _calibrate_config(args):
 def _cmd_rectify(args) -> int:
     from .calibrate.rectify import rectify_to_folder
 
-    if args.known_width is not None and args.known_height is not None:
-        raise InputError("rectify: give --known-width or --known-height, not both")
     doc = rectify_to_folder(
         args.photo,
         args.out,

@@ -65,6 +65,31 @@ class WallSpec:
     corners_px: tuple[float, ...] | None = None
     focal_px: float | None = None
 
+    def __post_init__(self) -> None:
+        where = f"wall '{self.name}'"
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError(f"wall name {self.name!r}: give every wall a non-empty name")
+        for key in ("width_m", "height_m"):
+            value = getattr(self, key)
+            if not (value > 0 or (math.isnan(value) and self.image is not None)):
+                raise InputError(f"{where}: {key} = {value} must be > 0 (metres); leave it out only for a photo wall")
+        if not (math.isfinite(self.thickness_m) and self.thickness_m > 0):
+            raise InputError(f"{where}: thickness_m = {self.thickness_m} must be > 0 (metres)")
+        if not math.isfinite(self.theta_rad):
+            raise InputError(f"{where}: theta = {self.theta_rad} must be a finite angle")
+        if self.vertices is not None and (
+            isinstance(self.vertices, bool) or not isinstance(self.vertices, int) or self.vertices < 3
+        ):
+            raise InputError(f"{where}: vertices = {self.vertices!r} must be a whole number >= 3")
+        if self.target_dice is not None and not 0 < self.target_dice < 1:
+            raise InputError(f"{where}: target_dice = {self.target_dice} must lie between 0 and 1")
+        if self.camera_height_m is not None and not 0 < self.camera_height_m < 100:
+            raise InputError(f"{where}: camera_height_m = {self.camera_height_m} must be the eye height in metres")
+        if self.focal_px is not None and not self.focal_px > 0:
+            raise InputError(f"{where}: focal_px = {self.focal_px} must be > 0 (pixels)")
+        if self.corners_px is not None and len(self.corners_px) != 8:
+            raise InputError(f"{where}: corners_px must be 8 numbers [x1, y1, ..., x4, y4] (pixels)")
+
     @property
     def size_from_photo(self) -> bool:
         return math.isnan(self.width_m) or math.isnan(self.height_m)
@@ -145,6 +170,17 @@ class StructureSpec:
     corners: tuple[CornerSpec, ...] = ()
     source: Path | None = field(default=None, compare=False)
 
+    def __post_init__(self) -> None:
+        if not self.walls:
+            raise InputError(f"structure '{self.name}': it has no walls; give at least one")
+        names = [w.name for w in self.walls]
+        if len(set(names)) != len(names):
+            raise InputError(f"structure '{self.name}': wall names {names} repeat; give every wall its own name")
+        for key in ("thickness_m", "aspect_tolerance", "photo_px_per_m"):
+            value = getattr(self, key)
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"structure '{self.name}': {key} = {value} must be > 0")
+
     def with_walls(self, walls: tuple[WallSpec, ...]) -> "StructureSpec":
         return replace(self, walls=walls)
 
@@ -206,10 +242,7 @@ def _vertices_or_dice(tbl: dict, where: str, default_n: int | None, default_d: f
 
 
 def _only_fields_of(cls, tbl: dict, where: str) -> None:
-    known = set(cls.__dataclass_fields__)
-    unknown = sorted(set(tbl) - known)
-    if unknown:
-        raise InputError(f"{where}: unknown field(s) {unknown}; valid fields are {sorted(known)}")
+    _check_keys(tbl, tuple(cls.__dataclass_fields__), where)
 
 
 def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
@@ -283,8 +316,179 @@ def _photos_from(tbl: dict, where: str) -> PhotoSpec:
     return spec
 
 
+STRUCTURE_KEYS = (
+    "name",
+    "thickness_m",
+    "vertices",
+    "target_dice",
+    "closed",
+    "refine",
+    "photo_px_per_m",
+    "aspect_tolerance",
+)
+WALL_KEYS = (
+    "name",
+    "mask",
+    "image",
+    "photo",
+    "width_m",
+    "height_m",
+    "theta_deg",
+    "thickness_m",
+    "vertices",
+    "target_dice",
+    "refine",
+    "camera_height_m",
+    "focal_px",
+    "corners_px",
+)
+CORNER_KEYS = ("photo", "walls", "focal_px")
+TABLES = ("structure", "wall", "corner", "synthetic", "photos")
+
+
+def _check_keys(tbl: dict, allowed, where: str, what: str = "field") -> None:
+    """An unknown key is an error naming the closest valid one ("widht_m: did you mean width_m?")."""
+    import difflib
+
+    for key in tbl:
+        if key not in allowed:
+            close = difflib.get_close_matches(key, list(allowed), n=1, cutoff=0.6)
+            hint = f"did you mean {close[0]}?" if close else f"valid {what}s are {', '.join(sorted(allowed))}"
+            raise InputError(f"{where}: unknown {what} '{key}'; {hint}")
+
+
+def _structure_defaults(st, path: Path) -> dict:
+    """The [structure] table: the name and the defaults every wall inherits."""
+    where = _where(path, "[structure]")
+    if not isinstance(st, dict):
+        raise InputError(f"{path}: the [structure] table is missing; add one with name and thickness_m")
+    _check_keys(st, STRUCTURE_KEYS, where)
+    t_default = _num(st, "thickness_m", where, default=None)
+    if t_default is not None and t_default <= 0:
+        raise InputError(f"{where}: 'thickness_m' must be > 0, got {t_default}")
+    n_default, d_default = _vertices_or_dice(st, where, 5, None)
+    closed = st.get("closed", None)
+    if closed is not None and not isinstance(closed, bool):
+        raise InputError(f"{where}: 'closed' must be true or false, got {closed!r}")
+    photo_ppm = float(_num(st, "photo_px_per_m", where, default=300.0))
+    if photo_ppm <= 0:
+        raise InputError(f"{where}: 'photo_px_per_m' must be > 0, got {photo_ppm}")
+    aspect_tol = float(_num(st, "aspect_tolerance", where, default=0.03))
+    if aspect_tol <= 0:
+        raise InputError(f"{where}: 'aspect_tolerance' must be > 0, got {aspect_tol}")
+    return {
+        "name": str(st.get("name", path.parent.name)),
+        "thickness_m": t_default,
+        "vertices": n_default,
+        "target_dice": d_default,
+        "closed": closed,
+        "refine": _flag(st, "refine", where, False),
+        "photo_px_per_m": photo_ppm,
+        "aspect_tolerance": aspect_tol,
+    }
+
+
+def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_sources: bool) -> WallSpec:
+    """One [[wall]] table."""
+    if not isinstance(w, dict):
+        raise InputError(f"{where}: must be a table of wall fields")
+    _check_keys(w, WALL_KEYS, where)
+    base = path.parent
+    t_default, n_default, d_default = defaults["thickness_m"], defaults["vertices"], defaults["target_dice"]
+    refine_default = defaults["refine"]
+    has_photo = "image" in w or "photo" in w
+    width = _num(w, "width_m", where, required=not has_photo, default=math.nan)
+    height = _num(w, "height_m", where, required=not has_photo, default=math.nan)
+    theta_deg = _num(w, "theta_deg", where, default=0.0)
+    t = _num(w, "thickness_m", where, default=t_default)
+    if width <= 0:
+        raise InputError(f"{where}: width_m = {width} must be > 0 (metres)")
+    if height <= 0:
+        raise InputError(f"{where}: height_m = {height} must be > 0 (metres)")
+    if t is None:
+        raise InputError(f"{where}: no thickness; set thickness_m here or in [structure]")
+    if t <= 0:
+        raise InputError(f"{where}: thickness_m = {t} must be > 0 (metres)")
+    if t >= width and not math.isnan(width):
+        raise InputError(f"{where}: thickness_m = {t} is not smaller than width_m = {width}; check both")
+    n, d = _vertices_or_dice(w, where, n_default, d_default)
+    mask = image = None
+    if "photo" in w and "image" not in w:
+        w = {**w, "image": w["photo"]}
+    for key in ("mask", "image"):
+        if key in w:
+            if not isinstance(w[key], str):
+                raise InputError(f"{where}: '{key}' must be a path string, got {w[key]!r}")
+            p = Path(w[key])
+            p = p if p.is_absolute() else base / p
+            if require_sources and not p.is_file():
+                raise InputError(f"{where}: {key} file {p} not found; fix the path (relative to {path.name})")
+            if key == "mask":
+                mask = p
+            else:
+                image = p
+    if require_sources and mask is None and image is None:
+        raise InputError(f"{where}: neither 'mask' nor 'image' (photo) is given; name the wall's mask or photo file")
+    if mask is None and image is None and (math.isnan(width) or math.isnan(height)):
+        raise InputError(f"{where}: width_m and height_m are missing; give them (metres) or a photo to fit them from")
+    cam_h = _num(w, "camera_height_m", where, default=None)
+    if cam_h is not None and not 0.0 < cam_h < 100.0:
+        raise InputError(
+            f"{where}: camera_height_m = {cam_h} must be the eye height above the wall's base in metres (e.g. 1.6)"
+        )
+    focal = _num(w, "focal_px", where, default=None)
+    if focal is not None and focal <= 0:
+        raise InputError(f"{where}: focal_px = {focal} must be > 0 (pixels)")
+    corners = w.get("corners_px")
+    if corners is not None:
+        if (
+            not isinstance(corners, list)
+            or len(corners) != 8
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in corners)
+        ):
+            raise InputError(f"{where}: corners_px must be 8 numbers [x1, y1, ..., x4, y4] (pixels), got {corners!r}")
+        corners = tuple(float(v) for v in corners)
+    return WallSpec(
+        name=wname,
+        width_m=float(width),
+        height_m=float(height),
+        theta_rad=math.radians(theta_deg),
+        thickness_m=float(t),
+        mask=mask,
+        image=image,
+        vertices=n,
+        target_dice=d,
+        refine=_flag(w, "refine", where, refine_default),
+        camera_height_m=None if cam_h is None else float(cam_h),
+        corners_px=corners,
+        focal_px=None if focal is None else float(focal),
+    )
+
+
+def _corner_from(c, i: int, names, path: Path, require_sources: bool) -> CornerSpec:
+    """One [[corner]] table."""
+    base = path.parent
+    where = _where(path, f"[[corner]] {i}")
+    if isinstance(c, dict):
+        _check_keys(c, CORNER_KEYS, where)
+    if not isinstance(c, dict) or not isinstance(c.get("photo"), str):
+        raise InputError(f"{where}: needs photo = 'PATH' and walls = ['A', 'B']")
+    pair = c.get("walls")
+    if not (isinstance(pair, list) and len(pair) == 2 and all(p in names for p in pair) and pair[0] != pair[1]):
+        raise InputError(
+            f"{where}: walls = {pair!r} must name two different walls of this file, the left one "
+            "(as seen from outside) first"
+        )
+    p = Path(c["photo"])
+    p = p if p.is_absolute() else base / p
+    if require_sources and not p.is_file():
+        raise InputError(f"{where}: photo file {p} not found; fix the path (relative to {path.name})")
+    focal = _num(c, "focal_px", where, default=None)
+    return CornerSpec(photo=p, walls=(pair[0], pair[1]), focal_px=None if focal is None else float(focal))
+
+
 def load_structure(path: str | Path, *, require_sources: bool = True) -> StructureSpec:
-    """Read and validate a structure (or scenario) TOML file.
+    """Read and validate a structure (or scenario) TOML file, table by table.
 
     Parameters
     ----------
@@ -298,147 +502,36 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not valid TOML ({exc}); fix the syntax") from None
-    base = path.parent
-    st = data.get("structure")
-    if not isinstance(st, dict):
-        raise InputError(f"{path}: the [structure] table is missing; add one with name and thickness_m")
-    where = _where(path, "[structure]")
-    name = st.get("name", path.parent.name)
-    t_default = _num(st, "thickness_m", where, default=None)
-    if t_default is not None and t_default <= 0:
-        raise InputError(f"{where}: 'thickness_m' must be > 0, got {t_default}")
-    n_default, d_default = _vertices_or_dice(st, where, 5, None)
-    closed = st.get("closed", None)
-    if closed is not None and not isinstance(closed, bool):
-        raise InputError(f"{where}: 'closed' must be true or false, got {closed!r}")
-    refine_default = _flag(st, "refine", where, False)
-    photo_ppm = float(_num(st, "photo_px_per_m", where, default=300.0))
-    if photo_ppm <= 0:
-        raise InputError(f"{where}: 'photo_px_per_m' must be > 0, got {photo_ppm}")
-    aspect_tol = float(_num(st, "aspect_tolerance", where, default=0.03))
-    if aspect_tol <= 0:
-        raise InputError(f"{where}: 'aspect_tolerance' must be > 0, got {aspect_tol}")
-    synthetic = None
-    if "synthetic" in data:
-        synthetic = _synthetic_from(data["synthetic"], _where(path, "[synthetic]"))
-
-    photos = None
-    if "photos" in data:
-        photos = _photos_from(data["photos"], _where(path, "[photos]"))
-
+    _check_keys(data, TABLES, str(path), "table")
+    defaults = _structure_defaults(data.get("structure"), path)
+    synthetic = _synthetic_from(data["synthetic"], _where(path, "[synthetic]")) if "synthetic" in data else None
+    photos = _photos_from(data["photos"], _where(path, "[photos]")) if "photos" in data else None
     walls_tbl = data.get("wall")
     if not isinstance(walls_tbl, list) or not walls_tbl:
         raise InputError(f"{path}: no [[wall]] tables; add one per wall photo or mask")
     walls: list[WallSpec] = []
     names: set[str] = set()
     for i, w in enumerate(walls_tbl, start=1):
-        wname = str(w.get("name", f"wall{i}"))
+        wname = str(w.get("name", f"wall{i}")) if isinstance(w, dict) else f"wall{i}"
         where = _where(path, f"[[wall]] {i} ({wname})")
         if wname in names:
             raise InputError(f"{where}: duplicate wall name; give every wall its own name")
         names.add(wname)
-        has_photo = "image" in w or "photo" in w
-        width = _num(w, "width_m", where, required=not has_photo, default=math.nan)
-        height = _num(w, "height_m", where, required=not has_photo, default=math.nan)
-        theta_deg = _num(w, "theta_deg", where, default=0.0)
-        t = _num(w, "thickness_m", where, default=t_default)
-        if width <= 0:
-            raise InputError(f"{where}: width_m = {width} must be > 0 (metres)")
-        if height <= 0:
-            raise InputError(f"{where}: height_m = {height} must be > 0 (metres)")
-        if t is None:
-            raise InputError(f"{where}: no thickness; set thickness_m here or in [structure]")
-        if t <= 0:
-            raise InputError(f"{where}: thickness_m = {t} must be > 0 (metres)")
-        if t >= width and not math.isnan(width):
-            raise InputError(f"{where}: thickness_m = {t} is not smaller than width_m = {width}; check both")
-        n, d = _vertices_or_dice(w, where, n_default, d_default)
-        mask = image = None
-        if "photo" in w and "image" not in w:
-            w = {**w, "image": w["photo"]}
-        for key in ("mask", "image"):
-            if key in w:
-                if not isinstance(w[key], str):
-                    raise InputError(f"{where}: '{key}' must be a path string, got {w[key]!r}")
-                p = Path(w[key])
-                p = p if p.is_absolute() else base / p
-                if require_sources and not p.is_file():
-                    raise InputError(f"{where}: {key} file {p} not found; fix the path (relative to {path.name})")
-                if key == "mask":
-                    mask = p
-                else:
-                    image = p
-        if require_sources and mask is None and image is None:
-            raise InputError(
-                f"{where}: neither 'mask' nor 'image' (photo) is given; name the wall's mask or photo file"
-            )
-        if mask is None and image is None and (math.isnan(width) or math.isnan(height)):
-            raise InputError(
-                f"{where}: width_m and height_m are missing; give them (metres) or a photo to fit them from"
-            )
-        cam_h = _num(w, "camera_height_m", where, default=None)
-        if cam_h is not None and not 0.0 < cam_h < 100.0:
-            raise InputError(
-                f"{where}: camera_height_m = {cam_h} must be the eye height above the wall's base in metres (e.g. 1.6)"
-            )
-        focal = _num(w, "focal_px", where, default=None)
-        if focal is not None and focal <= 0:
-            raise InputError(f"{where}: focal_px = {focal} must be > 0 (pixels)")
-        corners = w.get("corners_px")
-        if corners is not None:
-            if (
-                not isinstance(corners, list)
-                or len(corners) != 8
-                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in corners)
-            ):
-                raise InputError(
-                    f"{where}: corners_px must be 8 numbers [x1, y1, ..., x4, y4] (pixels), got {corners!r}"
-                )
-            corners = tuple(float(v) for v in corners)
-        walls.append(
-            WallSpec(
-                name=wname,
-                width_m=float(width),
-                height_m=float(height),
-                theta_rad=math.radians(theta_deg),
-                thickness_m=float(t),
-                mask=mask,
-                image=image,
-                vertices=n,
-                target_dice=d,
-                refine=_flag(w, "refine", where, refine_default),
-                camera_height_m=None if cam_h is None else float(cam_h),
-                corners_px=corners,
-                focal_px=None if focal is None else float(focal),
-            )
-        )
-    corners = []
-    for i, c in enumerate(data.get("corner", []) or [], start=1):
-        where = _where(path, f"[[corner]] {i}")
-        if not isinstance(c, dict) or not isinstance(c.get("photo"), str):
-            raise InputError(f"{where}: needs photo = 'PATH' and walls = ['A', 'B']")
-        pair = c.get("walls")
-        if not (isinstance(pair, list) and len(pair) == 2 and all(p in names for p in pair) and pair[0] != pair[1]):
-            raise InputError(
-                f"{where}: walls = {pair!r} must name two different walls of this file, the left one "
-                "(as seen from outside) first"
-            )
-        p = Path(c["photo"])
-        p = p if p.is_absolute() else base / p
-        if require_sources and not p.is_file():
-            raise InputError(f"{where}: photo file {p} not found; fix the path (relative to {path.name})")
-        focal = _num(c, "focal_px", where, default=None)
-        corners.append(CornerSpec(photo=p, walls=(pair[0], pair[1]), focal_px=None if focal is None else float(focal)))
+        walls.append(_wall_from(w, where, wname, defaults, path, require_sources))
+    corners = [
+        _corner_from(c, i, names, path, require_sources) for i, c in enumerate(data.get("corner", []) or [], start=1)
+    ]
+    t_default = defaults["thickness_m"]
     return StructureSpec(
-        name=str(name),
+        name=defaults["name"],
         walls=tuple(walls),
         thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),
-        vertices=n_default,
-        target_dice=d_default,
-        closed=closed,
-        aspect_tolerance=aspect_tol,
-        refine=refine_default,
-        photo_px_per_m=photo_ppm,
+        vertices=defaults["vertices"],
+        target_dice=defaults["target_dice"],
+        closed=defaults["closed"],
+        aspect_tolerance=defaults["aspect_tolerance"],
+        refine=defaults["refine"],
+        photo_px_per_m=defaults["photo_px_per_m"],
         synthetic=synthetic,
         photos=photos,
         corners=tuple(corners),

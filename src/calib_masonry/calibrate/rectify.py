@@ -52,6 +52,25 @@ class CalibrateConfig:
     force: bool = False
     detect: DetectConfig = field(default_factory=DetectConfig)
 
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.camera_height_m) and 0 < self.camera_height_m < 100):
+            raise InputError(
+                f"--camera-height {self.camera_height_m}: give the eye height above the wall's base in metres"
+            )
+        if not (math.isfinite(self.camera_height_sigma_m) and self.camera_height_sigma_m > 0):
+            raise InputError(f"--camera-height-sigma {self.camera_height_sigma_m}: must be > 0 (metres)")
+        if self.focal_px is not None and not (math.isfinite(self.focal_px) and self.focal_px > 0):
+            raise InputError(f"--focal-px {self.focal_px}: must be > 0 (pixels)")
+        for flag, value in (("--known-width", self.known_width_m), ("--known-height", self.known_height_m)):
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise InputError(f"{flag} {value}: must be > 0 (metres)")
+        if self.known_width_m is not None and self.known_height_m is not None:
+            raise InputError("rectify: give --known-width or --known-height, not both")
+        if not (math.isfinite(self.max_rms_px) and self.max_rms_px > 0):
+            raise InputError(f"--max-rms {self.max_rms_px}: must be > 0 (pixels)")
+        if self.corners_px is not None and len(self.corners_px) != 8:
+            raise InputError(f"--corners: got {len(self.corners_px)} numbers; give exactly 8 (x1,y1,...,x4,y4)")
+
 
 @dataclass(frozen=True)
 class PhotoCalibration:

@@ -20,7 +20,7 @@ from ..build3d.contacts import max_interpenetration
 from ..errors import InputError
 from ..io import read_json
 
-__all__ = ["compare", "compare_dirs", "match_polygons", "IOU_MATCH"]
+__all__ = ["compare", "compare_dirs", "compare_to_file", "match_polygons", "IOU_MATCH"]
 
 IOU_MATCH = 0.5
 
@@ -163,3 +163,14 @@ def compare(model: Structure3D, truth: Structure3D, *, where: str = "model") -> 
         "worst_pair": inter.pair,
         "walls": per_wall,
     }
+
+
+def compare_to_file(run_dir: str | Path, truth_dir: str | Path, out: str | Path | None = None) -> tuple[dict, Path]:
+    """``calib-masonry compare``: :func:`compare_dirs` written to ``out`` (default RUN_DIR/compare.json)."""
+    from ..io import staged_file, write_json
+
+    metrics = compare_dirs(run_dir, truth_dir)
+    out = Path(out) if out else Path(run_dir) / "compare.json"
+    with staged_file(out) as tmp:
+        write_json(tmp, metrics)
+    return metrics, out

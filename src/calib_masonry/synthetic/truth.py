@@ -33,7 +33,7 @@ from ..spec import PhotoSpec, StructureSpec, SyntheticSpec, structure_to_toml
 from .layouts import layout_structure
 from .render import rasterise_wall
 
-__all__ = ["synthesize", "truth_structure"]
+__all__ = ["synthesize", "synth_to_folder", "truth_structure"]
 
 
 def truth_structure(spec: StructureSpec):
@@ -190,3 +190,29 @@ def synthesize(
                 title=f"{spec.name}: true outer wall surfaces (red hatched: corner end faces)",
             )
     return truth
+
+
+def synth_to_folder(
+    scenario: str | Path,
+    out: str | Path,
+    *,
+    figures: bool = True,
+    photos: bool = False,
+    photo_size: tuple[int, int] | None = None,
+    progress: bool | None = None,
+):
+    """``calib-masonry synth``: read a scenario file and :func:`synthesize` it into ``out`` (with
+    ``photos``, also perspective photos, ``photo_size`` (W, H) pixels overriding its [photos] table).
+    Returns the scenario and the truth summary."""
+    from ..errors import InputError
+    from ..spec import load_structure
+
+    spec = load_structure(scenario, require_sources=False)
+    if spec.synthetic is None:
+        raise InputError(f"{scenario}: no [synthetic] table; add one (layout, px_per_m, seed, ...) to make a data set")
+    shots = None
+    if photos:
+        shots = spec.photos or PhotoSpec()
+        if photo_size:
+            shots = replace(shots, long_side_px=max(photo_size), short_side_px=min(photo_size))
+    return spec, synthesize(spec, out, figures=figures, photos=shots, progress=progress)

@@ -10,6 +10,7 @@ centres at integers). The traced outline is scikit-image's iso-line at level 0.5
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -25,23 +26,40 @@ from .split import splitting_sequence, visvalingam
 if TYPE_CHECKING:  # pragma: no cover
     from .refine import RefineConfig
 
-__all__ = ["TraceConfig", "TracedBrick", "TraceResult", "trace_mask", "refine_trace", "trace_outline"]
+__all__ = [
+    "TraceConfig",
+    "TracedBrick",
+    "TraceResult",
+    "trace_mask",
+    "refine_trace",
+    "trace_to_file",
+    "trace_outline",
+    "DEFAULT_VERTICES",
+]
+
+
+#: Vertices per brick when neither a count nor a target Dice is given.
+DEFAULT_VERTICES = 5
 
 
 @dataclass(frozen=True)
 class TraceConfig:
     """Exactly one of ``vertices`` (a fixed count N >= 3) or ``target_dice`` (the fewest vertices,
-    up to ``max_vertices``, that reach it) is used; ``vertices`` wins when both are set."""
+    up to ``max_vertices``, that reach it); neither means :data:`DEFAULT_VERTICES`."""
 
-    vertices: int | None = 5
+    vertices: int | None = None
     target_dice: float | None = None
     max_vertices: int = 64
     segment: SegmentConfig = SegmentConfig()
     refine: "RefineConfig | None" = None  # soft-Dice vertex refinement (wall2d.refine) when set
 
     def __post_init__(self) -> None:
+        if self.vertices is not None and self.target_dice is not None:
+            raise InputError("trace: give a vertex count (--vertices N) or a target Dice (--target-dice D), not both")
         if self.vertices is None and self.target_dice is None:
-            raise InputError("trace: give either a vertex count (--vertices N) or a target Dice (--target-dice D)")
+            object.__setattr__(self, "vertices", DEFAULT_VERTICES)
+        if self.vertices is not None and (isinstance(self.vertices, bool) or not isinstance(self.vertices, int)):
+            raise InputError(f"trace: vertices = {self.vertices!r} must be a whole number")
         if self.vertices is not None and self.vertices < 3:
             raise InputError(f"trace: vertices = {self.vertices} is too few; a polygon needs at least 3")
         if self.target_dice is not None and not 0 < self.target_dice < 1:
@@ -287,3 +305,38 @@ def refine_trace(
         for b, r in zip(bricks, results)
     ]
     return TraceResult(image_shape=traced.image_shape, bricks=tuple(out))
+
+
+def trace_to_file(
+    mask_path: str | Path,
+    out: str | Path,
+    config: TraceConfig = TraceConfig(),
+    *,
+    figure: str | Path | None = None,
+    figures: bool = True,
+) -> tuple[TraceResult, float, Path]:
+    """``calib-masonry trace``: read a mask, trace it, write polygons.json (and the overlay figure,
+    beside it unless ``figure`` names another path). Returns the trace, its seconds and the figure."""
+    import time
+
+    from ..io import read_mask, staged_file, write_json
+
+    mask = read_mask(mask_path, field="MASK")
+    t0 = time.perf_counter()
+    result = trace_mask(mask, config)
+    if not result.bricks:
+        raise InputError(f"MASK {mask_path}: no bricks found (no white regions); bricks must be white on black")
+    seconds = time.perf_counter() - t0
+    out = Path(out)
+    figure = Path(figure) if figure else out.with_suffix(".png")
+    with staged_file(out) as tmp_json, staged_file(figure) as tmp_png:
+        doc = result.to_json()
+        doc.update(mask=str(mask_path), vertices=config.vertices, target_dice=config.target_dice)
+        write_json(tmp_json, doc)
+        if figures:
+            from .figures import plot_trace
+
+            plot_trace(mask, result, tmp_png, title=f"{Path(mask_path).name}")
+    if not figures:
+        figure.unlink(missing_ok=True)
+    return result, seconds, figure

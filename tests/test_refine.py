@@ -90,6 +90,10 @@ def test_refined_never_worse_no_overlap(stone_wall):
     res = trace_mask(m, TraceConfig(vertices=5, refine=RefineConfig()))
     assert all(b.dice >= b.dice_splitting for b in res.bricks)
     assert res.mean_dice > res.mean_dice_splitting + 0.005
+    # every brick keeps its solver's status (FitStatus values), and it is in polygons.json
+    statuses = [b.solver_status for b in res.bricks]
+    assert set(statuses) <= {"converged", "step_limit"}  # the annealing stages stop at their step cap
+    assert all(row["solver_status"] in statuses for row in res.to_json()["bricks"])
     geoms = [shapely.Polygon(b.vertices_xy) for b in res.bricks]
     assert all(g.is_valid for g in geoms)
     tree = shapely.STRtree(geoms)

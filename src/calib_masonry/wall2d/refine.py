@@ -23,7 +23,7 @@ Convention: image coordinates (x = column, y = row, pixel centres at integers).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -31,6 +31,7 @@ import shapely
 from scipy import ndimage
 
 from .._jax import jax, jnp
+from ..calibrate.fitresult import FitStatus
 from .dice import rasterise_polygon
 
 __all__ = [
@@ -71,6 +72,11 @@ class RefinedPolygon:
     dice: float
     refined: bool  # False when the start was kept
     reason: str = ""  # why the start was kept
+    status: FitStatus = FitStatus.CONVERGED  # the BFGS solve's status at the sharpest temperature
+
+
+#: the refinement's per-stage solver codes (see _refine_batch)
+_SOLVER_STATUS = (FitStatus.CONVERGED, FitStatus.STEP_LIMIT, FitStatus.DIVERGED)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -154,10 +160,13 @@ def _refine_batch(params0, n, points, target, forbid, weight, const, box, penalt
                 max_steps=max_steps,
                 throw=False,
             )
-            return jnp.where(jnp.all(jnp.isfinite(sol.value)), sol.value, y), None
+            finite = jnp.all(jnp.isfinite(sol.value))
+            # 0 converged, 1 step limit, 2 non-finite (the stage's start is kept)
+            code = jnp.where(finite, jnp.where(sol.result == optx.RESULTS.successful, 0, 1), 2)
+            return jnp.where(finite, sol.value, y), code
 
-        y, _ = jax.lax.scan(stage, p0, taus)
-        return _vertices(y, n_)
+        y, codes = jax.lax.scan(stage, p0, taus)
+        return _vertices(y, n_), codes[-1]
 
     return jax.vmap(one)(params0, n, points, target, forbid, weight, const, box)
 
@@ -290,11 +299,11 @@ def refine_polygons(
     bricks = [
         _prepare(labels, owner, ids[i], slices[ids[i] - 1], config.margin_px, s, config.band_px) for i, s, _ in jobs
     ]
-    fits = _run_jobs(bricks, [s for _, s, _ in jobs], [e for _, _, e in jobs], config)
+    fits, statuses = _run_jobs(bricks, [s for _, s, _ in jobs], [e for _, _, e in jobs], config)
     best: dict[int, RefinedPolygon] = {}
     keep: dict[int, _Brick] = {}
-    for (i, s, _), b, r in zip(jobs, bricks, fits):
-        res = _accept_one(b, splitting[i], s, r)
+    for (i, s, _), b, r, st in zip(jobs, bricks, fits, statuses):
+        res = replace(_accept_one(b, splitting[i], s, r), status=st)
         if i not in best or res.dice > best[i].dice:
             best[i], keep[i] = res, b
     order = range(len(ids))
@@ -303,9 +312,11 @@ def refine_polygons(
 
 def _run_jobs(
     bricks: list[_Brick], starts: list[np.ndarray], easy: list[bool], config: RefineConfig
-) -> list[np.ndarray | None]:
+) -> tuple[list[np.ndarray | None], list[FitStatus]]:
+    """The BFGS solution of every job and its solver's status at the sharpest temperature."""
     n_max = 4 * math.ceil(max(len(s) for s in starts) / 4)  # few vertex-count shapes to compile
     results: list[np.ndarray | None] = [None] * len(bricks)
+    statuses: list[FitStatus] = [FitStatus.DIVERGED] * len(bricks)
     buckets: dict[tuple[bool, int], list[int]] = {}
     for i, b in enumerate(bricks):
         buckets.setdefault((easy[i], _bucket(len(b.points))), []).append(i)
@@ -353,10 +364,11 @@ def _run_jobs(
                 rtol=config.rtol,
                 atol=config.atol,
             )
-            out = np.asarray(out)
+            out, codes = (np.asarray(a) for a in out)
             for r, i in enumerate(chunk):
                 results[i] = out[r, : len(starts[i])] + bricks[i].centre + bricks[i].origin
-    return results
+                statuses[i] = _SOLVER_STATUS[int(codes[r])]
+    return results, statuses
 
 
 def _check(b: _Brick, v: np.ndarray, d0: float) -> tuple[str, float]:

@@ -77,6 +77,7 @@ class TracedBrick:
     refined: bool = False
     note: str = ""
     splitting_xy: np.ndarray | None = None  # the splitting polygon, when refined
+    solver_status: str | None = None  # the refinement solver's FitStatus value, when refined
 
 
 @dataclass(frozen=True)
@@ -103,6 +104,7 @@ class TraceResult:
                             "dice_splitting": b.dice_splitting,
                             "refined": b.refined,
                             "note": b.note,
+                            "solver_status": b.solver_status,
                             "splitting_vertices_xy": b.splitting_xy.tolist(),
                         }
                         if b.dice_splitting is not None
@@ -247,7 +249,7 @@ def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[Trace
             k, region, outline, offset = items[i]
             prev = best.get(i)
             if prev is None or r.dice > prev[1] + 1e-12:
-                best[i] = (r.vertices_xy, r.dice, sd, r.refined, r.reason, start)
+                best[i] = (r.vertices_xy, r.dice, sd, r.refined, r.reason, start, r.status.value)
             if config.target_dice is not None and r.dice < config.target_dice:
                 still.append(i)
         pending = still
@@ -255,8 +257,8 @@ def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[Trace
     for i, (k, region, outline, offset) in enumerate(items):
         if i not in best:  # a tiny outline: use it whole
             d = dice_polygon_region(outline, region)
-            best[i] = (outline + offset, d, d, False, "outline shorter than the vertex count", outline + offset)
-        v, d, sd, refined, note, sp = best[i]
+            best[i] = (outline + offset, d, d, False, "outline shorter than the vertex count", outline + offset, None)
+        v, d, sd, refined, note, sp, status = best[i]
         out.append(
             TracedBrick(
                 id=k,
@@ -268,6 +270,7 @@ def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[Trace
                 refined=bool(refined),
                 note=note,
                 splitting_xy=sp,
+                solver_status=status,
             )
         )
     return out
@@ -299,6 +302,7 @@ def refine_trace(
             dice=float(r.dice),
             refined=bool(r.refined),
             note=r.reason,
+            solver_status=r.status.value,
             dice_splitting=b.dice if b.dice_splitting is None else b.dice_splitting,
             splitting_xy=b.vertices_xy if b.splitting_xy is None else b.splitting_xy,
         )

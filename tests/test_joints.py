@@ -189,7 +189,7 @@ def test_cracks_cascade_event_by_event_in_one_load():
     assert FAILURE_MODES[modes[0]] == "tension"
 
 
-def test_pose_quaternions_match_scipy_and_give_back_the_matrices():
+def test_pose_quaternions_give_back_the_matrices():
     from scipy.spatial.transform import Rotation
 
     rng = np.random.default_rng(3)

@@ -26,6 +26,7 @@ __all__ = [
     "joint_axes",
     "patch_section",
     "OUTLINE_POINTS",
+    "box_pairs",
 ]
 
 OUTLINE_POINTS = 16  # a patch's outline (its convex hull) is stored with this many corners, padded by repeats
@@ -53,9 +54,10 @@ def intersection_volume(p: Polyhedron, q: Polyhedron) -> float:
     return float(inter.volume()) if not inter.is_empty() else 0.0
 
 
-def _box_pairs(lo: np.ndarray, hi: np.ndarray, min_overlap: float):
+def box_pairs(lo: np.ndarray, hi: np.ndarray, min_overlap: float):
     """Pairs ``(i, j)``, i < j, of boxes ``[lo, hi]`` ``(N, 3)`` overlapping by more than
-    ``min_overlap`` along every axis (sweep and prune along x, each box's candidates tested at once)."""
+    ``min_overlap`` along every axis (sweep and prune along x, each box's candidates tested at once):
+    the package's one broad phase."""
     order = np.argsort(lo[:, 0], kind="stable")
     lo_s, hi_s = lo[order], hi[order]
     # the candidates of the box at sorted position p are those after it whose lo_x is below its hi_x
@@ -85,7 +87,7 @@ def _candidate_pairs(bricks: Sequence[Brick], eps: float) -> set[tuple[int, int]
     # across walls: global boxes that overlap by more than eps in every axis
     lo = np.array([b.solid.vertices.min(axis=0) for b in bricks])
     hi = np.array([b.solid.vertices.max(axis=0) for b in bricks])
-    pairs.update((i, j) for i, j in _box_pairs(lo, hi, eps) if bricks[i].wall != bricks[j].wall)
+    pairs.update((i, j) for i, j in box_pairs(lo, hi, eps) if bricks[i].wall != bricks[j].wall)
     return pairs
 
 
@@ -252,7 +254,7 @@ def contact_patches(
     hi = np.array([b.solid.vertices.max(axis=0) for b in bricks]) + max_gap_m
     cos_tol = np.cos(np.radians(angle_deg))
     out: list[ContactPatch] = []
-    for a, b in _box_pairs(lo, hi, -1e-12):
+    for a, b in box_pairs(lo, hi, -1e-12):
         best = None
         for na, da, pa, basis in faces[a]:
             for nb, db, pb, basis_b in faces[b]:

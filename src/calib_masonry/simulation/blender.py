@@ -115,53 +115,24 @@ def _box(size) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _quaternions(r: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w, x, y, z) ``(..., 4)`` of rotation matrices ``(..., 3, 3)`` (w >= 0).
+    """Unit quaternions (w, x, y, z) ``(..., 4)`` of rotation matrices ``(..., 3, 3)``, w >= 0
+    (scipy's Rotation; Blender's float32 matrices are taken to the nearest rotation)."""
+    from scipy.spatial.transform import Rotation
 
-    Shepperd's method, vectorised: each quaternion is computed from the largest of its four
-    components' squares, so none is divided by a small number (10x faster than scipy's
-    Rotation.from_matrix on a run's ~10^5 poses, and the same to 1e-15 on exact rotations)."""
-    shape = r.shape[:-2]
-    m = np.asarray(r, dtype=np.float64).reshape(-1, 3, 3)
-    m00, m11, m22 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
-    # 4 x^2 - 1 etc. for (w, x, y, z): the trace and the three diagonal-led sums
-    d = np.stack([m00 + m11 + m22, m00 - m11 - m22, m11 - m00 - m22, m22 - m00 - m11], axis=1)
-    k = np.argmax(d, axis=1)
-    s21, s02, s10 = m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1]
-    a10, a20, a21 = m[:, 1, 0] + m[:, 0, 1], m[:, 2, 0] + m[:, 0, 2], m[:, 2, 1] + m[:, 1, 2]
-    big = 1.0 + d[np.arange(len(k)), k]
-    # the four candidate (un-normalised) quaternions, each 2 sqrt(big) times the true one
-    cand = np.stack(
-        [
-            np.stack([big, s21, s02, s10], axis=1),
-            np.stack([s21, big, a10, a20], axis=1),
-            np.stack([s02, a10, big, a21], axis=1),
-            np.stack([s10, a20, a21, big], axis=1),
-        ],
-        axis=1,
-    )
-    q = cand[np.arange(len(k)), k]
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    m = np.asarray(r, dtype=np.float64)
+    flat = m.reshape(-1, 3, 3)
+    if len(flat) == 0:
+        return np.zeros((*m.shape[:-2], 4))
+    q = Rotation.from_matrix(flat).as_quat(scalar_first=True)
     q *= np.where(q[:, :1] < 0, -1.0, 1.0)
-    return q.reshape(*shape, 4)
+    return q.reshape(*m.shape[:-2], 4)
 
 
 def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:
     """Quaternion (w, x, y, z) of the joint frame (:func:`~calib_masonry.simulation.scene.joint_axes`)
     whose z axis is ``normal``."""
     x, y, z = (a[0] for a in joint_axes(np.asarray(normal, dtype=np.float64)[None]))
-    m = np.column_stack([x, y, z])
-    w = np.sqrt(max(0.0, 1.0 + m[0, 0] + m[1, 1] + m[2, 2])) / 2.0
-    if w > 1e-6:
-        return (w, (m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w))
-    i = int(np.argmax(np.diag(m)))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    r = np.sqrt(max(0.0, 1.0 + m[i, i] - m[j, j] - m[k, k]))
-    q = [0.0, 0.0, 0.0, 0.0]
-    q[1 + i] = r / 2
-    q[1 + j] = (m[j, i] + m[i, j]) / (2 * r)
-    q[1 + k] = (m[k, i] + m[i, k]) / (2 * r)
-    q[0] = (m[k, j] - m[j, k]) / (2 * r)
-    return tuple(q)
+    return tuple(float(v) for v in _quaternions(np.column_stack([x, y, z])))
 
 
 def _gravity_per_frame(scene: Scene) -> np.ndarray:

@@ -49,16 +49,14 @@ __all__ = [
 
 
 def rotations(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (w, x, y, z)."""
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        -2,
-    )
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (w, x, y, z) (scipy's Rotation)."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q, dtype=np.float64)
+    flat = q.reshape(-1, 4)
+    if len(flat) == 0:
+        return np.zeros((*q.shape[:-1], 3, 3))
+    return Rotation.from_quat(flat, scalar_first=True).as_matrix().reshape(*q.shape[:-1], 3, 3)
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ import numpy as np
 import shapely
 
 from ..build3d.assemble import Brick, brick_solid
-from ..build3d.contacts import OUTLINE_POINTS, ContactPatch, contact_patches, joint_axes, patch_section
+from ..build3d.contacts import OUTLINE_POINTS, ContactPatch, box_pairs, contact_patches, joint_axes, patch_section
 from ..build3d.extrude import Polyhedron
 from ..build3d.place import Corner, WallFrame
 from ..errors import InputError
@@ -344,12 +344,10 @@ def _overlapping_unbonded(bodies: Sequence[Body], bonded: set[tuple[int, int]], 
     """Bodies, not bonded to each other, whose hulls overlap by more than ``tol_m`` (grown bricks
     that meet only along an edge, as two walls' end bricks at a re-entrant corner do, or stones
     whose corners nearly touch, overlap once grown)."""
+    from scipy.spatial import ConvexHull
+
     lo = np.array([b.location + b.vertices.min(axis=0) for b in bodies])
     hi = np.array([b.location + b.vertices.max(axis=0) for b in bodies])
-    from scipy.spatial import ConvexHull, cKDTree
-
-    centre, half = (lo + hi) / 2, (hi - lo) / 2
-    tree = cKDTree(centre)
     facets: dict[int, np.ndarray] = {}  # each body's hull, computed once however many pairs it is in
 
     def hull(k: int) -> np.ndarray:
@@ -358,10 +356,8 @@ def _overlapping_unbonded(bodies: Sequence[Body], bonded: set[tuple[int, int]], 
         return facets[k]
 
     out: set[int] = set()
-    for i, j in tree.query_pairs(2.0 * float(half.max()) * math.sqrt(3.0)):
-        if (min(i, j), max(i, j)) in bonded:
-            continue
-        if np.any(np.abs(centre[i] - centre[j]) >= half[i] + half[j] - tol_m):
+    for i, j in box_pairs(lo, hi, tol_m):
+        if (i, j) in bonded:
             continue
         if _hull_overlap_depth(hull(i), hull(j)) > tol_m:
             out.update((i, j))

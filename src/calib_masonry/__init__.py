@@ -1,7 +1,8 @@
 """calib_masonry: photos of single-wythe masonry walls to a calibrated 3D brick model and its simulation.
 
 The public API, re-exported explicitly. Every stage is a plain function on objects and writes no
-file; the ``write_*`` / ``read_*`` functions are the edge::
+file; the ``write_*`` / ``read_*`` functions and the ``*_to_folder`` / ``*_to_file`` calls behind
+each command of the CLI are the edge::
 
     photo --calibrate_photo--> PhotoCalibration --rectify--> orthophoto --segment--> mask
     mask --trace--> TraceResult --refine--> TraceResult
@@ -22,6 +23,12 @@ __version__ = "0.1.0"
 
 # public name -> (module, attribute)
 _API = {
+    "demo": (".pipeline", "demo"),
+    "compare_to_file": (".study.compare", "compare_to_file"),
+    "synth_to_folder": (".synthetic.truth", "synth_to_folder"),
+    "trace_to_file": (".wall2d.trace", "trace_to_file"),
+    "footprint_to_folder": (".calibrate.footprint", "footprint_to_folder"),
+    "rectify_to_folder": (".calibrate.rectify", "rectify_to_folder"),
     "Brick": (".build3d.assemble", "Brick"),
     "Structure3D": (".build3d.assemble", "Structure3D"),
     "WallPolygons": (".build3d.assemble", "WallPolygons"),
@@ -125,10 +132,12 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .calibrate.fitresult import FitResult as FitResult
     from .calibrate.fitresult import FitStatus as FitStatus
     from .calibrate.footprint import fit_footprint as fit_footprint
+    from .calibrate.footprint import footprint_to_folder as footprint_to_folder
     from .calibrate.rectify import CalibrateConfig as CalibrateConfig
     from .calibrate.rectify import PhotoCalibration as PhotoCalibration
     from .calibrate.rectify import calibrate_photo as calibrate_photo
     from .calibrate.rectify import rectify as rectify
+    from .calibrate.rectify import rectify_to_folder as rectify_to_folder
     from .errors import BackendMissing as BackendMissing
     from .errors import CalibMasonryError as CalibMasonryError
     from .errors import FitFailed as FitFailed
@@ -140,6 +149,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .pipeline import BuildResult as BuildResult
     from .pipeline import build as build
     from .pipeline import build_to_folder as build_to_folder
+    from .pipeline import demo as demo
     from .pipeline import read_build as read_build
     from .pipeline import write_build as write_build
     from .simulation.ground_motion import GroundMotion as GroundMotion
@@ -160,6 +170,8 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .spec import structure_to_toml as structure_to_toml
     from .study.compare import compare as compare
     from .study.compare import compare_dirs as compare_dirs
+    from .study.compare import compare_to_file as compare_to_file
+    from .synthetic.truth import synth_to_folder as synth_to_folder
     from .synthetic.truth import synthesize as synthesize
     from .synthetic.truth import truth_structure as truth_structure
     from .wall2d.refine import RefineConfig as RefineConfig
@@ -170,3 +182,4 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .wall2d.trace import TraceResult as TraceResult
     from .wall2d.trace import refine_trace as refine
     from .wall2d.trace import trace_mask as trace
+    from .wall2d.trace import trace_to_file as trace_to_file

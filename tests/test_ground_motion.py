@@ -64,7 +64,15 @@ def test_accelerogram_csv(tmp_path):
 
 @pytest.mark.parametrize(
     "text, msg",
-    [("", "at least 3 rows"), ("t,a\n0,1\n0,2\n0,3\n", "time must increase"), ("0,1\n1,x\n2,3\n", "unreadable")],
+    [
+        ("", "at least 3 rows"),
+        ("t,a\n0,1\n0,2\n0,3\n", "line 3: time 0 s does not increase"),
+        ("0,1\n1,x\n2,3\n", "line 2: '1,x' is not numbers"),
+        ("t,a\n0,0.1\n0.01,nan\n0.02,0.1\n", "line 3: '0.01,nan' holds NaN or inf"),
+        ("0,0.1\n0.01,inf\n0.02,0.1\n", "line 2"),
+        ("0,0.1\n0.01,0.2\n0.02,0.1\n0.05,0.0\n0.06,0.1\n", "line 4: time step 0.03 s"),
+        ("0,0.1,0.2,0.3\n0.01,0,0,0\n0.02,0,0,0\n", "line 1: 4 columns"),
+    ],
 )
 def test_accelerogram_errors(tmp_path, text, msg):
     p = tmp_path / "bad.csv"
@@ -73,6 +81,53 @@ def test_accelerogram_errors(tmp_path, text, msg):
         read_accelerogram(p)
     with pytest.raises(InputError, match="not found"):
         read_accelerogram(tmp_path / "none.csv")
+
+
+def test_two_column_record_shakes_along_x_and_three_columns_along_both(tmp_path):
+    t = np.arange(0, 4, 0.005)
+    a = 0.2 * np.sin(2 * np.pi * 1.5 * t)
+    two = tmp_path / "two.csv"
+    two.write_text("\n".join(f"{x:.3f},{y:.6f}" for x, y in zip(t, a)))
+    three = tmp_path / "three.csv"
+    three.write_text("time;ax;ay\n" + "\n".join(f"{x:.3f};{y:.6f};{-y:.6f}" for x, y in zip(t, a)))
+    m2, m3 = read_accelerogram(two), read_accelerogram(three)
+    assert m2.displacement.shape == (len(t), 2) and np.all(m2.displacement[:, 1] == 0)
+    assert m2.mean_acceleration(np.arange(0, 4, 0.04)).shape == (99, 2)
+    assert np.allclose(m3.displacement[:, 1], -m3.displacement[:, 0])
+    in_ms2 = read_accelerogram(two, units="m/s2")
+    assert in_ms2.pga == pytest.approx(m2.pga / G, rel=1e-9)
+
+
+def test_peer_at2_record(tmp_path):
+    rng = np.random.default_rng(0)
+    values = 0.1 * rng.standard_normal(203)
+    body = "\n".join("  ".join(f"{v:.7E}" for v in values[k : k + 5]) for k in range(0, len(values), 5))
+    for header in ("NPTS=   203, DT=   .0100 SEC", "  203    .0100    NPTS, DT"):
+        p = tmp_path / "RSN0_TEST.AT2"
+        p.write_text(
+            "PEER NGA STRONG MOTION DATABASE RECORD\nTest event, station, comp 000\n"
+            f"ACCELERATION TIME SERIES IN UNITS OF G\n{header}\n{body}\n"
+        )
+        m = read_accelerogram(p)
+        assert m.dt == pytest.approx(0.01) and len(m.displacement) == 203
+        assert m.source == "RSN0_TEST.AT2"
+    p.write_text(p.read_text().replace("  203    .0100", "  204    .0100"))
+    with pytest.raises(InputError, match="NPTS = 204 but the file holds 203"):
+        read_accelerogram(p)
+
+
+def test_pga_scales_a_record_and_without_it_the_record_runs_as_recorded(tmp_path):
+    from calib_masonry.simulation.run import SimulationConfig, motion_for
+
+    t = np.arange(0, 4, 0.005)
+    p = tmp_path / "rec.csv"
+    p.write_text("\n".join(f"{x:.3f},{0.2 * np.sin(2 * np.pi * 1.5 * x):.6f}" for x in t))
+    recorded = motion_for(SimulationConfig(accelerogram=p))
+    assert recorded.pga == pytest.approx(read_accelerogram(p).pga)
+    scaled = motion_for(SimulationConfig(accelerogram=p, pga_g=0.5))
+    assert scaled.applied_peak(25) == pytest.approx(0.5 * G, rel=1e-9)
+    with pytest.raises(InputError, match="must lie in 0..5 g"):
+        SimulationConfig(pga_g=1e9)
 
 
 def test_negative_pga_refused():

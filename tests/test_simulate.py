@@ -376,7 +376,15 @@ def test_simulate_cli_pushover(small_model):
 
 
 @pytest.mark.parametrize(
-    "case, msg", [("nobricks", "no bricks.json"), ("negative", "--pga"), ("badcsv", "accelerogram")]
+    "case, msg",
+    [
+        ("nobricks", "no bricks.json"),
+        ("negative", "--pga"),
+        ("huge", "must lie in 0..5 g"),
+        ("badcsv", "accelerogram"),
+        ("nan", "line 3: '0.02,nan' holds NaN or inf"),
+        ("frames", "--frames -1"),
+    ],
 )
 def test_simulate_bad_input(small_model, tmp_path, case, msg):
     model = small_model / "model"
@@ -386,6 +394,13 @@ def test_simulate_bad_input(small_model, tmp_path, case, msg):
         args[1] = tmp_path / "empty"
     elif case == "negative":
         args += ["--pga", "-0.2"]
+    elif case == "huge":
+        args += ["--pga", "1e9"]
+    elif case == "nan":
+        (tmp_path / "x.csv").write_text("0,0.1\n0.01,0.2\n0.02,nan\n0.03,0.1\n")
+        args += ["--accelerogram", tmp_path / "x.csv"]
+    elif case == "frames":
+        args += ["--frames", "-1"]
     else:
         (tmp_path / "x.csv").write_text("garbage\n")
         args += ["--accelerogram", tmp_path / "x.csv"]
@@ -489,3 +504,24 @@ def test_build_stores_the_geometry_simulate_would_compute(small_model, tmp_path,
     assert geometry_for_model(small_model / "model")[1]
     monkeypatch.setattr(scene_module, "_geometry_code_version", lambda: "edited")
     assert not geometry_for_model(small_model / "model")[1]
+
+
+def test_simulate_a_two_column_record(small_model, tmp_path):
+    """time, acceleration in g: the format the README documents (it used to crash after Blender started)."""
+    t = np.arange(0, 1.5, 0.005)
+    rec = tmp_path / "rec.csv"
+    rec.write_text("time_s,acc_g\n" + "\n".join(f"{x:.3f},{0.05 * np.sin(2 * np.pi * 2 * x):.6f}" for x in t))
+    r = _cli(
+        "simulate",
+        small_model / "model",
+        "--accelerogram",
+        rec,
+        "--frames",
+        "0",
+        "--no-figures",
+        "--out",
+        tmp_path / "o",
+    )
+    assert r.returncode == 0, r.stderr
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["ground_motion"]["source"] == "rec.csv" and 0.04 < s["ground_motion"]["pga_g"] < 0.08

@@ -198,6 +198,7 @@ def _cmd_simulate(args) -> int:
         duration_s=args.duration,
         seed=args.seed,
         accelerogram=Path(args.accelerogram) if args.accelerogram else None,
+        record_units=args.units,
         components=args.components or SimulationConfig.components,
         solver=solver,
         frames_png=args.frames,
@@ -304,7 +305,13 @@ def _parser() -> argparse.ArgumentParser:
 
     m = sub.add_parser("simulate", help="Bullet (bpy) earthquake simulation of a built model")
     m.add_argument("model_dir")
-    m.add_argument("--pga", type=float, default=0.3, help="peak ground acceleration in g (synthetic motion)")
+    m.add_argument(
+        "--pga",
+        type=float,
+        default=None,
+        help="peak ground acceleration in g: of the synthetic motion (default 0.3), or the peak an "
+        "--accelerogram is scaled to (default: the record as recorded)",
+    )
     m.add_argument("--duration", type=float, default=10.0, help="seconds of ground motion")
     m.add_argument("--seed", type=int, default=0)
     m.add_argument(
@@ -315,7 +322,13 @@ def _parser() -> argparse.ArgumentParser:
         help="horizontal components of the synthetic motion (default 2, as in a real earthquake; "
         "1 shakes along X only and spares the walls parallel to it)",
     )
-    m.add_argument("--accelerogram", default=None, help="CSV of time, acceleration (g) instead of --pga")
+    m.add_argument(
+        "--accelerogram",
+        default=None,
+        help="a recorded motion instead of the synthetic one: CSV of time, acceleration[, acceleration_y] "
+        "or a PEER NGA .AT2 file",
+    )
+    m.add_argument("--units", default=None, choices=("g", "m/s2"), help="of a CSV --accelerogram (default g)")
     m.add_argument("--fps", type=int, default=None, help="frames per second (default: the tested settings, 25)")
     m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")
     m.add_argument("--iterations", type=int, default=None, help="solver iterations per substep (default 50)")

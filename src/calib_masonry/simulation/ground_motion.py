@@ -227,42 +227,124 @@ def constant_acceleration(
     )
 
 
-def read_accelerogram(path: str | Path, *, units: str = "g", highpass_hz: float = 0.1) -> GroundMotion:
-    """A CSV of ``time, acceleration[, acceleration_y]`` (header lines allowed), in g or m/s^2."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"--accelerogram {path}: file not found; give a CSV of time, acceleration")
-    if units not in ("g", "m/s2"):
-        raise InputError(f"accelerogram units {units!r}: choose 'g' or 'm/s2'")
-    rows = []
-    try:
-        for line in path.read_text(encoding="utf-8", errors="strict").splitlines():
-            parts = [p for p in line.replace(";", ",").replace("\t", ",").split(",") if p.strip()]
-            if not parts:
-                continue
+def _record_error(path: Path, message: str) -> InputError:
+    return InputError(f"--accelerogram {path}: {message}")
+
+
+def _parse_at2(path: Path, lines: list[str]) -> tuple[np.ndarray, float, str]:
+    """A PEER NGA ``.AT2`` record: four header lines (the third names the units, the fourth NPTS and
+    DT, as ``NPTS=  5590, DT=   .0050 SEC`` or the older ``5590   .0050   NPTS, DT``), then the
+    accelerations, several per line."""
+    import re
+
+    if len(lines) < 5:
+        raise _record_error(path, "a PEER .AT2 file needs 4 header lines and the values; this one is shorter")
+    units = "m/s2" if re.search(r"CM/S|M/S|GAL", lines[2].upper()) else "g"
+    if re.search(r"CM/S|GAL", lines[2].upper()):
+        units = "cm/s2"
+    head = lines[3].upper()
+    m = re.search(r"NPTS\s*=\s*(\d+)\s*,?\s*DT\s*=\s*([0-9.Ee+-]+)", head)
+    if m is None:
+        m = re.search(r"^\s*(\d+)\s+([0-9.Ee+-]+)\s+NPTS", head)
+    if m is None:
+        raise _record_error(path, f"line 4 ({lines[3].strip()!r}) does not give NPTS and DT; is this a PEER .AT2 file?")
+    npts, dt = int(m.group(1)), float(m.group(2))
+    values: list[float] = []
+    for number, line in enumerate(lines[4:], start=5):
+        for token in line.replace(",", " ").split():
             try:
-                rows.append([float(p) for p in parts])
+                v = float(token)
             except ValueError:
-                if rows:
-                    raise
-                continue  # header
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise InputError(
-            f"--accelerogram {path}: unreadable ({exc}); give numbers as time, acceleration per line"
-        ) from None
-    if len(rows) < 3 or len({len(r) for r in rows}) != 1 or len(rows[0]) not in (2, 3):
-        raise InputError(f"--accelerogram {path}: expected at least 3 rows of 'time, acceleration[, acceleration_y]'")
+                raise _record_error(path, f"line {number}: {token!r} is not a number") from None
+            if not math.isfinite(v):
+                raise _record_error(path, f"line {number}: {token} is not a finite acceleration")
+            values.append(v)
+    if len(values) != npts:
+        raise _record_error(path, f"the header says NPTS = {npts} but the file holds {len(values)} values")
+    if not (math.isfinite(dt) and dt > 0):
+        raise _record_error(path, f"line 4: DT = {dt} must be > 0 seconds")
+    return np.asarray(values)[:, None], dt, units
+
+
+def _parse_csv(path: Path, lines: list[str], units: str) -> tuple[np.ndarray, float]:
+    """``time, acceleration[, acceleration_y]`` per line (comma, semicolon, tab or spaces), header
+    lines allowed before the numbers; every problem names its line."""
+    rows: list[list[float]] = []
+    numbers: list[int] = []
+    for number, line in enumerate(lines, start=1):
+        parts = [p for p in line.replace(";", ",").replace("\t", ",").replace(" ", ",").split(",") if p.strip()]
+        if not parts:
+            continue
+        try:
+            values = [float(p) for p in parts]
+        except ValueError:
+            if rows:
+                raise _record_error(
+                    path, f"line {number}: {line.strip()!r} is not numbers; give time, acceleration"
+                ) from None
+            continue  # a header line
+        if not all(math.isfinite(v) for v in values):
+            raise _record_error(path, f"line {number}: {line.strip()!r} holds NaN or inf; give finite numbers")
+        if len(values) not in (2, 3):
+            raise _record_error(
+                path, f"line {number}: {len(values)} columns; give time, acceleration[, acceleration_y]"
+            )
+        if rows and len(values) != len(rows[0]):
+            raise _record_error(
+                path, f"line {number}: {len(values)} columns where line {numbers[0]} has {len(rows[0])}"
+            )
+        rows.append(values)
+        numbers.append(number)
+    if len(rows) < 3:
+        raise _record_error(path, "expected at least 3 rows of 'time, acceleration[, acceleration_y]'")
     data = np.asarray(rows)
     t = data[:, 0]
     dts = np.diff(t)
-    if not np.all(dts > 0):
-        raise InputError(f"--accelerogram {path}: time must increase from row to row")
+    bad = np.flatnonzero(dts <= 0)
+    if bad.size:
+        k = int(bad[0]) + 1
+        raise _record_error(
+            path,
+            f"line {numbers[k]}: time {t[k]:g} s does not increase (line {numbers[k - 1]}: "
+            f"{t[k - 1]:g} s); sort the record by time",
+        )
     dt = float(np.median(dts))
-    if np.abs(dts - dt).max() > 1e-6 + 1e-3 * dt:
-        grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
-        acc = np.column_stack([np.interp(grid, t, data[:, k]) for k in range(1, data.shape[1])])
+    off = np.flatnonzero(np.abs(dts - dt) > 1e-6 + 1e-3 * dt)
+    if off.size:
+        k = int(off[0]) + 1
+        raise _record_error(
+            path,
+            f"line {numbers[k]}: time step {dts[k - 1]:g} s where the record's step is "
+            f"{dt:g} s; resample the record to a regular time step",
+        )
+    return data[:, 1:], dt
+
+
+RECORD_UNITS = {"g": G, "m/s2": 1.0, "cm/s2": 0.01}
+
+
+def read_accelerogram(path: str | Path, *, units: str | None = None, highpass_hz: float = 0.1) -> GroundMotion:
+    """A recorded ground motion: a CSV of ``time, acceleration[, acceleration_y]`` (a header allowed;
+    ``units`` "g" by default, or "m/s2") or a PEER NGA ``.AT2`` file (units from its header). NaN,
+    inf, a time that does not increase or an irregular time step is refused with its line number.
+    The record is applied as recorded (see :func:`calib_masonry.simulation.run.motion_for` for
+    scaling it to a PGA)."""
+    path = Path(path)
+    if not path.is_file():
+        raise _record_error(path, "file not found; give a CSV of time, acceleration or a PEER .AT2 file")
+    if units is not None and units not in ("g", "m/s2"):
+        raise InputError(f"--units {units!r}: choose g or m/s2")
+    try:
+        lines = path.read_text(encoding="utf-8", errors="strict").splitlines()
+    except (UnicodeDecodeError, OSError) as exc:
+        raise _record_error(path, f"unreadable ({exc}); give a text file of numbers") from None
+    if path.suffix.upper() == ".AT2":
+        acc, dt, file_units = _parse_at2(path, lines)
+        units = units or file_units
     else:
-        acc = data[:, 1:]
-    if units == "g":
-        acc = acc * G
+        acc, dt = _parse_csv(path, lines, units or "g")
+        units = units or "g"
+    acc = acc * RECORD_UNITS[units]
+    if acc.shape[1] == 1:  # one horizontal component, along X
+        acc = np.column_stack([acc[:, 0], np.zeros(len(acc))])
     return motion_from_acceleration(acc, dt, highpass_hz=highpass_hz, source=path.name)

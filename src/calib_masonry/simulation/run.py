@@ -60,16 +60,23 @@ __all__ = [
 ]
 
 
+DEFAULT_PGA_G = 0.3  # of a synthetic motion when no PGA is given
+MAX_PGA_G = 5.0  # above any recorded ground motion (the strongest reach about 3 g)
+
+
 @dataclass(frozen=True)
 class SimulationConfig:
     """What ``calib-masonry simulate`` is asked for, checked on construction: a synthetic ground
     motion (``pga_g``, ``duration_s``, ``seed``, ``components``), a recorded one (``accelerogram``)
     or a ``pushover``; the solver, the material and the outputs."""
 
-    pga_g: float = 0.3
+    # the peak ground acceleration in g: of the synthetic motion (None: 0.3), or, with an
+    # accelerogram, the peak the record is scaled to (None: the record as recorded)
+    pga_g: float | None = None
     duration_s: float = 10.0
     seed: int = 0
     accelerogram: Path | None = None
+    record_units: str | None = None  # of a CSV record: "g" (default) or "m/s2"; an .AT2 file names its own
     # two independent horizontal components, as a real earthquake has: with one, along X, the walls
     # parallel to X are loaded only in their plane and stand, so at most the other walls fall (the
     # paper example at 0.6 g, seed 0: 43 % of bricks moved with one component, 71-77 % with two)
@@ -88,8 +95,15 @@ class SimulationConfig:
     pushover: Pushover | None = None
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.pga_g) and self.pga_g >= 0):
-            raise InputError(f"--pga {self.pga_g}: the peak ground acceleration must be >= 0 (in g)")
+        if self.pga_g is None and self.accelerogram is None:
+            object.__setattr__(self, "pga_g", DEFAULT_PGA_G)
+        if self.pga_g is not None and not (math.isfinite(self.pga_g) and 0 <= self.pga_g <= MAX_PGA_G):
+            raise InputError(
+                f"--pga {self.pga_g}: the peak ground acceleration must lie in 0..{MAX_PGA_G:g} g "
+                "(the strongest records reach about 3 g)"
+            )
+        if self.record_units is not None and self.record_units not in ("g", "m/s2"):
+            raise InputError(f"--units {self.record_units!r}: choose g or m/s2")
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise InputError(f"--duration {self.duration_s}: must be > 0 seconds")
         if self.components not in (1, 2):
@@ -228,9 +242,17 @@ def motion_for(config: SimulationConfig) -> GroundMotion:
     applies (its mean over each frame) peaks at the PGA: the Kanai-Tajimi record is broadband, and
     at 25 fps its frame means peak 10-20 % below the peak of the 200 Hz samples (0.49-0.54 g for
     0.6 g records, seeds 0-2, measured), so scaling the samples would shake the model less than
-    asked. A recorded accelerogram is applied as it is."""
+    asked. A recorded accelerogram is applied as recorded, or, with ``pga_g``, scaled the same way
+    so that its applied peak is the PGA."""
     if config.accelerogram is not None:
-        return read_accelerogram(config.accelerogram)
+        record = read_accelerogram(config.accelerogram, units=config.record_units)
+        applied = record.applied_peak(config.solver.fps)
+        if config.pga_g is None or applied <= 0:
+            return record
+        return record.scaled(
+            config.pga_g * G / applied,
+            source=f"{record.source} scaled to {config.pga_g:g} g as applied at {config.solver.fps} fps",
+        )
     motion = synthetic_motion(
         config.pga_g,
         config.duration_s,

@@ -176,9 +176,9 @@ def build(
         )
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
-    todo = spec.with_walls(tuple(w for w in spec.walls if w.name not in traces_given))
-    resolved, photos = resolve_photo_walls(todo, progress=progress) if todo.walls else (todo, {})
-    fitted = {w.name: w for w in resolved.walls}
+    todo = tuple(w for w in spec.walls if w.name not in traces_given)
+    resolved, photos = resolve_photo_walls(spec.with_walls(todo), progress=progress) if todo else (spec, {})
+    fitted = {w.name: w for w in resolved.walls if w.name not in traces_given}
     spec = spec.with_walls(tuple(fitted.get(w.name, w) for w in spec.walls))
     if photos:
         seconds["calibrate_rectify_segment"] = time.perf_counter() - t0

@@ -105,3 +105,114 @@ def test_demo_from_project_folder(tmp_path):
     assert "FAIL" not in r.stdout
     m = json.loads((tmp_path / "demo" / "compare.json").read_text())
     assert m["precision"] == 1.0 and m["recall"] == 1.0
+
+
+@pytest.mark.parametrize("command", ["build", "trace", "simulate", "synth"])
+@pytest.mark.parametrize("where", ["is_a_file", "under_a_file"])
+def test_out_that_cannot_be_written_is_refused_up_front(tmp_path, command, where):
+    blocker = tmp_path / "blocker"
+    blocker.write_text("not a folder")
+    out = blocker if where == "is_a_file" else blocker / "sub" / "out"
+    if command == "trace" and where == "is_a_file":
+        out = tmp_path  # a folder where a file is wanted
+    args = {
+        "build": ["build", DATA / "paper_example" / "structure.toml"],
+        "trace": ["trace", SWAT],
+        "simulate": ["simulate", tmp_path / "no-model"],
+        "synth": ["synth", DATA / "paper_example" / "scenario.toml"],
+    }[command]
+    r = _run(*args, "--out", out)
+    assert r.returncode == 2, r.stderr
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: --out"), r.stderr
+    assert blocker.read_text() == "not a folder"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blocker"]
+
+
+def _staging(folder):
+    return [p for p in folder.iterdir() if ".partial-" in p.name]
+
+
+@pytest.mark.slow
+def test_sigterm_stops_build_and_leaves_nothing(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "model"
+    p = subprocess.Popen(
+        [sys.executable, "-m", "calib_masonry", "build", str(DATA / "stylite" / "structure.toml"), "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(6.0)  # into the work
+    assert p.poll() is None, "the build ended before it could be killed; use a larger structure"
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=30)  # how fast is measured in the note, not asserted
+    assert p.returncode == 2 and "terminated; nothing was written" in err
+    assert not out.exists() and _staging(tmp_path) == []
+
+
+@pytest.mark.slow
+def test_sigterm_stops_simulate_and_sigkill_staging_goes_with_the_next_run(tmp_path):
+    import signal
+    import time
+
+    from calib_masonry.pipeline import build_to_folder
+    from calib_masonry.spec import load_structure
+    from calib_masonry.synthetic.truth import synthesize
+
+    from .conftest import scenario_text
+
+    sc = tmp_path / "s.toml"
+    sc.write_text(scenario_text([(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)]))
+    synthesize(load_structure(sc, require_sources=False), tmp_path / "data", figures=False)
+    build_to_folder(
+        load_structure(tmp_path / "data" / "structure.toml"), tmp_path / "model", figures=False, progress=False
+    )
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    out = runs / "sim"
+
+    def start():
+        return subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "calib_masonry",
+                "simulate",
+                str(tmp_path / "model"),
+                "--duration",
+                "60",
+                "--out",
+                str(out),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+
+    def wait_for_staging(p):
+        for _ in range(600):
+            if _staging(runs):
+                return
+            assert p.poll() is None, p.communicate()[1]
+            time.sleep(0.1)
+        raise AssertionError("no staging folder appeared")
+
+    p = start()
+    wait_for_staging(p)
+    time.sleep(1.0)  # stepping
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 2 and "terminated" in err, err
+    assert not out.exists() and _staging(runs) == []
+
+    p = start()
+    wait_for_staging(p)
+    p.kill()  # SIGKILL: nothing can clean up
+    p.communicate(timeout=10)
+    assert len(_staging(runs)) == 1
+    r = _run("simulate", tmp_path / "model", "--duration", "0.5", "--frames", "0", "--no-figures", "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert _staging(runs) == [] and (out / "summary.json").is_file()

@@ -7,6 +7,7 @@ A user's mistake ends in one line ``error: ...`` and exit code 2, never a traceb
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 import warnings
@@ -361,17 +362,29 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that every staging folder is removed on the way out."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _print_warning
+    previous = signal.signal(signal.SIGTERM, _terminate)  # `kill`, `timeout` and schedulers send SIGTERM
     try:
         return int(args.func(args) or 0)
     except CalibMasonryError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("error: interrupted; nothing was written", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        what = "terminated" if isinstance(exc, Terminated) else "interrupted"
+        print(f"error: {what}; nothing was written", file=sys.stderr)
         return 2
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -29,6 +29,8 @@ __all__ = [
     "read_json",
     "read_mask",
     "read_photo",
+    "check_output",
+    "remove_stale_staging",
     "staged_file",
     "staged_output",
     "warn",
@@ -147,18 +149,69 @@ def read_json(path: str | Path, *, field: str = "file") -> Any:
         raise InputError(f"{field} {path}: not valid JSON ({exc}); re-create it") from None
 
 
+def check_output(path: str | Path, *, folder: bool = True, flag: str = "--out") -> Path:
+    """Check, before any work, that ``path`` can become an output folder (or file): it is not an
+    existing file (folder) or folder (file), and no folder above it is a file."""
+    path = Path(path)
+    what = "folder" if folder else "file"
+    if folder and path.exists() and not path.is_dir():
+        raise InputError(f"{flag} {path}: is a file, not a folder; give a folder to write the results into")
+    if not folder and path.is_dir():
+        raise InputError(f"{flag} {path}: is a folder; give a file name to write to")
+    for up in path.resolve().parents:
+        if up.exists():
+            if not up.is_dir():
+                raise InputError(
+                    f"{flag} {path}: {up} is a file, so no {what} can be made under it; choose another path"
+                )
+            break
+    return path
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _staging_prefix(path: Path) -> str:
+    return f".{path.name}.partial-"
+
+
+def remove_stale_staging(path: Path) -> None:
+    """Remove staging beside ``path`` that a killed run left (its pid, in the name, is gone)."""
+    parent = path.resolve().parent
+    if not parent.is_dir():
+        return
+    prefix = _staging_prefix(path)
+    for entry in parent.glob(prefix + "*"):
+        pid = entry.name[len(prefix) :].split("-", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry, ignore_errors=True)
+            else:
+                entry.unlink(missing_ok=True)
+
+
 @contextlib.contextmanager
 def staged_output(out_dir: str | Path) -> Iterator[Path]:
     """Yield an empty staging folder; on success move its entries into ``out_dir``.
 
     Entries of ``out_dir`` that the stage does not write are left alone; entries it does write
-    replace the old ones. On any exception the staging folder is removed and ``out_dir`` is
-    untouched, so a failed run never leaves half a result.
+    replace the old ones. On any exception (SIGTERM and Ctrl-C included, see the CLI) the staging
+    folder is removed and ``out_dir`` is untouched, so a failed run never leaves half a result.
+    Staging that a killed run left beside ``out_dir`` is removed first. The staging folder's name
+    carries this process's id.
     """
-    out_dir = Path(out_dir)
+    out_dir = check_output(out_dir)
     parent = out_dir.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=parent))
+    remove_stale_staging(out_dir)
+    stage = Path(tempfile.mkdtemp(prefix=f"{_staging_prefix(out_dir)}{os.getpid()}-", dir=parent))
     try:
         yield stage
     except BaseException:
@@ -180,9 +233,12 @@ def staged_output(out_dir: str | Path) -> Iterator[Path]:
 @contextlib.contextmanager
 def staged_file(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success only."""
-    path = Path(path)
+    path = check_output(path, folder=False)
     path.resolve().parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.partial-", suffix=path.suffix, dir=path.resolve().parent)
+    remove_stale_staging(path)
+    fd, tmp = tempfile.mkstemp(
+        prefix=f"{_staging_prefix(path)}{os.getpid()}-", suffix=path.suffix, dir=path.resolve().parent
+    )
     os.close(fd)
     umask = os.umask(0)
     os.umask(umask)

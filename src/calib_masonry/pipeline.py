@@ -17,7 +17,7 @@ from .build3d.export import export_mesh, plot_model, plot_walls, write_bricks_js
 from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
-from .io import read_json, read_mask, staged_output, warn, write_json
+from .io import check_output, read_json, read_mask, staged_output, warn, write_json
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
 
@@ -303,6 +303,7 @@ def build_to_folder(
     simulation_geometry: bool = True,
 ) -> dict:
     """:func:`build` and :func:`write_build`: what ``calib-masonry build`` calls."""
+    check_output(out)  # before the work, not after it
     return write_build(build(spec, progress=progress), out, figures=figures, simulation_geometry=simulation_geometry)
 
 
@@ -402,6 +403,7 @@ def demo(out: str | Path, data: str | Path | None = None) -> tuple[dict, dict, d
     from .study.compare import compare_dirs
 
     data = find_demo_data(data)
+    check_output(out)
     summary = build_to_folder(load_structure(data / "structure.toml"), out, figures=True)
     metrics = compare_dirs(out, data / "truth")
     write_json(Path(out) / "compare.json", metrics)

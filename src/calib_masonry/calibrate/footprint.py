@@ -237,11 +237,12 @@ def footprint_to_folder(
     """``calib-masonry footprint``: footprint.json, structure.toml with the adjusted W and theta, a plan figure."""
     from pathlib import Path
 
-    from ..io import staged_output, write_json
+    from ..io import check_output, staged_output, write_json
     from ..spec import structure_to_toml
     from .figures import plot_footprint
     from .rectify import CalibrateConfig
 
+    check_output(out)
     config = config or CalibrateConfig()
     if heading_sigma_deg <= 0 or theta_sigma_deg <= 0:
         raise InputError("footprint: --heading-sigma and --theta-sigma must be > 0 (degrees)")

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FitFailed, InputError
-from ..io import Photo, read_photo, staged_output, write_json
+from ..io import Photo, check_output, read_photo, staged_output, write_json
 from .camera import px_per_m
 from .fit import CalibrationInput, CalibrationResult, calibrate, order_corners
 from .lines import DetectConfig, Detection, detect_wall, refine_quad, segments_in_quad
@@ -276,6 +276,7 @@ def rectify_to_folder(
 
     from .figures import plot_calibration
 
+    check_output(out)
     cal = calibrate_photo(photo_path, config)
     res = cal.result
     if px_per_m is None:  # the photo's own resolution at the wall's centre, rounded

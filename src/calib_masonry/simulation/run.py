@@ -25,7 +25,7 @@ from ..build3d.assemble import Structure3D
 from ..build3d.export import bricks_from_json, bricks_json
 from ..build3d.place import Footprint, WallGeometry, corners, wall_frames
 from ..errors import InputError
-from ..io import json_bytes, read_json, staged_output, write_json
+from ..io import check_output, json_bytes, read_json, staged_output, write_json
 from .ground_motion import G, GroundMotion, read_accelerogram, synthetic_motion
 from .joints import joint_stiffness
 from .scene import (
@@ -471,6 +471,7 @@ def simulate_to_folder(
     from .blender import require_bpy
 
     require_bpy()
+    check_output(out)
     t0 = time.perf_counter()
     scene = scene_for_model(model_dir, config)
     t_scene = time.perf_counter() - t0

@@ -167,10 +167,10 @@ def compare(model: Structure3D, truth: Structure3D, *, where: str = "model") -> 
 
 def compare_to_file(run_dir: str | Path, truth_dir: str | Path, out: str | Path | None = None) -> tuple[dict, Path]:
     """``calib-masonry compare``: :func:`compare_dirs` written to ``out`` (default RUN_DIR/compare.json)."""
-    from ..io import staged_file, write_json
+    from ..io import check_output, staged_file, write_json
 
+    out = check_output(Path(out) if out else Path(run_dir) / "compare.json", folder=False)
     metrics = compare_dirs(run_dir, truth_dir)
-    out = Path(out) if out else Path(run_dir) / "compare.json"
     with staged_file(out) as tmp:
         write_json(tmp, metrics)
     return metrics, out

@@ -205,8 +205,10 @@ def synth_to_folder(
     ``photos``, also perspective photos, ``photo_size`` (W, H) pixels overriding its [photos] table).
     Returns the scenario and the truth summary."""
     from ..errors import InputError
+    from ..io import check_output
     from ..spec import load_structure
 
+    check_output(out)
     spec = load_structure(scenario, require_sources=False)
     if spec.synthetic is None:
         raise InputError(f"{scenario}: no [synthetic] table; add one (layout, px_per_m, seed, ...) to make a data set")

@@ -323,16 +323,16 @@ def trace_to_file(
     beside it unless ``figure`` names another path). Returns the trace, its seconds and the figure."""
     import time
 
-    from ..io import read_mask, staged_file, write_json
+    from ..io import check_output, read_mask, staged_file, write_json
 
+    out = check_output(out, folder=False)
+    figure = check_output(Path(figure) if figure else out.with_suffix(".png"), folder=False, flag="--figure")
     mask = read_mask(mask_path, field="MASK")
     t0 = time.perf_counter()
     result = trace_mask(mask, config)
     if not result.bricks:
         raise InputError(f"MASK {mask_path}: no bricks found (no white regions); bricks must be white on black")
     seconds = time.perf_counter() - t0
-    out = Path(out)
-    figure = Path(figure) if figure else out.with_suffix(".png")
     with staged_file(out) as tmp_json, staged_file(figure) as tmp_png:
         doc = result.to_json()
         doc.update(mask=str(mask_path), vertices=config.vertices, target_dice=config.target_dice)

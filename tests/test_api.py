@@ -137,6 +137,14 @@ def test_build_writes_the_simulation_geometry_without_reading_what_it_wrote(buil
     monkeypatch.undo()
     assert read_back == []
     assert summary["bricks"] == len(result.structure.bricks)
+    import trimesh
+
+    glb = trimesh.load(out / "model.glb")  # one node and geometry per brick, named by wall and label
+    assert len(glb.geometry) == len(result.structure.bricks)
+    assert all(name.split("_brick_")[0] in {"w0", "w1", "w2", "w3"} for name in glb.geometry)
+    assert sum(g.volume for g in glb.geometry.values()) == pytest.approx(
+        sum(b.volume for b in result.structure.bricks), rel=1e-6
+    )
     geometry, stored = geometry_for_model(out)
     assert stored  # the copy build stored matches the bricks.json it wrote, byte for byte
     again = read_build(out)

@@ -216,3 +216,22 @@ def test_sigterm_stops_simulate_and_sigkill_staging_goes_with_the_next_run(tmp_p
     r = _run("simulate", tmp_path / "model", "--duration", "0.5", "--frames", "0", "--no-figures", "--out", out)
     assert r.returncode == 0, r.stderr
     assert _staging(runs) == [] and (out / "summary.json").is_file()
+
+
+def test_oversized_and_misnamed_images_are_one_line_errors(tmp_path, monkeypatch):
+    from calib_masonry import io
+    from calib_masonry.errors import InputError
+
+    mask = np.zeros((60, 80), np.uint8)
+    mask[10:50, 10:70] = 255
+    Image.fromarray(mask).save(tmp_path / "m.png")
+    monkeypatch.setattr(io, "MAX_IMAGE_PIXELS", 4000)
+    with pytest.raises(InputError, match="80 x 60 px .* above the 0 megapixel limit; downsample it"):
+        io.read_mask(tmp_path / "m.png")
+    monkeypatch.setattr(io, "_TRUST_LARGE_IMAGES", True)
+    assert io.read_mask(tmp_path / "m.png").sum() == 40 * 60
+    Image.fromarray(mask).save(tmp_path / "j.jpg", quality=95)
+    (tmp_path / "j.jpg").rename(tmp_path / "j.png")
+    r = _run("trace", tmp_path / "j.png", "--out", tmp_path / "p.json")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert "is a JPEG image named .png" in r.stderr and not (tmp_path / "p.json").exists()

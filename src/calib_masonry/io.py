@@ -51,16 +51,46 @@ def xy_from_rc(rc: np.ndarray) -> np.ndarray:
     return rc[..., ::-1].copy()
 
 
+#: Images above this many pixels are refused (Pillow's decompression-bomb guard is 179 megapixels).
+MAX_IMAGE_PIXELS = 178_956_970
+_TRUST_LARGE_IMAGES = os.environ.get("CALIB_MASONRY_TRUST_LARGE_IMAGES") == "1"
+if _TRUST_LARGE_IMAGES:
+    Image.MAX_IMAGE_PIXELS = None
+
+
 @contextlib.contextmanager
 def _opened_image(path: Path, field: str, hint: str) -> Iterator[Image.Image]:
     """An image file, opened and decoded; a missing or unreadable file is a one-line InputError."""
     if not path.is_file():
         raise InputError(f"{field} {path}: file not found; check the path")
     try:
-        im = Image.open(path)
-        im.load()
+        with warnings.catch_warnings():  # the size is checked below, in one line
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            im = Image.open(path)
+    except Image.DecompressionBombError as exc:
+        raise InputError(f"{field} {path}: {exc}; downsample it or set CALIB_MASONRY_TRUST_LARGE_IMAGES=1") from None
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
         raise InputError(f"{field} {path}: cannot be read as an image ({exc}); {hint}") from None
+    if im.width * im.height > MAX_IMAGE_PIXELS and not _TRUST_LARGE_IMAGES:
+        im.close()
+        raise InputError(
+            f"{field} {path}: {im.width} x {im.height} px ({im.width * im.height / 1e6:.0f} megapixels) is above "
+            f"the {MAX_IMAGE_PIXELS / 1e6:.0f} megapixel limit; downsample it (a brick needs about 30 px "
+            "across), or set CALIB_MASONRY_TRUST_LARGE_IMAGES=1 for a file you trust"
+        )
+    try:
+        im.load()
+    except (OSError, SyntaxError, ValueError) as exc:
+        im.close()
+        raise InputError(f"{field} {path}: cannot be read as an image ({exc}); {hint}") from None
+    suffix_format = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".tif": "TIFF", ".tiff": "TIFF"}
+    expected = suffix_format.get(path.suffix.lower())
+    if expected is not None and im.format is not None and im.format != expected:
+        im.close()
+        raise InputError(
+            f"{field} {path}: the file is a {im.format} image named {path.suffix}; "
+            f"rename it to its real type (a mask must be a lossless PNG or TIFF: JPEG blurs the joints)"
+        )
     with im:
         yield im
 

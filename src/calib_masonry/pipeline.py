@@ -342,6 +342,7 @@ def write_build(
     with staged_output(out) as stage:
         t0 = time.perf_counter()
         export_mesh(s, stage / "model.stl")
+        export_mesh(s, stage / "model.glb")  # one node per brick: opens in Blender, three.js, any glTF viewer
         write_bricks_json(s, stage / "bricks.json")
         result.seconds["export"] = time.perf_counter() - t0
         if figures:

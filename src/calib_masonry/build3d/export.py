@@ -44,9 +44,18 @@ def export_mesh(structure: Structure3D, path: Path) -> None:
         raise InputError(f"{path}: unknown mesh format; use one of {sorted(EXPORTERS)}")
     mesh = structure_mesh(structure)
     if kind == "glb":
+        # one node per brick, named by wall and id, coloured by wall (the same colours as model.png)
+        import matplotlib
+
+        cmap = matplotlib.colormaps["tab10"]
+        names = [w.name for w in structure.footprint.walls]
         scene = trimesh.Scene()
         for b in structure.bricks:
-            scene.add_geometry(b.solid.to_trimesh(), node_name=f"brick_{b.id:05d}", geom_name=f"brick_{b.id:05d}")
+            m = b.solid.to_trimesh()
+            rgba = (np.array(cmap(b.wall % 10)) * 255).astype(np.uint8)
+            m.visual = trimesh.visual.ColorVisuals(m, face_colors=np.tile(rgba, (len(m.faces), 1)))
+            name = f"{names[b.wall]}_brick_{b.label:05d}"
+            scene.add_geometry(m, node_name=name, geom_name=name)
         data = scene.export(file_type="glb")
     else:
         data = mesh.export(file_type=kind)

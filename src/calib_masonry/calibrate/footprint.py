@@ -151,7 +151,7 @@ def fit_footprint(
     if not fit.status.ok:
         worst = names[int(np.argmin(x[:n] / w_hat))] if np.all(np.isfinite(x)) else None
         raise FitFailed(
-            f"footprint: the closure fit {fit.status.message}"
+            f"footprint: closure fit: {fit.status.message}"
             + (
                 f" (wall '{worst}' would shrink from {w_hat[names.index(worst)]:.3f} m to "
                 f"{x[names.index(worst)]:.3f} m)"

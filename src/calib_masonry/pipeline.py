@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from .build3d.assemble import Structure3D, WallPolygons, assemble
 from .build3d.contacts import max_interpenetration
@@ -18,6 +17,7 @@ from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
 from .io import check_output, read_json, read_mask, staged_output, warn, write_json
+from .progress import progress as _progress
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
 
@@ -93,13 +93,7 @@ def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) ->
     photos = {}
     walls = []
     todo = [w for w in spec.walls if w.mask is None and w.image is not None]
-    bar = tqdm(
-        total=len(todo),
-        desc="calibrate photos",
-        unit="photo",
-        disable=None if progress is None else not progress,
-        leave=False,
-    )
+    bar = _progress(total=len(todo), desc="calibrate photos", unit="photo", enabled=progress)
     for wall in spec.walls:
         if wall in todo:
             pw = photo_wall(wall, spec)
@@ -184,9 +178,7 @@ def build(
         seconds["calibrate_rectify_segment"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     traces = []
-    for wall in tqdm(
-        spec.walls, desc="trace walls", unit="wall", disable=None if progress is None else not progress, leave=False
-    ):
+    for wall in _progress(spec.walls, desc="trace walls", unit="wall", enabled=progress):
         if wall.name in traces_given:
             traces.append(traces_given[wall.name])
         else:

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from ..errors import BackendMissing
+from ..progress import progress as _progress
 from .joints import CrackTracker
 from .scene import Scene, joint_axes
 
@@ -345,13 +345,7 @@ def run(
         grab(0)
     if warm == 0:
         end_warmup(0)
-    for f in tqdm(
-        range(1, frames + 1),
-        desc="simulate",
-        unit="frame",
-        disable=None if progress is None else not progress,
-        leave=False,
-    ):
+    for f in _progress(range(1, frames + 1), desc="simulate", unit="frame", enabled=progress):
         i = f if record else 0
         if tracker is not None:
             # the joints the coming step's load cracks, given the poses now (frame f - 1)

@@ -49,23 +49,14 @@ def truth_structure(spec: StructureSpec):
 
 def _photograph(spec: StructureSpec, pieces, photos: PhotoSpec, stage: Path, out: Path, progress) -> list[dict]:
     """photos/<wall>.jpg for every wall, structure_photos.toml naming them; the cameras' truth."""
-    from tqdm.auto import tqdm
-
+    from ..progress import progress as _progress
     from .photo import photograph_wall, save_jpeg
 
     syn = spec.synthetic or SyntheticSpec()
     (stage / "photos").mkdir()
     truths = []
     walls = []
-    for w, wall in enumerate(
-        tqdm(
-            spec.walls,
-            desc="photograph walls",
-            unit="photo",
-            disable=None if progress is None else not progress,
-            leave=False,
-        )
-    ):
+    for w, wall in enumerate(_progress(spec.walls, desc="photograph walls", unit="photo", enabled=progress)):
         rng = np.random.default_rng([syn.seed, 2, w])
         shot = photograph_wall(wall, pieces[w], photos, rng)
         name = f"photos/{wall.name}.jpg"
@@ -85,9 +76,7 @@ def _photograph(spec: StructureSpec, pieces, photos: PhotoSpec, stage: Path, out
     n = len(spec.walls)
     closed = spec.closed if spec.closed is not None else footprint_is_closed(spec)
     pairs = [(i, i + 1) for i in range(n - 1)] + ([(n - 1, 0)] if closed else [])
-    for i, j in tqdm(
-        pairs, desc="photograph corners", unit="photo", disable=None if progress is None else not progress, leave=False
-    ):
+    for i, j in _progress(pairs, desc="photograph corners", unit="photo", enabled=progress):
         a, b = spec.walls[i], spec.walls[j]
         if abs(math.remainder(b.theta_rad - a.theta_rad, 2 * math.pi)) < math.radians(5):
             continue  # no corner between (nearly) collinear walls

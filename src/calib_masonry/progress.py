@@ -1,0 +1,88 @@
+"""Progress of long steps: a bar on a terminal; when stderr is not a terminal (a log file, a pipe, a
+scheduler, a Dask worker), a line at most every :data:`LOG_EVERY_S` seconds with what is done, the
+percent and the time left, and a last line when a step that logged ends."""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Iterable, Iterator
+
+__all__ = ["LOG_EVERY_S", "progress"]
+
+LOG_EVERY_S = 10.0
+
+
+class _LogLines:
+    """tqdm's small interface (iterate, update, close) writing log lines instead of a bar."""
+
+    def __init__(self, iterable: Iterable | None, total: int | None, desc: str, unit: str, stream) -> None:
+        self.iterable = iterable
+        self.total = total if total is not None else (len(iterable) if hasattr(iterable, "__len__") else None)
+        self.desc, self.unit, self.stream = desc, unit, stream
+        self.n = 0
+        self.t0 = self.last = time.monotonic()
+        self.logged = False
+
+    def __iter__(self) -> Iterator:
+        for item in self.iterable:
+            yield item
+            self.update()
+        self.close()
+
+    def _line(self, now: float) -> str:
+        elapsed = now - self.t0
+        if self.total:
+            done = self.n / self.total
+            left = elapsed / done - elapsed if done > 0 else float("nan")
+            return (
+                f"{self.desc}: {self.n}/{self.total} {self.unit}s ({done:.0%}), {elapsed:.0f} s elapsed, "
+                f"about {left:.0f} s left"
+            )
+        return f"{self.desc}: {self.n} {self.unit}s, {elapsed:.0f} s elapsed"
+
+    def update(self, n: int = 1) -> None:
+        self.n += n
+        now = time.monotonic()
+        if now - self.last >= LOG_EVERY_S:
+            print(self._line(now), file=self.stream, flush=True)
+            self.last, self.logged = now, True
+
+    def close(self) -> None:
+        if self.logged:
+            print(self._line(time.monotonic()) + ", done", file=self.stream, flush=True)
+            self.logged = False
+
+
+class _Silent:
+    def __init__(self, iterable: Iterable | None) -> None:
+        self.iterable = iterable
+
+    def __iter__(self) -> Iterator:
+        return iter(self.iterable)
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def progress(
+    iterable: Iterable | None = None,
+    *,
+    total: int | None = None,
+    desc: str,
+    unit: str = "it",
+    enabled: bool | None = None,
+):
+    """Wrap a long loop (or count it with ``update()``): ``enabled`` False is silent, True or None
+    shows a bar on a terminal and log lines elsewhere (None is the library's default)."""
+    if enabled is False:
+        return _Silent(iterable)
+    stream = sys.stderr
+    if stream is not None and hasattr(stream, "isatty") and stream.isatty():
+        from tqdm.auto import tqdm
+
+        return tqdm(iterable, total=total, desc=desc, unit=unit, leave=False)
+    return _LogLines(iterable, total, desc, unit, stream)

@@ -1,0 +1,27 @@
+"""Progress: a bar on a terminal, log lines with percent and time left elsewhere."""
+
+import io
+
+from calib_masonry import progress as progress_module
+from calib_masonry.progress import progress
+
+
+def test_log_lines_when_not_on_a_terminal(monkeypatch):
+    stream = io.StringIO()
+    monkeypatch.setattr(progress_module.sys, "stderr", stream)
+    monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)  # a line per step here; 10 s in a real run
+    assert list(progress(range(4), desc="simulate", unit="frame")) == [0, 1, 2, 3]
+    lines = stream.getvalue().splitlines()
+    assert lines[0].startswith("simulate: 1/4 frames (25%)") and "s left" in lines[0]
+    assert lines[-1].startswith("simulate: 4/4 frames (100%)") and lines[-1].endswith(", done")
+
+
+def test_quiet_when_disabled_and_no_line_for_a_short_step(monkeypatch):
+    stream = io.StringIO()
+    monkeypatch.setattr(progress_module.sys, "stderr", stream)
+    assert list(progress(range(3), desc="x", enabled=False)) == [0, 1, 2]
+    bar = progress(total=2, desc="calibrate photos", unit="photo")
+    bar.update()
+    bar.update()
+    bar.close()
+    assert stream.getvalue() == ""  # under 10 s: nothing to report

@@ -266,7 +266,7 @@ def _parse_at2(path: Path, lines: list[str]) -> tuple[np.ndarray, float, str]:
     return np.asarray(values)[:, None], dt, units
 
 
-def _parse_csv(path: Path, lines: list[str], units: str) -> tuple[np.ndarray, float]:
+def _parse_csv(path: Path, lines: list[str]) -> tuple[np.ndarray, float]:
     """``time, acceleration[, acceleration_y]`` per line (comma, semicolon, tab or spaces), header
     lines allowed before the numbers; every problem names its line."""
     rows: list[list[float]] = []
@@ -342,7 +342,7 @@ def read_accelerogram(path: str | Path, *, units: str | None = None, highpass_hz
         acc, dt, file_units = _parse_at2(path, lines)
         units = units or file_units
     else:
-        acc, dt = _parse_csv(path, lines, units or "g")
+        acc, dt = _parse_csv(path, lines)
         units = units or "g"
     acc = acc * RECORD_UNITS[units]
     if acc.shape[1] == 1:  # one horizontal component, along X

@@ -375,6 +375,13 @@ def run(
     if not record:
         grab(0)  # the final state only
     if blend_path is not None:
+        # keep the run in the file: the point cache holds every frame just stepped (with the joint
+        # model's cracks in it); marked as baked, it is saved and replayed instead of re-simulated
+        rw = sc.rigidbody_world
+        rw.point_cache.frame_end = len(mats)  # a pushover may have stopped early
+        with bpy.context.temp_override(scene=sc, point_cache=rw.point_cache):
+            bpy.ops.ptcache.bake_from_cache()
+        sc.frame_end = len(mats)
         sc.frame_set(1)
         bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), check_existing=False, compress=True)
     return RunOutput(

@@ -16,7 +16,7 @@ from .build3d.export import export_mesh, plot_model, plot_walls, write_bricks_js
 from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
-from .io import check_output, read_json, read_mask, staged_output, warn, write_json
+from .io import check_output, read_mask, staged_output, warn, write_json
 from .progress import progress as _progress
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
@@ -303,10 +303,10 @@ def read_build(model_dir: str | Path) -> Structure3D:
     """The Structure3D a ``build`` output folder holds (its bricks.json and summary.json)."""
     from .build3d.assemble import Structure3D
     from .build3d.place import closure_gap
-    from .simulation.run import load_model
+    from .simulation.run import model_from_json, read_model_json
 
-    bricks, frames, cs, footprint = load_model(model_dir)
-    data = read_json(Path(model_dir) / "bricks.json", field="MODEL_DIR bricks.json")
+    data, closed = read_model_json(model_dir)  # bricks.json parsed once
+    bricks, frames, cs, footprint = model_from_json(data, closed, model_dir)
     removed = tuple(tuple(w.get("removed_corner_pieces", ())) for w in data["walls"])
     return Structure3D(
         name=str(data.get("structure", Path(model_dir).name)),

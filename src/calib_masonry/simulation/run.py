@@ -53,6 +53,7 @@ __all__ = [
     "scene_for_model",
     "motion_for",
     "load_model",
+    "read_model_json",
     "model_from_json",
     "geometry_for_model",
     "store_geometry",
@@ -173,11 +174,15 @@ def model_from_json(data: dict, closed, source: str | Path):
     return bricks, wall_frames(footprint), corners(footprint), footprint
 
 
+def read_model_json(model_dir: str | Path) -> tuple[dict, bool | None]:
+    """A ``build`` output folder's bricks.json contents and its summary's closed_footprint."""
+    model_dir = _checked_model_dir(model_dir)
+    return read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json"), _closed_footprint(model_dir)
+
+
 def load_model(model_dir: str | Path):
     """Bricks, wall frames, corners and footprint of a ``build`` output folder."""
-    model_dir = _checked_model_dir(model_dir)
-    data = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
-    return model_from_json(data, _closed_footprint(model_dir), model_dir)
+    return model_from_json(*read_model_json(model_dir), model_dir)
 
 
 def _geometry_key(bricks_json_bytes: bytes, closed, max_gap_m: float, mortar_fill: bool) -> str:

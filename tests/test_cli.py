@@ -129,6 +129,50 @@ def test_out_that_cannot_be_written_is_refused_up_front(tmp_path, command, where
     assert sorted(p.name for p in tmp_path.iterdir()) == ["blocker"]
 
 
+@pytest.mark.parametrize("command", ["build", "simulate", "synth", "rectify", "footprint", "demo"])
+def test_out_that_is_not_an_earlier_output_is_refused_up_front(tmp_path, command):
+    out = tmp_path / "results"
+    out.mkdir()
+    (out / "thesis.tex").write_text("not ours")
+    args = {
+        "build": ["build", DATA / "paper_example" / "structure.toml"],
+        "simulate": ["simulate", tmp_path / "no-model"],
+        "synth": ["synth", DATA / "paper_example" / "scenario.toml"],
+        "rectify": ["rectify", tmp_path / "no-photo.jpg"],
+        "footprint": ["footprint", tmp_path / "no.json"],
+        "demo": ["demo"],
+    }[command]
+    r = _run(*args, "--out", out)
+    assert r.returncode == 2, r.stderr
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: --out") and "--overwrite" in lines[0], r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["thesis.tex"]
+
+
+def test_a_build_into_an_earlier_output_replaces_it_whole(tmp_path):
+    a = np.zeros((100, 200), np.uint8)
+    a[10:40, 10:90] = 255
+    a[60:90, 110:190] = 255
+    Image.fromarray(a).save(tmp_path / "m.png")
+    s = _structure(tmp_path)
+    out = tmp_path / "out"
+    assert _run("build", s, "--out", out).returncode == 0
+    (out / "compare.json").write_text("{}")  # as the demo or `compare` leave it
+    (out / "photos").mkdir()  # as a build from photos leaves it
+    r = _run("build", s, "--out", out, "--no-figures")
+    assert r.returncode == 0, r.stderr
+    names = {p.name for p in out.iterdir()}
+    assert "compare.json" not in names and "photos" not in names and "walls.png" not in names
+    assert {"bricks.json", "model.stl", "model.glb", "summary.json"} <= names
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.png", "out", "s.toml"]
+    # a folder holding the structure's own files is built into only with --overwrite, and they stay
+    r = _run("build", s, "--out", tmp_path)
+    assert r.returncode == 2 and "--overwrite" in r.stderr
+    r = _run("build", tmp_path / "s.toml", "--out", tmp_path, "--overwrite", "--no-figures")
+    assert r.returncode == 0, r.stderr
+    assert {"m.png", "s.toml", "bricks.json"} <= {p.name for p in tmp_path.iterdir()}
+
+
 def _staging(folder):
     return [p for p in folder.iterdir() if ".partial-" in p.name]
 

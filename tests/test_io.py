@@ -3,7 +3,7 @@ import pytest
 from PIL import Image
 
 from calib_masonry.errors import InputError
-from calib_masonry.io import read_mask, staged_output
+from calib_masonry.io import OUTPUT_MARKER, check_output, output_command, read_mask, staged_output
 
 
 def test_read_mask_binary(tmp_path):
@@ -39,12 +39,61 @@ def test_read_mask_corrupt_and_missing(tmp_path):
 def test_staged_output_all_or_nothing(tmp_path):
     out = tmp_path / "out"
     with pytest.raises(RuntimeError):
-        with staged_output(out) as stage:
+        with staged_output(out, "build") as stage:
             (stage / "model.stl").write_text("half")
             raise RuntimeError("boom")
     assert not out.exists()
     assert list(tmp_path.iterdir()) == []
-    with staged_output(out) as stage:
+    with staged_output(out, "build") as stage:
         (stage / "a.txt").write_text("1")
     assert (out / "a.txt").read_text() == "1"
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+def test_a_rerun_replaces_its_output_folder_as_a_whole(tmp_path):
+    out = tmp_path / "out"
+    with staged_output(out, "build") as stage:
+        (stage / "compare.json").write_text("old")
+        (stage / "model.stl").write_text("old")
+    assert output_command(out) == "build"
+    with staged_output(out, "build") as stage:
+        (stage / "model.stl").write_text("new")
+    assert sorted(p.name for p in out.iterdir()) == [OUTPUT_MARKER, "model.stl"]  # no stale compare.json
+    assert (out / "model.stl").read_text() == "new"
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]  # no staging, no old copy left
+
+
+def test_a_folder_that_is_not_this_commands_output_is_refused_up_front(tmp_path):
+    mine = tmp_path / "notes"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("years of work")
+    with pytest.raises(InputError, match=r"--out .*notes.*'thesis.tex'.*--overwrite"):
+        check_output(mine, command="build")
+    with pytest.raises(InputError, match="--overwrite"):
+        with staged_output(mine, "build"):
+            raise AssertionError("the body must not run")
+    assert (mine / "thesis.tex").read_text() == "years of work"
+    sim = tmp_path / "sim"
+    with staged_output(sim, "simulate") as stage:
+        (stage / "summary.json").write_text("{}")
+    with pytest.raises(InputError, match="an output of `calib-masonry simulate`"):
+        check_output(sim, command="build")
+    # an empty folder is fine, and --overwrite replaces a foreign one as a whole
+    (tmp_path / "empty").mkdir()
+    check_output(tmp_path / "empty", command="build")
+    with staged_output(mine, "build", overwrite=True) as stage:
+        (stage / "model.stl").write_text("new")
+    assert sorted(p.name for p in mine.iterdir()) == [OUTPUT_MARKER, "model.stl"]
+
+
+def test_the_runs_own_inputs_inside_its_output_folder_are_kept(tmp_path):
+    out = tmp_path / "data"
+    with staged_output(out, "synth") as stage:
+        (stage / "masks").mkdir()
+        (stage / "masks" / "old_wall.png").write_text("old")
+    (out / "scenario.toml").write_text("the scenario")  # the user's input, kept beside its output
+    with staged_output(out, "synth", keep=[out / "scenario.toml", tmp_path / "elsewhere.toml"]) as stage:
+        (stage / "masks").mkdir()
+        (stage / "masks" / "wall.png").write_text("new")
+    assert (out / "scenario.toml").read_text() == "the scenario"
+    assert sorted(p.name for p in (out / "masks").iterdir()) == ["wall.png"]

@@ -26,7 +26,12 @@ def _cmd_synth(args) -> int:
     from .synthetic.truth import synth_to_folder
 
     spec, truth = synth_to_folder(
-        args.scenario, args.out, figures=not args.no_figures, photos=args.photos, photo_size=args.photo_size
+        args.scenario,
+        args.out,
+        figures=not args.no_figures,
+        photos=args.photos,
+        photo_size=args.photo_size,
+        overwrite=args.overwrite,
     )
     print(
         f"synth: {spec.name}: {len(truth['walls'])} walls, {truth['bricks']} bricks, "
@@ -64,7 +69,7 @@ def _cmd_build(args) -> int:
     spec = load_structure(args.structure)
     if args.refine:
         spec = replace(spec, refine=True, walls=tuple(replace(w, refine=True) for w in spec.walls))
-    summary = build_to_folder(spec, args.out, figures=not args.no_figures)
+    summary = build_to_folder(spec, args.out, figures=not args.no_figures, overwrite=args.overwrite)
     _print_build(summary, args.out)
     return 0
 
@@ -106,7 +111,7 @@ def _cmd_demo(args) -> int:
     from .pipeline import demo
 
     t0 = time.perf_counter()
-    summary, metrics, checks, data = demo(args.out, args.data)
+    summary, metrics, checks, data = demo(args.out, args.data, overwrite=args.overwrite)
     _print_build(summary, args.out)
     _print_compare(metrics, Path(args.out) / "compare.json")
     for name, ok in checks.items():
@@ -146,6 +151,7 @@ def _cmd_rectify(args) -> int:
         px_per_m=args.px_per_m,
         mask_path=args.mask,
         figure=not args.no_figures,
+        overwrite=args.overwrite,
     )
     cam = doc["camera"]
     print(
@@ -166,6 +172,7 @@ def _cmd_footprint(args) -> int:
         heading_sigma_deg=args.heading_sigma,
         theta_sigma_deg=args.theta_sigma,
         figure=not args.no_figures,
+        overwrite=args.overwrite,
     )
     print(
         f"footprint: {len(doc['walls'])} walls, gap {doc['closure_gap_before_m'] * 1000:.1f} mm before, "
@@ -209,7 +216,7 @@ def _cmd_simulate(args) -> int:
         if args.pushover
         else None,
     )
-    s = simulate_to_folder(args.model_dir, args.out, config)
+    s = simulate_to_folder(args.model_dir, args.out, config, overwrite=args.overwrite)
     if args.pushover:
         value = s["collapse_multiplier_g"]
         print(
@@ -226,6 +233,14 @@ def _cmd_simulate(args) -> int:
     return 0
 
 
+def _overwrite_flag(q) -> None:
+    q.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace --out even if it is not an earlier output of this command (it is replaced as a whole)",
+    )
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="calib-masonry", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -236,6 +251,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--no-figures", action="store_true")
     s.add_argument("--photos", action="store_true", help="also take perspective photos (settings: [photos] table)")
     s.add_argument("--photo-size", type=int, nargs=2, default=None, metavar=("W", "H"), help="photo size in px")
+    _overwrite_flag(s)
     s.set_defaults(func=_cmd_synth)
 
     def calib_flags(q, *, corners: bool) -> None:
@@ -269,6 +285,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--px-per-m", type=float, default=None, help="orthophoto resolution (default: the photo's own)")
     r.add_argument("--mask", default=None, help="a brick mask of the photo to rectify along with it")
     r.add_argument("--out", required=True)
+    _overwrite_flag(r)
     r.set_defaults(func=_cmd_rectify)
 
     f = sub.add_parser("footprint", help="close the footprint: adjust every wall's W and theta jointly")
@@ -279,6 +296,7 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--heading-sigma", type=float, default=2.0, help="compass heading uncertainty in deg (default 2)")
     f.add_argument("--theta-sigma", type=float, default=1.0, help="uncertainty of typed theta_deg values in deg")
     f.add_argument("--out", required=True)
+    _overwrite_flag(f)
     f.set_defaults(func=_cmd_footprint)
 
     t = sub.add_parser("trace", help="mask -> brick polygons with Dice (polygons.json)")
@@ -296,6 +314,7 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--out", default="out/build")
     b.add_argument("--no-figures", action="store_true")
     b.add_argument("--refine", action="store_true", help="soft-Dice refinement for every wall (as refine = true)")
+    _overwrite_flag(b)
     b.set_defaults(func=_cmd_build)
 
     c = sub.add_parser("compare", help="metrics of a build against synthetic truth")
@@ -351,6 +370,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     m.add_argument("--no-figures", action="store_true")
     m.add_argument("--out", default="out/simulate")
+    _overwrite_flag(m)
     m.set_defaults(func=_cmd_simulate)
 
     d = sub.add_parser("demo", help="build the paper example from its masks and compare with its truth")
@@ -358,6 +378,7 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument(
         "--data", default=None, help="folder with structure.toml and truth/ (default data_synthetic/paper_example)"
     )
+    _overwrite_flag(d)
     d.set_defaults(func=_cmd_demo)
     return p
 

@@ -11,9 +11,10 @@ import json
 import math
 import os
 import shutil
+import signal
 import tempfile
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,6 +31,8 @@ __all__ = [
     "read_mask",
     "read_photo",
     "check_output",
+    "OUTPUT_MARKER",
+    "output_command",
     "remove_stale_staging",
     "staged_file",
     "staged_output",
@@ -179,9 +182,32 @@ def read_json(path: str | Path, *, field: str = "file") -> Any:
         raise InputError(f"{field} {path}: not valid JSON ({exc}); re-create it") from None
 
 
-def check_output(path: str | Path, *, folder: bool = True, flag: str = "--out") -> Path:
+#: The file that marks a folder as a command's output, so that a later run may replace it as a whole.
+OUTPUT_MARKER = ".calib-masonry-output.json"
+
+
+def output_command(folder: str | Path) -> str | None:
+    """The command whose output ``folder`` is (from its marker file), or None."""
+    try:
+        return str(json.loads((Path(folder) / OUTPUT_MARKER).read_text(encoding="utf-8"))["command"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def check_output(
+    path: str | Path,
+    *,
+    folder: bool = True,
+    flag: str = "--out",
+    command: str | None = None,
+    overwrite: bool = False,
+) -> Path:
     """Check, before any work, that ``path`` can become an output folder (or file): it is not an
-    existing file (folder) or folder (file), and no folder above it is a file."""
+    existing file (folder) or folder (file), and no folder above it is a file.
+
+    With ``command`` (a folder output, which a run replaces as a whole), an existing folder must be
+    empty or an earlier output of the same command (its marker file says so), unless ``overwrite``.
+    """
     path = Path(path)
     what = "folder" if folder else "file"
     if folder and path.exists() and not path.is_dir():
@@ -195,6 +221,24 @@ def check_output(path: str | Path, *, folder: bool = True, flag: str = "--out") 
                     f"{flag} {path}: {up} is a file, so no {what} can be made under it; choose another path"
                 )
             break
+    if folder and command and path.is_dir():
+        entries = sorted(e.name for e in path.iterdir())
+        if entries:
+            cwd = Path.cwd().resolve()
+            if cwd == path.resolve() or path.resolve() in cwd.parents:
+                raise InputError(
+                    f"{flag} {path}: is the working folder or holds it, and a run replaces its --out as a "
+                    "whole; give a new folder"
+                )
+            earlier = output_command(path)
+            if earlier != command and not overwrite:
+                whose = f"an output of `calib-masonry {earlier}`" if earlier else "not an earlier calib-masonry output"
+                shown = ", ".join(repr(e) for e in entries[:3]) + (", ..." if len(entries) > 3 else "")
+                raise InputError(
+                    f"{flag} {path}: the folder holds {shown} and is {whose}; a `{command}` run replaces its "
+                    "output folder as a whole, so choose a new or empty folder, or add --overwrite "
+                    "(overwrite=True) to replace this one"
+                )
     return path
 
 
@@ -227,35 +271,65 @@ def remove_stale_staging(path: Path) -> None:
                 entry.unlink(missing_ok=True)
 
 
-@contextlib.contextmanager
-def staged_output(out_dir: str | Path) -> Iterator[Path]:
-    """Yield an empty staging folder; on success move its entries into ``out_dir``.
+def _keep_inputs(out_dir: Path, stage: Path, keep) -> None:
+    """Copy the files among ``keep`` (the run's inputs) that lie inside ``out_dir`` into the stage,
+    at the same relative place, unless the run wrote that name itself."""
+    for f in keep:
+        if f is None:
+            continue
+        f = Path(f).resolve()
+        try:
+            rel = f.relative_to(out_dir)
+        except ValueError:
+            continue
+        target = stage / rel
+        if f.is_file() and not target.exists():
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(f, target)
 
-    Entries of ``out_dir`` that the stage does not write are left alone; entries it does write
-    replace the old ones. On any exception (SIGTERM and Ctrl-C included, see the CLI) the staging
-    folder is removed and ``out_dir`` is untouched, so a failed run never leaves half a result.
-    Staging that a killed run left beside ``out_dir`` is removed first. The staging folder's name
-    carries this process's id.
+
+@contextlib.contextmanager
+def staged_output(
+    out_dir: str | Path, command: str, *, overwrite: bool = False, keep: Iterable[str | Path | None] = ()
+) -> Iterator[Path]:
+    """Yield an empty staging folder; on success it becomes ``out_dir``, replacing it as a whole.
+
+    ``out_dir`` must be new, empty, or an earlier output of the same ``command`` (a marker file in
+    it says so; see :func:`check_output`), unless ``overwrite``. Nothing of an earlier run stays
+    beside the new results, except files among ``keep`` (the run's own inputs, say a scenario file
+    kept inside its output folder), which are carried over. On any exception (SIGTERM and Ctrl-C
+    included, see the CLI) the staging folder is removed and ``out_dir`` is untouched, so a failed
+    run never leaves half a result. Staging that a killed run left beside ``out_dir`` is removed
+    first. The staging folder's name carries this process's id.
     """
-    out_dir = check_output(out_dir)
-    parent = out_dir.resolve().parent
+    out_dir = check_output(out_dir, command=command, overwrite=overwrite).resolve()
+    parent = out_dir.parent
     parent.mkdir(parents=True, exist_ok=True)
     remove_stale_staging(out_dir)
-    stage = Path(tempfile.mkdtemp(prefix=f"{_staging_prefix(out_dir)}{os.getpid()}-", dir=parent))
+    prefix = f"{_staging_prefix(out_dir)}{os.getpid()}-"
+    stage = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
     try:
         yield stage
-    except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        for entry in sorted(stage.iterdir()):
-            target = out_dir / entry.name
-            if target.is_dir() and not target.is_symlink():
-                shutil.rmtree(target)
-            elif target.exists() or target.is_symlink():
-                target.unlink()
-            os.replace(entry, target)
+        _keep_inputs(out_dir, stage, keep)
+        (stage / OUTPUT_MARKER).write_text(json.dumps({"command": command}) + "\n", encoding="utf-8")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(stage, 0o777 & ~umask)  # mkdtemp makes 0700; give the folder the usual permissions
+        old = parent / f"{prefix}old-{os.urandom(4).hex()}"
+        blocked = {signal.SIGTERM, signal.SIGINT}
+        signal.pthread_sigmask(signal.SIG_BLOCK, blocked)  # the swap is not interrupted half-way
+        try:
+            if out_dir.exists():
+                os.replace(out_dir, old)
+            try:
+                os.replace(stage, out_dir)
+            except BaseException:
+                if old.exists() and not out_dir.exists():
+                    os.replace(old, out_dir)  # put the earlier output back
+                raise
+            shutil.rmtree(old, ignore_errors=True)
+        finally:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, blocked)
     finally:
         shutil.rmtree(stage, ignore_errors=True)
 

@@ -293,10 +293,17 @@ def build_to_folder(
     figures: bool = True,
     progress: bool | None = None,
     simulation_geometry: bool = True,
+    overwrite: bool = False,
 ) -> dict:
     """:func:`build` and :func:`write_build`: what ``calib-masonry build`` calls."""
-    check_output(out)  # before the work, not after it
-    return write_build(build(spec, progress=progress), out, figures=figures, simulation_geometry=simulation_geometry)
+    check_output(out, command="build", overwrite=overwrite)  # before the work, not after it
+    return write_build(
+        build(spec, progress=progress),
+        out,
+        figures=figures,
+        simulation_geometry=simulation_geometry,
+        overwrite=overwrite,
+    )
 
 
 def read_build(model_dir: str | Path) -> Structure3D:
@@ -320,9 +327,16 @@ def read_build(model_dir: str | Path) -> Structure3D:
 
 
 def write_build(
-    result: BuildResult, out: str | Path, *, figures: bool = True, simulation_geometry: bool = True
+    result: BuildResult,
+    out: str | Path,
+    *,
+    figures: bool = True,
+    simulation_geometry: bool = True,
+    overwrite: bool = False,
 ) -> dict:
-    """Write a build into the folder ``out`` (all or nothing): ``model.stl``, ``bricks.json``,
+    """Write a build into the folder ``out`` (all or nothing, replacing ``out`` as a whole: an
+    existing ``out`` must be an earlier build or empty, unless ``overwrite``; the structure's own
+    files inside it are kept): ``model.stl``, ``model.glb``, ``bricks.json``,
     ``summary.json``, figures, the photo walls' calibrations and (with ``simulation_geometry``) the
     bodies and contact patches ``simulate`` starts from (``sim_geometry.npz``), computed from the
     structure in memory. Returns the summary."""
@@ -331,7 +345,8 @@ def write_build(
     t0 = time.perf_counter()
     inter = max_interpenetration(s.bricks)
     result.seconds["interpenetration_check"] = time.perf_counter() - t0
-    with staged_output(out) as stage:
+    inputs = [spec.source, *(w.mask for w in spec.walls), *(w.image for w in spec.walls)]
+    with staged_output(out, "build", overwrite=overwrite, keep=inputs) as stage:
         t0 = time.perf_counter()
         export_mesh(s, stage / "model.stl")
         export_mesh(s, stage / "model.glb")  # one node per brick: opens in Blender, three.js, any glTF viewer
@@ -388,7 +403,7 @@ def find_demo_data(explicit: str | Path | None = None) -> Path:
     )
 
 
-def demo(out: str | Path, data: str | Path | None = None) -> tuple[dict, dict, dict, Path]:
+def demo(out: str | Path, data: str | Path | None = None, *, overwrite: bool = False) -> tuple[dict, dict, dict, Path]:
     """``calib-masonry demo``: build the paper example from its masks into ``out``, compare it with
     its truth (compare.json) and check the build against what the method promises. Returns the
     build summary, the metrics, the checks (name -> passed) and the data folder."""
@@ -396,8 +411,8 @@ def demo(out: str | Path, data: str | Path | None = None) -> tuple[dict, dict, d
     from .study.compare import compare_dirs
 
     data = find_demo_data(data)
-    check_output(out)
-    summary = build_to_folder(load_structure(data / "structure.toml"), out, figures=True)
+    check_output(out, command="build", overwrite=overwrite)
+    summary = build_to_folder(load_structure(data / "structure.toml"), out, figures=True, overwrite=overwrite)
     metrics = compare_dirs(out, data / "truth")
     write_json(Path(out) / "compare.json", metrics)
     checks = {

@@ -232,7 +232,14 @@ def _estimates_from_json(paths, heading_sigma_deg):
 
 
 def footprint_to_folder(
-    inputs, out, *, config=None, heading_sigma_deg: float = 2.0, theta_sigma_deg: float = 1.0, figure: bool = True
+    inputs,
+    out,
+    *,
+    config=None,
+    heading_sigma_deg: float = 2.0,
+    theta_sigma_deg: float = 1.0,
+    figure: bool = True,
+    overwrite: bool = False,
 ) -> dict:
     """``calib-masonry footprint``: footprint.json, structure.toml with the adjusted W and theta, a plan figure."""
     from pathlib import Path
@@ -242,7 +249,7 @@ def footprint_to_folder(
     from .figures import plot_footprint
     from .rectify import CalibrateConfig
 
-    check_output(out)
+    check_output(out, command="footprint", overwrite=overwrite)
     config = config or CalibrateConfig()
     if heading_sigma_deg <= 0 or theta_sigma_deg <= 0:
         raise InputError("footprint: --heading-sigma and --theta-sigma must be > 0 (degrees)")
@@ -267,7 +274,7 @@ def footprint_to_folder(
             estimate_theta_sigma_deg=math.degrees(est[4]),
             theta_source=est[5],
         )
-    with staged_output(out) as stage:
+    with staged_output(out, "footprint", overwrite=overwrite, keep=paths) as stage:
         write_json(stage / "footprint.json", doc)
         if spec is not None:
             walls = tuple(

@@ -270,13 +270,14 @@ def rectify_to_folder(
     px_per_m: float | None = None,
     mask_path: str | Path | None = None,
     figure: bool = True,
+    overwrite: bool = False,
 ) -> dict:
     """``calib-masonry rectify``: calibration.json, rectified.png (and rectified_mask.png), overlay.png."""
     from PIL import Image
 
     from .figures import plot_calibration
 
-    check_output(out)
+    check_output(out, command="rectify", overwrite=overwrite)
     cal = calibrate_photo(photo_path, config)
     res = cal.result
     if px_per_m is None:  # the photo's own resolution at the wall's centre, rounded
@@ -300,7 +301,7 @@ def rectify_to_folder(
     doc = cal.to_json()
     doc["px_per_m"] = px_per_m
     doc["rectified_shape"] = list(rect.shape[:2])
-    with staged_output(out) as stage:
+    with staged_output(out, "rectify", overwrite=overwrite, keep=[photo_path, mask_path]) as stage:
         Image.fromarray((np.clip(rect, 0, 1) * 255 + 0.5).astype(np.uint8)).save(stage / "rectified.png")
         if mask is not None:
             rm = rectify_image(mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m)

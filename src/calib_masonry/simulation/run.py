@@ -470,17 +470,23 @@ def simulate_to_folder(
     config: SimulationConfig = SimulationConfig(),
     *,
     progress: bool | None = None,
+    overwrite: bool = False,
 ) -> dict:
     """Run the simulation ``config`` asks for on a model folder and write summary.json, poses.npz,
-    scene.blend, figures and frames/ into ``out`` (all or nothing)."""
+    scene.blend, figures and frames/ into ``out`` (all or nothing, replacing ``out`` as a whole)."""
     from .blender import require_bpy
 
     require_bpy()
-    check_output(out)
+    check_output(out, command="simulate", overwrite=overwrite)
+    model = Path(model_dir).resolve()
+    if Path(out).resolve() == model or Path(out).resolve() in model.parents:
+        raise InputError(
+            f"--out {out}: holds the model folder {model_dir}, which a run would replace; give another folder"
+        )
     t0 = time.perf_counter()
     scene = scene_for_model(model_dir, config)
     t_scene = time.perf_counter() - t0
-    with staged_output(out) as stage:
+    with staged_output(out, "simulate", overwrite=overwrite, keep=[config.accelerogram]) as stage:
         result = _run_scene(scene, str(model_dir), progress=progress, blend_path=stage / "scene.blend")
         result.summary["seconds"]["scene"] = round(t_scene, 3)
         write_simulation(result, stage, figures=config.figures, frames_png=config.frames_png)

@@ -108,16 +108,18 @@ def synthesize(
     figures: bool = True,
     photos: PhotoSpec | None = None,
     progress: bool | None = None,
+    overwrite: bool = False,
 ) -> dict:
-    """Write masks, structure.toml and truth for the scenario ``spec`` into ``out``; with ``photos``
-    (or a ``[photos]`` table in the scenario) also perspective photos and their cameras' truth."""
+    """Write masks, structure.toml and truth for the scenario ``spec`` into ``out`` (replacing it as a
+    whole; a scenario file inside it is kept); with ``photos`` (or a ``[photos]`` table in the
+    scenario) also perspective photos and their cameras' truth."""
     photos = photos or spec.photos
     syn = spec.synthetic or SyntheticSpec()
     pieces, structure = truth_structure(spec)
     rng = np.random.default_rng([syn.seed, 1])
     out = Path(out)
     walls_truth = []
-    with staged_output(out) as stage:
+    with staged_output(out, "synth", overwrite=overwrite, keep=[spec.source]) as stage:
         (stage / "masks").mkdir()
         (stage / "truth").mkdir()
         new_walls = []
@@ -189,6 +191,7 @@ def synth_to_folder(
     photos: bool = False,
     photo_size: tuple[int, int] | None = None,
     progress: bool | None = None,
+    overwrite: bool = False,
 ):
     """``calib-masonry synth``: read a scenario file and :func:`synthesize` it into ``out`` (with
     ``photos``, also perspective photos, ``photo_size`` (W, H) pixels overriding its [photos] table).
@@ -197,7 +200,7 @@ def synth_to_folder(
     from ..io import check_output
     from ..spec import load_structure
 
-    check_output(out)
+    check_output(out, command="synth", overwrite=overwrite)
     spec = load_structure(scenario, require_sources=False)
     if spec.synthetic is None:
         raise InputError(f"{scenario}: no [synthetic] table; add one (layout, px_per_m, seed, ...) to make a data set")
@@ -206,4 +209,4 @@ def synth_to_folder(
         shots = spec.photos or PhotoSpec()
         if photo_size:
             shots = replace(shots, long_side_px=max(photo_size), short_side_px=min(photo_size))
-    return spec, synthesize(spec, out, figures=figures, photos=shots, progress=progress)
+    return spec, synthesize(spec, out, figures=figures, photos=shots, progress=progress, overwrite=overwrite)

@@ -279,3 +279,13 @@ def test_oversized_and_misnamed_images_are_one_line_errors(tmp_path, monkeypatch
     r = _run("trace", tmp_path / "j.png", "--out", tmp_path / "p.json")
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert "is a JPEG image named .png" in r.stderr and not (tmp_path / "p.json").exists()
+
+
+def test_an_image_too_big_for_the_memory_is_refused_before_decoding(tmp_path, monkeypatch):
+    from calib_masonry import io
+    from calib_masonry.errors import InputError
+
+    Image.fromarray(np.full((60, 80), 255, np.uint8)).save(tmp_path / "m.png")
+    monkeypatch.setattr(io, "_available_bytes", lambda: 1000)
+    with pytest.raises(InputError, match=r"m.png: 80 x 60 px needs about .* GiB .* free; downsample it"):
+        io.read_mask(tmp_path / "m.png")

@@ -97,3 +97,36 @@ def test_the_runs_own_inputs_inside_its_output_folder_are_kept(tmp_path):
         (stage / "masks" / "wall.png").write_text("new")
     assert (out / "scenario.toml").read_text() == "the scenario"
     assert sorted(p.name for p in (out / "masks").iterdir()) == ["wall.png"]
+
+
+@pytest.mark.parametrize("kind", ["L", "L16", "RGB", "1", "F"])
+def test_read_mask_thresholds_half_way_in_every_pixel_format(tmp_path, kind):
+    """The mask is `(v - lo) / (hi - lo) >= 1/2` whatever the file's type, computed without float64
+    copies of the image."""
+    from PIL import Image
+
+    rng = np.random.default_rng(3)
+    truth = rng.random((40, 50)) < 0.6
+    hi = {"L": 255, "L16": 65535, "RGB": 255, "1": 1, "F": 1.0}[kind]
+    values = np.where(truth, hi, 0).astype(np.float64)
+    edge = rng.random((40, 50)) < 0.02  # a few anti-aliased pixels either side of one half
+    values[edge] = np.where(rng.random(edge.sum()) < 0.5, 0.49, 0.51) * hi
+    want = (values - values.min()) / (values.max() - values.min()) >= 0.5
+    if kind == "L":
+        im = Image.fromarray(values.round().astype(np.uint8))
+        want = values.round() >= 128
+    elif kind == "L16":
+        im = Image.fromarray(values.round().astype(np.uint16))
+        want = values.round() >= 32768
+    elif kind == "RGB":
+        v = values.round().astype(np.uint8)
+        im = Image.fromarray(np.stack([v, v, v], axis=-1))
+        want = v >= 128
+    elif kind == "1":
+        im = Image.fromarray(truth)
+        want = truth
+    else:
+        im = Image.fromarray(values.astype(np.float32), mode="F")
+    path = tmp_path / ("m.tif" if kind == "F" else "m.png")
+    im.save(path)
+    np.testing.assert_array_equal(read_mask(path), want)

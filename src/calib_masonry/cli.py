@@ -243,6 +243,11 @@ def _overwrite_flag(q) -> None:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="calib-masonry", description=__doc__.splitlines()[0])
+    p.add_argument(
+        "--trust-large-images",
+        action="store_true",
+        help="read images above 179 megapixels (Pillow's decompression-bomb limit) for files you trust",
+    )
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("synth", help="make masks and exact truth from a scenario TOML")
@@ -394,6 +399,10 @@ def _terminate(signum, frame) -> None:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _print_warning
+    if args.trust_large_images:
+        from .io import trust_large_images
+
+        trust_large_images()
     previous = signal.signal(signal.SIGTERM, _terminate)  # `kill`, `timeout` and schedulers send SIGTERM
     try:
         return int(args.func(args) or 0)

@@ -20,7 +20,17 @@ def plot_trace(mask: np.ndarray, result: TraceResult, path: Path, *, title: str 
     rows, cols = mask.shape
     scale = 9.0 / max(rows, cols)
     fig, ax = plt.subplots(figsize=(max(3.0, cols * scale) + 1.2, max(3.0, rows * scale)))
-    ax.imshow(mask, cmap="gray", vmin=-0.6, vmax=1.3, interpolation="nearest")
+    # the figure shows about 1,000 px across: a mask of many megapixels is shown decimated (a view,
+    # no copy), since matplotlib would otherwise make 32-byte RGBA floats of every pixel
+    step = max(1, max(rows, cols) // 2000)
+    ax.imshow(
+        mask[::step, ::step],
+        cmap="gray",
+        vmin=-0.6,
+        vmax=1.3,
+        interpolation="nearest",
+        extent=(-0.5, -0.5 + step * len(range(0, cols, step)), -0.5 + step * len(range(0, rows, step)), -0.5),
+    )
     cmap = plt.get_cmap("plasma")
     dice = np.array([b.dice for b in result.bricks])
     coll = PolyCollection(

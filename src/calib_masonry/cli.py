@@ -7,11 +7,13 @@ A user's mistake ends in one line ``error: ...`` and exit code 2, never a traceb
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
 import time
 import warnings
 from pathlib import Path
+from typing import NoReturn
 
 from .errors import CalibMasonryError
 
@@ -241,14 +243,30 @@ def _overwrite_flag(q) -> None:
     )
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``error: ...``, exit 2, like every other mistake) and numbers
+    such as ``-1e+16`` or ``-inf`` read as values rather than as unknown options."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        if hasattr(self, "_negative_number_matcher"):
+            self._negative_number_matcher = _NEGATIVE_NUMBER
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"error: {self.prog}: {message}; see `{self.prog} --help`\n")
+
+
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
+
+
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="calib-masonry", description=__doc__.splitlines()[0])
+    p = _Parser(prog="calib-masonry", description=__doc__.splitlines()[0])
     p.add_argument(
         "--trust-large-images",
         action="store_true",
         help="read images above 179 megapixels (Pillow's decompression-bomb limit) for files you trust",
     )
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     s = sub.add_parser("synth", help="make masks and exact truth from a scenario TOML")
     s.add_argument("scenario")

@@ -63,6 +63,8 @@ __all__ = [
 
 DEFAULT_PGA_G = 0.3  # of a synthetic motion when no PGA is given
 MAX_PGA_G = 5.0  # above any recorded ground motion (the strongest reach about 3 g)
+MAX_FRAMES = 100_000  # about an hour of simulated time at 25 fps: far beyond any record or pushover
+MAX_FRAMES_PNG = 1000
 
 
 @dataclass(frozen=True)
@@ -111,6 +113,23 @@ class SimulationConfig:
             raise InputError(f"--components {self.components}: give 1 (along --direction) or 2 horizontal components")
         if self.frames_png < 0:
             raise InputError(f"--frames {self.frames_png}: must be >= 0 (collapse frames to render)")
+        if not 0 <= self.seed < 2**63:
+            raise InputError(f"--seed {self.seed}: must be a whole number >= 0")
+        seconds = self.pushover.duration_s if self.pushover is not None else self.duration_s
+        frames = seconds * self.solver.fps
+        if frames > MAX_FRAMES:
+            what = (
+                f"--pushover-max {self.pushover.max_g:g} at --pushover-rate {self.pushover.rate_g_per_s:g}"
+                if self.pushover is not None
+                else f"--duration {self.duration_s:g}"
+            )
+            raise InputError(
+                f"{what}: {seconds:.4g} s at {self.solver.fps} fps is {frames:.3g} frames, above {MAX_FRAMES:,}; "
+                "give a shorter run (a quake's strong motion lasts seconds; a pushover ramp of 0.01 g/s to 1 g "
+                "is 100 s)"
+            )
+        if self.frames_png > MAX_FRAMES_PNG:
+            raise InputError(f"--frames {self.frames_png}: at most {MAX_FRAMES_PNG} collapse frames are rendered")
 
 
 @dataclass(frozen=True)

@@ -108,6 +108,13 @@ class Material:
 MASONRY = Material()
 
 
+#: Upper limits of the solver settings: far beyond what changes a result (the convergence study
+#: doubles the defaults), low enough that a typo does not start a run of days.
+MAX_FPS = 1000
+MAX_SUBSTEPS = 1000
+MAX_ITERATIONS = 10_000
+
+
 @dataclass(frozen=True)
 class SolverSettings:
     """Bullet settings, set explicitly: tall bonded walls need far more iterations than Blender's 10.
@@ -144,6 +151,16 @@ class SolverSettings:
                 f"solver settings: fps, substeps and iterations must be > 0 (got {self.fps}, "
                 f"{self.substeps}, {self.iterations})"
             )
+        for flag, value, most in (
+            ("--fps", self.fps, MAX_FPS),
+            ("--substeps", self.substeps, MAX_SUBSTEPS),
+            ("--iterations", self.iterations, MAX_ITERATIONS),
+        ):
+            if value > most:
+                raise InputError(
+                    f"{flag} {value}: at most {most}; the defaults already pass the analytic tests, and "
+                    "doubling them is the accuracy check"
+                )
 
     @property
     def warmup_frames(self) -> int:

@@ -201,6 +201,8 @@ def synth_to_folder(
     from ..spec import load_structure
 
     check_output(out, command="synth", overwrite=overwrite)
+    if photo_size and (min(photo_size) < 64 or max(photo_size) > 20000):
+        raise InputError(f"--photo-size {photo_size[0]} {photo_size[1]}: each side must lie in 64..20000 px")
     spec = load_structure(scenario, require_sources=False)
     if spec.synthetic is None:
         raise InputError(f"{scenario}: no [synthetic] table; add one (layout, px_per_m, seed, ...) to make a data set")

@@ -145,6 +145,7 @@ def test_build_writes_the_simulation_geometry_without_reading_what_it_wrote(buil
     assert sum(g.volume for g in glb.geometry.values()) == pytest.approx(
         sum(b.volume for b in result.structure.bricks), rel=1e-6
     )
+    _check_model_blend(out / "model.blend", result.structure)
     geometry, stored = geometry_for_model(out)
     assert stored  # the copy build stored matches the bricks.json it wrote, byte for byte
     again = read_build(out)
@@ -152,6 +153,24 @@ def test_build_writes_the_simulation_geometry_without_reading_what_it_wrote(buil
     assert all(
         np.array_equal(x.solid.vertices, y.solid.vertices) for x, y in zip(again.bricks, result.structure.bricks)
     )
+
+
+def _check_model_blend(path, structure) -> None:
+    """model.blend opens in Blender with a collection per wall and every brick where the model has it."""
+    from calib_masonry.simulation.blender import require_bpy
+
+    bpy = require_bpy()
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    walls = [w.name for w in structure.footprint.walls]
+    per_wall = {c.name: {o.name: o for o in c.objects} for c in bpy.data.collections}
+    assert sorted(per_wall) == sorted(walls)
+    for b in structure.bricks:
+        ob = per_wall[walls[b.wall]][f"{walls[b.wall]}_brick_{b.label:05d}"]
+        v = np.array([tuple(ob.matrix_world @ x.co) for x in ob.data.vertices])
+        want = b.solid.to_trimesh().vertices
+        assert len(v) == len(want) and np.abs(v - want).max() < 1e-5  # float32 in Blender
+    assert sum(len(c) for c in per_wall.values()) == len(structure.bricks)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
 def test_compare_in_memory_matches_compare_of_folders(built, tmp_path):

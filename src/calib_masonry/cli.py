@@ -212,6 +212,7 @@ def _cmd_simulate(args) -> int:
         components=args.components or SimulationConfig.components,
         solver=solver,
         frames_png=args.frames,
+        gif_frames=args.gif_frames,
         figures=not args.no_figures,
         foundation=args.foundation,
         pushover=Pushover(rate_g_per_s=args.pushover_rate, direction_deg=args.direction, max_g=args.pushover_max)
@@ -385,6 +386,7 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--pushover-rate", type=float, default=0.01, help="pushover ramp in g per second (default 0.01)")
     m.add_argument("--pushover-max", type=float, default=1.0, help="pushover's largest lateral acceleration in g")
     m.add_argument("--frames", type=int, default=6, help="collapse frames to render as PNG")
+    m.add_argument("--gif-frames", type=int, default=24, help="views in collapse.gif, played in real time (0: none)")
     m.add_argument(
         "--foundation",
         action=argparse.BooleanOptionalAction,

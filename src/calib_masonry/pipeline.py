@@ -326,6 +326,19 @@ def read_build(model_dir: str | Path) -> Structure3D:
     )
 
 
+def _write_model_blend(structure, path: Path) -> None:
+    """model.blend (a collection per wall), when Blender's bpy is installed (the ``sim`` extra)."""
+    from .build3d.export import blend_walls
+    from .errors import BackendMissing
+    from .simulation.blender import require_bpy, write_model_blend
+
+    try:
+        require_bpy()
+    except BackendMissing:
+        return
+    write_model_blend(blend_walls(structure), path)
+
+
 def write_build(
     result: BuildResult,
     out: str | Path,
@@ -333,10 +346,11 @@ def write_build(
     figures: bool = True,
     simulation_geometry: bool = True,
     overwrite: bool = False,
+    blend: bool = True,
 ) -> dict:
     """Write a build into the folder ``out`` (all or nothing, replacing ``out`` as a whole: an
     existing ``out`` must be an earlier build or empty, unless ``overwrite``; the structure's own
-    files inside it are kept): ``model.stl``, ``model.glb``, ``bricks.json``,
+    files inside it are kept): ``model.stl``, ``model.glb``, ``model.blend`` (with bpy; ``blend``), ``bricks.json``,
     ``summary.json``, figures, the photo walls' calibrations and (with ``simulation_geometry``) the
     bodies and contact patches ``simulate`` starts from (``sim_geometry.npz``), computed from the
     structure in memory. Returns the summary."""
@@ -352,6 +366,10 @@ def write_build(
         export_mesh(s, stage / "model.glb")  # one node per brick: opens in Blender, three.js, any glTF viewer
         write_bricks_json(s, stage / "bricks.json")
         result.seconds["export"] = time.perf_counter() - t0
+        if blend and s.bricks:
+            t0 = time.perf_counter()
+            _write_model_blend(s, stage / "model.blend")
+            result.seconds["model_blend"] = time.perf_counter() - t0
         if figures:
             t0 = time.perf_counter()
             removed = []

@@ -242,19 +242,28 @@ def _min_width(poly: shapely.Geometry) -> float:
 
 
 def contact_patches(
-    bricks: Sequence[Brick], *, max_gap_m: float = 0.03, min_area_m2: float = 1e-4, angle_deg: float = 10.0
+    bricks: Sequence[Brick],
+    *,
+    max_gap_m: float = 0.03,
+    min_area_m2: float = 1e-4,
+    angle_deg: float = 10.0,
+    progress: bool | None = None,
 ) -> list[ContactPatch]:
     """Patches where two bricks' faces face each other across at most ``max_gap_m``.
 
     Any orientation: faces are matched by anti-parallel normals (within ``angle_deg``) and plane
     distance, and the patch is the exact overlap of the two faces projected on a common plane.
+    ``progress``: see :func:`calib_masonry.progress.progress` (None: a bar on a terminal, log lines
+    otherwise, for a step that can take tens of seconds on a large structure).
     """
-    faces = [_planar_faces(b.solid) for b in bricks]
+    from ..progress import progress as _progress
+
+    faces = [_planar_faces(b.solid) for b in _progress(bricks, desc="joint faces", unit="brick", enabled=progress)]
     lo = np.array([b.solid.vertices.min(axis=0) for b in bricks]) - max_gap_m
     hi = np.array([b.solid.vertices.max(axis=0) for b in bricks]) + max_gap_m
     cos_tol = np.cos(np.radians(angle_deg))
     out: list[ContactPatch] = []
-    for a, b in box_pairs(lo, hi, -1e-12):
+    for a, b in _progress(box_pairs(lo, hi, -1e-12), desc="joint patches", unit="pair", enabled=progress):
         best = None
         for na, da, pa, basis in faces[a]:
             for nb, db, pb, basis_b in faces[b]:

@@ -45,14 +45,11 @@ def export_mesh(structure: Structure3D, path: Path) -> None:
     mesh = structure_mesh(structure)
     if kind == "glb":
         # one node per brick, named by wall and id, coloured by wall (the same colours as model.png)
-        import matplotlib
-
-        cmap = matplotlib.colormaps["tab10"]
         names = [w.name for w in structure.footprint.walls]
         scene = trimesh.Scene()
         for b in structure.bricks:
             m = b.solid.to_trimesh()
-            rgba = (np.array(cmap(b.wall % 10)) * 255).astype(np.uint8)
+            rgba = (wall_colour(b.wall) * 255).astype(np.uint8)
             m.visual = trimesh.visual.ColorVisuals(m, face_colors=np.tile(rgba, (len(m.faces), 1)))
             name = f"{names[b.wall]}_brick_{b.label:05d}"
             scene.add_geometry(m, node_name=name, geom_name=name)
@@ -60,6 +57,24 @@ def export_mesh(structure: Structure3D, path: Path) -> None:
     else:
         data = mesh.export(file_type=kind)
     Path(path).write_bytes(data if isinstance(data, bytes) else data.encode())
+
+
+def wall_colour(wall: int) -> np.ndarray:
+    """RGBA in [0, 1] of a wall in every model output (model.png, model.glb, model.blend)."""
+    import matplotlib
+
+    return np.array(matplotlib.colormaps["tab10"](wall % 10))
+
+
+def blend_walls(structure: Structure3D) -> list:
+    """The model as :func:`calib_masonry.simulation.blender.write_model_blend` takes it: per wall its
+    name, colour and bricks (name, vertices, triangles)."""
+    names = [w.name for w in structure.footprint.walls]
+    walls = [(name, wall_colour(i), []) for i, name in enumerate(names)]
+    for b in structure.bricks:
+        m = b.solid.to_trimesh()
+        walls[b.wall][2].append((f"{names[b.wall]}_brick_{b.label:05d}", np.asarray(m.vertices), np.asarray(m.faces)))
+    return walls
 
 
 def bricks_json(structure: Structure3D) -> dict:

@@ -33,7 +33,7 @@ from ..progress import progress as _progress
 from .joints import CrackTracker
 from .scene import Scene, joint_axes
 
-__all__ = ["RunOutput", "run", "require_bpy"]
+__all__ = ["RunOutput", "run", "require_bpy", "write_model_blend"]
 
 
 def require_bpy():
@@ -79,6 +79,30 @@ def _mesh_object(bpy, name: str, vertices: np.ndarray, faces: np.ndarray, locati
     ob.location = tuple(float(x) for x in location)
     collection.objects.link(ob)
     return ob
+
+
+def write_model_blend(walls, path: str | Path) -> None:
+    """Save a built model as a .blend file: one collection per wall, one mesh object per brick
+    (its origin at the brick's vertex mean, so it rotates about itself), coloured by wall.
+
+    ``walls``: a sequence of ``(wall name, rgba, bricks)``, each brick ``(name, vertices (V, 3) in
+    global metres, triangles (T, 3))``. Blender's state is reset before and after.
+    """
+    bpy = require_bpy()
+    _reset(bpy)
+    sc = bpy.context.scene
+    for name, rgba, bricks in walls:
+        col = bpy.data.collections.new(name)
+        sc.collection.children.link(col)
+        mat = bpy.data.materials.new(f"{name}_material")
+        mat.diffuse_color = tuple(float(x) for x in rgba)
+        for brick_name, vertices, faces in bricks:
+            centre = np.asarray(vertices, dtype=np.float64).mean(axis=0)
+            ob = _mesh_object(bpy, brick_name, np.asarray(vertices) - centre, np.asarray(faces), centre, col)
+            ob.data.materials.append(mat)
+            ob.color = tuple(float(x) for x in rgba)  # the viewport's object colour
+    bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
+    _reset(bpy)
 
 
 def _box(size) -> tuple[np.ndarray, np.ndarray]:

@@ -220,32 +220,33 @@ def plot_histories(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> None
     plt.close(fig)
 
 
-def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) -> list[Path]:
-    """The collapse sequence: ``count`` axonometric views of the bricks at evenly spaced times."""
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+class _FramePainter:
+    """Axonometric views of the bricks at given frames, in one fixed box (shared by the PNG frames
+    and the GIF)."""
 
-    from .. import _figure as plt
+    def __init__(self, scene: Scene, out: RunOutput) -> None:
+        self.scene, self.out = scene, out
+        self.R = rotations(out.quaternions)
+        allv = np.concatenate([b.vertices + b.location for b in scene.bodies])
+        self.lo, self.hi = allv.min(axis=0), allv.max(axis=0)
+        self.pad = 0.3 * float((self.hi - self.lo)[:2].max())
+        light = np.array([0.4, -0.6, 0.7])
+        self.light = light / np.linalg.norm(light)
 
-    folder.mkdir(parents=True, exist_ok=True)
-    R = rotations(out.quaternions)
-    allv = np.concatenate([b.vertices + b.location for b in scene.bodies])
-    lo, hi = allv.min(axis=0), allv.max(axis=0)
-    pad = 0.3 * float((hi - lo)[:2].max())
-    light = np.array([0.4, -0.6, 0.7])
-    light /= np.linalg.norm(light)
-    frames = np.unique(np.linspace(0, len(out.time) - 1, count).round().astype(int))
-    paths = []
-    for k, f in enumerate(frames):
-        fig = plt.figure(figsize=(6, 6))
+    def figure(self, f: int, size_in: float = 6.0):
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+        from .. import _figure as plt
+
+        scene, out, lo, hi, pad = self.scene, self.out, self.lo, self.hi, self.pad
+        fig = plt.figure(figsize=(size_in, size_in))
         ax = fig.add_subplot(projection="3d")
-        tris = []
-        for j, b in enumerate(scene.bodies):
-            v = b.vertices @ R[f, j].T + out.positions[f, j]
-            tris.append(v[b.faces])
-        tri = np.concatenate(tris)
+        tri = np.concatenate(
+            [(b.vertices @ self.R[f, j].T + out.positions[f, j])[b.faces] for j, b in enumerate(scene.bodies)]
+        )
         n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-        sh = 0.35 + 0.6 * np.clip(n @ light, 0, 1)
+        sh = 0.35 + 0.6 * np.clip(n @ self.light, 0, 1)
         ax.add_collection3d(
             Poly3DCollection(
                 tri, facecolors=np.column_stack([0.75 * sh, 0.45 * sh, 0.32 * sh, np.ones_like(sh)]), linewidths=0
@@ -256,15 +257,59 @@ def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) ->
         ax.set_zlim(min(lo[2], 0.0), hi[2])
         ax.set_box_aspect((hi[0] - lo[0] + 2 * pad, hi[1] - lo[1] + 2 * pad, hi[2] - min(lo[2], 0.0)))
         ax.view_init(elev=20, azim=-60)
+        ax.tick_params(labelsize=7)
         ax.set_title(
             f"t = {out.time[f]:.2f} s (ground moves from {out.time[0] + scene.solver.warmup_s:.2f} s)", fontsize=9
         )
-        p = folder / f"frame_{k:03d}.png"
         fig.tight_layout()
+        return fig
+
+
+def _frames(out: RunOutput, count: int) -> np.ndarray:
+    return np.unique(np.linspace(0, len(out.time) - 1, count).round().astype(int))
+
+
+def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) -> list[Path]:
+    """The collapse sequence: ``count`` axonometric views of the bricks at evenly spaced times."""
+    from .. import _figure as plt
+
+    folder.mkdir(parents=True, exist_ok=True)
+    painter = _FramePainter(scene, out)
+    paths = []
+    for k, f in enumerate(_frames(out, count)):
+        fig = painter.figure(f)
+        p = folder / f"frame_{k:03d}.png"
         fig.savefig(p, dpi=90)
         plt.close(fig)
         paths.append(p)
     return paths
+
+
+def write_collapse_gif(
+    scene: Scene, out: RunOutput, path: Path, count: int = 24, *, progress: bool | None = None
+) -> None:
+    """The run as an animated GIF: ``count`` views at evenly spaced times, played in real time."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from PIL import Image
+
+    from .. import _figure as plt
+    from ..progress import progress as _progress
+
+    painter = _FramePainter(scene, out)
+    frames = _frames(out, count)
+    images = []
+    for f in _progress(frames, desc="collapse.gif", unit="frame", enabled=progress):
+        fig = painter.figure(f, size_in=4.5)
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        rgba = np.asarray(canvas.buffer_rgba())
+        images.append(Image.fromarray(rgba[..., :3].copy()).quantize(colors=128, dither=Image.Dither.NONE))
+        plt.close(fig)
+    if not images:
+        return
+    dt = np.diff(out.time[frames]) if len(frames) > 1 else np.array([1.0])
+    durations = [int(max(40, round(1000 * d))) for d in dt] + [2000]  # hold the last frame
+    images[0].save(path, save_all=True, append_images=images[1:], duration=durations[: len(images)], loop=0)
 
 
 def plot_pushover(scene: Scene, curve: tuple[float | None, np.ndarray, np.ndarray], path: Path) -> None:

@@ -88,6 +88,7 @@ class SimulationConfig:
     solver: SolverSettings = SolverSettings()
     material: Material = MASONRY
     frames_png: int = 6
+    gif_frames: int = 24  # views in collapse.gif (0: none)
     figures: bool = True
     # bond the bottom course to the ground (a footing): without it the ground moves the structure
     # through friction alone, and the whole structure creeps on the plate (a slow turn of ~1 mrad
@@ -128,6 +129,8 @@ class SimulationConfig:
                 "give a shorter run (a quake's strong motion lasts seconds; a pushover ramp of 0.01 g/s to 1 g "
                 "is 100 s)"
             )
+        if not 0 <= self.gif_frames <= MAX_FRAMES_PNG:
+            raise InputError(f"--gif-frames {self.gif_frames}: must lie in 0..{MAX_FRAMES_PNG}")
         if self.frames_png > MAX_FRAMES_PNG:
             raise InputError(f"--frames {self.frames_png}: at most {MAX_FRAMES_PNG} collapse frames are rendered")
 
@@ -456,10 +459,18 @@ def simulate(
     return _run_scene(scene, name, progress=progress, blend_path=blend_path)
 
 
-def write_simulation(result: SimulationResult, out: Path, *, figures: bool = True, frames_png: int = 6) -> None:
+def write_simulation(
+    result: SimulationResult,
+    out: Path,
+    *,
+    figures: bool = True,
+    frames_png: int = 6,
+    gif_frames: int = 24,
+    progress: bool | None = None,
+) -> None:
     """Write a result into the folder ``out`` (it must exist): summary.json, poses.npz and the figures
-    (ground_motion.png or pushover.png, histories.png, frames/)."""
-    from .results import plot_ground_motion, plot_histories, plot_pushover, render_frames
+    (ground_motion.png or pushover.png, histories.png, frames/, collapse.gif)."""
+    from .results import plot_ground_motion, plot_histories, plot_pushover, render_frames, write_collapse_gif
 
     scene, r, m = result.scene, result.output, result.metrics
     np.savez_compressed(
@@ -478,6 +489,8 @@ def write_simulation(result: SimulationResult, out: Path, *, figures: bool = Tru
             plot_ground_motion(scene, out / "ground_motion.png")
         plot_histories(scene, r, m, out / "histories.png")
         render_frames(scene, r, out / "frames", count=frames_png)
+        if gif_frames:
+            write_collapse_gif(scene, r, out / "collapse.gif", count=gif_frames, progress=progress)
     summary = dict(result.summary)
     summary["seconds"] = {**summary["seconds"], "figures": round(time.perf_counter() - t1, 3)}
     write_json(out / "summary.json", summary)
@@ -508,5 +521,12 @@ def simulate_to_folder(
     with staged_output(out, "simulate", overwrite=overwrite, keep=[config.accelerogram]) as stage:
         result = _run_scene(scene, str(model_dir), progress=progress, blend_path=stage / "scene.blend")
         result.summary["seconds"]["scene"] = round(t_scene, 3)
-        write_simulation(result, stage, figures=config.figures, frames_png=config.frames_png)
+        write_simulation(
+            result,
+            stage,
+            figures=config.figures,
+            frames_png=config.frames_png,
+            gif_frames=config.gif_frames,
+            progress=progress,
+        )
     return read_json(Path(out) / "summary.json")

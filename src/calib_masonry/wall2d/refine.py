@@ -32,6 +32,7 @@ from scipy import ndimage
 
 from .._jax import jax, jnp
 from ..calibrate.fitresult import FitStatus
+from ..progress import progress as _progress
 from .dice import rasterise_polygon
 
 __all__ = [
@@ -321,6 +322,7 @@ def _run_jobs(
     for i, b in enumerate(bricks):
         buckets.setdefault((easy[i], _bucket(len(b.points))), []).append(i)
     dt = jnp.dtype(config.dtype)
+    bar = _progress(total=len(bricks), desc="refine", unit="brick")
     for (is_easy, size), members in sorted(buckets.items()):
         taus = config.easy_temperatures if is_easy else config.temperatures
         steps = config.easy_steps if is_easy else config.max_steps
@@ -368,6 +370,8 @@ def _run_jobs(
             for r, i in enumerate(chunk):
                 results[i] = out[r, : len(starts[i])] + bricks[i].centre + bricks[i].origin
                 statuses[i] = _SOLVER_STATUS[int(codes[r])]
+            bar.update(len(chunk))
+    bar.close()
     return results, statuses
 
 

@@ -289,3 +289,24 @@ def test_an_image_too_big_for_the_memory_is_refused_before_decoding(tmp_path, mo
     monkeypatch.setattr(io, "_available_bytes", lambda: 1000)
     with pytest.raises(InputError, match=r"m.png: 80 x 60 px needs about .* GiB .* free; downsample it"):
         io.read_mask(tmp_path / "m.png")
+
+
+@pytest.mark.parametrize(
+    "args, expect",
+    [
+        (["trace", SWAT, "--vertices", "0"], "vertices = 0 is too few"),
+        (["rectify", SWAT, "--max-rms", "-1"], "--max-rms -1.0: must be > 0"),
+        (["simulate", DATA, "--pga", "1e9"], "--pga 1000000000.0"),
+        (["simulate", DATA, "--frames", "-1"], "--frames -1"),
+        (["simulate", DATA, "--pga", "-1e+16"], "--pga -1e+16"),
+        (["simulate", DATA, "--iterations", "1e9"], "invalid int value"),
+    ],
+)
+def test_silently_accepted_values_are_one_line_errors(tmp_path, args, expect):
+    """Values the earlier versions took without a word (--vertices 0 as 5, --pga 1e9 as a 242,329 km
+    roof drift) end in one line and exit 2, before any work, with nothing written."""
+    r = _run(*args, "--out", tmp_path / "out")
+    assert r.returncode == 2, r.stderr
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and expect in lines[0], r.stderr
+    assert list(tmp_path.iterdir()) == []

@@ -247,13 +247,14 @@ def contact_patches(
     max_gap_m: float = 0.03,
     min_area_m2: float = 1e-4,
     angle_deg: float = 10.0,
+    min_gap_m: float = -1e-4,
     progress: bool | None = None,
 ) -> list[ContactPatch]:
     """Patches where two bricks' faces face each other across at most ``max_gap_m``.
 
     Any orientation: faces are matched by anti-parallel normals (within ``angle_deg``) and plane
     distance, and the patch is the exact overlap of the two faces projected on a common plane.
-    ``progress``: see :func:`calib_masonry.progress.progress` (None: a bar on a terminal, log lines
+    Faces that overlap by more than ``-min_gap_m`` are not a joint. ``progress``: see :func:`calib_masonry.progress.progress` (None: a bar on a terminal, log lines
     otherwise, for a step that can take tens of seconds on a large structure).
     """
     from ..progress import progress as _progress
@@ -270,7 +271,7 @@ def contact_patches(
                 if float(na @ nb) > -cos_tol:
                     continue
                 gap = -db - da  # distance from a's plane to b's plane along na (nb ~ -na)
-                if gap < -1e-4 or gap > max_gap_m:
+                if gap < min_gap_m or gap > max_gap_m:
                     continue
                 # b's face in 3D, projected on a's plane basis
                 inter = pa.intersection(shapely.transform(pb, lambda xy: (xy @ basis_b + db * nb) @ basis.T))

@@ -489,7 +489,27 @@ def scene_geometry(
         # faces miss joints wider than the reach or bent by more than the angle: 42 Stylite stones
         # had nothing below them and hung from their neighbours in the joint model)
         cells = [_Solid(id=i, solid=Polyhedron(bd.vertices + bd.location, bd.faces)) for i, bd in enumerate(bodies)]
-        patches = contact_patches(cells, max_gap_m=0.5 * max_gap_m, angle_deg=10.0)
+        # the hulls of two neighbouring cells overlap where a cell is not convex (an irregular
+        # stone's): their shared face is a joint even so (overlap up to a joint's reach)
+        patches = contact_patches(cells, max_gap_m=0.5 * max_gap_m, angle_deg=10.0, min_gap_m=-max_gap_m)
+        if ungrown:
+            # a stone left bare (its cell's hull would overlap a neighbour) faces its neighbours across
+            # its whole mortar joint, not half of it, and its faces are the stone's own (not parallel
+            # cell faces); at a corner, the other wall's cells, grown without knowing it, reach into
+            # it by up to half a joint. Found with the full reach, the bare bricks' angle and that
+            # overlap, it keeps the bed it lies on (31 Stylite stones had none and hung from their
+            # head joints in the joint model)
+            have = {(p.a, p.b) for p in patches}
+            near = sorted(ungrown | {j for i, j in pairs if i in ungrown} | {i for i, j in pairs if j in ungrown})
+            extra = contact_patches(
+                [cells[k] for k in near],
+                max_gap_m=max_gap_m,
+                angle_deg=15.0,
+                min_gap_m=-max_gap_m,  # a cell grown into the corner stone of the other wall
+                progress=False,
+            )
+            patches += [p for p in extra if (p.a in ungrown or p.b in ungrown) and (p.a, p.b) not in have]
+            patches.sort(key=lambda c: (c.a, c.b))
         pairs = np.array([(p.a, p.b) for p in patches], dtype=np.int64).reshape(-1, 2)
     from scipy.spatial import ConvexHull
 

@@ -187,10 +187,12 @@ def trace_mask(mask: np.ndarray, config: TraceConfig = TraceConfig()) -> TraceRe
     target Dice, count by count from 3 vertices, each brick stopping at the first count whose
     refined polygon reaches the target.
     """
+    from ..progress import progress
+
     labels = label_bricks(mask, config.segment)
     slices = ndimage.find_objects(labels)
     items = []
-    for k, slc in enumerate(slices, start=1):
+    for k, slc in enumerate(progress(slices, desc="trace outlines", unit="brick"), start=1):
         if slc is None:
             continue
         region = labels[slc] == k
@@ -201,7 +203,7 @@ def trace_mask(mask: np.ndarray, config: TraceConfig = TraceConfig()) -> TraceRe
         bricks = _refined(labels, items, config)
     else:
         bricks = []
-        for k, region, outline, offset in items:
+        for k, region, outline, offset in progress(items, desc="simplify", unit="brick"):
             poly, dice = _simplify(outline, region, config)
             bricks.append(
                 TracedBrick(

@@ -537,11 +537,22 @@ def test_build_stores_the_geometry_simulate_would_compute(small_model, tmp_path,
     assert not geometry_for_model(small_model / "model")[1]
 
 
-def test_simulate_a_two_column_record(small_model, tmp_path):
-    """time, acceleration in g: the format the README documents (it used to crash after Blender started)."""
+@pytest.mark.parametrize("kind", ["csv", "at2"])
+def test_simulate_a_two_column_record(small_model, tmp_path, kind):
+    """time, acceleration in g: the format the README documents (it used to crash after Blender
+    started); and the same motion as a PEER NGA .AT2 file, the format engineers download."""
     t = np.arange(0, 1.5, 0.005)
-    rec = tmp_path / "rec.csv"
-    rec.write_text("time_s,acc_g\n" + "\n".join(f"{x:.3f},{0.05 * np.sin(2 * np.pi * 2 * x):.6f}" for x in t))
+    a = 0.05 * np.sin(2 * np.pi * 2 * t)
+    if kind == "csv":
+        rec = tmp_path / "rec.csv"
+        rec.write_text("time_s,acc_g\n" + "\n".join(f"{x:.3f},{v:.6f}" for x, v in zip(t, a)))
+    else:
+        rec = tmp_path / "rec.AT2"
+        body = "\n".join("  ".join(f"{v:.7E}" for v in a[k : k + 5]) for k in range(0, len(a), 5))
+        rec.write_text(
+            "PEER NGA STRONG MOTION DATABASE RECORD\nTest event, station, comp 000\n"
+            f"ACCELERATION TIME SERIES IN UNITS OF G\nNPTS=  {len(a)}, DT=   .0050 SEC\n{body}\n"
+        )
     r = _cli(
         "simulate",
         small_model / "model",
@@ -555,7 +566,7 @@ def test_simulate_a_two_column_record(small_model, tmp_path):
     )
     assert r.returncode == 0, r.stderr
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
-    assert s["ground_motion"]["source"] == "rec.csv" and 0.04 < s["ground_motion"]["pga_g"] < 0.08
+    assert s["ground_motion"]["source"] == rec.name and 0.04 < s["ground_motion"]["pga_g"] < 0.08
 
 
 def test_the_same_record_in_g_and_in_m_per_s2_gives_the_same_run(small_model, tmp_path):

@@ -74,8 +74,17 @@ trust_large_images(os.environ.get("CALIB_MASONRY_TRUST_LARGE_IMAGES") == "1")
 
 
 def _available_bytes() -> int | None:
+    """Memory a process can still take: Linux's MemAvailable (free memory plus the page cache it can
+    drop; "free" alone is small on a machine that has read many files), else the physical total."""
     try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):  # not every platform says
         return None
 

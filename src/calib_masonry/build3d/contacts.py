@@ -254,8 +254,9 @@ def contact_patches(
 
     Any orientation: faces are matched by anti-parallel normals (within ``angle_deg``) and plane
     distance, and the patch is the exact overlap of the two faces projected on a common plane.
-    Faces that overlap by more than ``-min_gap_m`` are not a joint. ``progress``: see :func:`calib_masonry.progress.progress` (None: a bar on a terminal, log lines
-    otherwise, for a step that can take tens of seconds on a large structure).
+    Faces that overlap by more than ``-min_gap_m`` are not a joint. ``progress``: see
+    :func:`calib_masonry.progress.progress` (None: a bar on a terminal, log lines otherwise, for a
+    step that can take tens of seconds on a large structure).
     """
     from ..progress import progress as _progress
 

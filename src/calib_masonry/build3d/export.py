@@ -45,13 +45,10 @@ def export_mesh(structure: Structure3D, path: Path) -> None:
     mesh = structure_mesh(structure)
     if kind == "glb":
         # one node per brick, named by wall and id, coloured by wall (the same colours as model.png)
-        names = [w.name for w in structure.footprint.walls]
         scene = trimesh.Scene()
-        for b in structure.bricks:
-            m = b.solid.to_trimesh()
-            rgba = (wall_colour(b.wall) * 255).astype(np.uint8)
+        for wall, name, m in _brick_meshes(structure):
+            rgba = (wall_colour(wall) * 255).astype(np.uint8)
             m.visual = trimesh.visual.ColorVisuals(m, face_colors=np.tile(rgba, (len(m.faces), 1)))
-            name = f"{names[b.wall]}_brick_{b.label:05d}"
             scene.add_geometry(m, node_name=name, geom_name=name)
         data = scene.export(file_type="glb")
     else:
@@ -66,14 +63,20 @@ def wall_colour(wall: int) -> np.ndarray:
     return np.array(matplotlib.colormaps["tab10"](wall % 10))
 
 
+def _brick_meshes(structure: Structure3D):
+    """Per brick, in order: its wall's index, its node name in every model file (``WALL_brick_LABEL``)
+    and its mesh."""
+    names = [w.name for w in structure.footprint.walls]
+    for b in structure.bricks:
+        yield b.wall, f"{names[b.wall]}_brick_{b.label:05d}", b.solid.to_trimesh()
+
+
 def blend_walls(structure: Structure3D) -> list:
     """The model as :func:`calib_masonry.simulation.blender.write_model_blend` takes it: per wall its
     name, colour and bricks (name, vertices, triangles)."""
-    names = [w.name for w in structure.footprint.walls]
-    walls = [(name, wall_colour(i), []) for i, name in enumerate(names)]
-    for b in structure.bricks:
-        m = b.solid.to_trimesh()
-        walls[b.wall][2].append((f"{names[b.wall]}_brick_{b.label:05d}", np.asarray(m.vertices), np.asarray(m.faces)))
+    walls = [(w.name, wall_colour(i), []) for i, w in enumerate(structure.footprint.walls)]
+    for wall, name, m in _brick_meshes(structure):
+        walls[wall][2].append((name, np.asarray(m.vertices), np.asarray(m.faces)))
     return walls
 
 

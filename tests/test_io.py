@@ -130,3 +130,23 @@ def test_read_mask_thresholds_half_way_in_every_pixel_format(tmp_path, kind):
     path = tmp_path / ("m.tif" if kind == "F" else "m.png")
     im.save(path)
     np.testing.assert_array_equal(read_mask(path), want)
+
+
+def test_a_requested_stop_is_never_committed_even_if_its_exception_was_swallowed(tmp_path, monkeypatch):
+    # Some third-party imports wrap an optional import in a bare `except:`, which swallows the
+    # exception the CLI's SIGTERM handler raises; the stop flag it also sets must still hold.
+    import threading
+
+    from calib_masonry import errors
+
+    monkeypatch.setattr(errors, "_STOP", threading.Event())
+    out = tmp_path / "out"
+    with pytest.raises(errors.Terminated):
+        with staged_output(out, "build") as stage:
+            (stage / "model.stl").write_text("whole, but the run was told to stop")
+            try:
+                errors.request_stop()
+                raise errors.Terminated()
+            except BaseException:  # what such an import does
+                pass
+    assert list(tmp_path.iterdir()) == []

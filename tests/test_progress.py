@@ -25,3 +25,25 @@ def test_quiet_when_disabled_and_no_line_for_a_short_step(monkeypatch):
     bar.update()
     bar.close()
     assert stream.getvalue() == ""  # under 10 s: nothing to report
+
+
+def test_a_requested_stop_ends_a_loop_at_its_next_step(monkeypatch):
+    import threading
+
+    import pytest
+
+    from calib_masonry import errors
+
+    monkeypatch.setattr(errors, "_STOP", threading.Event())
+    for enabled in (False, None):
+        seen = []
+        with pytest.raises(errors.Terminated):
+            for i in progress(range(5), desc="build", enabled=enabled):
+                seen.append(i)
+                if i == 1:
+                    errors.request_stop()
+        assert seen == [0, 1]
+        bar = progress(total=3, desc="build", enabled=enabled)
+        with pytest.raises(errors.Terminated):
+            bar.update()
+        errors._STOP.clear()

@@ -15,7 +15,7 @@ import warnings
 from pathlib import Path
 from typing import NoReturn
 
-from .errors import CalibMasonryError
+from .errors import CalibMasonryError, Terminated, request_stop
 
 __all__ = ["main"]
 
@@ -408,11 +408,8 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the program is, so that every staging folder is removed on the way out."""
-
-
 def _terminate(signum, frame) -> None:
+    request_stop()  # kept even if some library swallows the exception below
     raise Terminated()
 
 
@@ -431,7 +428,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt as exc:
         what = "terminated" if isinstance(exc, Terminated) else "interrupted"
-        print(f"error: {what}; nothing was written", file=sys.stderr)
+        written = getattr(exc, "written", None)
+        if written:  # the signal came during the final rename: the output is whole, say so
+            print(f"error: {what} after {written} was complete; that output is whole", file=sys.stderr)
+        else:
+            print(f"error: {what}; nothing was written", file=sys.stderr)
         return 2
     finally:
         signal.signal(signal.SIGTERM, previous)

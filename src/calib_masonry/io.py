@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from .errors import InputError
+from .errors import InputError, raise_if_stopped
 
 __all__ = [
     "json_bytes",
@@ -361,7 +361,9 @@ def staged_output(
         old = parent / f"{prefix}old-{os.urandom(4).hex()}"
         blocked = {signal.SIGTERM, signal.SIGINT}
         signal.pthread_sigmask(signal.SIG_BLOCK, blocked)  # the swap is not interrupted half-way
+        swapped = False
         try:
+            raise_if_stopped()  # a stop whose exception some library swallowed: do not commit
             if out_dir.exists():
                 os.replace(out_dir, old)
             try:
@@ -370,9 +372,15 @@ def staged_output(
                 if old.exists() and not out_dir.exists():
                     os.replace(old, out_dir)  # put the earlier output back
                 raise
+            swapped = True
             shutil.rmtree(old, ignore_errors=True)
         finally:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, blocked)
+            try:
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, blocked)  # a signal held back is handled here
+            except KeyboardInterrupt as exc:
+                if swapped:
+                    exc.written = str(out_dir)  # the output is whole; the CLI says so
+                raise
     finally:
         shutil.rmtree(stage, ignore_errors=True)
 

@@ -1,12 +1,18 @@
 """Progress of long steps: a bar on a terminal; when stderr is not a terminal (a log file, a pipe, a
 scheduler, a Dask worker), a line at most every :data:`LOG_EVERY_S` seconds with what is done, the
-percent and the time left, and a last line when a step that logged ends."""
+percent and the time left, and a last line when a step that logged ends.
+
+Every step also checks for a requested stop (:func:`calib_masonry.errors.request_stop`, which the
+CLI's SIGTERM handler calls), so a long loop ends at its next step even when the signal's own
+exception was swallowed by a third-party import."""
 
 from __future__ import annotations
 
 import sys
 import time
 from collections.abc import Iterable, Iterator
+
+from .errors import raise_if_stopped
 
 __all__ = ["LOG_EVERY_S", "progress"]
 
@@ -42,6 +48,7 @@ class _LogLines:
         return f"{self.desc}: {self.n} {self.unit}s, {elapsed:.0f} s elapsed"
 
     def update(self, n: int = 1) -> None:
+        raise_if_stopped()
         self.n += n
         now = time.monotonic()
         if now - self.last >= LOG_EVERY_S:
@@ -62,7 +69,7 @@ class _Silent:
         return iter(self.iterable)
 
     def update(self, n: int = 1) -> None:
-        pass
+        raise_if_stopped()
 
     def close(self) -> None:
         pass
@@ -78,11 +85,30 @@ def progress(
 ):
     """Wrap a long loop (or count it with ``update()``): ``enabled`` False is silent, True or None
     shows a bar on a terminal and log lines elsewhere (None is the library's default)."""
+    if iterable is not None:
+        if total is None and hasattr(iterable, "__len__"):
+            total = len(iterable)
+        iterable = _checked(iterable)
     if enabled is False:
         return _Silent(iterable)
     stream = sys.stderr
     if stream is not None and hasattr(stream, "isatty") and stream.isatty():
-        from tqdm.auto import tqdm
-
-        return tqdm(iterable, total=total, desc=desc, unit=unit, leave=False)
+        return _bar_class()(iterable, total=total, desc=desc, unit=unit, leave=False)
     return _LogLines(iterable, total, desc, unit, stream)
+
+
+def _checked(iterable: Iterable) -> Iterator:
+    for item in iterable:
+        raise_if_stopped()
+        yield item
+
+
+def _bar_class():
+    from tqdm.auto import tqdm
+
+    class _Bar(tqdm):
+        def update(self, n=1):
+            raise_if_stopped()
+            return super().update(n)
+
+    return _Bar

@@ -22,6 +22,8 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,13 +40,26 @@ __all__ = ["RunOutput", "run", "require_bpy", "write_model_blend"]
 
 def require_bpy():
     try:
-        import bpy  # noqa: PLC0415 - the one place bpy is imported
+        with _signals_held():
+            import bpy  # noqa: PLC0415 - the one place bpy is imported
     except ImportError as exc:
         raise BackendMissing(
             "simulate: Blender's bpy module is not installed; install it with "
             "pip install -c constraints.txt 'bpy==5.0.*' (Python 3.11 only)"
         ) from exc
     return bpy
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Hold SIGTERM and Ctrl-C back while Blender runs Python of its own (start-up, factory
+    settings, saving, baking): an exception raised by the CLI's signal handler inside it crashes
+    Blender with SIGSEGV. A signal that came meanwhile is handled on the way out."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 @dataclass(frozen=True)
@@ -67,7 +82,8 @@ class RunOutput:
 
 
 def _reset(bpy) -> None:
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    with _signals_held():
+        bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
 def _mesh_object(bpy, name: str, vertices: np.ndarray, faces: np.ndarray, location, collection):
@@ -101,7 +117,8 @@ def write_model_blend(walls, path: str | Path) -> None:
             ob = _mesh_object(bpy, brick_name, np.asarray(vertices) - centre, np.asarray(faces), centre, col)
             ob.data.materials.append(mat)
             ob.color = tuple(float(x) for x in rgba)  # the viewport's object colour
-    bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
+    with _signals_held():
+        bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
     _reset(bpy)
 
 
@@ -225,7 +242,8 @@ def build_scene(scene: Scene):
     sc.frame_end = frames + 1
     sc.gravity = (0.0, 0.0, -scene.gravity)
     sc.use_gravity = True
-    bpy.ops.rigidbody.world_add()
+    with _signals_held():
+        bpy.ops.rigidbody.world_add()
     rw = sc.rigidbody_world
     rw.substeps_per_frame = s.substeps
     rw.solver_iterations = s.iterations
@@ -403,11 +421,12 @@ def run(
         # model's cracks in it); marked as baked, it is saved and replayed instead of re-simulated
         rw = sc.rigidbody_world
         rw.point_cache.frame_end = len(mats)  # a pushover may have stopped early
-        with bpy.context.temp_override(scene=sc, point_cache=rw.point_cache):
+        with bpy.context.temp_override(scene=sc, point_cache=rw.point_cache), _signals_held():
             bpy.ops.ptcache.bake_from_cache()
         sc.frame_end = len(mats)
         sc.frame_set(1)
-        bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), check_existing=False, compress=True)
+        with _signals_held():
+            bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), check_existing=False, compress=True)
     return RunOutput(
         time=np.arange(n) / s.fps,
         positions=mats[:, :, :3, 3].astype(np.float64),

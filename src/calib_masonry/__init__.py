@@ -9,6 +9,7 @@ each command of the CLI are the edge::
     StructureSpec (+ traces) --build--> BuildResult (.structure: Structure3D)
     Structure3D + GroundMotion | Pushover --simulate--> SimulationResult
     Structure3D + truth Structure3D --compare--> metrics
+    Study (load_study) --run_study--> rows, summary   (on Dask; study_to_folder resumes)
 
 Names are imported lazily on first use (PEP 562), so ``import calib_masonry`` and the command line
 start fast and load JAX, torch or bpy only for the stages that need them.
@@ -82,6 +83,10 @@ _API = {
     "load_structure": (".spec", "load_structure"),
     "structure_to_toml": (".spec", "structure_to_toml"),
     "compare": (".study.compare", "compare"),
+    "Study": (".study.design", "Study"),
+    "load_study": (".study.design", "load_study"),
+    "run_study": (".study.run", "run_study"),
+    "study_to_folder": (".study.run", "study_to_folder"),
     "compare_dirs": (".study.compare", "compare_dirs"),
     "synthesize": (".synthetic.truth", "synthesize"),
     "truth_structure": (".synthetic.truth", "truth_structure"),
@@ -171,6 +176,10 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .study.compare import compare as compare
     from .study.compare import compare_dirs as compare_dirs
     from .study.compare import compare_to_file as compare_to_file
+    from .study.design import Study as Study
+    from .study.design import load_study as load_study
+    from .study.run import run_study as run_study
+    from .study.run import study_to_folder as study_to_folder
     from .synthetic.truth import synth_to_folder as synth_to_folder
     from .synthetic.truth import synthesize as synthesize
     from .synthetic.truth import truth_structure as truth_structure

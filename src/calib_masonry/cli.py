@@ -109,6 +109,33 @@ def _print_compare(m: dict, out) -> None:
     )
 
 
+def _cmd_study(args) -> int:
+    from .study.design import load_study
+    from .study.run import study_to_folder
+
+    study = load_study(args.study_file)
+    t0 = time.perf_counter()
+    rows, summary, ran = study_to_folder(
+        study,
+        args.out,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        overwrite=args.overwrite,
+        figures=not args.no_figures,
+    )
+    print(
+        f"study: {study.name}: {summary['samples']} samples ({ran} run now, {summary['samples'] - ran} kept from "
+        f"before), {summary['failed']} failed, {time.perf_counter() - t0:.1f} s -> {args.out}"
+    )
+    for key, st in list(summary["outputs"].items())[:8]:
+        if st.get("n"):
+            print(f"  {key:>28}: mean {st['mean']:.6g}, std {st['std']:.3g}, 5-95 % {st['p5']:.6g} .. {st['p95']:.6g}")
+    frag = summary.get("fragility")
+    if frag and frag.get("median_g"):
+        print(f"  fragility: median {frag['median_g']:.3f} g, beta {frag['beta']:.3f}")
+    return 0
+
+
 def _cmd_demo(args) -> int:
     from .pipeline import demo
 
@@ -398,6 +425,25 @@ def _parser() -> argparse.ArgumentParser:
     _overwrite_flag(m)
     m.set_defaults(func=_cmd_simulate)
 
+    st = sub.add_parser(
+        "study",
+        help="an uncertainty, sensitivity, fragility or truth-sweep study on Dask (resumes where it stopped)",
+    )
+    st.add_argument("study_file", help="a study .toml (see data_synthetic/studies/)")
+    st.add_argument("--out", default="out/study")
+    st.add_argument(
+        "--scheduler", default=None, help="a running Dask scheduler, tcp://HOST:PORT (default: a local cluster)"
+    )
+    st.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="worker processes of the local cluster (default: one per core; 0: run in this process)",
+    )
+    st.add_argument("--no-figures", action="store_true")
+    _overwrite_flag(st)
+    st.set_defaults(func=_cmd_study)
+
     d = sub.add_parser("demo", help="build the paper example from its masks and compare with its truth")
     d.add_argument("--out", default="out/demo")
     d.add_argument(
@@ -429,8 +475,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt as exc:
         what = "terminated" if isinstance(exc, Terminated) else "interrupted"
         written = getattr(exc, "written", None)
-        if written:  # the signal came during the final rename: the output is whole, say so
-            print(f"error: {what} after {written} was complete; that output is whole", file=sys.stderr)
+        if written:  # what was complete when the signal came (a final rename, a study's samples)
+            print(f"error: {what}; {written}", file=sys.stderr)
         else:
             print(f"error: {what}; nothing was written", file=sys.stderr)
         return 2

@@ -38,8 +38,8 @@ class FitFailed(CalibMasonryError, RuntimeError):
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM (or a stop requested by a caller), raised where the program is, so that every staging
-    folder is removed on the way out. ``written`` names an output that was already complete when the
-    signal was handled (it arrived during the final rename), else None."""
+    folder is removed on the way out. ``written`` says what was already complete when the signal was
+    handled (an output renamed into place, a study's finished samples), else None."""
 
     def __init__(self, written: str | None = None) -> None:
         super().__init__()

@@ -379,7 +379,7 @@ def staged_output(
                 signal.pthread_sigmask(signal.SIG_UNBLOCK, blocked)  # a signal held back is handled here
             except KeyboardInterrupt as exc:
                 if swapped:
-                    exc.written = str(out_dir)  # the output is whole; the CLI says so
+                    exc.written = f"{out_dir} was complete before it; that output is whole"  # the CLI says so
                 raise
     finally:
         shutil.rmtree(stage, ignore_errors=True)

@@ -135,6 +135,7 @@ class PhotoSpec:
     eye_height_m: tuple[float, float] = (1.5, 1.8)
     distance_m: tuple[float, float] = (3.0, 30.0)
     max_yaw_deg: float = 35.0
+    yaw_deg: float | None = None  # a fixed yaw (a truth sweep's value) instead of a draw within max_yaw_deg
     max_roll_deg: float = 2.0
     blur_px: tuple[float, float] = (0.4, 0.9)
     noise: float = 0.012
@@ -487,6 +488,16 @@ def _corner_from(c, i: int, names, path: Path, require_sources: bool) -> CornerS
     return CornerSpec(photo=p, walls=(pair[0], pair[1]), focal_px=None if focal is None else float(focal))
 
 
+def read_toml(path: Path, what: str) -> dict:
+    """A TOML file's tables; a missing or malformed file is an error naming it."""
+    if not path.is_file():
+        raise InputError(f"{path}: {what} not found; give the path of a .toml file")
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not valid TOML ({exc}); fix the syntax") from None
+
+
 def load_structure(path: str | Path, *, require_sources: bool = True) -> StructureSpec:
     """Read and validate a structure (or scenario) TOML file, table by table.
 
@@ -496,12 +507,7 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
     require_sources : if True every wall must name a ``mask`` (or ``image``) that exists.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: structure file not found; give the path of a .toml file")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: not valid TOML ({exc}); fix the syntax") from None
+    data = read_toml(path, "structure file")
     _check_keys(data, TABLES, str(path), "table")
     defaults = _structure_defaults(data.get("structure"), path)
     synthetic = _synthetic_from(data["synthetic"], _where(path, "[synthetic]")) if "synthetic" in data else None

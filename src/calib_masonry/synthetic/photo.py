@@ -112,6 +112,8 @@ def sample_camera(wall: WallSpec, spec: PhotoSpec, rng: np.random.Generator) -> 
         f = focal_px_from_35mm(f35, size)
         eye = rng.uniform(*spec.eye_height_m)
         yaw = math.radians(rng.uniform(-spec.max_yaw_deg, spec.max_yaw_deg))
+        if spec.yaw_deg is not None:  # drawn all the same, so the other draws do not change with it
+            yaw = math.radians(spec.yaw_deg)
         roll = math.radians(rng.uniform(-spec.max_roll_deg, spec.max_roll_deg))
         xt, zt = wall.width_m * rng.uniform(0.4, 0.6), wall.height_m * rng.uniform(0.45, 0.55)
         pitch_jitter = math.radians(rng.uniform(-2.0, 2.0))

@@ -1,0 +1,357 @@
+"""One sample of a study: a pure function of (study, sample) that calls the library's stages.
+
+:func:`run_sample` varies the structure (walls' W, H, theta, t; the mask; the trace's vertex count
+or target Dice), builds it in memory and reads the model's outputs; a truth sweep synthesises its
+walls (and photos) with the swept generator parameters and compares the build with the exact truth;
+with a ``[simulate]`` table it runs Bullet under the sample's load. What does not change between
+samples of a worker (a structure file, a mask's trace, a photo's calibration, the simulation
+geometry of an unvaried model) is computed once per worker process and cached.
+
+Bullet orders its broad-phase tree by memory address, so a simulation's last bits depend on what
+the process allocated before it. Each simulation therefore runs in a fresh child process
+(``python -m calib_masonry.study.child``) with a fixed hash seed: the same sample gives the same
+poses on any worker, in any order.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import pickle
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CalibMasonryError, InputError
+from .design import Sample, Study
+
+__all__ = ["run_sample", "ROW_KEYS"]
+
+# the child's environment, whatever the worker's: a fixed hash seed, and one BLAS thread (a threaded
+# BLAS sums in an order that depends on its thread count, and the joint model's solves use it)
+CHILD_ENV = {"PYTHONHASHSEED": "0", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+ROW_KEYS = ("sample", "point", "status", "error", "warnings", "seconds", "worker")  # the bookkeeping columns
+
+
+@functools.lru_cache(maxsize=8)
+def _structure(path: Path, require_sources: bool = True):
+    from ..spec import load_structure
+
+    return load_structure(path, require_sources=require_sources)
+
+
+@functools.lru_cache(maxsize=64)
+def _mask(path: Path, dilate_px: int) -> np.ndarray:
+    from ..io import read_mask
+
+    return _dilated(read_mask(path, field=f"mask {path}"), dilate_px)
+
+
+def _dilated(mask: np.ndarray, dilate_px: int) -> np.ndarray:
+    """The bricks (True) dilated by ``dilate_px`` pixels (eroded if negative), a disk's reach."""
+    if dilate_px == 0:
+        return mask
+    from scipy import ndimage
+
+    r = abs(int(dilate_px))
+    y, x = np.mgrid[-r : r + 1, -r : r + 1]
+    disk = x * x + y * y <= r * r
+    op = ndimage.binary_dilation if dilate_px > 0 else ndimage.binary_erosion
+    return op(mask.astype(bool), structure=disk)
+
+
+@functools.lru_cache(maxsize=256)
+def _trace(key: tuple, vertices: int | None, target_dice: float | None, refine: bool):
+    """The trace of a wall's mask (``key``: ("mask", path, dilate) or ("photo", structure, wall, dilate))."""
+    from ..wall2d.refine import RefineConfig
+    from ..wall2d.trace import TraceConfig, trace_mask
+
+    if key[0] == "mask":
+        mask = _mask(key[1], key[2])
+    else:
+        mask = _dilated(_photo_wall(key[1], key[2]).mask, key[3])
+    config = TraceConfig(
+        vertices=vertices,
+        target_dice=target_dice if vertices is None else None,
+        refine=RefineConfig() if refine else None,
+    )
+    result = trace_mask(mask, config)
+    if not result.bricks:
+        raise InputError(f"{key[1]}: no bricks found in the mask (dilated by {key[-1]} px); narrow [inputs.mask]")
+    return result
+
+
+@functools.lru_cache(maxsize=32)
+def _photo_wall(structure: Path, wall_name: str):
+    """A photo wall calibrated with W and H free (their covariance is what a calibration input draws from)."""
+    from ..pipeline import photo_wall
+
+    spec = _structure(structure)
+    wall = next(w for w in spec.walls if w.name == wall_name)
+    return photo_wall(replace(wall, width_m=math.nan, height_m=math.nan), spec)
+
+
+def _calibration(structure: Path, wall_name: str) -> tuple[np.ndarray, np.ndarray]:
+    fit = _photo_wall(structure, wall_name).calibration.result.fit
+    i = [fit.names.index("width_m"), fit.names.index("height_m")]
+    return fit.value[i], fit.covariance[np.ix_(i, i)]
+
+
+def _varied(spec, study: Study, values: dict, source: Path | None):
+    """The structure with the sample's values, the keys of its walls' traces and the values drawn
+    from calibrations (W, H by wall)."""
+    walls, keys, drawn = [], {}, {}
+    vertices = values.get("trace.vertices")
+    target = values.get("trace.target_dice")
+    dilate = int(values.get("mask.dilate_px", 0))
+    for w in spec.walls:
+        if w.mask is not None:
+            key = ("mask", Path(w.mask), dilate)
+        elif source is not None:
+            key = ("photo", source, w.name, dilate)
+            base = _photo_wall(source, w.name).wall
+            w = replace(
+                w,
+                width_m=base.width_m if math.isnan(w.width_m) else w.width_m,
+                height_m=base.height_m if math.isnan(w.height_m) else w.height_m,
+            )
+        else:
+            raise InputError(f"wall '{w.name}': neither a mask nor a photo")
+        pair = values.get(f"{w.name}.width_m+height_m")
+        if pair is not None:
+            from .design import Input
+
+            width, height = Input("", "calibration").value(np.asarray(pair), _calibration(source, w.name))
+            if not (width > 0 and height > 0):
+                raise InputError(
+                    f"wall '{w.name}': the calibration's draw W = {width:g}, H = {height:g} m is not a wall"
+                )
+            w = replace(w, width_m=width, height_m=height)
+            drawn.update({f"{w.name}.width_m": width, f"{w.name}.height_m": height})
+        changes = {}
+        for field in ("width_m", "height_m", "thickness_m"):
+            v = values.get(f"{w.name}.{field}")
+            if v is not None:
+                if not v > 0:
+                    raise InputError(
+                        f"{w.name}.{field} = {v:g}: drawn <= 0 m; give a smaller sigma or a positive range"
+                    )
+                changes[field] = float(v)
+        if f"{w.name}.theta_deg" in values:
+            changes["theta_rad"] = math.radians(values[f"{w.name}.theta_deg"])
+        if vertices is not None:
+            changes.update(vertices=int(vertices), target_dice=None)
+        elif target is not None:
+            changes.update(vertices=None, target_dice=float(target))
+        w = replace(w, **changes)
+        walls.append(w)
+        keys[w.name] = (key, w.vertices, w.target_dice, bool(w.refine))
+    return spec.with_walls(tuple(walls)), keys, drawn
+
+
+def _build_outputs(result) -> dict:
+    from ..simulation.scene import MASONRY
+
+    s = result.structure
+    vol = np.array([b.volume for b in s.bricks])
+    cen = np.array([b.solid.centroid for b in s.bricks])
+    com = (vol[:, None] * cen).sum(axis=0) / vol.sum()
+    return {
+        "total_volume_m3": float(vol.sum()),
+        "mass_kg": float(MASONRY.density * vol.sum()),
+        "bricks": len(s.bricks),
+        "closure_error_m": float(s.closure_error_m),
+        "com_x_m": float(com[0]),
+        "com_y_m": float(com[1]),
+        "com_z_m": float(com[2]),
+        "mean_dice": float(np.mean([b.dice for b in s.bricks])),
+    }
+
+
+def _sweep_spec(base, values: dict):
+    from ..spec import PhotoSpec, SyntheticSpec
+
+    syn = base.synthetic or SyntheticSpec()
+    photos = base.photos or PhotoSpec()
+    for name, v in values.items():
+        table, _, field = name.partition(".")
+        if table == "synthetic":
+            cur = getattr(syn, field)
+            syn = replace(syn, **{field: int(v) if isinstance(cur, int) else float(v)})
+        elif table == "photos":
+            cur = getattr(photos, field)
+            if isinstance(cur, tuple):
+                v = (float(v), float(v))
+            elif isinstance(cur, int):
+                v = int(v)
+            else:
+                v = float(v)
+            photos = replace(photos, **{field: v})
+    return replace(base, synthetic=syn, photos=photos)
+
+
+def _sweep(study: Study, sample: Sample) -> dict:
+    """Synthesise the swept walls (and photos), build them and compare with the exact truth."""
+    from ..pipeline import build
+    from ..spec import load_structure
+    from ..synthetic.truth import synthesize, truth_structure
+    from .compare import compare
+
+    spec = _sweep_spec(_structure(study.scenario, False), sample.values)
+    with tempfile.TemporaryDirectory(prefix="calib-masonry-sample-") as tmp:
+        data = Path(tmp) / "data"
+        truth = synthesize(spec, data, figures=False, photos=spec.photos if study.photos else None, progress=False)
+        if study.photos:
+            built_spec = load_structure(data / "structure_photos.toml")
+            if study.fit_size:
+                eye = {p["name"]: p["eye_height_m"] for p in truth["photos"]}
+                built_spec = built_spec.with_walls(
+                    tuple(
+                        replace(w, width_m=math.nan, height_m=math.nan, camera_height_m=eye[w.name])
+                        for w in built_spec.walls
+                    )
+                )
+        else:
+            built_spec = load_structure(data / "structure.toml")
+        values = {k: v for k, v in sample.values.items() if not k.startswith(("synthetic.", "photos."))}
+        if values:
+            built_spec, keys, _ = _varied(built_spec, study, values, None)
+            traces = {n: _trace(*k) for n, k in keys.items()} if not study.photos else None
+        else:
+            traces = None
+        result = build(built_spec, traces=traces, progress=False)
+        _trace.cache_clear()  # the masks lived in the temporary folder
+        _mask.cache_clear()
+    _, true = truth_structure(spec)
+    m = compare(result.structure, true)
+    out = _build_outputs(result)
+    out.update(
+        precision=m["precision"],
+        recall=m["recall"],
+        dice_mean=m["dice"]["mean"],
+        dice_min=m["dice"]["min"],
+        centroid_error_mm=m["centroid_error_mm"]["mean"],
+        volume_relative_error=m["total_volume_m3"]["relative_error"],
+        max_abs_width_error_m=m["max_abs_width_error_m"],
+        max_abs_height_error_m=m["max_abs_height_error_m"],
+        max_abs_theta_error_deg=m["max_abs_theta_error_deg"],
+    )
+    for w in m["walls"]:
+        out[f"{w['wall']}.width_error_m"] = w["width_error_m"]
+        out[f"{w['wall']}.height_error_m"] = w["height_error_m"]
+        out[f"{w['wall']}.dice_mean"] = w["dice"]["mean"]
+    return out, result
+
+
+def _evaluate(study: Study, sample: Sample) -> dict:
+    from ..pipeline import build
+
+    if study.scenario is not None:
+        outputs, result = _sweep(study, sample)
+    else:
+        spec, keys, drawn = _varied(_structure(study.structure), study, sample.values, study.structure)
+        result = build(spec, traces={n: _trace(*k) for n, k in keys.items()}, progress=False)
+        outputs = {**drawn, **_build_outputs(result)}
+    if study.simulate is not None:
+        outputs.update(_simulate(study, sample, result.structure))
+    return outputs
+
+
+_GEOMETRY: dict = {}  # the simulation geometry of an unvaried model, once per worker
+
+
+def _simulate(study: Study, sample: Sample, structure) -> dict:
+    """Run the sample's load in a fresh child process; its outcome."""
+    from ..simulation.ground_motion import synthetic_motion
+    from ..simulation.run import simulation_geometry
+    from ..simulation.scene import Pushover
+
+    sim = study.simulate
+    varied = any(not k.startswith(("synthetic.", "photos.")) for k in sample.values) or study.scenario is not None
+    if varied:
+        geometry = simulation_geometry(structure)
+    else:  # every sample simulates the same model: its contact geometry once per worker
+        key = (str(study.structure), study.fingerprint())
+        if key not in _GEOMETRY:
+            _GEOMETRY.clear()
+            _GEOMETRY[key] = simulation_geometry(structure)
+        geometry = _GEOMETRY[key]
+    if sim.pushover:
+        load = Pushover(
+            rate_g_per_s=sim.pushover_rate_g_per_s, direction_deg=sim.direction_deg, max_g=sim.pushover_max_g
+        )
+    else:
+        load = synthetic_motion(
+            sample.load["pga_g"],
+            sim.duration_s,
+            seed=study.seed * 1000 + sample.load["record"],
+            direction_deg=sim.direction_deg,
+        )
+    return run_child({"geometry": geometry, "load": load})
+
+
+def run_child(job: dict) -> dict:
+    """Run one simulation job in ``python -m calib_masonry.study.child`` (fixed hash seed; ends with
+    this process: it watches its parent) and return its outcome; a failure there is an :class:`InputError` here."""
+    env = dict(os.environ, **CHILD_ENV)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "calib_masonry.study.child"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+    )
+    try:
+        out, err = proc.communicate(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
+    except BaseException:
+        proc.kill()
+        proc.wait()
+        raise
+    if proc.returncode != 0:
+        lines = [ln for ln in err.decode(errors="replace").splitlines() if ln.strip()]
+        raise InputError(f"simulation: {lines[-1] if lines else f'exit code {proc.returncode}'}")
+    return pickle.loads(out)
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+
+        return str(get_worker().name)
+    except (ImportError, ValueError):
+        return "local"
+
+
+def run_sample(study: Study, sample: Sample) -> dict:
+    """The row of one sample: its index, inputs, outputs, status (``ok`` or ``failed`` with its
+    one-line error), the warnings it raised, seconds and worker. Never raises for a failed sample
+    (only for an interrupt), so that a study goes on."""
+    t0 = time.perf_counter()
+    row: dict = {"sample": sample.index, "point": sample.point}
+    row.update({k: v for k, v in sample.load.items()})
+    for k, v in sample.values.items():
+        if isinstance(v, tuple):  # a calibration pair's cube coordinates
+            continue
+        row[k] = v
+    caught: list = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            outputs = _evaluate(study, sample)
+        row.update(outputs)
+        row.update(status="ok", error="")
+    except CalibMasonryError as exc:
+        row.update(status="failed", error=str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    except Exception as exc:  # a bug or a library's error: recorded, the study goes on
+        row.update(status="failed", error=f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
+    row["warnings"] = "; ".join(sorted({str(w.message).splitlines()[0] for w in caught}))
+    row["seconds"] = round(time.perf_counter() - t0, 3)
+    row["worker"] = _worker_name()
+    return row

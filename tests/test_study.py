@@ -1,0 +1,334 @@
+"""Studies: sampling, the analytic checks of what they report, Dask execution, resuming, bad files."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calib_masonry.errors import InputError
+from calib_masonry.study.analysis import fit_fragility
+from calib_masonry.study.design import load_study, samples
+from calib_masonry.study.run import run_study, study_to_folder
+
+from .conftest import scenario_text
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "data_synthetic"
+BOOKKEEPING = ("seconds", "worker")
+
+
+def _study(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+@pytest.fixture
+def small_structure(make_scenario):
+    """Two small synthetic walls at a corner, their masks and structure.toml."""
+    return make_scenario([(1.6, 0.8, 0), (1.2, 0.8, 90)], closed=False) / "structure.toml"
+
+
+def test_lognormal_fragility_fit_recovers_the_curve_it_was_drawn_from():
+    from scipy.stats import norm
+
+    rng = np.random.default_rng(3)
+    theta, beta = 0.35, 0.45
+    pga = np.repeat(np.linspace(0.1, 0.9, 9), 150)
+    collapsed = rng.random(len(pga)) < norm.cdf(np.log(pga / theta) / beta)
+    fit = fit_fragility(pga, collapsed)
+    assert fit is not None
+    assert fit[0] == pytest.approx(theta, rel=0.08) and fit[1] == pytest.approx(beta, rel=0.15)
+    # perfectly separated outcomes have no finite maximum-likelihood curve: no fit, not a step made up
+    assert fit_fragility(np.array([0.1, 0.2, 0.4, 0.8]), np.array([0, 0, 1, 1])) is None
+
+
+def test_the_design_is_a_pure_function_of_the_study(tmp_path, small_structure):
+    text = (
+        f'[study]\nname = "d"\nstructure = "{small_structure}"\n[sampling]\nmethod = "lhs"\nn = 8\nseed = 4\n'
+        "[inputs.w0]\nwidth_m = { sigma = 0.01 }\ntheta_deg = { range = [-1, 1] }\n"
+        "[inputs.trace]\nvertices = { choices = [4, 5, 6] }\n"
+    )
+    a = samples(load_study(_study(tmp_path, text)))
+    b = samples(load_study(_study(tmp_path, text, "again.toml")))
+    assert [s.values for s in a] == [s.values for s in b] and len(a) == 8
+    w = np.array([s.values["w0.width_m"] for s in a])
+    # a Latin hypercube puts one draw in each of n equal-probability strata of every input
+    from scipy.stats import norm
+
+    strata = np.floor(norm.cdf((w - 1.6) / 0.01) * 8).astype(int)
+    assert sorted(strata) == list(range(8))
+    assert {s.values["trace.vertices"] for s in a} <= {4, 5, 6}
+
+
+def test_sobol_gives_the_only_input_with_spread_all_of_the_variance(tmp_path, small_structure):
+    text = (
+        f'[study]\nname = "sobol"\nstructure = "{small_structure}"\n'
+        '[sampling]\nmethod = "sobol"\nn = 16\nseed = 2\n'
+        "[inputs.w0]\nwidth_m = { sigma = 0.05 }\nheight_m = { sigma = 0.0 }\n"
+        "[inputs.w1]\nwidth_m = { sigma = 0.0 }\ntheta_deg = { sigma = 0.0 }\n"
+    )
+    study = load_study(_study(tmp_path, text))
+    rows, summary = run_study(study, workers=0, progress=False)
+    assert summary["failed"] == 0 and summary["samples"] == 16 * (4 + 2)
+    si = summary["sobol"]["total_volume_m3"]
+    assert si["w0.width_m"]["ST"] > 0.9
+    for other in ("w0.height_m", "w1.width_m", "w1.theta_deg"):
+        assert abs(si[other]["ST"]) < 0.05 and abs(si[other]["S1"]) < 0.05
+
+
+@pytest.mark.slow
+def test_geometry_study_spread_of_volume_matches_the_first_order_estimate(tmp_path):
+    """64 LHS samples of the paper example on a LocalCluster: the standard deviation of the total
+    brick volume against sqrt(sum (dV/dx_i sigma_i)^2), the derivatives by central differences of
+    the build at the structure's values."""
+    from calib_masonry.pipeline import build
+    from calib_masonry.spec import load_structure
+
+    sigma = {"width_m": 0.02, "height_m": 0.03, "thickness_m": 0.004}
+    path = _study(
+        tmp_path,
+        f'[study]\nname = "geometry"\nstructure = "{DATA / "paper_example" / "structure.toml"}"\n'
+        '[sampling]\nmethod = "lhs"\nn = 64\nseed = 5\n'
+        "[inputs.every_wall]\n" + "".join(f"{k} = {{ sigma = {v} }}\n" for k, v in sigma.items()),
+    )
+    study = load_study(path)
+    rows, summary = run_study(study, workers=2, progress=False)
+    assert summary["failed"] == 0 and len(rows) == 64
+    assert {r["worker"] for r in rows} != {"local"}  # ran on the cluster's workers
+
+    spec = load_structure(DATA / "paper_example" / "structure.toml")
+    base = build(spec, progress=False)
+    traces = {w.name: t for w, t in zip(spec.walls, base.traces)}
+
+    def volume(wall: str, key: str, value: float) -> float:
+        walls = tuple(replace(w, **{key: value}) if w.name == wall else w for w in spec.walls)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "footprint does not close")  # a wider wall opens the corner
+            result = build(spec.with_walls(walls), traces=traces, progress=False)
+        return sum(b.volume for b in result.structure.bricks)
+
+    var = 0.0
+    for w in spec.walls:
+        for key, s in sigma.items():
+            x = getattr(w, key)
+            h = 1e-3 * x
+            var += ((volume(w.name, key, x + h) - volume(w.name, key, x - h)) / (2 * h) * s) ** 2
+    estimate = math.sqrt(var)
+    sampled = summary["outputs"]["total_volume_m3"]["std"]
+    assert sampled == pytest.approx(estimate, rel=0.15), (sampled, estimate)
+
+
+@pytest.mark.slow
+def test_yaw_sweep_reports_width_height_and_dice_errors_per_yaw(tmp_path):
+    scenario = _study(
+        tmp_path,
+        scenario_text([(4.0, 3.0, 0)], seed=11, closed=False),
+        "scenario.toml",
+    )
+    path = _study(
+        tmp_path,
+        f'[study]\nname = "yaw"\nscenario = "{scenario}"\n[sweep]\n"photos.yaw_deg" = [0, 25]\n',
+    )
+    study = load_study(path)
+    rows, summary = run_study(study, workers=0, progress=False)
+    assert [r["photos.yaw_deg"] for r in rows] == [0.0, 25.0]
+    assert all(r["status"] == "ok" for r in rows), [r["error"] for r in rows]
+    table = summary["sweep"]["photos.yaw_deg"]
+    assert [t["value"] for t in table] == [0.0, 25.0]
+    for t in table:
+        # the errors compare reports: a fitted W and H within 2 % of the truth, bricks found again
+        assert t["max_abs_width_error_m"] < 0.02 * 4.0 and t["max_abs_height_error_m"] < 0.02 * 3.0
+        assert 0.9 < t["dice_mean"] <= 1.0
+    assert rows[0]["w0.width_error_m"] != rows[1]["w0.width_error_m"]  # each yaw was photographed anew
+
+
+def _fragility_study(tmp_path: Path) -> Path:
+    return _study(
+        tmp_path,
+        f'[study]\nname = "stylite_fragility"\nstructure = "{DATA / "stylite" / "structure.toml"}"\n'
+        "[sampling]\nseed = 3\n[simulate]\npga_g = [0.05, 0.3, 0.6]\nrecords = 1\nduration_s = 1.0\n",
+    )
+
+
+def _rows_of(folder: Path) -> dict[int, dict]:
+    out = {}
+    for f in sorted((folder / "samples").glob("*.json")):
+        row = json.loads(f.read_text())
+        out[row["sample"]] = {k: v for k, v in row.items() if k not in BOOKKEEPING}
+    return out
+
+
+@pytest.mark.slow
+def test_fragility_study_resumes_after_a_kill_and_matches_a_separate_scheduler_and_worker(tmp_path):
+    path = _fragility_study(tmp_path)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "calib_masonry", "study", str(path), "--out", str(out), "--workers", "2"]
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 600
+    while not list((out / "samples").glob("*.json")) if out.exists() else True:
+        assert p.poll() is None, p.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.5)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 2 and "run the same command again" in err, err
+    kept = _rows_of(out)
+    assert 1 <= len(kept) < 3, "the study finished before it could be killed"
+    kept_bytes = {f.name: f.read_bytes() for f in (out / "samples").glob("*.json")}
+
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr
+    assert f"{3 - len(kept)} run now, {len(kept)} kept from before" in r.stdout
+    assert {f.name: f.read_bytes() for f in (out / "samples").glob("*.json") if f.name in kept_bytes} == kept_bytes
+    local = _rows_of(out)
+    assert sorted(local) == [0, 1, 2] and all(row["status"] == "ok" for row in local.values())
+    summary = json.loads((out / "summary.json").read_text())
+    assert [t["pga_g"] for t in summary["fragility"]["per_pga"]] == [0.05, 0.3, 0.6]
+    assert (out / "samples.parquet").is_file() and (out / "figures" / "fragility.png").is_file()
+
+    # the same study on a scheduler and a worker started as separate processes on 127.0.0.1
+    port = _free_port()
+    env = dict(os.environ, PYTHONHASHSEED="0", OMP_NUM_THREADS="1")
+    dask = str(Path(sys.executable).with_name("dask"))
+    sched = subprocess.Popen(
+        [dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+    )
+    worker = None
+    try:
+        worker = subprocess.Popen(
+            [dask, "worker", f"tcp://127.0.0.1:{port}", "--nthreads", "1", "--nworkers", "1", "--no-dashboard"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=env,
+            cwd=tmp_path,
+        )
+        time.sleep(3.0)
+        rows, _ = run_study(load_study(path), scheduler=f"tcp://127.0.0.1:{port}", progress=False)
+        remote = {r["sample"]: {k: v for k, v in r.items() if k not in BOOKKEEPING} for r in rows}
+        assert json.dumps(remote, sort_keys=True) == json.dumps(local, sort_keys=True)  # NaN-safe, bit for bit
+    finally:
+        for proc in (worker, sched):
+            if proc is not None:
+                proc.terminate()
+                proc.wait(timeout=30)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+BAD = {
+    "unknown input": ("[inputs.w0]\nwidht_m = { sigma = 0.01 }\n", "did you mean width_m"),
+    "negative sigma": ("[inputs.w0]\nwidth_m = { sigma = -0.01 }\n", "cannot be negative"),
+    "no such wall": ("[inputs.wall9]\nwidth_m = { sigma = 0.01 }\n", "has no wall 'wall9'"),
+    "n = 0": ("[sampling]\nn = 0\n[inputs.w0]\nwidth_m = { sigma = 0.01 }\n", "n = 0: must be > 0"),
+    "sobol n": ('[sampling]\nmethod = "sobol"\nn = 12\n[inputs.w0]\nwidth_m = { sigma = 0.01 }\n', "power of 2"),
+    "method": ('[sampling]\nmethod = "lhc"\n[inputs.w0]\nwidth_m = { sigma = 0.01 }\n', "did you mean lhs"),
+    "nothing varies": ("", "nothing varies"),
+    "two laws": ("[inputs.w0]\nwidth_m = { sigma = 0.01, range = [1, 2] }\n", "exactly one of"),
+    "pga units": ("[simulate]\npga_g = [300]\n", "not an earthquake"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_study_files_are_one_line_errors_before_any_sample(tmp_path, small_structure, case):
+    body, message = BAD[case]
+    path = _study(tmp_path, f'[study]\nname = "bad"\nstructure = "{small_structure}"\n' + body)
+    with pytest.raises(InputError, match=message.replace("(", r"\(")):
+        load_study(path)
+    r = subprocess.run(
+        [sys.executable, "-m", "calib_masonry", "study", str(path), "--out", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and str(path) in r.stderr, r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unreachable_scheduler_is_refused_before_any_sample(tmp_path, small_structure):
+    path = _study(
+        tmp_path,
+        f'[study]\nname = "s"\nstructure = "{small_structure}"\n[inputs.w0]\nwidth_m = {{ sigma = 0.01 }}\n',
+    )
+    out = tmp_path / "out"
+    r = subprocess.run(
+        [sys.executable, "-m", "calib_masonry", "study", str(path), "--out", str(out)]
+        + ["--scheduler", f"tcp://127.0.0.1:{_free_port()}"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 2 and "--scheduler" in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert not out.exists()
+
+
+def test_a_study_folder_is_resumed_only_by_the_same_study(tmp_path, small_structure):
+    text = f'[study]\nname = "s"\nstructure = "{small_structure}"\n[sampling]\nn = 3\n[inputs.w0]\nwidth_m = {{ sigma = 0.01 }}\n'
+    out = tmp_path / "out"
+    rows, summary, ran = study_to_folder(load_study(_study(tmp_path, text)), out, workers=0, progress=False)
+    assert ran == 3 and summary["ok"] == 3
+    assert {"samples.csv", "samples.parquet", "summary.json", "study.json", "figures"} <= {
+        p.name for p in out.iterdir()
+    }
+    again = study_to_folder(load_study(_study(tmp_path, text)), out, workers=0, progress=False)
+    assert again[2] == 0 and again[0] == rows  # nothing left to compute: the same table
+    edited = load_study(_study(tmp_path, text.replace("0.01", "0.02"), "edited.toml"))
+    with pytest.raises(InputError, match="different study"):
+        study_to_folder(edited, out, workers=0, progress=False)
+    assert study_to_folder(edited, out, workers=0, progress=False, overwrite=True)[2] == 3
+
+
+def test_a_calibration_input_draws_w_and_h_jointly_with_their_reported_correlation():
+    from scipy.stats import qmc
+
+    from calib_masonry.study.design import Input
+
+    mean, cov = np.array([5.0, 3.0]), np.array([[0.02**2, 0.8 * 0.02 * 0.01], [0.8 * 0.02 * 0.01, 0.01**2]])
+    u = qmc.LatinHypercube(d=2, seed=1).random(4000)
+    draws = np.array([Input("w.width_m+height_m", "calibration").value(x, (mean, cov)) for x in u])
+    assert np.allclose(draws.mean(axis=0), mean, atol=1e-3)
+    assert np.allclose(np.cov(draws.T), cov, rtol=0.08)
+
+
+@pytest.mark.slow
+def test_from_calibration_draws_a_photo_walls_size_around_its_fit(tmp_path, make_scenario):
+    from calib_masonry.spec import PhotoSpec, load_structure
+    from calib_masonry.synthetic.truth import synthesize
+
+    sc = _study(tmp_path, scenario_text([(4.0, 3.0, 0)], seed=5, closed=False), "scenario.toml")
+    truth = synthesize(load_structure(sc, require_sources=False), tmp_path / "data", figures=False, photos=PhotoSpec())
+    eye = truth["photos"][0]["eye_height_m"]
+    photos = (tmp_path / "data" / "structure_photos.toml").read_text()
+    photos = photos.replace("width_m = 4.0\n", "").replace("height_m = 3.0\n", f"camera_height_m = {eye}\n")
+    structure = _study(tmp_path, photos, "data/photo_structure.toml")
+    path = _study(
+        tmp_path,
+        f'[study]\nname = "cal"\nstructure = "{structure}"\n[sampling]\nn = 6\nseed = 1\n'
+        "[inputs.w0]\nfrom_calibration = true\n",
+    )
+    rows, summary = run_study(load_study(path), workers=0, progress=False)
+    assert summary["failed"] == 0, summary["failures"]
+    w = np.array([r["w0.width_m"] for r in rows])
+    h = np.array([r["w0.height_m"] for r in rows])
+    assert len(set(w)) == 6 and np.all(np.abs(w - 4.0) < 0.1) and np.all(np.abs(h - 3.0) < 0.1)
+    vols = np.array([r["total_volume_m3"] for r in rows])
+    assert np.allclose(vols / (w * h), vols[0] / (w[0] * h[0]), rtol=1e-6)  # the model follows each draw

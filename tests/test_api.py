@@ -113,8 +113,15 @@ def test_two_simulate_calls_in_one_process_agree(built):
 
 
 def test_no_subprocess_in_the_library():
+    # simulate() runs in the caller's process (no re-exec). The one child process is a study
+    # sample's simulation (study/sample.py starts study/child.py): a fresh process per run is what
+    # makes a study's table the same on any worker, since Bullet orders bodies by memory address.
+    allowed = {ROOT / "src" / "calib_masonry" / "study" / "sample.py"}
     for path in (ROOT / "src").rglob("*.py"):
         text = path.read_text()
+        if path in allowed:
+            assert "os.exec" not in text and "multiprocessing" not in text, path
+            continue
         assert "subprocess" not in text and "os.exec" not in text and "multiprocessing" not in text, path
 
 

@@ -8,6 +8,7 @@ exception was swallowed by a third-party import."""
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from collections.abc import Iterable, Iterator
@@ -103,6 +104,7 @@ def _checked(iterable: Iterable) -> Iterator:
         yield item
 
 
+@functools.cache  # one subclass, made on first use (tqdm loads only on a terminal)
 def _bar_class():
     from tqdm.auto import tqdm
 

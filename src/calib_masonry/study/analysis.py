@@ -257,7 +257,14 @@ def plot_study(study: Study, rows: list[dict], summary: dict, folder: Path) -> l
 
     folder.mkdir(parents=True, exist_ok=True)
     ok = [r for r in rows if r.get("status") == "ok"]
-    written = []
+    written: list[Path] = []
+
+    def save(fig, name: str) -> None:
+        fig.tight_layout()
+        written.append(folder / name)
+        fig.savefig(written[-1], dpi=110)
+        plt.close(fig)
+
     stats = summary["outputs"]
     keys = [k for k in stats if stats[k].get("n", 0) and not k.startswith("com_")][:12]
     if keys:
@@ -272,10 +279,7 @@ def plot_study(study: Study, rows: list[dict], summary: dict, folder: Path) -> l
         for ax in list(axes.flat)[len(keys) :]:
             ax.axis("off")
         fig.suptitle(f"{study.name}: outputs over {len(ok)} samples ({summary['failed']} failed)", fontsize=10)
-        fig.tight_layout()
-        written.append(folder / "histograms.png")
-        fig.savefig(written[-1], dpi=110)
-        plt.close(fig)
+        save(fig, "histograms.png")
     main = _main_output(stats)
     inputs = [k for k in summary["inputs"] if _numeric(ok, k) is not None][:8]
     if main and inputs:
@@ -286,10 +290,7 @@ def plot_study(study: Study, rows: list[dict], summary: dict, folder: Path) -> l
             ax.set_xlabel(k, fontsize=8)
             ax.tick_params(labelsize=7)
         axes.flat[0].set_ylabel(main, fontsize=8)
-        fig.tight_layout()
-        written.append(folder / "output_vs_inputs.png")
-        fig.savefig(written[-1], dpi=110)
-        plt.close(fig)
+        save(fig, "output_vs_inputs.png")
     sob = summary.get("sobol", {})
     if main and isinstance(sob.get(main), dict) and "note" not in sob[main]:
         names = list(sob[main])
@@ -307,10 +308,7 @@ def plot_study(study: Study, rows: list[dict], summary: dict, folder: Path) -> l
         ax.set_xticks(x, names, rotation=30, ha="right", fontsize=8)
         ax.set_ylabel(f"Sobol' index of {main}")
         ax.legend()
-        fig.tight_layout()
-        written.append(folder / "sobol.png")
-        fig.savefig(written[-1], dpi=110)
-        plt.close(fig)
+        save(fig, "sobol.png")
     frag = summary.get("fragility")
     if frag:
         from scipy.stats import norm
@@ -339,10 +337,7 @@ def plot_study(study: Study, rows: list[dict], summary: dict, folder: Path) -> l
         ax.set_ylim(-0.02, 1.02)
         ax.legend(fontsize=7)
         ax.set_title(f"{study.name}: fragility")
-        fig.tight_layout()
-        written.append(folder / "fragility.png")
-        fig.savefig(written[-1], dpi=110)
-        plt.close(fig)
+        save(fig, "fragility.png")
     sw = summary.get("sweep")
     if sw:
         errs = ["max_abs_width_error_m", "max_abs_height_error_m", "dice_mean"]
@@ -353,8 +348,5 @@ def plot_study(study: Study, rows: list[dict], summary: dict, folder: Path) -> l
                 ax.set_xlabel(key, fontsize=8)
                 ax.set_ylabel(e, fontsize=8)
                 ax.tick_params(labelsize=7)
-        fig.tight_layout()
-        written.append(folder / "sweep.png")
-        fig.savefig(written[-1], dpi=110)
-        plt.close(fig)
+        save(fig, "sweep.png")
     return written

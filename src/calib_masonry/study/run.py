@@ -231,7 +231,8 @@ def _run_into(study_: Study, out: Path, client, *, progress, overwrite: bool, fi
     out = _prepare(out, study_, overwrite)
     sample_dir = out / "samples"
     done = _read_done(sample_dir)
-    todo = [s for s in samples(study_) if s.index not in done]
+    every = samples(study_)
+    todo = [s for s in every if s.index not in done]
 
     def keep(row: dict) -> None:
         tmp = sample_dir / f"{row['sample']:06d}.json.partial"
@@ -243,10 +244,9 @@ def _run_into(study_: Study, out: Path, client, *, progress, overwrite: bool, fi
     try:
         _execute(study_, todo, keep, client, progress=progress)
     except KeyboardInterrupt as exc:
-        ran = len(done) - (len(samples(study_)) - len(todo))
-        total = len(samples(study_))
+        ran = len(done) - (len(every) - len(todo))
         exc.written = (
-            f"{len(done)} of {total} samples are kept in {sample_dir} ({ran} from this run, "
+            f"{len(done)} of {len(every)} samples are kept in {sample_dir} ({ran} from this run, "
             f"{time.perf_counter() - t0:.0f} s); run the same command again to compute the rest"
         )
         raise

@@ -197,8 +197,9 @@ def _sweep_spec(base, values: dict):
     return replace(base, synthetic=syn, photos=photos)
 
 
-def _sweep(study: Study, sample: Sample) -> dict:
-    """Synthesise the swept walls (and photos), build them and compare with the exact truth."""
+def _sweep(study: Study, sample: Sample) -> tuple[dict, object]:
+    """Synthesise the swept walls (and photos), build them and compare with the exact truth: the
+    outputs and the BuildResult."""
     from ..pipeline import build
     from ..spec import load_structure
     from ..synthetic.truth import synthesize, truth_structure
@@ -335,7 +336,7 @@ def run_sample(study: Study, sample: Sample) -> dict:
     (only for an interrupt), so that a study goes on."""
     t0 = time.perf_counter()
     row: dict = {"sample": sample.index, "point": sample.point}
-    row.update({k: v for k, v in sample.load.items()})
+    row.update(sample.load)
     for k, v in sample.values.items():
         if isinstance(v, tuple):  # a calibration pair's cube coordinates
             continue

@@ -7,7 +7,7 @@ same samples and calls the same build on each in this process, with the masks' t
 once, and reads the same outputs, as a careful script would. Printed: wall seconds of each (the clusters' start-up apart and
 included), the speed-up of 2 workers over 1, and the machinery's overhead per sample over direct.
 
-    .venv/bin/python experiments/bench_study.py [--samples 48] [--study FILE]
+    .venv/bin/python experiments/bench_study.py [--samples 64] [--study FILE]
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ def on_cluster(study, workers: int) -> tuple[float, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--samples", type=int, default=48)
+    ap.add_argument("--samples", type=int, default=64)
     ap.add_argument("--study", default=str(ROOT / "data_synthetic" / "studies" / "paper_example_geometry.toml"))
     a = ap.parse_args()
     from calib_masonry.study.design import load_study

@@ -221,16 +221,10 @@ def test_fragility_study_resumes_after_a_kill_and_matches_a_separate_scheduler_a
         rows, _ = run_study(load_study(path), scheduler=f"tcp://127.0.0.1:{port}", progress=False)
         remote = {r["sample"]: {k: v for k, v in r.items() if k not in BOOKKEEPING} for r in rows}
         assert sorted(remote) == sorted(local)
-        for i, row in local.items():
-            # the model and the verdict are identical; the simulation's numbers were identical bit for
-            # bit in a quiet run, but once differed by 0.6 % of the bricks moved while two test suites
-            # shared the 2 cores (Blender's threads change the heap layout Bullet's order follows)
-            sim = {"moved_fraction", "cracked_fraction", "roof_drift_m", "max_displacement_m", "collapse_time_s"}
-            assert {k: v for k, v in remote[i].items() if k not in sim} == {
-                k: v for k, v in row.items() if k not in sim
-            }
-            assert remote[i]["moved_fraction"] == pytest.approx(row["moved_fraction"], abs=0.03)
-            assert remote[i]["cracked_fraction"] == pytest.approx(row["cracked_fraction"], abs=0.03)
+        # identical rows, simulation included: every sample's simulation runs in a fresh child whose
+        # Blender starts its task scheduler with one thread, so its heap layout (which Bullet's broad
+        # phase follows) does not depend on the load of the machine
+        assert remote == local
     finally:
         for proc in (worker, sched):
             if proc is not None:

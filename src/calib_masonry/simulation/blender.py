@@ -40,7 +40,7 @@ __all__ = ["RunOutput", "run", "require_bpy", "write_model_blend"]
 
 def require_bpy():
     try:
-        with _signals_held():
+        with _signals_held(), _one_cpu():
             import bpy  # noqa: PLC0415 - the one place bpy is imported
     except ImportError as exc:
         raise BackendMissing(
@@ -48,6 +48,28 @@ def require_bpy():
             "pip install -c constraints.txt 'bpy==5.0.*' (Python 3.11 only)"
         ) from exc
     return bpy
+
+
+@contextlib.contextmanager
+def _one_cpu():
+    """Let Blender start its task scheduler (TBB) with one thread: TBB sizes it from the CPUs the
+    process may use when bpy is first imported. With a pool of threads, allocations made in
+    parallel land in an order that depends on timing, and Bullet's broad phase (ordered by
+    address) then steps the same scene differently when the machine is busy: 2 of 6 runs of one
+    Stylite job differed under load, 0 of 13 with this (measured). The CPUs are given back after
+    the import; the scheduler keeps its single thread."""
+    import os
+    import sys
+
+    if "bpy" in sys.modules or not hasattr(os, "sched_setaffinity"):
+        yield
+        return
+    cpus = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, {min(cpus)})
+    try:
+        yield
+    finally:
+        os.sched_setaffinity(0, cpus)
 
 
 @contextlib.contextmanager

@@ -29,13 +29,14 @@ from ..io import OUTPUT_MARKER, check_output, write_json
 from ..progress import progress as _progress
 from .analysis import input_columns, output_columns, plot_study, summarize
 from .design import Sample, Study, samples, study_json
-from .sample import CHILD_ENV, ROW_KEYS, run_sample
+from .sample import CHILD_ENV, ROW_KEYS, run_sample, warm_worker
 
 __all__ = ["run_study", "study_to_folder", "SCHEDULER_TIMEOUT_S"]
 
 SCHEDULER_TIMEOUT_S = 10.0
 # what every worker process starts with: one thread per numerical library (a worker per core)
 WORKER_ENV = CHILD_ENV
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.system-monitor.gil.enabled": False}
 
 
 def _client(scheduler: str | None, workers: int | None):
@@ -52,15 +53,20 @@ def _client(scheduler: str | None, workers: int | None):
                 f"--scheduler {scheduler}: cannot reach it ({type(exc).__name__}: {str(exc).splitlines()[0]}); "
                 "start `dask scheduler` there, or check the address (tcp://HOST:PORT)"
             ) from None
+    import dask
+
     n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        silence_logs=logging.ERROR,
-        env=WORKER_ENV,
-    )
+    # no statistical profiler (it samples the sample's stack every 10 ms) and no GIL monitor in
+    # the local workers: nobody reads them here, and they cost the samples' own Python time
+    with dask.config.set(WORKER_CONFIG):
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+            env=WORKER_ENV,
+        )
     return Client(cluster), cluster
 
 
@@ -78,6 +84,7 @@ def _dask(scheduler: str | None, workers: int | None):
         return
     client, cluster = _client(scheduler, workers)
     try:
+        client.run(warm_worker)  # the stages' imports are start-up, not the first sample's cost
         yield client
     finally:
         client.close()

@@ -9,8 +9,9 @@ geometry of an unvaried model) is computed once per worker process and cached.
 
 Bullet orders its broad-phase tree by memory address, so a simulation's last bits depend on what
 the process allocated before it. Each simulation therefore runs in a fresh child process
-(``python -m calib_masonry.study.child``) with a fixed hash seed: the same sample gives the same
-poses on any worker, in any order.
+(``python -m calib_masonry.study.child``) with a fixed hash seed, whose Blender starts with a
+one-thread task scheduler (a pool's parallel allocations would make the layout depend on the
+machine's load): the same sample gives the same poses on any worker, in any order, busy or not.
 """
 
 from __future__ import annotations
@@ -319,6 +320,15 @@ def run_child(job: dict) -> dict:
         lines = [ln for ln in err.decode(errors="replace").splitlines() if ln.strip()]
         raise InputError(f"simulation: {lines[-1] if lines else f'exit code {proc.returncode}'}")
     return pickle.loads(out)
+
+
+def warm_worker() -> None:
+    """Import the stages a sample calls, once per worker when the study starts, so that the first
+    sample of each worker does not pay for them (run on every worker by the study's client)."""
+    from .. import pipeline  # noqa: F401
+    from ..build3d import assemble  # noqa: F401
+    from ..simulation import run  # noqa: F401
+    from ..wall2d import trace  # noqa: F401
 
 
 def _worker_name() -> str:

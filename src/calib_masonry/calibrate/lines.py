@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..errors import FitFailed
+from ..errors import CalibMasonryError, FitFailed
 from .fit import order_corners
 
 __all__ = ["DetectConfig", "Detection", "detect_wall", "refine_quad", "segments_in_quad"]
@@ -197,6 +197,23 @@ def _vanishing_point(
     return vp, inl
 
 
+def _near_heads(horiz: np.ndarray, heads: np.ndarray) -> np.ndarray:
+    """The horizontal segments in the region the head joints cover (their densest run across,
+    their extent up and down, a tenth more each way), where the bed vanishing point is sought: a
+    textured ground or paving below the wall has long, near-horizontal lines of its own that can
+    outvote the bed joints (a tall wall's bed joints were lost to them, measured). All of them when
+    that region holds fewer than eight."""
+    if len(heads) < 4:
+        return horiz
+    mid_h = (heads[:, :2] + heads[:, 2:]) / 2
+    x0, x1 = _densest_run(mid_h[:, 0], np.hypot(heads[:, 2] - heads[:, 0], heads[:, 3] - heads[:, 1]))
+    y0, y1 = np.min(heads[:, [1, 3]]), np.max(heads[:, [1, 3]])
+    mx, my = 0.1 * (x1 - x0), 0.1 * (y1 - y0)
+    mid = (horiz[:, :2] + horiz[:, 2:]) / 2
+    keep = (mid[:, 0] > x0 - mx) & (mid[:, 0] < x1 + mx) & (mid[:, 1] > y0 - my) & (mid[:, 1] < y1 + my)
+    return horiz[keep] if keep.sum() >= 8 else horiz
+
+
 def _densest_run(pos: np.ndarray, weight: np.ndarray, trim: float = 0.015) -> tuple[float, float]:
     """The extent of the heaviest run of ``pos`` (no gap wider than 12 % of the spread), with
     ``trim`` of its total weight cut from either end: a stray short segment beyond the wall's edge
@@ -219,6 +236,10 @@ def _densest_run(pos: np.ndarray, weight: np.ndarray, trim: float = 0.015) -> tu
     return float(p[min(lo, len(p) - 1)]), float(p[min(max(hi, lo), len(p) - 1)])
 
 
+#: an edge this strong, relative to the strongest across a side's profile, counts as the outline
+OUTER_EDGE_FRACTION = 0.35
+
+
 def _refine_side(rgb_s: np.ndarray, a: np.ndarray, b: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray] | None:
     """Sub-pixel line (point, direction) of the strongest colour edge along the side a-b."""
     d = b - a
@@ -235,7 +256,13 @@ def _refine_side(rgb_s: np.ndarray, a: np.ndarray, b: np.ndarray, half: float) -
         [ndimage.map_coordinates(rgb_s[..., c], coords, order=1, mode="nearest") for c in range(3)], axis=-1
     ).reshape(len(ts), len(offs), 3)
     grad = np.linalg.norm(np.diff(prof, axis=1), axis=-1)  # between samples
-    k = np.argmax(grad, axis=1)
+    # the outermost strong edge (the sides run LL, LR, UR, UL, so +n points out of the wall): a
+    # mortar strip along the outline has a weaker edge to the background than to the stones
+    # inside, and the strongest edge would put the side on the stones (1-3 px in, measured)
+    peak = np.zeros_like(grad, dtype=bool)
+    peak[:, 1:-1] = (grad[:, 1:-1] >= grad[:, :-2]) & (grad[:, 1:-1] >= grad[:, 2:])
+    strong = peak & (grad >= OUTER_EDGE_FRACTION * grad.max(axis=1, keepdims=True))
+    k = np.where(strong.any(axis=1), grad.shape[1] - 1 - np.argmax(strong[:, ::-1], axis=1), np.argmax(grad, axis=1))
     kk = np.clip(k, 1, grad.shape[1] - 2)
     g0, g1, g2 = grad[np.arange(len(ts)), kk - 1], grad[np.arange(len(ts)), kk], grad[np.arange(len(ts)), kk + 1]
     den = g0 - 2 * g1 + g2
@@ -265,6 +292,11 @@ def _intersect(l1, l2) -> np.ndarray:
     return c1 + t[0] * d1
 
 
+#: the wall's colours are learnt from this central part of the first outline (0.85 let a first
+#: outline that reached into the ground teach the model the ground's colours, measured)
+INNER_FRACTION = 0.6
+
+
 def _wall_mask(rgb_small: np.ndarray, quad: np.ndarray) -> np.ndarray:
     """Pixels whose colour is likelier under the wall's colours than under the surroundings'."""
     from matplotlib.path import Path as MplPath
@@ -274,7 +306,7 @@ def _wall_mask(rgb_small: np.ndarray, quad: np.ndarray) -> np.ndarray:
     c = quad.mean(axis=0)
     yy, xx = np.mgrid[0:rows, 0:cols]
     pts = np.c_[xx.ravel(), yy.ravel()]
-    inner = MplPath(c + (quad - c) * 0.85).contains_points(pts).reshape(rows, cols)
+    inner = MplPath(c + (quad - c) * INNER_FRACTION).contains_points(pts).reshape(rows, cols)
     outer = ~MplPath(c + (quad - c) * 1.15).contains_points(pts).reshape(rows, cols)
     bins = 16
     idx = np.clip((rgb_small * bins).astype(int), 0, bins - 1)
@@ -306,16 +338,22 @@ def _grow_to_mask(mask: np.ndarray, rect_from_px: np.ndarray) -> np.ndarray | No
     return back[:, :2] / back[:, 2:3]
 
 
-def _snap_to_mask(mask: np.ndarray, quad: np.ndarray, vps: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
-    """Move each side of ``quad`` (LL, LR, UR, UL) onto the mask's boundary, keeping it pointed at
-    its vanishing point (bed family for the base and top, head family for the ends): only the
-    side's offset is estimated, as the median over 40 boundary crossings, so a stretch of weak or
-    confusing boundary cannot tilt it."""
+def _snap_to_mask(
+    mask: np.ndarray, quad: np.ndarray, vps: tuple[np.ndarray, np.ndarray] | None, reach: float = 0.15
+) -> np.ndarray | None:
+    """Move each side of ``quad`` (LL, LR, UR, UL) onto the mask's boundary.
+
+    With ``vps`` each side keeps pointing at its vanishing point (bed family for the base and top,
+    head family for the ends): only the side's offset is estimated, as the median over 40 boundary
+    crossings, so a stretch of weak or confusing boundary cannot tilt it. Without, each side is a
+    robust line through its crossings (direction free): the fix for vanishing points that the
+    joints got wrong (irregular stones, few joints near the top of a tall wall). ``reach`` is the
+    search distance as a fraction of the quadrilateral's size."""
     size = float(np.max(np.ptp(quad, axis=0)))
-    reach = 0.15 * size
+    reach = reach * size
     lines = []
     for i in range(4):
-        vp = vps[0] if i in (0, 2) else vps[1]
+        vp = None if vps is None else (vps[0] if i in (0, 2) else vps[1])
         a, b = quad[i], quad[(i + 1) % 4]
         d = (b - a) / np.linalg.norm(b - a)
         n = np.array([d[1], -d[0]])
@@ -335,6 +373,12 @@ def _snap_to_mask(mask: np.ndarray, quad: np.ndarray, vps: tuple[np.ndarray, np.
                 pts.append(line[k] + 0.25 * n)
         if len(pts) < 8:
             return None
+        if vps is None:
+            line = _robust_line(np.array(pts))
+            if line is None:
+                return None
+            lines.append(line)
+            continue
         cand = np.cross(np.c_[np.array(pts), np.ones(len(pts))], vp)
         cand /= np.linalg.norm(cand[:, :2], axis=1, keepdims=True)
         offset = cand @ np.r_[mid, 1.0]
@@ -348,6 +392,71 @@ def _snap_to_mask(mask: np.ndarray, quad: np.ndarray, vps: tuple[np.ndarray, np.
             return None
         corners.append(c[:2] / c[2])
     return np.array(corners)
+
+
+def _largest_quad(ring: np.ndarray) -> np.ndarray:
+    """The four vertices of a convex polygon ``ring`` (in order) spanning the largest area: for
+    every pair of diagonal ends, the best vertex on either side (O(n^3), vectorised)."""
+    n = len(ring)
+    idx = np.arange(n)
+    best, best_area = ring[:4], -1.0
+    for i in range(n - 3):
+        d = ring - ring[i]
+        t = 0.5 * np.abs(d[:, None, 0] * d[None, :, 1] - d[:, None, 1] * d[None, :, 0])  # t[k, j]
+        between = (idx[None, :] > i) & (idx[None, :] < idx[:, None])  # j in (i, k)
+        after = idx[None, :] > idx[:, None]  # l in (k, n)
+        left = np.where(between, t, -1.0)
+        right = np.where(after, t, -1.0)
+        j, l_ = left.argmax(axis=1), right.argmax(axis=1)
+        area = left[idx, j] + right[idx, l_]
+        area[(left[idx, j] < 0) | (right[idx, l_] < 0)] = -1.0
+        k = int(area.argmax())
+        if area[k] > best_area:
+            best_area, best = float(area[k]), ring[[i, j[k], k, l_[k]]]
+    return best
+
+
+def _quad_of_mask(mask: np.ndarray, min_solidity: float = 0.95, min_fill: float = 0.95) -> np.ndarray | None:
+    """The quadrilateral (LL, LR, UR, UL) a wall mask outlines, or None when the mask is not one:
+    the largest quadrilateral on its convex hull's vertices, kept when the mask fills
+    ``min_solidity`` of its hull and the quadrilateral ``min_fill`` of it (a neighbouring wall or a
+    tree of the wall's colours merged into it is not a quadrilateral)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    ys, xs = np.nonzero(mask)
+    if len(xs) < 200:
+        return None
+    pts = np.c_[xs, ys].astype(np.float64)
+    try:
+        hull = ConvexHull(pts)
+    except QhullError:
+        return None
+    if len(xs) < min_solidity * hull.volume or len(hull.vertices) < 4:  # volume is the area in 2D
+        return None
+    quad = _largest_quad(pts[hull.vertices])
+    x, y = quad[:, 0], quad[:, 1]
+    area = 0.5 * abs(float(x @ np.roll(y, -1) - y @ np.roll(x, -1)))
+    if area < min_fill * hull.volume:
+        return None
+    try:
+        return order_corners(quad, where="automatic mode")
+    except CalibMasonryError:
+        return None
+
+
+def _robust_line(pts: np.ndarray) -> np.ndarray | None:
+    """Homogeneous line ``(a, b, c)``, ``a^2 + b^2 = 1``, through ``pts`` by total least squares,
+    three rounds of dropping points beyond 3 robust sigmas (and 1 px)."""
+    keep = np.ones(len(pts), dtype=bool)
+    for _ in range(4):
+        if keep.sum() < 5:
+            return None
+        c = pts[keep].mean(axis=0)
+        _, _, vt = np.linalg.svd(pts[keep] - c)
+        n = np.array([-vt[0][1], vt[0][0]])
+        r = (pts - c) @ n
+        keep = np.abs(r) <= max(1.0, 3.0 * 1.4826 * float(np.median(np.abs(r[keep]))))
+    return np.r_[n, -(n @ c)]
 
 
 def refine_quad(rgb: np.ndarray, quad: np.ndarray, halfwidths: tuple[float, ...] = (5.0, 2.5)) -> np.ndarray:
@@ -416,8 +525,9 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
 
     hn, vn = norm(horiz), norm(vert)
     try:
-        vp_b, inl_b = _vanishing_point(hn, config.vp_inlier_px / scale, config, rng)
         vp_h, inl_h = _vanishing_point(vn, config.vp_inlier_px / scale, config, rng)
+        vp_b, inl_b = _vanishing_point(_near_heads(hn, vn[inl_h]), config.vp_inlier_px / scale, config, rng)
+        inl_b = _dist_to_vp(hn, vp_b) < config.vp_inlier_px / scale
     except FitFailed:
         raise FitFailed(
             "automatic mode: no wall found (too few horizontal or vertical joint lines); click the "
@@ -470,12 +580,32 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
         if grown is None:
             break
         quad_small = order_corners(grown, where="automatic mode")
-    snapped = _snap_to_mask(_wall_mask(rgb_small, quad_small), quad_small, (to_small @ vp_b, to_small @ vp_h))
-    if snapped is not None and np.max(np.linalg.norm(snapped - quad_small, axis=1)) < 0.2 * scale:
-        quad_small = snapped
+    mask = _wall_mask(rgb_small, quad_small)
+    outline = _quad_of_mask(mask)
+    if outline is not None:
+        # the wall's colours outline a clean quadrilateral: it is the wall, whatever the joints'
+        # vanishing points say (few joints resolve near a tall wall's top, and a wrong vanishing
+        # point there cut the outline at mid-height, measured)
+        quad_small = outline
+    else:
+        snapped = _snap_to_mask(mask, quad_small, (to_small @ vp_b, to_small @ vp_h))
+        if snapped is not None and np.max(np.linalg.norm(snapped - quad_small, axis=1)) < 0.2 * scale:
+            quad_small = snapped
+    # then let each side turn onto the colour boundary: the joints' vanishing points tilt the sides
+    # of irregular-stone and tall walls (a tall wall's base 60 px off its true slope, measured)
+    free = _snap_to_mask(mask, quad_small, None, reach=0.03)
+    if free is not None and np.max(np.linalg.norm(free - quad_small, axis=1)) < 0.1 * scale:
+        quad_small = free
     quad = order_corners((quad_small + 0.5) / s - 0.5, where="automatic mode")
     # refine each side in the full photo
     quad = refine_quad(rgb, quad, (config.refine_halfwidth_px or 6.0 / s, 2.5 / s))
+    rows, cols = rgb.shape[:2]
+    slack = 0.02 * max(rows, cols)
+    if np.any(quad < -slack) or np.any(quad[:, 0] > cols - 1 + slack) or np.any(quad[:, 1] > rows - 1 + slack):
+        raise FitFailed(
+            "automatic mode: the outline found runs outside the photo (lines of the surroundings taken for "
+            "joints); click the wall's corners with --corners x1,y1,...,x4,y4"
+        )
     bed_full = np.c_[to_full(bed[:, :2]), to_full(bed[:, 2:])]
     head_full = np.c_[to_full(head[:, :2]), to_full(head[:, 2:])]
     unscale = np.array(

@@ -254,6 +254,17 @@ def test_automatic_mode_outlines_a_tall_narrow_wall_seen_from_its_foot(seed):
     assert np.max(np.abs(cal.detection.corners_px - np.array(truth["corners_px"]))) < 2.0
     for name, true in (("width_m", width), ("height_m", height)):
         assert abs(cal.result.value(name) - true) < 2.0 * cal.result.sigma(name), name
+    # the scale of such a photo is loose (2-6 %): the calibration says so, and which flag pins it
+    rel = cal.result.sigma("width_m") / cal.result.width_m
+    assert (rel > 0.02) == bool(cal.advice())
+    if rel > 0.02:
+        assert "--known-width" in cal.advice() and "--known-width" in cal.to_json()["advice"]
+    pinned = cm.calibrate_photo(
+        photo,
+        cm.CalibrateConfig(camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02, known_width_m=width),
+    )
+    assert pinned.advice() == "" and "advice" not in pinned.to_json()
+    assert pinned.result.height_m == pytest.approx(height, rel=0.01)
 
 
 def test_clicked_corners_are_snapped_and_beat_raw_clicks(photo_set):

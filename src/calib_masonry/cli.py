@@ -188,6 +188,8 @@ def _cmd_rectify(args) -> int:
         f"H = {doc['height_m']:.3f} +- {doc['height_sigma_m']:.3f} m, f = {cam['focal_px']:.0f} px ({doc['focal_source']}), "
         f"yaw {cam['yaw_deg']:.1f} deg, RMS {doc['rms_residual_px']:.2f} px, {doc['status']} -> {args.out}"
     )
+    if doc.get("advice"):
+        print(f"note: {doc['advice']}")
     return 0
 
 

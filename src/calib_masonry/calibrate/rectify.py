@@ -72,6 +72,10 @@ class CalibrateConfig:
             raise InputError(f"--corners: got {len(self.corners_px)} numbers; give exactly 8 (x1,y1,...,x4,y4)")
 
 
+#: above this relative 1-sigma uncertainty of W or H a calibration says how to pin the scale
+SCALE_ADVICE_RELATIVE_SIGMA = 0.02
+
+
 @dataclass(frozen=True)
 class PhotoCalibration:
     photo: Photo
@@ -80,9 +84,26 @@ class PhotoCalibration:
     mode: str  # "clicked" or "automatic"
     focal_source: str
 
+    def advice(self) -> str:
+        """What to add when the photo fixes W and H only loosely ("" when both are known to within
+        :data:`SCALE_ADVICE_RELATIVE_SIGMA`): the scale rests on the camera height and the wall's
+        convergence, and for a tall wall seen from its foot one pixel on a corner moves it by
+        2-6 % (measured, experiments/bench_tall_walls.py)."""
+        rel = max(
+            self.result.sigma("width_m") / self.result.width_m, self.result.sigma("height_m") / self.result.height_m
+        )
+        if not rel > SCALE_ADVICE_RELATIVE_SIGMA:
+            return ""
+        return (
+            f"W and H are known only to +-{rel:.1%} (1 sigma) from this photo; measure one side and pass "
+            "--known-width or --known-height, or measure your eye height above the wall's base for --camera-height"
+        )
+
     def to_json(self) -> dict:
         doc = self.result.to_json()
         doc.update(photo=str(self.photo.path), mode=self.mode, focal_source=self.focal_source)
+        if self.advice():
+            doc["advice"] = self.advice()
         if self.photo.heading_deg is not None:
             doc["exif_heading_deg"] = self.photo.heading_deg
             from .camera import theta_from_heading

@@ -296,13 +296,14 @@ def pack(inp: CalibrationInput) -> dict:
     }
 
 
-def _line_distances(vp, seg):
-    """Signed distance of each segment's first endpoint from the line through its midpoint and ``vp``."""
-    p1 = jnp.concatenate([seg[:, :2], jnp.ones((seg.shape[0], 1))], axis=1)
-    mid = jnp.concatenate([(seg[:, :2] + seg[:, 2:]) / 2, jnp.ones((seg.shape[0], 1))], axis=1)
-    line = jnp.cross(mid, jnp.broadcast_to(vp, mid.shape))
-    norm = jnp.sqrt(line[:, 0] ** 2 + line[:, 1] ** 2 + 1e-300)
-    return jnp.sum(line * p1, axis=1) / norm
+def _line_distances(vp, seg, xp=jnp):
+    """Signed distance of each segment's first endpoint from the line through its midpoint and ``vp``
+    (``xp``: jax.numpy inside the fit, numpy outside it, where eager JAX would compile every call)."""
+    p1 = xp.concatenate([seg[:, :2], xp.ones((seg.shape[0], 1))], axis=1)
+    mid = xp.concatenate([(seg[:, :2] + seg[:, 2:]) / 2, xp.ones((seg.shape[0], 1))], axis=1)
+    line = xp.cross(mid, xp.broadcast_to(vp, mid.shape))
+    norm = xp.sqrt(line[:, 0] ** 2 + line[:, 1] ** 2 + 1e-300)
+    return xp.sum(line * p1, axis=1) / norm
 
 
 def _parts(params, data):
@@ -362,8 +363,8 @@ def calibrate(
         first = calibrate(inp, start=start, reject_outliers=False)
         h = first.image_from_wall
         bed, head = _capped(inp.bed_segments), _capped(inp.head_segments)
-        d_bed = np.asarray(_line_distances(jnp.asarray(h[:, 0]), jnp.asarray(bed))) if len(bed) else np.zeros(0)
-        d_head = np.asarray(_line_distances(jnp.asarray(h[:, 1]), jnp.asarray(head))) if len(head) else np.zeros(0)
+        d_bed = _line_distances(h[:, 0], bed, np) if len(bed) else np.zeros(0)
+        d_head = _line_distances(h[:, 1], head, np) if len(head) else np.zeros(0)
         inp = replace(inp, bed_segments=_inliers(bed, d_bed), head_segments=_inliers(head, d_head))
         start = first.params
     data = pack(inp)

@@ -40,6 +40,7 @@ __all__ = [
     "warn",
     "write_json",
     "write_mask",
+    "write_rgb",
     "xy_from_rc",
 ]
 
@@ -176,6 +177,12 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
     if np.issubdtype(arr.dtype, np.integer):  # (v - lo) / (hi - lo) >= 1/2, in exact integers
         return arr >= int(lo) + (int(hi) - int(lo) + 1) // 2
     return arr >= float(lo) + 0.5 * span
+
+
+def write_rgb(path: Path, rgb: np.ndarray) -> None:
+    """Write an RGB image in [0, 1] as an 8-bit PNG, with zlib's fastest level: a photo-sized
+    orthophoto took 0.80 s at the default level and 0.17 s at this one, 18 % larger (measured)."""
+    Image.fromarray((np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8)).save(path, compress_level=1)
 
 
 def write_mask(path: Path, mask: np.ndarray) -> None:

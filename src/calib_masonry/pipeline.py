@@ -16,7 +16,7 @@ from .build3d.export import export_mesh, plot_model, plot_walls, write_bricks_js
 from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
-from .io import check_output, read_mask, staged_output, warn, write_json
+from .io import check_output, read_mask, staged_output, warn, write_json, write_mask, write_rgb
 from .progress import progress as _progress
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
@@ -271,16 +271,14 @@ def _summary(result: BuildResult, interpenetration) -> dict:
 
 
 def _write_photo_wall(pw: PhotoWall, folder: Path, *, figures: bool) -> None:
-    from PIL import Image
 
     from .calibrate.figures import plot_calibration
-    from .io import write_mask
 
     folder.mkdir(parents=True)
     doc = pw.calibration.to_json()
     doc.update(used_width_m=pw.wall.width_m, used_height_m=pw.wall.height_m, rectified_shape=list(pw.mask.shape))
     write_json(folder / "calibration.json", doc)
-    Image.fromarray((np.clip(pw.rectified, 0, 1) * 255 + 0.5).astype(np.uint8)).save(folder / "rectified.png")
+    write_rgb(folder / "rectified.png", pw.rectified)
     write_mask(folder / "mask.png", pw.mask)
     if figures:
         plot_calibration(pw.calibration, pw.rectified, folder / "overlay.png")

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FitFailed, InputError
-from ..io import Photo, check_output, read_photo, staged_output, write_json
+from ..io import Photo, check_output, read_photo, staged_output, write_json, write_mask, write_rgb
 from .camera import px_per_m
 from .fit import CalibrationInput, CalibrationResult, calibrate, order_corners
 from .lines import DetectConfig, Detection, detect_wall, refine_quad, segments_in_quad
@@ -294,7 +294,6 @@ def rectify_to_folder(
     overwrite: bool = False,
 ) -> dict:
     """``calib-masonry rectify``: calibration.json, rectified.png (and rectified_mask.png), overlay.png."""
-    from PIL import Image
 
     from .figures import plot_calibration
 
@@ -323,10 +322,10 @@ def rectify_to_folder(
     doc["px_per_m"] = px_per_m
     doc["rectified_shape"] = list(rect.shape[:2])
     with staged_output(out, "rectify", overwrite=overwrite, keep=[photo_path, mask_path]) as stage:
-        Image.fromarray((np.clip(rect, 0, 1) * 255 + 0.5).astype(np.uint8)).save(stage / "rectified.png")
+        write_rgb(stage / "rectified.png", rect)
         if mask is not None:
             rm = rectify_image(mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m)
-            Image.fromarray(((rm >= 0.5) * 255).astype(np.uint8)).save(stage / "rectified_mask.png")
+            write_mask(stage / "rectified_mask.png", rm >= 0.5)
         write_json(stage / "calibration.json", doc)
         if figure:
             plot_calibration(cal, rect, stage / "overlay.png")

@@ -111,9 +111,17 @@ def test_two_simulate_calls_in_one_process_agree(built):
 
 
 def test_no_subprocess_in_the_library():
-    # simulate() runs in the caller's process (no re-exec), and so does a study sample's simulation
+    # simulate() runs in the caller's process (no re-exec). The one child process is a study
+    # sample's simulation (study/sample.py starts study/child.py): a dask worker runs threads of its
+    # own (event loop, profiler) whose allocations interleave with Bullet's, and Bullet orders its
+    # broad phase by address; a fresh single-threaded process per simulation keeps a study's rows
+    # the same on any worker (in a worker's own process they differed once, measured in CI).
+    allowed = {ROOT / "src" / "calib_masonry" / "study" / "sample.py"}
     for path in (ROOT / "src").rglob("*.py"):
         text = path.read_text()
+        if path in allowed:
+            assert "os.exec" not in text and "multiprocessing" not in text, path
+            continue
         assert "subprocess" not in text and "os.exec" not in text and "multiprocessing" not in text, path
 
 

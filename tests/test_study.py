@@ -221,9 +221,9 @@ def test_fragility_study_resumes_after_a_kill_and_matches_a_separate_scheduler_a
         rows, _ = run_study(load_study(path), scheduler=f"tcp://127.0.0.1:{port}", progress=False)
         remote = {r["sample"]: {k: v for k, v in r.items() if k not in BOOKKEEPING} for r in rows}
         assert sorted(remote) == sorted(local)
-        # identical rows, simulation included: every worker's Blender starts its task scheduler with
-        # one thread, so its heap layout (which Bullet's broad phase follows) depends neither on the
-        # worker's history nor on the load of the machine
+        # identical rows, simulation included: every sample's simulation runs in a fresh
+        # single-threaded child whose Blender starts its task scheduler with one thread, so its heap
+        # layout (which Bullet's broad phase follows) depends neither on the worker nor on the load
         assert remote == local
     finally:
         for proc in (worker, sched):

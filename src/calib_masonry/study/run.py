@@ -29,13 +29,13 @@ from ..io import OUTPUT_MARKER, check_output, write_json
 from ..progress import progress as _progress
 from .analysis import input_columns, output_columns, plot_study, summarize
 from .design import Sample, Study, samples, study_json
-from .sample import ROW_KEYS, run_sample, warm_worker
+from .sample import CHILD_ENV, ROW_KEYS, run_sample, warm_worker
 
 __all__ = ["run_study", "study_to_folder", "SCHEDULER_TIMEOUT_S"]
 
 SCHEDULER_TIMEOUT_S = 10.0
-# what every local worker process starts with: one thread per numerical library (a worker per core)
-WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+# what every worker process starts with: one thread per numerical library (a worker per core)
+WORKER_ENV = CHILD_ENV
 WORKER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.system-monitor.gil.enabled": False}
 
 

@@ -7,16 +7,23 @@ with a ``[simulate]`` table it runs Bullet under the sample's load. What does no
 samples of a worker (a structure file, a mask's trace, a photo's calibration, the simulation
 geometry of an unvaried model) is computed once per worker process and cached.
 
-A simulation runs in the worker's own process. Its poses are bit for bit the same on any worker,
-in any order, on a busy machine or not: Blender starts its task scheduler with one thread (see
-:func:`calib_masonry.simulation.blender.require_bpy`), and with that, measured, neither the
-process's history nor its hash seed changes a pose.
+Bullet orders its broad-phase tree by memory address, so a simulation's last bits depend on what
+else allocates memory meanwhile. In a single-threaded process two runs are bit-identical (Blender
+starts its task scheduler with one thread), but a dask worker has threads of its own (event loop,
+heartbeats, profiler): run there, one sample once differed between a LocalCluster worker and a
+separate ``dask worker`` (measured in CI). Each simulation therefore runs in a fresh single-threaded
+child process (``python -m calib_masonry.study.child``): the same sample gives the same poses on
+any worker, in any order, busy or not.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import os
+import pickle
+import subprocess
+import sys
 import tempfile
 import time
 import warnings
@@ -30,6 +37,9 @@ from .design import Sample, Study
 
 __all__ = ["run_sample", "ROW_KEYS"]
 
+# the child's environment, whatever the worker's: a fixed hash seed, and one BLAS thread (a threaded
+# BLAS sums in an order that depends on its thread count, and the joint model's solves use it)
+CHILD_ENV = {"PYTHONHASHSEED": "0", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 ROW_KEYS = ("sample", "point", "status", "error", "warnings", "seconds", "worker")  # the bookkeeping columns
 
 
@@ -262,9 +272,9 @@ _GEOMETRY: dict = {}  # the simulation geometry of an unvaried model, once per w
 
 
 def _simulate(study: Study, sample: Sample, structure) -> dict:
-    """Run the sample's load (in this process); its outcome."""
+    """Run the sample's load in a fresh child process; its outcome."""
     from ..simulation.ground_motion import synthetic_motion
-    from ..simulation.run import simulate, simulation_geometry
+    from ..simulation.run import simulation_geometry
     from ..simulation.scene import Pushover
 
     sim = study.simulate
@@ -288,28 +298,30 @@ def _simulate(study: Study, sample: Sample, structure) -> dict:
             seed=study.seed * 1000 + sample.load["record"],
             direction_deg=sim.direction_deg,
         )
-    return outcome(simulate(geometry, load, progress=False))
+    return run_child({"geometry": geometry, "load": load})
 
 
-def outcome(result) -> dict:
-    """What a study keeps of a :class:`~calib_masonry.simulation.run.SimulationResult`."""
-    from ..simulation.results import outcome as verdict
-
-    m = result.metrics
-    moved = float(m.moved_fraction[-1])
-    out = {
-        "moved_fraction": moved,
-        "cracked_fraction": float(m.broken_fraction[-1]),
-        "roof_drift_m": float(m.roof_drift_m[-1]),
-        "max_displacement_m": float(m.max_displacement_m.max()) if len(m.max_displacement_m) else 0.0,
-        "outcome": verdict(moved),
-        "collapsed": int(verdict(moved) == "collapsed"),
-        "collapse_time_s": m.collapse_time_s,  # None: half the bricks never moved
-    }
-    if result.curve is not None:
-        cm = result.collapse_multiplier_g
-        out["collapse_multiplier_g"] = None if cm is None else float(cm)
-    return out
+def run_child(job: dict) -> dict:
+    """Run one simulation job in ``python -m calib_masonry.study.child`` (fixed hash seed; ends with
+    this process: it watches its parent) and return its outcome; a failure there is an :class:`InputError` here."""
+    env = dict(os.environ, **CHILD_ENV)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "calib_masonry.study.child"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+    )
+    try:
+        out, err = proc.communicate(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
+    except BaseException:
+        proc.kill()
+        proc.wait()
+        raise
+    if proc.returncode != 0:
+        lines = [ln for ln in err.decode(errors="replace").splitlines() if ln.strip()]
+        raise InputError(f"simulation: {lines[-1] if lines else f'exit code {proc.returncode}'}")
+    return pickle.loads(out)
 
 
 def warm_worker() -> None:

@@ -269,19 +269,21 @@ def _refine_side(rgb_s: np.ndarray, a: np.ndarray, b: np.ndarray, half: float) -
     frac = np.where(np.abs(den) > 1e-12, 0.5 * (g0 - g2) / np.where(np.abs(den) > 1e-12, den, 1.0), 0.0)
     off = offs[0] + 0.5 * (kk + np.clip(frac, -0.5, 0.5)) + 0.25
     edge = a[None, :] + ts[:, None] * (b - a)[None, :] + off[:, None] * n[None, :]
-    keep = np.ones(len(ts), dtype=bool)
-    for _ in range(3):
-        c = edge[keep].mean(axis=0)
-        _, _, vt = np.linalg.svd(edge[keep] - c)
-        dirn = vt[0]
-        nn = np.array([-dirn[1], dirn[0]])
-        r = (edge - c) @ nn
-        mad = np.median(np.abs(r[keep])) + 0.05
-        keep = np.abs(r) < 3.0 * 1.4826 * mad
+    return _robust_fit(edge, pad=0.05)
+
+
+def _robust_fit(pts: np.ndarray, *, pad: float = 0.0, floor: float = 0.0) -> tuple[np.ndarray, np.ndarray] | None:
+    """Line (point, unit direction) through ``pts`` by total least squares, after three rounds of
+    dropping points farther than ``max(floor, 3 x 1.4826 x (median distance + pad))``; None when
+    fewer than five points are left."""
+    keep = np.ones(len(pts), dtype=bool)
+    for _ in range(4):
         if keep.sum() < 5:
             return None
-    c = edge[keep].mean(axis=0)
-    _, _, vt = np.linalg.svd(edge[keep] - c)
+        c = pts[keep].mean(axis=0)
+        _, _, vt = np.linalg.svd(pts[keep] - c)
+        r = (pts - c) @ np.array([-vt[0][1], vt[0][0]])
+        keep = np.abs(r) < max(floor, 3.0 * 1.4826 * (float(np.median(np.abs(r[keep]))) + pad))
     return c, vt[0]
 
 
@@ -374,10 +376,11 @@ def _snap_to_mask(
         if len(pts) < 8:
             return None
         if vps is None:
-            line = _robust_line(np.array(pts))
-            if line is None:
+            fit = _robust_fit(np.array(pts), floor=1.0)
+            if fit is None:
                 return None
-            lines.append(line)
+            normal = np.array([-fit[1][1], fit[1][0]])
+            lines.append(np.r_[normal, -(normal @ fit[0])])
             continue
         cand = np.cross(np.c_[np.array(pts), np.ones(len(pts))], vp)
         cand /= np.linalg.norm(cand[:, :2], axis=1, keepdims=True)
@@ -442,21 +445,6 @@ def _quad_of_mask(mask: np.ndarray, min_solidity: float = 0.95, min_fill: float 
         return order_corners(quad, where="automatic mode")
     except CalibMasonryError:
         return None
-
-
-def _robust_line(pts: np.ndarray) -> np.ndarray | None:
-    """Homogeneous line ``(a, b, c)``, ``a^2 + b^2 = 1``, through ``pts`` by total least squares,
-    three rounds of dropping points beyond 3 robust sigmas (and 1 px)."""
-    keep = np.ones(len(pts), dtype=bool)
-    for _ in range(4):
-        if keep.sum() < 5:
-            return None
-        c = pts[keep].mean(axis=0)
-        _, _, vt = np.linalg.svd(pts[keep] - c)
-        n = np.array([-vt[0][1], vt[0][0]])
-        r = (pts - c) @ n
-        keep = np.abs(r) <= max(1.0, 3.0 * 1.4826 * float(np.median(np.abs(r[keep]))))
-    return np.r_[n, -(n @ c)]
 
 
 def refine_quad(rgb: np.ndarray, quad: np.ndarray, halfwidths: tuple[float, ...] = (5.0, 2.5)) -> np.ndarray:

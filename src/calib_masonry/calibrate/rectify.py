@@ -102,8 +102,9 @@ class PhotoCalibration:
     def to_json(self) -> dict:
         doc = self.result.to_json()
         doc.update(photo=str(self.photo.path), mode=self.mode, focal_source=self.focal_source)
-        if self.advice():
-            doc["advice"] = self.advice()
+        advice = self.advice()
+        if advice:
+            doc["advice"] = advice
         if self.photo.heading_deg is not None:
             doc["exif_heading_deg"] = self.photo.heading_deg
             from .camera import theta_from_heading

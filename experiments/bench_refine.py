@@ -6,7 +6,11 @@ brick at a time, from the same splitting start. The peer takes about a quarter o
 brick, so it runs on a seeded random subset and its time is scaled to the whole set; both Dice
 means are reported on that same subset (and ours on the whole set).
 
-    .venv/bin/python experiments/bench_refine.py [--peer-bricks 40]
+Real-size cases (issue 16): synthetic stone walls at 200 and 400 px/m (stones 110-380 px across)
+and the shared SWAT mask; ms per stone cold (first call, compiling) and warm, and the ratio to the
+peer measured in the same run on a seeded subset.
+
+    .venv/bin/python experiments/bench_refine.py [--peer-bricks 40] [--peer-real 10]
 """
 
 from __future__ import annotations
@@ -60,22 +64,63 @@ theta_deg = {th}
 )
 
 
+def _job(m: np.ndarray, vertices: int):
+    """One mask's refinement job: its labels, its trace and the second starts refine_polygons takes."""
+    labels = label_bricks(m)
+    tr = trace_mask(m, TraceConfig(vertices=vertices))
+    slices = ndimage.find_objects(labels)
+    alts = []
+    for b in tr.bricks:
+        sl = slices[b.id - 1]
+        o = trace_outline(labels[sl] == b.id)
+        dense = split_outline(o, min(4 * vertices, len(o)))
+        alts.append(o[dense[visvalingam(o[dense], vertices)]] + [sl[1].start, sl[0].start])
+    return labels, tr, alts
+
+
 def _jobs(data: Path, vertices: int):
-    spec = load_structure(data / "structure.toml")
-    jobs = []
-    for w in spec.walls:
-        m = read_mask(w.mask)
-        labels = label_bricks(m)
-        tr = trace_mask(m, TraceConfig(vertices=vertices))
-        slices = ndimage.find_objects(labels)
-        alts = []
-        for b in tr.bricks:
-            sl = slices[b.id - 1]
-            o = trace_outline(labels[sl] == b.id)
-            dense = split_outline(o, min(4 * vertices, len(o)))
-            alts.append(o[dense[visvalingam(o[dense], vertices)]] + [sl[1].start, sl[0].start])
-        jobs.append((labels, tr, alts))
-    return jobs
+    return [_job(read_mask(w.mask), vertices) for w in load_structure(data / "structure.toml").walls]
+
+
+REAL_SIZE = """
+[structure]
+name = "bench_real_size"
+thickness_m = 0.40
+vertices = 8
+closed = false
+
+[synthetic]
+layout = "stones"
+stone_length_m = [0.55, 0.95]
+stone_height_m = [0.35, 0.55]
+mortar_m = 0.025
+irregularity = 0.8
+px_per_m = {px}
+seed = 7
+
+[[wall]]
+name = "w0"
+width_m = 3.0
+height_m = 3.0
+theta_deg = 0
+"""
+
+
+def real_size(name: str, jobs, config: RefineConfig, peer_bricks: int) -> None:
+    """ms per stone cold and warm, against the peer on a seeded subset, in the same run."""
+    n = sum(len(tr.bricks) for _, tr, _ in jobs)
+    res_cold, t_cold = ours(jobs, config)
+    res, t_warm = ours(jobs, config)
+    flat = [(w, b.id, b.vertices_xy) for w, (_, tr, _) in enumerate(jobs) for b in tr.bricks]
+    pick = np.random.default_rng(0).choice(len(flat), size=min(peer_bricks, len(flat)), replace=False)
+    t0 = time.perf_counter()
+    peer_d = [peer_one(jobs[flat[p][0]][0], flat[p][1], flat[p][2])[0] for p in pick]
+    t_peer = (time.perf_counter() - t0) / len(pick)
+    print(
+        f"{name:38s} {n:6d} {t_cold / n * 1000:9.0f} {t_warm / n * 1000:9.0f} {t_peer * 1000:9.0f} "
+        f"{t_peer / (t_warm / n):7.1f}x {t_peer / (t_cold / n):7.1f}x "
+        f"{np.mean([res[p].dice for p in pick]):7.4f} {np.mean(peer_d):7.4f}"
+    )
 
 
 def ours(jobs, config: RefineConfig):
@@ -110,6 +155,7 @@ def peer_one(labels, brick_id, start):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--peer-bricks", type=int, default=40)
+    ap.add_argument("--peer-real", type=int, default=10, help="peer stones per real-size case")
     ap.add_argument("--skip-swat", action="store_true")
     args = ap.parse_args()
     config = RefineConfig()
@@ -150,6 +196,23 @@ def main() -> None:
         f"(first call: {t_peer * n / t_cold:.0f}x)"
     )
     print(f"no brick worse than its start: {all(r.dice >= r.dice_before for r in res)}")
+
+    print()
+    print("real-size stones (8 vertices): ms per stone; the peer on a seeded subset; Dice on that subset")
+    print(
+        f"{'case':38s} {'stones':>6s} {'cold ms':>9s} {'warm ms':>9s} {'peer ms':>9s} {'warm':>8s} {'cold':>8s} "
+        f"{'ours':>7s} {'peer':>7s}"
+    )
+    for px in (200, 400):
+        with tempfile.TemporaryDirectory() as tmp:
+            sc = Path(tmp) / "scenario.toml"
+            sc.write_text(REAL_SIZE.format(px=px))
+            synthesize(load_structure(sc, require_sources=False), Path(tmp) / "data", figures=False)
+            case = _jobs(Path(tmp) / "data", 8)
+        real_size(f"synthetic stones, {px} px/m ({int(0.55 * px)}-{int(0.95 * px)} px)", case, config, args.peer_real)
+    if not args.skip_swat:
+        real_size("SWAT WR2_250_new.png (real stone mask)", [_job(read_mask(SWAT), 8)], config, args.peer_real)
+    print("aim (issue 16): warm >= 20x the peer; first call <= 5 s more than a warm one")
 
     if args.skip_swat:
         return

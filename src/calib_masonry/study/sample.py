@@ -8,10 +8,11 @@ samples of a worker (a structure file, a mask's trace, a photo's calibration, th
 geometry of an unvaried model) is computed once per worker process and cached.
 
 Bullet orders its broad-phase tree by memory address, so a simulation's last bits depend on what
-else allocates memory meanwhile. In a single-threaded process two runs are bit-identical (Blender
-starts its task scheduler with one thread), but a dask worker has threads of its own (event loop,
-heartbeats, profiler): run there, one sample once differed between a LocalCluster worker and a
-separate ``dask worker`` (measured in CI). Each simulation therefore runs in a fresh single-threaded
+else allocates memory meanwhile. Fresh single-threaded processes gave the same poses every time
+measured (0 of 13 differed, Blender's task scheduler on one thread), but a dask worker has threads
+of its own (event loop, heartbeats, profiler): run there, one sample once differed between a
+LocalCluster worker and a separate ``dask worker`` (measured in CI), and two runs in one pytest
+process once differed by 0.01 mm. Each simulation therefore runs in a fresh single-threaded
 child process (``python -m calib_masonry.study.child``): the same sample gives the same poses on
 any worker, in any order, busy or not.
 """

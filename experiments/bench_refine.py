@@ -37,12 +37,15 @@ from calib_masonry.wall2d.trace import TraceConfig, trace_mask, trace_outline
 ROOT = Path(__file__).resolve().parents[1]
 SWAT = ROOT.parent / "shared" / "data" / "external" / "swat" / "WR2_250_new.png"
 
-SCENARIO = """
+
+def _scenario(name: str, closed: bool, px_per_m: float, seed: int, walls) -> str:
+    """A stone-wall scenario (irregular stones, 8 vertices) with ``walls`` as (width, height, theta)."""
+    return f"""
 [structure]
-name = "bench_stones"
+name = "{name}"
 thickness_m = 0.40
 vertices = 8
-closed = true
+closed = {str(closed).lower()}
 
 [synthetic]
 layout = "stones"
@@ -50,17 +53,23 @@ stone_length_m = [0.55, 0.95]
 stone_height_m = [0.35, 0.55]
 mortar_m = 0.025
 irregularity = 0.8
-px_per_m = 100
-seed = 99
+px_per_m = {px_per_m}
+seed = {seed}
 """ + "".join(
-    f"""
+        f"""
 [[wall]]
 name = "w{i}"
 width_m = {w}
-height_m = 13.5
+height_m = {h}
 theta_deg = {th}
 """
-    for i, (w, th) in enumerate([(6.4, 0), (6.2, 90), (6.4, 180), (6.2, 270)])
+        for i, (w, h, th) in enumerate(walls)
+    )
+
+
+#: the ~1,000-stone tower at 100 px/m (stones 55-95 px across)
+SCENARIO = _scenario(
+    "bench_stones", True, 100, 99, [(6.4, 13.5, 0), (6.2, 13.5, 90), (6.4, 13.5, 180), (6.2, 13.5, 270)]
 )
 
 
@@ -82,28 +91,13 @@ def _jobs(data: Path, vertices: int):
     return [_job(read_mask(w.mask), vertices) for w in load_structure(data / "structure.toml").walls]
 
 
-REAL_SIZE = """
-[structure]
-name = "bench_real_size"
-thickness_m = 0.40
-vertices = 8
-closed = false
-
-[synthetic]
-layout = "stones"
-stone_length_m = [0.55, 0.95]
-stone_height_m = [0.35, 0.55]
-mortar_m = 0.025
-irregularity = 0.8
-px_per_m = {px}
-seed = 7
-
-[[wall]]
-name = "w0"
-width_m = 3.0
-height_m = 3.0
-theta_deg = 0
-"""
+def _synthetic_jobs(scenario: str, vertices: int = 8):
+    """Synthesise ``scenario`` in a temporary folder and return its walls' refinement jobs."""
+    with tempfile.TemporaryDirectory() as tmp:
+        sc = Path(tmp) / "scenario.toml"
+        sc.write_text(scenario)
+        synthesize(load_structure(sc, require_sources=False), Path(tmp) / "data", figures=False)
+        return _jobs(Path(tmp) / "data", vertices)
 
 
 def real_size(name: str, jobs, config: RefineConfig, peer_bricks: int) -> None:
@@ -159,11 +153,7 @@ def main() -> None:
     ap.add_argument("--skip-swat", action="store_true")
     args = ap.parse_args()
     config = RefineConfig()
-    with tempfile.TemporaryDirectory() as tmp:
-        sc = Path(tmp) / "scenario.toml"
-        sc.write_text(SCENARIO)
-        synthesize(load_structure(sc, require_sources=False), Path(tmp) / "data", figures=False)
-        jobs = _jobs(Path(tmp) / "data", 8)
+    jobs = _synthetic_jobs(SCENARIO)
     n = sum(len(tr.bricks) for _, tr, _ in jobs)
     res_cold, t_cold = ours(jobs, config)
     res, t_warm = ours(jobs, config)
@@ -204,11 +194,7 @@ def main() -> None:
         f"{'ours':>7s} {'peer':>7s}"
     )
     for px in (200, 400):
-        with tempfile.TemporaryDirectory() as tmp:
-            sc = Path(tmp) / "scenario.toml"
-            sc.write_text(REAL_SIZE.format(px=px))
-            synthesize(load_structure(sc, require_sources=False), Path(tmp) / "data", figures=False)
-            case = _jobs(Path(tmp) / "data", 8)
+        case = _synthetic_jobs(_scenario("bench_real_size", False, px, 7, [(3.0, 3.0, 0)]))
         real_size(f"synthetic stones, {px} px/m ({int(0.55 * px)}-{int(0.95 * px)} px)", case, config, args.peer_real)
     if not args.skip_swat:
         real_size("SWAT WR2_250_new.png (real stone mask)", [_job(read_mask(SWAT), 8)], config, args.peer_real)

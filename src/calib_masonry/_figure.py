@@ -4,7 +4,7 @@ same in a terminal, a notebook, a thread or a Dask worker. The names mirror pypl
 
 from __future__ import annotations
 
-__all__ = ["figure", "subplots", "close", "get_cmap"]
+__all__ = ["figure", "subplots", "save", "close", "get_cmap"]
 
 
 def figure(figsize=None, **kwargs):
@@ -16,6 +16,13 @@ def figure(figsize=None, **kwargs):
 def subplots(*args, figsize=None, **kwargs):
     fig = figure(figsize=figsize)
     return fig, fig.subplots(*args, **kwargs)
+
+
+def save(fig, path, dpi: int = 110) -> None:
+    """Write ``fig`` to ``path``; a PNG at zlib level 1 (Pillow's default 6 took half of a figure's
+    time, 0.4 s of the calibration overlay's 0.65 s, for files about 15 % smaller)."""
+    kwargs = {"pil_kwargs": {"compress_level": 1}} if str(path).lower().endswith(".png") else {}
+    fig.savefig(path, dpi=dpi, **kwargs)
 
 
 def close(fig) -> None:

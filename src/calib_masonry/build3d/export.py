@@ -160,7 +160,7 @@ def plot_walls(
         fontsize=9,
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    plt.save(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -199,7 +199,7 @@ def plot_model(structure: Structure3D, path: Path) -> None:
     ax.set_zlabel("Z (m)")
     ax.set_title(f"{structure.name}: {len(structure.bricks)} bricks")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    plt.save(fig, path, dpi=110)
     plt.close(fig)
 
 

@@ -22,7 +22,8 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
 
     res = cal.result
     rgb = cal.photo.rgb
-    step = max(1, math.ceil(max(rgb.shape[:2]) / 1600))
+    # each panel is about 800 px wide at the saved size: a finer image only costs resampling time
+    step = max(1, math.ceil(max(rgb.shape[:2]) / 900))
     fig, (a, b) = plt.subplots(1, 2, figsize=(14, 7.5), gridspec_kw={"width_ratios": [1, 1]})
     a.imshow(rgb[::step, ::step], extent=(-0.5, rgb.shape[1] - 0.5, rgb.shape[0] - 0.5, -0.5))
     h = res.image_from_wall
@@ -67,7 +68,8 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
         fontsize=9,
     )
     rows, cols = rect.shape[:2]
-    b.imshow(np.clip(rect, 0, 1), extent=(0, w_m, 0, h_m))
+    rstep = max(1, math.ceil(max(rows, cols) / 900))
+    b.imshow(np.clip(rect[::rstep, ::rstep], 0, 1), extent=(0, w_m, 0, h_m))
     for x in np.arange(1.0, w_m, 1.0):
         b.axvline(x, color="white", lw=0.5, alpha=0.7)
     for z in np.arange(1.0, h_m, 1.0):
@@ -80,7 +82,7 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
         fontsize=9,
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    plt.save(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -107,7 +109,7 @@ def plot_footprint(widths, thetas, adjusted_w, adjusted_t, names, path: Path, *,
     ax.set_ylabel("Y [m]")
     ax.set_title(f"{title}\nestimates leave a {gap * 1000:.0f} mm gap; the fit closes it".strip(), fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    plt.save(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -137,5 +139,5 @@ def plot_corner(rgb: np.ndarray, result, path: Path, *, names=("wall n", "wall n
         fontsize=9,
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    plt.save(fig, path, dpi=100)
     plt.close(fig)

@@ -241,6 +241,28 @@ def rect_from_wall(width_m: float, height_m: float, shape: tuple[int, int]) -> n
     return np.array([[cols / width_m, 0.0, -0.5], [0.0, -rows / height_m, rows - 0.5], [0.0, 0.0, 1.0]])
 
 
+def import_resampling_early(figures: bool = False) -> None:
+    """Start importing torch and kornia (1.3-1.6 s; with ``figures`` also matplotlib) on a second
+    thread, so that it runs while this one reads, searches and fits the photo: ``rectify_image``
+    then finds them loaded. numpy and scipy, which both sides import, are loaded before the thread
+    starts; an import that fails there fails again, with its message, where it is needed."""
+    import threading
+
+    def load() -> None:
+        try:
+            import kornia.filters  # noqa: F401
+            import kornia.geometry.transform  # noqa: F401
+            import torch  # noqa: F401
+
+            if figures:
+                import matplotlib.collections  # noqa: F401
+                import matplotlib.figure  # noqa: F401
+        except Exception:  # noqa: BLE001 - reported by the import where it is needed
+            pass
+
+    threading.Thread(target=load, name="calib-masonry-imports", daemon=True).start()
+
+
 def rectify_image(
     image: np.ndarray,
     wall_from_image: np.ndarray,
@@ -297,6 +319,8 @@ def rectify_to_folder(
     """``calib-masonry rectify``: calibration.json, rectified.png (and rectified_mask.png), overlay.png."""
 
     from .figures import plot_calibration
+
+    import_resampling_early(figures=figure)
 
     check_output(out, command="rectify", overwrite=overwrite)
     cal = calibrate_photo(photo_path, config)

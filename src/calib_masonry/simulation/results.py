@@ -197,7 +197,7 @@ def plot_ground_motion(scene: Scene, path: Path) -> None:
     ax[1].set_xlabel("time (s)")
     ax[0].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    plt.save(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -216,7 +216,7 @@ def plot_histories(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> None
     for a in ax:
         a.axvline(0.0, color="k", lw=0.5, ls=":")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    plt.save(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -279,7 +279,7 @@ def render_frames(scene: Scene, out: RunOutput, folder: Path, count: int = 6) ->
     for k, f in enumerate(_frames(out, count)):
         fig = painter.figure(f)
         p = folder / f"frame_{k:03d}.png"
-        fig.savefig(p, dpi=90)
+        plt.save(fig, p, dpi=90)
         plt.close(fig)
         paths.append(p)
     return paths
@@ -328,5 +328,5 @@ def plot_pushover(scene: Scene, curve: tuple[float | None, np.ndarray, np.ndarra
     ax.set_title(f"pushover at {scene.pushover.rate_g_per_s:g} g/s", fontsize=9)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    plt.save(fig, path, dpi=110)
     plt.close(fig)

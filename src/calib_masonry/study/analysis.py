@@ -250,10 +250,7 @@ def _main_output(stats: dict) -> str | None:
 def plot_study(study: Study, rows: list[dict], summary: dict, folder: Path) -> list[Path]:
     """The study's figures in ``folder``: histograms of the outputs, the main output against each
     input, Sobol' bars, the fragility curve with its band, the sweep's errors per swept value."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .. import _figure as plt
 
     folder.mkdir(parents=True, exist_ok=True)
     ok = [r for r in rows if r.get("status") == "ok"]
@@ -262,7 +259,7 @@ def plot_study(study: Study, rows: list[dict], summary: dict, folder: Path) -> l
     def save(fig, name: str) -> None:
         fig.tight_layout()
         written.append(folder / name)
-        fig.savefig(written[-1], dpi=110)
+        plt.save(fig, written[-1], dpi=110)
         plt.close(fig)
 
     stats = summary["outputs"]

@@ -62,5 +62,5 @@ def plot_trace(mask: np.ndarray, result: TraceResult, path: Path, *, title: str 
     ax.set_ylim(rows - 0.5, -0.5)
     ax.set_title(f"{title}  {len(result.bricks)} bricks, mean Dice {result.mean_dice:.4f}", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    plt.save(fig, path, dpi=110)
     plt.close(fig)

@@ -7,7 +7,8 @@ differentiable in the vertex positions. All bricks of a wall are refined at once
 pixels are those of a crop around it (so the cost follows brick size, not image size), flattened
 and padded to one of a few sizes, vmapped and jit-compiled; optimistix's BFGS minimises, over a
 temperature schedule from smooth to sharp, the number of misclassified pixels
-``sum(m) (1 - softDice) + penalty x sum(p over forbidden pixels)``.
+``sum(m) (1 - softDice) + penalty x sum(p over forbidden pixels)``. The smooth temperatures see
+the pixels at half resolution (``coarse_stages``), the sharp ones every pixel.
 
 Constraints, enforced by a penalty during the fit and checked exactly after it:
 
@@ -53,13 +54,20 @@ class RefineConfig:
     schedule ``easy_temperatures`` x ``easy_steps``: they only need a polish."""
 
     temperatures: tuple[float, ...] = (3.0, 1.5, 0.75, 0.35, 0.2)
-    max_steps: int = 30
+    max_steps: int = 40
     easy_dice: float = 0.99
     easy_temperatures: tuple[float, ...] = (1.0, 0.4)
     easy_steps: int = 15
     penalty: float = 4.0
     margin_px: int = 8
     band_px: float = 2.0
+    # the first ``coarse_stages`` of ``temperatures`` (3, 1.5 and 0.75 px) see the band at half
+    # resolution (each 2 x 2 block of pixels one point with their mean target, weighted by their
+    # number); the sharp ones then see every pixel, from where the smooth ones left the polygon.
+    # On the SWAT stones this cut the warm time by a third; with 40 steps a stage instead of 30
+    # the mean Dice at 4 to 8 vertices is no lower than with every stage at full resolution.
+    # 0: every stage sees every pixel.
+    coarse_stages: int = 3
     chunk: int = 32
     rtol: float = 1e-6
     atol: float = 1e-4
@@ -193,6 +201,23 @@ class _Brick:
     const: float  # pixels inside both the region and the start polygon, away from both outlines
     region: np.ndarray  # (rows, cols) crop bool
     allowed: np.ndarray  # (rows, cols) crop bool
+    weight: np.ndarray | None = None  # (P,) pixels each point stands for (None: 1)
+
+
+def _coarse(b: _Brick) -> _Brick:
+    """The brick's band seen at half resolution: each 2 x 2 block of pixels becomes one point at
+    its centre, with the block's mean target and mean forbidden value, weighted by its pixels in
+    the band."""
+    xy = np.rint(b.points + b.centre).astype(np.int64)
+    block = xy // 2
+    key = block[:, 1] * (b.shape[1] // 2 + 2) + block[:, 0]
+    uniq, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    tgt = np.bincount(inv, b.target, minlength=len(uniq)) / count
+    fb = np.bincount(inv, b.forbid, minlength=len(uniq)) / count
+    first = np.zeros(len(uniq), dtype=np.int64)
+    first[inv[::-1]] = np.arange(len(inv))[::-1]
+    centres = 2.0 * block[first] + 0.5 - b.centre
+    return replace(b, points=centres, target=tgt, forbid=fb, weight=count.astype(np.float64))
 
 
 def _prepare(
@@ -300,7 +325,35 @@ def refine_polygons(
     bricks = [
         _prepare(labels, owner, ids[i], slices[ids[i] - 1], config.margin_px, s, config.band_px) for i, s, _ in jobs
     ]
-    fits, statuses = _run_jobs(bricks, [s for _, s, _ in jobs], [e for _, _, e in jobs], config)
+    temps = tuple(config.temperatures)
+    k = config.coarse_stages if 0 < config.coarse_stages < len(temps) else 0
+    easy_schedule = (tuple(config.easy_temperatures), config.easy_steps)
+    first = [easy_schedule if e else (temps[:k] if k else temps, config.max_steps) for _, _, e in jobs]
+    fits, statuses = _run_jobs(
+        [b if e or not k else _coarse(b) for b, (_, _, e) in zip(bricks, jobs)],
+        [s for _, s, _ in jobs],
+        first,
+        config,
+        desc="refine" if not k else "refine, smooth stages",
+    )
+    hard = [j for j, (_, _, e) in enumerate(jobs) if not e] if k else []
+    if hard:
+        # the sharp stages on every pixel, from where the smooth ones left each polygon
+        again = [
+            fits[j]
+            if fits[j] is not None and np.all(np.isfinite(fits[j])) and shapely.Polygon(fits[j]).is_valid
+            else jobs[j][1]
+            for j in hard
+        ]
+        sharp, sharp_status = _run_jobs(
+            [bricks[j] for j in hard],
+            again,
+            [(temps[k:], config.max_steps)] * len(hard),
+            config,
+            desc="refine, sharp stages",
+        )
+        for j, f, st in zip(hard, sharp, sharp_status):
+            fits[j], statuses[j] = f, st
     best: dict[int, RefinedPolygon] = {}
     keep: dict[int, _Brick] = {}
     for (i, s, _), b, r, st in zip(jobs, bricks, fits, statuses):
@@ -312,20 +365,24 @@ def refine_polygons(
 
 
 def _run_jobs(
-    bricks: list[_Brick], starts: list[np.ndarray], easy: list[bool], config: RefineConfig
+    bricks: list[_Brick],
+    starts: list[np.ndarray],
+    schedules: list[tuple[tuple[float, ...], int]],
+    config: RefineConfig,
+    *,
+    desc: str,
 ) -> tuple[list[np.ndarray | None], list[FitStatus]]:
-    """The BFGS solution of every job and its solver's status at the sharpest temperature."""
+    """The BFGS solution of every job under its schedule (temperatures, steps per temperature) and
+    its solver's status at the last temperature."""
     n_max = 4 * math.ceil(max(len(s) for s in starts) / 4)  # few vertex-count shapes to compile
     results: list[np.ndarray | None] = [None] * len(bricks)
     statuses: list[FitStatus] = [FitStatus.DIVERGED] * len(bricks)
-    buckets: dict[tuple[bool, int], list[int]] = {}
+    buckets: dict[tuple[tuple[tuple[float, ...], int], int], list[int]] = {}
     for i, b in enumerate(bricks):
-        buckets.setdefault((easy[i], _bucket(len(b.points))), []).append(i)
+        buckets.setdefault((schedules[i], _bucket(len(b.points))), []).append(i)
     dt = jnp.dtype(config.dtype)
-    bar = _progress(total=len(bricks), desc="refine", unit="brick")
-    for (is_easy, size), members in sorted(buckets.items()):
-        taus = config.easy_temperatures if is_easy else config.temperatures
-        steps = config.easy_steps if is_easy else config.max_steps
+    bar = _progress(total=len(bricks), desc=desc, unit="brick")
+    for ((taus, steps), size), members in sorted(buckets.items()):
         for c in range(0, len(members), config.chunk):
             chunk = members[c : c + config.chunk]
             pad = min(config.chunk, 2 ** math.ceil(math.log2(len(chunk)))) - len(chunk)
@@ -344,7 +401,7 @@ def _run_jobs(
                 pts[r, :k] = b.points
                 tgt[r, :k] = b.target
                 fb[r, :k] = b.forbid
-                w[r, :k] = 1.0
+                w[r, :k] = 1.0 if b.weight is None else b.weight
                 const[r] = b.const
                 box[r] = b.centre - 0.5  # half the crop, less half a pixel
                 s = starts[i] - b.origin - b.centre

@@ -325,9 +325,8 @@ def rectify_to_folder(
 
     from .figures import plot_calibration
 
-    import_resampling_early(figures=figure)
-
     check_output(out, command="rectify", overwrite=overwrite)
+    import_resampling_early(figures=figure)
     cal = calibrate_photo(photo_path, config)
     res = cal.result
     if px_per_m is None:  # the photo's own resolution at the wall's centre, rounded

@@ -1,15 +1,21 @@
 """The joint model alone against rigid-block limit analysis, on dry-stacked block assemblies.
 
-Why: the dry panel's pushover test (tests/test_simulate.py, strict xfail) is not only Bullet's
-friction creep. This script takes Bullet out: it ramps a uniform lateral acceleration through the
-joint model of simulation/joints.py alone (every interface a joint of zero tensile strength and
-cohesion, friction mu; cracked joints as contacts at their corners, as in a run where every corner
-stays closed) and reports the first load at which the model has no equilibrium left (a body held
-only by the weak inertia-relief springs: a joint's relative displacement over 1 cm). Next to it,
-the limit-analysis load of the same blocks from the static linear programme of the tests.
+Why: in a run, Bullet holds every cracked joint until the joint model has no equilibrium with it
+(simulation/joints.py), so a structure's collapse load is the joint model's. This script takes
+Bullet out: it ramps a uniform lateral acceleration in 0.005 g steps through the joint model alone
+(every interface a joint of zero tensile strength and cohesion, friction mu; cracked joints as
+frictional no-tension contacts at their corners) and reports the first load at which the model has
+no equilibrium left (a joint corner moving over 1 mm, what makes a run let the joint go, or a solve
+that does not reach its tolerance). Next to it, the limit-analysis load of the same blocks from the
+static linear programme of the tests (associative friction).
 
-A sound joint model gives at most the limit-analysis load (any equilibrium it finds is statically
-admissible) and, where the mechanism is pure rocking (mu = 5), close to it.
+With Coulomb (non-associative) friction the real collapse load is at most the programme's; where
+the mechanism rocks it should be close to it. Measured on the 2026-11-24 code: within 6 % below to
+2 % above the programme at mu 0.6 (the test's 12 x 3 panel 0.395 against 0.420 g), and a side by
+side pair and the mu 5 panels well below it: where a mechanism needs the friction of a head joint
+that carries no compression at rest (stiff blocks side by side have no normal force until they
+lean on each other), the elastic path finds the weaker branch of the non-associative problem, or
+the Newton iteration stalls on those untouched corners.
 
     .venv/bin/python experiments/joint_statics.py [--mu 0.6 5]
 """
@@ -26,25 +32,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from calib_masonry.simulation.ground_motion import G  # noqa: E402
 from calib_masonry.simulation.joints import JointModel  # noqa: E402
-from calib_masonry.simulation.scene import Bond, Material, Plate, Scene  # noqa: E402
-from tests.test_simulate import _block, _limit_analysis, _panel  # noqa: E402
+from calib_masonry.simulation.scene import Material, Plate, Scene  # noqa: E402
+from tests.test_simulate import _block, _dry_joints, _limit_analysis, _panel  # noqa: E402
 
 T = 0.2  # thickness, m
-
-
-def dry_joints(blocks) -> list[Bond]:
-    """A joint on every interface of ``blocks`` ((x0, x1), (z0, z1)): footings, beds and heads."""
-    tol, bonds = 1e-9, []
-    for i, ((x0, x1), (z0, z1)) in enumerate(blocks):
-        if z0 < tol:
-            bonds.append(Bond.rectangle(i, -1, ((x0 + x1) / 2, 0, 0), (0, 0, -1.0), (1.0, 0, 0), x1 - x0, T))
-        for j, ((y0, y1), (w0, _)) in enumerate(blocks):
-            if abs(w0 - z1) < tol and min(x1, y1) - max(x0, y0) > tol:
-                lo, hi = max(x0, y0), min(x1, y1)
-                bonds.append(Bond.rectangle(i, j, ((lo + hi) / 2, 0, z1), (0, 0, 1.0), (1.0, 0, 0), hi - lo, T))
-            if j > i and abs(y0 - x1) < tol and abs(w0 - z0) < tol:
-                bonds.append(Bond.rectangle(i, j, (x1, 0, (z0 + z1) / 2), (1.0, 0, 0), (0, 0, 1.0), z1 - z0, T))
-    return bonds
 
 
 def model_collapse(blocks, mu: float, top: float = 1.5, step: float = 0.005) -> float | None:
@@ -53,12 +44,12 @@ def model_collapse(blocks, mu: float, top: float = 1.5, step: float = 0.005) -> 
         _block((x1 - x0, T, z1 - z0), ((x0 + x1) / 2, 0.0, (z0 + z1) / 2), mu=mu) for (x0, x1), (z0, z1) in blocks
     ]
     dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=mu)
-    jm = JointModel(Scene(bodies=tuple(bodies), bonds=tuple(dry_joints(blocks)), plate=Plate(), material=dry))
+    jm = JointModel(Scene(bodies=tuple(bodies), bonds=tuple(_dry_joints(blocks, T)), plate=Plate(), material=dry))
     intact = np.ones(jm.nj, bool)
     for lam in np.arange(0.0, top + step / 2, step):
         new, _, state = jm.crack(np.array([lam * G, 0.0, -G]), intact)
         intact[new] = False
-        if np.abs(state.relative[:, :3]).max() > 1e-2:
+        if not jm.converged or jm.corner_motion().max() > 1e-3:
             return float(lam)
     return None
 

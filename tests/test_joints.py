@@ -207,3 +207,36 @@ def test_a_block_standing_on_the_plate_bears_on_it():
     sc = Scene(bodies=sc.bodies, bonds=sc.bonds[1:], material=sc.material)
     st, _ = JointModel(sc).solve(np.array([0.0, 0.0, -G]), np.ones(1, bool))
     assert abs(st.forces[0, 2]) == pytest.approx(sc.bodies[1].mass * G, rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    "size, direction", [((0.2, 0.3, 0.8), (1.0, 0.0)), ((0.3, 0.2, 1.0), (0.6, 0.8)), ((0.9, 0.6, 0.3), (0.6, 0.8))]
+)
+def test_a_block_on_a_cracked_joint_tips_or_slides_where_statics_says(size, direction):
+    # one block on a dry footing (no tension, no cohesion, friction 0.5), the sideways load ramped
+    # in 0.005 g steps: the model keeps an equilibrium up to the smaller of mu (sliding) and the
+    # load at which the resultant leaves the footing (tipping: lam h / 2 |d_x| = l_x / 2 or
+    # lam h / 2 |d_y| = l_y / 2), and runs away (motion over 1 mm) at the next step; the slender
+    # blocks tip, the squat one slides
+    mu = 0.5
+    lx, ly, h = size
+    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=mu)
+    sc = Scene(
+        bodies=(_block("b", size, (0, 0, h / 2)),),
+        bonds=(Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, lx, ly),),
+        material=dry,
+    )
+    jm = JointModel(sc)
+    dx, dy = direction
+    tips = min(lx / (h * abs(dx)) if dx else np.inf, ly / (h * abs(dy)) if dy else np.inf)
+    expected = min(mu, tips)
+    intact = np.ones(1, bool)
+    onset = None
+    for lam in np.arange(0.005, 1.5, 0.005):
+        new, _, _ = jm.crack(np.array([lam * G * dx, lam * G * dy, -G]), intact)
+        intact[new] = False
+        if jm.corner_motion().max() > 1e-3:
+            onset = lam
+            break
+    assert onset is not None
+    assert onset == pytest.approx(expected, abs=0.0101)

@@ -99,6 +99,7 @@ class RunOutput:
     seconds_stepping: float
     bond_break_time_s: np.ndarray | None = None  # cracking time of each bond after the warm-up, if watched
     bond_break_mode: np.ndarray | None = None  # per bond: index into joints.FAILURE_MODES, -1 if intact
+    bond_release_time_s: np.ndarray | None = None  # when Bullet let each cracked bond go, NaN if never
     max_utilisation: np.ndarray | None = None  # (F,) the intact joints' largest utilisation at each frame
     seconds_joints: float = 0.0  # wall time spent in the joint model
 
@@ -350,7 +351,7 @@ def run(
     which hold the live Bullet bodies and constraints (writing the originals tags the depsgraph
     and crashed Blender in about half the trials). With ``record=False`` only the stepping is done
     (the bare-Bullet baseline): no poses are read and no joint model runs; ``switch_off_s`` (per
-    bond, seconds after the warm-up, NaN for never; the ``bond_break_time_s`` of a recorded run)
+    bond, seconds after the warm-up, NaN for never; the ``bond_release_time_s`` of a recorded run)
     then replays that run's joint switches on a schedule fixed in advance, so the baseline does the
     same Bullet work. ``stop(frame, positions (B, 3), plate (3,))``, if given, is asked after every
     recorded frame whether the run may end there (a pushover ends once it has run away); the
@@ -458,6 +459,7 @@ def run(
         seconds_stepping=seconds_stepping,
         bond_break_time_s=tracker.break_time_s if tracker is not None else None,
         bond_break_mode=tracker.break_mode if tracker is not None else None,
+        bond_release_time_s=tracker.release_time_s if tracker is not None else None,
         max_utilisation=utilisation if record else None,
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
     )

@@ -44,28 +44,46 @@ a rectangle ``b x d`` under a compression ``N`` and a moment ``M`` about a princ
 reaches ``f_t`` at ``M = f_t S + N d / 6`` (``S = b d^2 / 6``); its resultant leaves the patch at
 ``M = N d / 2``; so it fails at ``M = max(f_t S + N d / 6, N d / 2)``: by the mortar's tension for
 a lightly loaded joint, by rocking for a heavily loaded one. Once cracked, the joint carries what
-rigid contact carries (compression, rocking about an edge, Coulomb friction): Bullet's contacts
-take over. (A partly cracked joint keeps its full stiffness in this linear model; the stiffness
-lost by the cracked part would shift some load to its neighbours.)
+dry contact carries: compression, rocking about an edge, Coulomb friction (see "Cracked joints").
+(A partly cracked joint keeps its full stiffness in this linear model; the stiffness lost by the
+cracked part would shift some load to its neighbours.)
 
 The elastic model. Every brick is a rigid body with six degrees of freedom (translation and small
 rotation about its centroid). The intact joints (and the foundation joints to the ground) couple
-them through the stiffness above; the joints that have cracked couple them through
-compression-only contact springs at their outline's corners (``k_n A / k`` and ``k_s A / k`` for
-``k`` corners, a corner that would pull is dropped and the system solved again), but only at
-corners that Bullet says are still closed (gap under ``contact_gap_m``). The load is each brick's
-weight in the frame that moves with the ground, ``m (-a_x, -a_y, -g)``, the same vector Bullet
-steps with in that frame: the intact structure is rigid in Bullet, so it responds to the ground
-quasi-statically, and its joint forces are those of this linear solve (direct sparse LU, exact to
-rounding: they do not depend on any solver setting). A brick or a group of bricks that no joint or
+them through the stiffness above.
+
+Cracked joints. A cracked joint couples its bricks at its outline's corners, each corner with a
+share ``A / k`` of the patch (``k`` corners) and the springs ``k_n A / k``, ``k_s A / k`` [N/m]
+of an elastic-plastic contact: no tension, and a shear force bounded by Coulomb's ``mu N`` beyond
+which the corner slides (UDEC's and 3DEC's contact law; the exact law and its smoothing are in
+:meth:`JointModel._contact_forces`). A corner keeps the slip it has made from one load to the
+next (:meth:`JointModel.commit`), so the model follows the load's history as friction does. The
+equilibrium of every body under these nonlinear contacts is found by Newton's method on the exact
+(non-symmetric) tangent, with every step capped and halved until the out-of-balance force falls,
+to an out-of-balance force of ``tol`` (1e-3) of the heaviest body's load. A structure whose
+cracked joints leave a mechanism has no such equilibrium: the iteration then runs away along the
+mechanism (held only by the weak springs below), and the joints that move by more than
+``release_m`` (1 mm; an equilibrium moves them by microns) are the ones Bullet lets go (see
+:class:`CrackTracker`). Against rigid-block limit analysis (experiments/joint_statics.py, dry
+panels with Coulomb friction 0.6) the model finds its mechanism within 6 % below the static
+programme's load (Coulomb friction is non-associative, so the real collapse load is at most the
+programme's).
+
+The load is each brick's weight in the frame that moves with the ground, ``m (-a_x, -a_y, -g)``,
+the same vector Bullet steps with in that frame: the structure Bullet holds is rigid, so it
+responds to the ground quasi-statically, and its joint forces are those of this solve (while no
+joint has cracked a linear one, direct sparse LU, exact to rounding; after, the contacts' Newton
+iteration to its tolerance): they do not depend on any of Bullet's settings. A brick or a group of bricks that no joint or
 contact holds (falling) is held by a weak spring ``eps m`` to its place; under the uniform
 gravity-like load that spring takes exactly the group's own weight, so it puts no force on the
 group's joints (inertia relief).
 
 Forces depend on the ratios of the stiffnesses (``k_s / k_n`` and the patches' geometry), not on
 their size: all joints share one material, so scaling ``E`` scales every displacement and leaves
-every force as it is. The absolute values matter only for how far a joint opens, which nothing
-here reads.
+every force as it is. The absolute values matter only for how far a joint moves: an equilibrium
+moves the joints by microns with the default moduli, a mechanism by metres (``g / eps``), and
+``release_m`` lies between (a mortar a thousand times softer than the default would need a
+larger one).
 
 When a frame's load cracks a joint, the load is re-solved on the structure without it, and the
 joints that this overloads crack in the same frame (event by event: those within 10 % of the
@@ -239,6 +257,14 @@ class JointModel:
         self._reg = sp.diags(reg.ravel())
         self._lu: dict = {}
         self._joint_part: tuple | None = None
+        self._U: np.ndarray | None = None  # the last committed solve's motion
+        self._last: tuple | None = None
+        self.newton_iterations = 0  # of the last solve
+        self.converged = True  # whether the last solve met ``tol``
+        self.step_m = 1e-4  # no Newton step moves anything further than this or 3x the motion so far, m
+        self.smooth_m = 1e-10  # the width over which the contacts' no-tension kink is rounded, m
+        self.tol = 1e-3  # out-of-balance force, as a fraction of the heaviest body's load
+        self.max_iter = 100
         self.n_all = len(bonds)
         if self.n_all == 0:
             return
@@ -281,6 +307,7 @@ class JointModel:
         # contact corners of each joint: global positions at the reference state and their B rows
         self.corner_mask = self._unique_corners()
         self._corner_L, self._corner_k = self._corner_rows()
+        self.slip = np.zeros(self.outline.shape[:2] + (2,))  # kept slip of every contact corner, m
 
     # ------------------------------------------------------------------ geometry of the corners
     def _unique_corners(self) -> np.ndarray:
@@ -380,28 +407,142 @@ class JointModel:
         self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None
     ) -> tuple[JointState, np.ndarray]:
         """The joints' state under the load ``m g`` on every body (``g`` (3,) m/s^2), with the joints
-        ``intact`` (J,) as mortar and the others as compression-only contacts at their corners
-        where ``closed`` (J', K) (default: every corner of every cracked joint; J' counts the plate
-        contacts after the joints, :attr:`n_all`). Returns the state of the mortar joints and the
-        contact corners that carry compression (a corner that pulls is dropped and the system solved
-        again, up to three times; which corners touch at all is Bullet's answer, ``closed``)."""
+        ``intact`` (J,) as mortar and the others as frictional, compression-only contacts at their
+        corners where ``closed`` (J', K) (default: every corner of every cracked joint; J' counts the
+        plate contacts after the joints, :attr:`n_all`). Returns the state of the mortar joints and
+        the contact corners that carry compression.
+
+        The contacts start from the slip each corner has kept since the last :meth:`commit` (see
+        the module docstring, "Cracked joints"); a corner opens and closes again within the solve
+        as the iteration finds it pulled or pressed. :attr:`converged` says whether the solve met
+        its tolerance."""
         intact = self._pad(intact)
         cand = (~intact)[:, None] & self.corner_mask
         if closed is not None:
             cand &= closed
-        active = cand.copy()
         rhs = self._load(g)
         jc, kc = np.nonzero(cand)
-        for _ in range(3):  # drop the corners that pull, solve again (Bullet's poses say which touch)
-            U = self._solve(intact, active, rhs)
-            if jc.size == 0:
-                break
-            dn = np.einsum("ca,ca->c", self._corner_L[jc, kc, 2], U[self.dofs[jc]])
-            pulling = active[jc, kc] & (dn > 0.0)
-            if not pulling.any():
-                break
-            active[jc[pulling], kc[pulling]] = False
+        U = self._contact_newton(intact, jc, kc, rhs)
+        self._last = (jc, kc, U)
+        active = np.zeros_like(cand)
+        if jc.size:
+            gap = np.einsum("cab,cb->ca", self._corner_L[jc, kc], U[self.dofs[jc]])
+            active[jc, kc] = gap[:, 2] < 0.0
         return self.state(U), active
+
+    def _contact_forces(self, jc, kc, gap):
+        """Forces ``(C, 3)`` (u, v, n in the joint frame, on b; ``F_n < 0`` presses) of the contact
+        corners at their relative displacements ``gap`` (C, 3), their tangent ``dF / d gap`` (C, 3, 3)
+        and whether each slips (carries more than half its friction limit).
+
+        Per corner of stiffness ``(k_s, k_s, k_n)`` and kept slip ``s`` (2,), with ``delta`` =
+        :attr:`smooth_m`:
+
+        * normal: ``N = k_n delta softplus(-d_n / delta)`` (``F_n = -N``): ``k_n max(-d_n, 0)``, no
+          tension, with its kink rounded over ``delta`` (a corner that just touches carries
+          ``k_n delta ln 2``: for 1e-10 m, a millionth of a brick's weight);
+        * shear: the trial force ``T* = k_s (d_t - s)`` and ``T = mu N T* / sqrt(|T*|^2 + (mu N)^2)``:
+          elastic (``T = T*``) while ``|T*| << mu N``, and tending to Coulomb's limit ``mu N`` as
+          the corner slides: a regularised Coulomb friction (smooth, so that Newton's method
+          converges on it; the limit it carries is Coulomb's).
+
+        Units: m, N, N/m."""
+        k = self._corner_k[jc, kc]
+        mu = self.material.friction
+        d = self.smooth_m
+        s = self.slip[jc, kc]
+        x = -gap[:, 2] / d
+        N = k[:, 2] * d * np.logaddexp(0.0, x)
+        dN = -k[:, 2] * 0.5 * (1.0 + np.tanh(0.5 * x))  # dN / d d_n
+        trial = k[:, :2] * (gap[:, :2] - s)
+        L = mu * N
+        t2 = (trial**2).sum(axis=1)
+        m = np.sqrt(t2 + L**2)
+        live = m > 0.0  # else the corner is open and unloaded: no force, no stiffness
+        w = np.where(live, 1.0 / np.where(live, m, 1.0), 0.0)  # 1 / m
+        F = np.empty_like(gap)
+        F[:, :2] = (L * w)[:, None] * trial
+        F[:, 2] = -N
+        T = np.zeros((len(jc), 3, 3))
+        e = trial * w[:, None]  # T* / m: |e| <= 1, as are L / m and |T*|^2 / m^2 below
+        T[:, :2, :2] = (L * w)[:, None, None] * (np.eye(2) - e[:, :, None] * e[:, None, :]) * k[:, None, :2]
+        T[:, :2, 2] = e * ((e**2).sum(axis=1) * mu * dN)[:, None]
+        T[:, 2, 2] = -dN
+        slips = np.sqrt(t2) > 0.5 * L
+        return F, T, slips
+
+    def _residual(self, K0, jc, kc, U, rhs):
+        """Out-of-balance force ``(6 B,)`` at ``U`` and the contact corners' state there."""
+        r = K0 @ U - rhs
+        if jc.size == 0:
+            return r, None
+        dofs = self.dofs[jc]
+        Lc = self._corner_L[jc, kc]
+        gap = np.einsum("cab,cb->ca", Lc, U[dofs])
+        F, T, slips = self._contact_forces(jc, kc, gap)
+        np.add.at(r, dofs, np.einsum("cab,ca->cb", Lc, F))
+        return r, (gap, F, T, slips)
+
+    def _contact_newton(self, intact, jc, kc, rhs) -> np.ndarray:
+        """The motion ``U`` (6 B,) that balances ``rhs`` with the contact corners ``jc, kc``, from the
+        last committed motion (see the module docstring, "Cracked joints")."""
+        self.converged = True
+        if jc.size == 0:
+            return self._solve(intact, np.zeros((self.n_all, self.outline.shape[1]), bool), rhs)
+        U = self._U.copy() if self._U is not None else np.zeros_like(rhs)
+        K0 = self._joint_matrix(intact)
+        scale = max(float(np.abs(rhs).max()), 1e-300)
+        r, st = self._residual(K0, jc, kc, U, rhs)
+        Lc = self._corner_L[jc, kc]
+        dofs = self.dofs[jc]
+        self.newton_iterations = 0
+        self.converged = False
+        for it in range(self.max_iter):
+            if np.abs(r).max() <= self.tol * scale:
+                self.converged = True
+                break
+            gap, F, T, slips = st
+            norm0 = np.linalg.norm(r)
+            Kc = np.einsum("cai,cab,cbj->cij", Lc, T, Lc)
+            Jm = (K0 + _scatter(dofs, Kc, 6 * self.nb, drop_zeros=True)).tocsc()
+            dU = spla.splu(Jm).solve(-r)
+            # a step that would move anything by more than ``step_m`` (or three times the largest
+            # motion so far) is shortened: a free body's full step is g / eps, metres; then halved
+            # while it does not lower the out-of-balance force
+            cap = max(self.step_m, 3.0 * float(np.abs(U).max()))
+            a = min(1.0, cap / max(float(np.abs(dU).max()), 1e-300))
+            for _ in range(6):
+                r_new, st_new = self._residual(K0, jc, kc, U + a * dU, rhs)
+                if np.linalg.norm(r_new) < norm0:
+                    break
+                a *= 0.5
+            else:
+                # Newton's step does not lower the out-of-balance force (the contact law bends
+                # within a few smoothing widths): a full step on the elastic stiffness of the
+                # touching corners instead, the initial-stiffness iteration of plasticity
+                active = np.zeros((self.n_all, self.outline.shape[1]), bool)
+                touch = gap[:, 2] < 0.0
+                active[jc[touch], kc[touch]] = True
+                dU = -self._solve(intact, active, r)
+                a = min(1.0, cap / max(float(np.abs(dU).max()), 1e-300))
+                r_new, st_new = self._residual(K0, jc, kc, U + a * dU, rhs)
+            U = U + a * dU
+            r, st = r_new, st_new
+            self.newton_iterations = it + 1
+        return U
+
+    def commit(self) -> None:
+        """Keep the last solve's slip of every contact corner (and its motion, the next solve's start):
+        the end of a load step."""
+        if self._last is None:
+            return
+        jc, kc, U = self._last
+        self._U = U
+        if jc.size:
+            gap = np.einsum("cab,cb->ca", self._corner_L[jc, kc], U[self.dofs[jc]])
+            F, _, _ = self._contact_forces(jc, kc, gap)
+            k = self._corner_k[jc, kc]
+            self.slip[jc, kc] = gap[:, :2] - F[:, :2] / np.maximum(k[:, :2], 1e-300)
 
     def state(self, U: np.ndarray) -> JointState:
         """Utilisation, governing criterion and forces of every mortar joint for the body motion ``U`` (6 B,)."""
@@ -461,9 +602,25 @@ class JointModel:
             cracked.append(new)
             modes.append(state.mode[new])
             state, _ = self.solve(g, intact, closed)
+        self.commit()
         if not cracked:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), state
         return np.concatenate(cracked), np.concatenate(modes), state
+
+    def corner_motion(self) -> np.ndarray:
+        """The largest relative displacement ``(J',)`` (m) of each joint's corners in the last
+        committed solve (0 before any)."""
+        out = np.zeros(self.n_all)
+        if self._U is None or self.n_all == 0:
+            return out
+        rel = np.einsum("jkab,jb->jka", self._corner_L, self._U[self.dofs])
+        return np.linalg.norm(rel, axis=2).max(axis=1)
+
+    def forget(self, joints: np.ndarray) -> None:
+        """Drop the kept motion and the slip of these joints' corners: after a mechanism has run
+        away in the model, its motion is no start for the next load."""
+        self._U = None
+        self.slip[joints] = 0.0
 
     def corner_gaps(
         self,
@@ -497,26 +654,47 @@ class JointModel:
 class CrackTracker:
     """The joints of a run, from the end of the warm-up on: before each step, :meth:`step` cracks
     the joints that the step's load (``m g`` on every body) cracks, given which cracked joints
-    still touch (from the poses). Records each joint's cracking time and failure mode.
+    still touch (from the poses), and says which cracked joints Bullet must let go. Records each
+    joint's cracking time, failure mode and release time.
+
+    A cracked joint is not let go at once: it is a frictional, no-tension contact in the joint
+    model, and while the model finds an equilibrium with it (every body's motion small, under
+    ``release_m``), Bullet keeps holding it with its rigid constraint, as it holds an intact one.
+    Bullet's own friction between two moving bodies creeps at a rate set by the time step (a
+    block on a block under a steady 0.2 g slides 38 mm in 5 s at the defaults, 5 mm at 4x the
+    substeps), so a crack handed to Bullet's contacts at once would let a standing structure
+    creep apart at a speed the solver chooses. Without an equilibrium the model's motion runs
+    away (the weak inertia-relief springs hold a mechanism at ``g / eps``, metres); the cracked
+    joints that then move by more than ``release_m`` are let go, and Bullet's contacts carry the
+    mechanism from there.
 
     While no joint has cracked (and no body merely stands on the plate), the joint forces are
     linear in ``g``: the three unit-load solutions are computed once and combined, so a structure
     that stands costs one factorisation."""
 
     def __init__(
-        self, scene: Scene, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray, time_s: float
+        self,
+        scene: Scene,
+        positions: np.ndarray,
+        rotations: np.ndarray,
+        plate: np.ndarray,
+        time_s: float,
+        release_m: float = 1e-3,
     ) -> None:
         self.model = JointModel(scene, contact_gap_m=scene.solver.contact_gap_m)
         n = self.model.nj
         self.t0 = float(time_s)
+        self.release_m = float(release_m)
         self.ref = (
             np.asarray(positions, dtype=np.float64).copy(),
             np.asarray(rotations, dtype=np.float64).copy(),
             np.asarray(plate, dtype=np.float64).copy(),
         )
         self.intact = np.ones(n, dtype=bool)
+        self.held = np.ones(n, dtype=bool)  # Bullet's constraint still on
         self.break_time_s = np.full(n, np.nan)
         self.break_mode = np.full(n, -1, dtype=np.int64)
+        self.release_time_s = np.full(n, np.nan)
         self.max_utilisation = 0.0
         self.seconds = 0.0
         self._unit = None
@@ -530,8 +708,9 @@ class CrackTracker:
     def step(
         self, time_s: float, g: np.ndarray, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray
     ) -> np.ndarray:
-        """The joints that crack under the coming step's load ``g`` (3,), given the current poses;
-        returns their indices."""
+        """The joints that Bullet must let go before the coming step's load ``g`` (3,), given the
+        current poses; returns their indices (joints that crack are recorded, and let go only
+        once the model has no equilibrium with them)."""
         t = time.perf_counter()
         try:
             if self.model.nj == 0:
@@ -546,13 +725,23 @@ class CrackTracker:
                 if self.max_utilisation <= 1.0:
                     return np.zeros(0, dtype=np.int64)
             else:
-                gaps = self.model.corner_gaps(positions, rotations, plate, *self.ref)
-                closed = gaps < self.model.contact_gap_m
+                # the cracked joints Bullet holds are contacts in the model; those it has let go
+                # are Bullet's alone; bodies standing on the plate bear where Bullet says they touch
+                closed = np.repeat(self.model._pad(self.held)[:, None], self.model.outline.shape[1], axis=1)
+                if self.model.n_all > self.model.nj:
+                    gaps = self.model.corner_gaps(positions, rotations, plate, *self.ref)
+                    closed[self.model.nj :] = gaps[self.model.nj :] < self.model.contact_gap_m
             new, modes, state = self.model.crack(g, self.intact, closed)
             self.intact[new] = False
             self.break_time_s[new] = float(time_s) - self.t0
             self.break_mode[new] = modes
             self.max_utilisation = float(np.where(self.intact, state.utilisation, 0.0).max(initial=0.0))
-            return new
+            moving = self.model.corner_motion()[: self.model.nj] > self.release_m
+            release = np.flatnonzero(moving & ~self.intact & self.held)
+            if release.size:
+                self.held[release] = False
+                self.release_time_s[release] = float(time_s) - self.t0
+                self.model.forget(release)
+            return release
         finally:
             self.seconds += time.perf_counter() - t

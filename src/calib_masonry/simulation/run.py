@@ -364,8 +364,9 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
             "contact_gap_m": s.contact_gap_m,
         },
         "joints": {
-            "model": "elastic interfaces (UDEC/3DEC convention) between rigid bricks; Bullet keeps intact "
-            "joints rigid, the joint model cracks them (calib_masonry.simulation.joints)",
+            "model": "elastic interfaces (UDEC/3DEC convention) between rigid bricks, cracked ones as "
+            "frictional no-tension contacts; Bullet keeps joints rigid until the joint model has no "
+            "equilibrium with them (calib_masonry.simulation.joints)",
             "normal_stiffness_n_per_m3": k.normal,
             "shear_stiffness_n_per_m3": k.shear,
             "tensile_strength_pa": mat.tensile_strength,
@@ -394,6 +395,8 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
         "collapse_time_s": m.collapse_time_s,
         "bonds_broken": int(np.isfinite(m.bond_break_time_s).sum()),
         "bonds_broken_fraction": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
+        # cracked joints Bullet let go: the rest of the cracked ones it held while they had an equilibrium
+        "bonds_released": int(np.isfinite(out.bond_release_time_s).sum()) if out.bond_release_time_s is not None else 0,
         "max_brick_displacement_m": float(m.max_displacement_m.max()),
         "outcome": outcome(float(m.moved_fraction[-1])),
         "seconds": {
@@ -480,6 +483,9 @@ def write_simulation(
         quaternions=r.quaternions.astype(np.float32),
         plate=r.plate.astype(np.float32),
         bond_break_time_s=m.bond_break_time_s,
+        bond_release_time_s=(
+            r.bond_release_time_s if r.bond_release_time_s is not None else np.full(len(scene.bonds), np.nan)
+        ),
     )
     t1 = time.perf_counter()
     if figures:

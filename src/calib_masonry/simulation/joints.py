@@ -264,7 +264,7 @@ class JointModel:
         self.step_m = 1e-4  # no Newton step moves anything further than this or 3x the motion so far, m
         self.smooth_m = 1e-10  # the width over which the contacts' no-tension kink is rounded, m
         self.tol = 1e-3  # out-of-balance force, as a fraction of the heaviest body's load
-        self.max_iter = 100
+        self.max_iter = 50
         self.n_all = len(bonds)
         if self.n_all == 0:
             return
@@ -404,7 +404,7 @@ class JointModel:
         return int(a.sum() + b.sum())
 
     def solve(
-        self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None
+        self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None, start: np.ndarray | None = None
     ) -> tuple[JointState, np.ndarray]:
         """The joints' state under the load ``m g`` on every body (``g`` (3,) m/s^2), with the joints
         ``intact`` (J,) as mortar and the others as frictional, compression-only contacts at their
@@ -414,15 +414,16 @@ class JointModel:
 
         The contacts start from the slip each corner has kept since the last :meth:`commit` (see
         the module docstring, "Cracked joints"); a corner opens and closes again within the solve
-        as the iteration finds it pulled or pressed. :attr:`converged` says whether the solve met
-        its tolerance."""
+        as the iteration finds it pulled or pressed. The iteration starts from the motion ``start``
+        (6 B,), by default the last committed one; :attr:`converged` says whether it met its
+        tolerance."""
         intact = self._pad(intact)
         cand = (~intact)[:, None] & self.corner_mask
         if closed is not None:
             cand &= closed
         rhs = self._load(g)
         jc, kc = np.nonzero(cand)
-        U = self._contact_newton(intact, jc, kc, rhs)
+        U = self._contact_newton(intact, jc, kc, rhs, start)
         self._last = (jc, kc, U)
         active = np.zeros_like(cand)
         if jc.size:
@@ -483,13 +484,18 @@ class JointModel:
         np.add.at(r, dofs, np.einsum("cab,ca->cb", Lc, F))
         return r, (gap, F, T, slips)
 
-    def _contact_newton(self, intact, jc, kc, rhs) -> np.ndarray:
-        """The motion ``U`` (6 B,) that balances ``rhs`` with the contact corners ``jc, kc``, from the
-        last committed motion (see the module docstring, "Cracked joints")."""
+    def _contact_newton(self, intact, jc, kc, rhs, start: np.ndarray | None = None) -> np.ndarray:
+        """The motion ``U`` (6 B,) that balances ``rhs`` with the contact corners ``jc, kc``, from
+        ``start`` or the last committed motion (see the module docstring, "Cracked joints"). Stops
+        without convergence when ten iterations have neither halved the out-of-balance force nor
+        grown the motion tenfold (a mechanism's run-away)."""
         self.converged = True
         if jc.size == 0:
             return self._solve(intact, np.zeros((self.n_all, self.outline.shape[1]), bool), rhs)
-        U = self._U.copy() if self._U is not None else np.zeros_like(rhs)
+        if start is not None:
+            U = start.copy()
+        else:
+            U = self._U.copy() if self._U is not None else np.zeros_like(rhs)
         K0 = self._joint_matrix(intact)
         scale = max(float(np.abs(rhs).max()), 1e-300)
         r, st = self._residual(K0, jc, kc, U, rhs)
@@ -497,10 +503,16 @@ class JointModel:
         dofs = self.dofs[jc]
         self.newton_iterations = 0
         self.converged = False
+        history = []
         for it in range(self.max_iter):
             if np.abs(r).max() <= self.tol * scale:
                 self.converged = True
                 break
+            history.append((np.linalg.norm(r), float(np.abs(U).max())))
+            if len(history) > 10:
+                (r10, u10), (rn, un) = history[-11], history[-1]
+                if rn > 0.5 * r10 and un < 10.0 * u10:
+                    break  # stalled
             gap, F, T, slips = st
             norm0 = np.linalg.norm(r)
             Kc = np.einsum("cai,cab,cbj->cij", Lc, T, Lc)
@@ -601,7 +613,7 @@ class JointModel:
                 closed[new] = True  # a joint that has just cracked still touches
             cracked.append(new)
             modes.append(state.mode[new])
-            state, _ = self.solve(g, intact, closed)
+            state, _ = self.solve(g, intact, closed, start=self._last[2])  # from the last round's motion
         self.commit()
         if not cracked:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), state

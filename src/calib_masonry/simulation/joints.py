@@ -90,7 +90,9 @@ larger one).
 
 When a frame's load cracks a joint, the load is re-solved on the structure without it, and the
 joints that this overloads crack in the same frame (event by event: those within 10 % of the
-worst at each round), up to ``max_rounds``.
+worst at each round), up to ``max_rounds``; once a round's solve has run away (a mechanism), every
+intact joint then over its strength cracks at once and the rounds end (the run lets the moving
+joints go, and Bullet carries the mechanism).
 
 Units: metres, newtons, pascals, radians.
 """
@@ -595,12 +597,14 @@ class JointModel:
         return JointState(utilisation=crit.max(axis=1), mode=crit.argmax(axis=1), forces=forces, relative=rel)
 
     def crack(
-        self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None
+        self, g: np.ndarray, intact: np.ndarray, closed: np.ndarray | None = None, runaway_m: float | None = None
     ) -> tuple[np.ndarray, np.ndarray, JointState]:
         """The joints that crack under the load ``m g``, event by event: solve, crack the intact
         joints whose utilisation is over 1 and within 10 % of the worst, solve again on what is
-        left, until no intact joint is over 1 (or ``max_rounds``). Returns the indices cracked (in
-        order), the criterion each failed by, and the last state."""
+        left, until no intact joint is over 1 (or ``max_rounds``). Once a solve has run away (a
+        joint corner moving by more than ``runaway_m``, a mechanism), the order of events means
+        nothing any more: every intact joint over 1 cracks at once and the rounds end. Returns
+        the indices cracked (in order), the criterion each failed by, and the last state."""
         intact = np.asarray(intact, dtype=bool)[: self.nj].copy()
         closed = None if closed is None else np.asarray(closed, dtype=bool).copy()
         cracked: list[np.ndarray] = []
@@ -611,12 +615,15 @@ class JointModel:
             worst = float(util.max(initial=0.0))
             if worst <= 1.0:
                 break
-            new = np.flatnonzero(util >= max(1.0, 0.9 * worst))
+            runaway = runaway_m is not None and self._motion(self._last[2]).max() > runaway_m
+            new = np.flatnonzero(util > 1.0) if runaway else np.flatnonzero(util >= max(1.0, 0.9 * worst))
             intact[new] = False
             if closed is not None:
                 closed[new] = True  # a joint that has just cracked still touches
             cracked.append(new)
             modes.append(state.mode[new])
+            if runaway:
+                break
             state, _ = self.solve(g, intact, closed, start=self._last[2])  # from the last round's motion
         self.commit()
         if not cracked:
@@ -626,10 +633,15 @@ class JointModel:
     def corner_motion(self) -> np.ndarray:
         """The largest relative displacement ``(J',)`` (m) of each joint's corners in the last
         committed solve (0 before any)."""
-        out = np.zeros(self.n_all)
         if self._U is None or self.n_all == 0:
-            return out
-        rel = np.einsum("jkab,jb->jka", self._corner_L, self._U[self.dofs])
+            return np.zeros(self.n_all)
+        return self._motion(self._U)
+
+    def _motion(self, U: np.ndarray) -> np.ndarray:
+        """The largest relative displacement ``(J',)`` (m) of each joint's corners under the motion ``U``."""
+        if self.n_all == 0:
+            return np.zeros(0)
+        rel = np.einsum("jkab,jb->jka", self._corner_L, U[self.dofs])
         return np.linalg.norm(rel, axis=2).max(axis=1)
 
     def forget(self, joints: np.ndarray) -> None:
@@ -747,7 +759,7 @@ class CrackTracker:
                 if self.model.n_all > self.model.nj:
                     gaps = self.model.corner_gaps(positions, rotations, plate, *self.ref)
                     closed[self.model.nj :] = gaps[self.model.nj :] < self.model.contact_gap_m
-            new, modes, state = self.model.crack(g, self.intact, closed)
+            new, modes, state = self.model.crack(g, self.intact, closed, runaway_m=self.release_m)
             self.intact[new] = False
             self.break_time_s[new] = float(time_s) - self.t0
             self.break_mode[new] = modes

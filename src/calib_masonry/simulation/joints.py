@@ -63,9 +63,9 @@ equilibrium of every body under these nonlinear contacts is found by Newton's me
 (where no halving does, one step on the touching corners' elastic stiffness instead), to an
 out-of-balance force of ``tol`` (1e-3) of the heaviest body's load; an iteration that has stalled
 (ten steps without halving that force or growing the motion tenfold) stops where it is, and
-:attr:`JointModel.converged` says so. A structure whose
-cracked joints leave a mechanism has no such equilibrium: the iteration then runs away along the
-mechanism (held only by the weak springs below), and the joints that move by more than
+:attr:`JointModel.converged` says so. A structure whose cracked joints leave a mechanism has no
+such equilibrium: the iteration then runs away along the mechanism (held only by the weak springs
+below), and the joints that move by more than
 ``release_m`` (1 mm; an equilibrium moves them by microns) are the ones Bullet lets go (see
 :class:`CrackTracker`). Against rigid-block limit analysis (experiments/joint_statics.py, dry
 panels with Coulomb friction 0.6) the model finds its mechanism within 6 % below the static
@@ -76,10 +76,10 @@ The load is each brick's weight in the frame that moves with the ground, ``m (-a
 the same vector Bullet steps with in that frame: the structure Bullet holds is rigid, so it
 responds to the ground quasi-statically, and its joint forces are those of this solve (while no
 joint has cracked a linear one, direct sparse LU, exact to rounding; after, the contacts' Newton
-iteration to its tolerance): they do not depend on any of Bullet's settings. A brick or a group of bricks that no joint or
-contact holds (falling) is held by a weak spring ``eps m`` to its place; under the uniform
-gravity-like load that spring takes exactly the group's own weight, so it puts no force on the
-group's joints (inertia relief).
+iteration to its tolerance): they do not depend on any of Bullet's settings. A brick or a group
+of bricks that no joint or contact holds (falling) is held by a weak spring ``eps m`` to its place;
+under the uniform gravity-like load that spring takes exactly the group's own weight, so it puts
+no force on the group's joints (inertia relief).
 
 Forces depend on the ratios of the stiffnesses (``k_s / k_n`` and the patches' geometry), not on
 their size: all joints share one material, so scaling ``E`` scales every displacement and leaves
@@ -432,14 +432,13 @@ class JointModel:
         self._last = (jc, kc, U)
         active = np.zeros_like(cand)
         if jc.size:
-            gap = np.einsum("cab,cb->ca", self._corner_L[jc, kc], U[self.dofs[jc]])
-            active[jc, kc] = gap[:, 2] < 0.0
+            active[jc, kc] = self._corner_relative(jc, kc, U)[:, 2] < 0.0
         return self.state(U), active
 
     def _contact_forces(self, jc, kc, gap):
         """Forces ``(C, 3)`` (u, v, n in the joint frame, on b; ``F_n < 0`` presses) of the contact
-        corners at their relative displacements ``gap`` (C, 3), their tangent ``dF / d gap`` (C, 3, 3)
-        and whether each slips (carries more than half its friction limit).
+        corners at their relative displacements ``gap`` (C, 3) and their tangent ``dF / d gap``
+        (C, 3, 3).
 
         Per corner of stiffness ``(k_s, k_s, k_n)`` and kept slip ``s`` (2,), with ``delta`` =
         :attr:`smooth_m`:
@@ -475,20 +474,22 @@ class JointModel:
         T[:, :2, :2] = (L * w)[:, None, None] * (np.eye(2) - e[:, :, None] * e[:, None, :]) * k[:, None, :2]
         T[:, :2, 2] = e * ((e**2).sum(axis=1) * mu * dN)[:, None]
         T[:, 2, 2] = -dN
-        slips = np.sqrt(t2) > 0.5 * L
-        return F, T, slips
+        return F, T
+
+    def _corner_relative(self, jc, kc, U: np.ndarray) -> np.ndarray:
+        """The relative displacement ``(C, 3)`` (u, v, n in the joint frame; ``d_n > 0`` opens) of
+        the corners ``jc, kc`` under the motion ``U`` (6 B,)."""
+        return np.einsum("cab,cb->ca", self._corner_L[jc, kc], U[self.dofs[jc]])
 
     def _residual(self, K0, jc, kc, U, rhs):
         """Out-of-balance force ``(6 B,)`` at ``U`` and the contact corners' state there."""
         r = K0 @ U - rhs
         if jc.size == 0:
             return r, None
-        dofs = self.dofs[jc]
-        Lc = self._corner_L[jc, kc]
-        gap = np.einsum("cab,cb->ca", Lc, U[dofs])
-        F, T, slips = self._contact_forces(jc, kc, gap)
-        np.add.at(r, dofs, np.einsum("cab,ca->cb", Lc, F))
-        return r, (gap, F, T, slips)
+        gap = self._corner_relative(jc, kc, U)
+        F, T = self._contact_forces(jc, kc, gap)
+        np.add.at(r, self.dofs[jc], np.einsum("cab,ca->cb", self._corner_L[jc, kc], F))
+        return r, (gap, T)
 
     def _contact_newton(self, intact, jc, kc, rhs, start: np.ndarray | None = None) -> np.ndarray:
         """The motion ``U`` (6 B,) that balances ``rhs`` with the contact corners ``jc, kc``, from
@@ -519,7 +520,7 @@ class JointModel:
                 (r10, u10), (rn, un) = history[-11], history[-1]
                 if rn > 0.5 * r10 and un < 10.0 * u10:
                     break  # stalled
-            gap, F, T, slips = st
+            gap, T = st
             norm0 = np.linalg.norm(r)
             Kc = np.einsum("cai,cab,cbj->cij", Lc, T, Lc)
             Jm = (K0 + _scatter(dofs, Kc, 6 * self.nb, drop_zeros=True)).tocsc()
@@ -557,8 +558,8 @@ class JointModel:
         jc, kc, U = self._last
         self._U = U
         if jc.size:
-            gap = np.einsum("cab,cb->ca", self._corner_L[jc, kc], U[self.dofs[jc]])
-            F, _, _ = self._contact_forces(jc, kc, gap)
+            gap = self._corner_relative(jc, kc, U)
+            F, _ = self._contact_forces(jc, kc, gap)
             k = self._corner_k[jc, kc]
             self.slip[jc, kc] = gap[:, :2] - F[:, :2] / np.maximum(k[:, :2], 1e-300)
 

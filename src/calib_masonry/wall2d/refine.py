@@ -211,11 +211,9 @@ def _coarse(b: _Brick) -> _Brick:
     xy = np.rint(b.points + b.centre).astype(np.int64)
     block = xy // 2
     key = block[:, 1] * (b.shape[1] // 2 + 2) + block[:, 0]
-    uniq, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    uniq, first, inv, count = np.unique(key, return_index=True, return_inverse=True, return_counts=True)
     tgt = np.bincount(inv, b.target, minlength=len(uniq)) / count
     fb = np.bincount(inv, b.forbid, minlength=len(uniq)) / count
-    first = np.zeros(len(uniq), dtype=np.int64)
-    first[inv[::-1]] = np.arange(len(inv))[::-1]
     centres = 2.0 * block[first] + 0.5 - b.centre
     return replace(b, points=centres, target=tgt, forbid=fb, weight=count.astype(np.float64))
 

@@ -189,6 +189,26 @@ def test_cracks_cascade_event_by_event_in_one_load():
     assert FAILURE_MODES[modes[0]] == "tension"
 
 
+@pytest.mark.parametrize("load", [2.0, 3.0])
+def test_a_block_let_go_changes_nothing_for_the_rest(load):
+    # a column with one more block on top whose joint Bullet has let go (cracked, no corner in the
+    # model): that block floats on its weak spring, a kilometre away in the model, and must not
+    # make the rest's solve look like a mechanism; the rest cracks as the column without it does
+    mat = Material(tensile_strength=0.01e6)
+    ref = _column(3, material=mat)
+    lam, _, _ = _first_crack(ref)
+    g = np.array([load * lam * G, 0.0, -G])
+    expect, expect_modes, _ = JointModel(ref).crack(
+        g, np.ones(3, bool), np.ones((3, OUTLINE_POINTS), bool), runaway_m=1e-3
+    )
+    sc = _column(4, material=mat)
+    closed = np.ones((4, OUTLINE_POINTS), bool)
+    closed[3] = False
+    cracked, modes, _ = JointModel(sc).crack(g, np.array([True, True, True, False]), closed, runaway_m=1e-3)
+    assert list(cracked) == list(expect)
+    assert list(modes) == list(expect_modes)
+
+
 def test_pose_quaternions_give_back_the_matrices():
     from scipy.spatial.transform import Rotation
 

@@ -61,7 +61,8 @@ next (:meth:`JointModel.commit`), so the model follows the load's history as fri
 equilibrium of every body under these nonlinear contacts is found by Newton's method on the exact
 (non-symmetric) tangent, with every step capped and halved until the out-of-balance force falls
 (where no halving does, one step on the touching corners' elastic stiffness instead), to an
-out-of-balance force of ``tol`` (1e-3) of the heaviest body's load; an iteration that has stalled
+out-of-balance force of ``tol`` (1e-3) of the heaviest body's load (these numerical settings are
+:class:`ContactSettings`); an iteration that has stalled
 (ten steps without halving that force or growing the motion tenfold) stops where it is, and
 :attr:`JointModel.converged` says so. A structure whose cracked joints leave a mechanism has no
 such equilibrium: the iteration then runs away along the mechanism (held only by the weak springs
@@ -106,14 +107,43 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..errors import InputError
 from .scene import Bond, Material, Scene, footing_patches, joint_axes
 
-__all__ = ["JointStiffness", "joint_stiffness", "JointModel", "JointState", "CrackTracker", "FAILURE_MODES"]
+__all__ = [
+    "ContactSettings",
+    "JointStiffness",
+    "joint_stiffness",
+    "JointModel",
+    "JointState",
+    "CrackTracker",
+    "FAILURE_MODES",
+]
 
 FAILURE_MODES = ("tension", "compression", "shear")
 
 #: A new solver state this close to the last factorised one is solved by preconditioned CG.
 _CG_CHANGES = 4
+
+
+@dataclass(frozen=True)
+class ContactSettings:
+    """How the joint model finds its equilibrium and decides a run-away (see the module docstring).
+    Numerical settings, not material: none was fitted to make a structure stand or fall; an
+    outcome that changed with them would be the solver's, as with Bullet's settings."""
+
+    eps_per_s2: float = 1e-2  # weak spring to each body's place: eps m on translations, eps m l^2 on rotations, 1/s^2
+    step_m: float = 1e-4  # no Newton step moves anything further than this or 3x the motion so far, m
+    smooth_m: float = 1e-10  # the width over which the contacts' no-tension kink is rounded, m
+    tol: float = 1e-3  # out-of-balance force at convergence, as a fraction of the heaviest body's load
+    max_iter: int = 50  # Newton iterations per solve
+    max_rounds: int = 40  # crack rounds per load
+    release_m: float = 1e-3  # a joint whose corners move further than this in a solve has run away, m
+
+    def __post_init__(self) -> None:
+        for name in ("eps_per_s2", "step_m", "smooth_m", "tol", "max_iter", "max_rounds", "release_m"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"contact settings: {name} = {getattr(self, name)} must be > 0")
 
 
 @dataclass(frozen=True)
@@ -235,13 +265,11 @@ class JointModel:
     small-displacement, about that state.
     """
 
-    def __init__(
-        self, scene: Scene, *, eps_per_s2: float = 1e-2, contact_gap_m: float = 1e-3, max_rounds: int = 40
-    ) -> None:
+    def __init__(self, scene: Scene, *, settings: ContactSettings | None = None, contact_gap_m: float = 1e-3) -> None:
+        self.settings = settings = settings if settings is not None else ContactSettings()
         self.material = scene.material
         self.stiffness = joint_stiffness(self.material)
         self.contact_gap_m = float(contact_gap_m)
-        self.max_rounds = int(max_rounds)
         bodies = scene.bodies
         bonds = scene.bonds
         self.nb = len(bodies)
@@ -255,8 +283,8 @@ class JointModel:
         # weak springs to the body's place: eps m on translations, eps m l^2 on rotations
         reg = np.column_stack(
             [
-                np.repeat(eps_per_s2 * self.mass[:, None], 3, axis=1),
-                np.repeat((eps_per_s2 * self.mass * size**2)[:, None], 3, axis=1),
+                np.repeat(settings.eps_per_s2 * self.mass[:, None], 3, axis=1),
+                np.repeat((settings.eps_per_s2 * self.mass * size**2)[:, None], 3, axis=1),
             ]
         )
         self._reg = sp.diags(reg.ravel())
@@ -265,11 +293,7 @@ class JointModel:
         self._U: np.ndarray | None = None  # the last committed solve's motion
         self._last: tuple | None = None
         self.newton_iterations = 0  # of the last solve
-        self.converged = True  # whether the last solve met ``tol``
-        self.step_m = 1e-4  # no Newton step moves anything further than this or 3x the motion so far, m
-        self.smooth_m = 1e-10  # the width over which the contacts' no-tension kink is rounded, m
-        self.tol = 1e-3  # out-of-balance force, as a fraction of the heaviest body's load
-        self.max_iter = 50
+        self.converged = True  # whether the last solve met ``settings.tol``
         self.n_all = len(bonds)
         if self.n_all == 0:
             return
@@ -455,7 +479,7 @@ class JointModel:
         Units: m, N, N/m."""
         k = self._corner_k[jc, kc]
         mu = self.material.friction
-        d = self.smooth_m
+        d = self.settings.smooth_m
         s = self.slip[jc, kc]
         x = -gap[:, 2] / d
         N = k[:, 2] * d * np.logaddexp(0.0, x)
@@ -511,8 +535,8 @@ class JointModel:
         self.newton_iterations = 0
         self.converged = False
         history = []
-        for it in range(self.max_iter):
-            if np.abs(r).max() <= self.tol * scale:
+        for it in range(self.settings.max_iter):
+            if np.abs(r).max() <= self.settings.tol * scale:
                 self.converged = True
                 break
             history.append((np.linalg.norm(r), float(np.abs(U).max())))
@@ -528,7 +552,7 @@ class JointModel:
             # a step that would move anything by more than ``step_m`` (or three times the largest
             # motion so far) is shortened: a free body's full step is g / eps, metres; then halved
             # while it does not lower the out-of-balance force
-            cap = max(self.step_m, 3.0 * float(np.abs(U).max()))
+            cap = max(self.settings.step_m, 3.0 * float(np.abs(U).max()))
             a = min(1.0, cap / max(float(np.abs(dU).max()), 1e-300))
             for _ in range(6):
                 r_new, st_new = self._residual(K0, jc, kc, U + a * dU, rhs)
@@ -603,7 +627,8 @@ class JointModel:
         """The joints that crack under the load ``m g``, event by event: solve, crack the intact
         joints whose utilisation is over 1 and within 10 % of the worst, solve again on what is
         left, until no intact joint is over 1 (or ``max_rounds``). Once a solve has run away (a
-        joint corner moving by more than ``runaway_m``, a mechanism), the order of events means
+        corner of a joint still in the model, intact or a contact that may touch, moving by more
+        than ``runaway_m``: a mechanism), the order of events means
         nothing any more: every intact joint over 1 cracks at once and the rounds end. Returns
         the indices cracked (in order), the criterion each failed by, and the last state."""
         intact = np.asarray(intact, dtype=bool)[: self.nj].copy()
@@ -611,12 +636,14 @@ class JointModel:
         cracked: list[np.ndarray] = []
         modes: list[np.ndarray] = []
         state, _ = self.solve(g, intact, closed)
-        for _ in range(self.max_rounds):
+        for _ in range(self.settings.max_rounds):
             util = np.where(intact, state.utilisation, 0.0)
             worst = float(util.max(initial=0.0))
             if worst <= 1.0:
                 break
-            runaway = runaway_m is not None and self._motion(self._last[2]).max() > runaway_m
+            runaway = (
+                runaway_m is not None and self._motion(self._last[2])[self._linked(intact, closed)].max() > runaway_m
+            )
             new = np.flatnonzero(util > 1.0) if runaway else np.flatnonzero(util >= max(1.0, 0.9 * worst))
             intact[new] = False
             if closed is not None:
@@ -630,6 +657,14 @@ class JointModel:
         if not cracked:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), state
         return np.concatenate(cracked), np.concatenate(modes), state
+
+    def _linked(self, intact: np.ndarray, closed: np.ndarray | None) -> np.ndarray:
+        """``(J',)`` the joints in the model: intact, or cracked with a contact corner that may touch.
+        A body whose joints are all let go is held by its weak spring alone and moves by ``g / eps``
+        (a kilometre), which says nothing about whether the structure has an equilibrium."""
+        linked = self._pad(intact)
+        linked |= (closed if closed is not None else self.corner_mask).any(axis=1)
+        return linked
 
     def corner_motion(self) -> np.ndarray:
         """The largest relative displacement ``(J',)`` (m) of each joint's corners in the last
@@ -708,12 +743,12 @@ class CrackTracker:
         rotations: np.ndarray,
         plate: np.ndarray,
         time_s: float,
-        release_m: float = 1e-3,
+        settings: ContactSettings | None = None,
     ) -> None:
-        self.model = JointModel(scene, contact_gap_m=scene.solver.contact_gap_m)
+        self.model = JointModel(scene, settings=settings, contact_gap_m=scene.solver.contact_gap_m)
         n = self.model.nj
         self.t0 = float(time_s)
-        self.release_m = float(release_m)
+        self.release_m = self.model.settings.release_m
         self.ref = (
             np.asarray(positions, dtype=np.float64).copy(),
             np.asarray(rotations, dtype=np.float64).copy(),

@@ -743,6 +743,7 @@ class CrackTracker:
         rotations: np.ndarray,
         plate: np.ndarray,
         time_s: float,
+        *,
         settings: ContactSettings | None = None,
     ) -> None:
         self.model = JointModel(scene, settings=settings, contact_gap_m=scene.solver.contact_gap_m)

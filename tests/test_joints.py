@@ -209,6 +209,32 @@ def test_a_block_let_go_changes_nothing_for_the_rest(load):
     assert list(modes) == list(expect_modes)
 
 
+def test_a_let_go_block_starts_where_its_weak_spring_holds_it():
+    # the let-go block is held by its weak spring alone: its equilibrium is the load over eps m (a
+    # rigid translation, g / eps); the solve starts it there, so it costs no Newton steps more than
+    # the column without it (it used to take a dozen capped steps to float a kilometre away)
+    mat = Material(tensile_strength=0.01e6)
+    g = np.array([0.3 * G, 0.0, -G])
+    intact = np.array([True, True, False])
+    ref = JointModel(_column(3, material=mat))
+    ref.solve(g, intact)
+    model = JointModel(_column(4, material=mat))
+    closed = np.ones((4, OUTLINE_POINTS), bool)
+    closed[3] = False
+    state, _ = model.solve(g, np.append(intact, False), closed)
+    assert model.converged and ref.converged
+    assert model.newton_iterations == ref.newton_iterations
+    U = model._last[2].reshape(-1, 6)
+    assert U[3, :3] == pytest.approx(g / model.settings.eps_per_s2, rel=1e-12)
+    assert U[3, 3:] == pytest.approx(np.zeros(3), abs=1e-12)
+    assert model._free_bodies(np.zeros(4, bool), np.array([0, 1], dtype=np.int64)).tolist() == [
+        False,
+        False,
+        True,
+        True,
+    ]
+
+
 def test_pose_quaternions_give_back_the_matrices():
     from scipy.spatial.transform import Rotation
 

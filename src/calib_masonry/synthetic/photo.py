@@ -16,7 +16,6 @@ import math
 
 import numpy as np
 from scipy import ndimage
-from skimage.draw import polygon as draw_polygon
 
 from ..build3d.scale import image_from_wall
 from ..calibrate.camera import (
@@ -33,6 +32,7 @@ from ..calibrate.camera import (
 )
 from ..errors import InputError, raise_if_stopped
 from ..spec import PhotoSpec, WallSpec
+from ..wall2d.dice import polygon_pixels
 from .layouts import Piece
 from .render import mask_shape
 
@@ -53,7 +53,7 @@ def wall_texture(wall: WallSpec, pieces: list[Piece], px_per_m: float, rng: np.r
     labels = np.zeros(shape, dtype=np.int32)
     for i, piece in enumerate(pieces, start=1):
         xy = image_from_wall(piece.polygon_m, shape, wall.width_m, wall.height_m)
-        rr, cc = draw_polygon(xy[:, 1], xy[:, 0], shape=shape)
+        rr, cc = polygon_pixels(xy[:, 1], xy[:, 0], shape)
         labels[rr, cc] = i
     base = np.array([0.56, 0.27, 0.19]) * rng.uniform(0.85, 1.15)
     colours = base * rng.uniform(0.72, 1.18, size=(len(pieces) + 1, 1)) + rng.normal(0, 0.025, (len(pieces) + 1, 3))
@@ -172,8 +172,8 @@ def _background(params, size, rng) -> np.ndarray:
     gx = params[4] + t * (r[0] / norm)
     gy = params[5] + t * (r[1] / norm)
     pattern = 0.5 + 0.25 * np.sin(2.3 * gx) * np.sin(1.7 * gy) + 0.25 * np.sin(7.1 * gx + 3.3 * gy)
-    ground = np.array([0.36, 0.37, 0.26], np.float32) * (0.8 + 0.3 * pattern)[:, None]
-    haze = np.clip(t / 200.0, 0, 0.6)[:, None]
+    ground = np.array([0.36, 0.37, 0.26], np.float32) * (0.8 + 0.3 * pattern.astype(np.float32))[:, None]
+    haze = np.clip(t / 200.0, 0, 0.6).astype(np.float32)[:, None]
     img[below] = ground * (1 - haze) + haze * horizon
     img += rng.normal(0, 0.01, img.shape)
     return img

@@ -1,7 +1,8 @@
 """Rasterising synthetic walls to binary masks.
 
-A pixel is brick when its centre lies inside a piece's polygon (scikit-image's polygon rule), so
-a mask edge is within half a pixel of the true edge. ``edge_blur_px`` / ``edge_noise`` roughen the
+A pixel is brick when its centre lies inside a piece's polygon (scikit-image's polygon rule, by
+:func:`~calib_masonry.wall2d.dice.polygon_pixels`), so a mask edge is within half a pixel of the
+true edge. ``edge_blur_px`` / ``edge_noise`` roughen the
 edges: the mask is blurred with that Gaussian sigma, uniform noise of that amplitude is added, and
 the result is thresholded at one half.
 """
@@ -10,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
-from skimage.draw import polygon as draw_polygon
 
 from ..build3d.scale import image_from_wall
 from ..spec import SyntheticSpec, WallSpec
+from ..wall2d.dice import polygon_pixels
 from .layouts import Piece
 
 __all__ = ["mask_shape", "rasterise_wall"]
@@ -33,7 +34,7 @@ def rasterise_wall(
     for piece in pieces:
         xy = image_from_wall(piece.polygon_m, shape, wall.width_m, wall.height_m)
         polys_px.append(xy)
-        rr, cc = draw_polygon(xy[:, 1], xy[:, 0], shape=shape)
+        rr, cc = polygon_pixels(xy[:, 1], xy[:, 0], shape)
         mask[rr, cc] = True
     if syn.edge_blur_px > 0 or syn.edge_noise > 0:
         f = mask.astype(np.float64)

@@ -153,3 +153,42 @@ def test_stylite_refined_truth_dice_per_wall(tmp_path):
         assert wb["dice"]["mean"] >= wa["dice"]["mean"]
     assert b["precision"] == 1.0 and b["recall"] == 1.0
     assert b["max_interpenetration_m3"] <= 1e-9
+
+
+def test_the_exported_batch_solver_is_the_jitted_function_bit_for_bit(tmp_path, monkeypatch):
+    # the refinement calls its batch solver exported once for any batch size and point count
+    # (and kept on disk); for two shapes and from the file, it must give exactly what jit gives
+    from functools import partial
+
+    import calib_masonry.wall2d.refine as refine
+
+    monkeypatch.setenv("CALIB_MASONRY_CACHE", str(tmp_path))
+    refine._batch_solver.cache_clear()
+    rng = np.random.default_rng(3)
+    taus = jnp.asarray([1.5, 0.35])
+    direct = jax.jit(partial(refine._refine_batch, max_steps=12, rtol=1e-6, atol=1e-4))
+    for batch, size in [(2, 96), (3, 160)]:
+        angle = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+        p0 = np.stack([8 * np.cos(angle), 6 * np.sin(angle)], -1)[None] + rng.normal(0, 1, (batch, 6, 2))
+        pts = rng.uniform(-12, 12, (batch, size, 2))
+        target = (np.abs(pts[..., 0]) < 7) & (np.abs(pts[..., 1]) < 5)
+        args = (
+            jnp.asarray(p0),
+            jnp.full(batch, 6, dtype=jnp.int32),
+            jnp.asarray(pts),
+            jnp.asarray(target, float),
+            jnp.zeros((batch, size)),
+            jnp.ones((batch, size)),
+            jnp.zeros(batch),
+            jnp.full((batch, 2), 12.0),
+            jnp.asarray(1.0),
+            taus,
+        )
+        expect = [np.asarray(a) for a in direct(*args)]
+        for fresh in (False, True):
+            if fresh:  # from the file written by the first export
+                refine._batch_solver.cache_clear()
+            got = refine._batch_solver(6, 2, 12, 1e-6, 1e-4, "float64").call(*args)
+            assert all(np.array_equal(np.asarray(g), e) for g, e in zip(got, expect))
+    assert len(list(tmp_path.glob("refine-*.jaxexport"))) == 1
+    refine._batch_solver.cache_clear()

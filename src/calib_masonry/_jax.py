@@ -17,9 +17,9 @@ jax.config.update("jax_enable_x64", True)
 __all__ = ["jax", "jnp"]
 
 
-def enable_compilation_cache() -> None:
-    """Keep compiled fits on disk (``$CALIB_MASONRY_CACHE`` or ~/.cache/calib_masonry/jax), so a
-    second run of the same command skips XLA compilation."""
+def cache_dir():
+    """The folder of the on-disk caches (``$CALIB_MASONRY_CACHE`` or ~/.cache/calib_masonry/jax),
+    created if need be; None where it cannot be."""
     import os
     from pathlib import Path
 
@@ -27,6 +27,15 @@ def enable_compilation_cache() -> None:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError:
+        return None
+    return path
+
+
+def enable_compilation_cache() -> None:
+    """Keep compiled fits on disk (:func:`cache_dir`), so a second run of the same command skips
+    XLA compilation."""
+    path = cache_dir()
+    if path is None:
         return
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)

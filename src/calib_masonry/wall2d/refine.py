@@ -24,8 +24,10 @@ Convention: image coordinates (x = column, y = row, pixel centres at integers).
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, replace
-from functools import partial
+from functools import cache, partial
+from pathlib import Path
 
 import numpy as np
 import shapely
@@ -155,8 +157,9 @@ def _loss(params, args):
     return m * (1.0 - dice) + penalty * jnp.sum(weight * forbid * p) + 100.0 * penalty * jnp.sum(outside**2)
 
 
-@partial(jax.jit, static_argnames=("max_steps", "rtol", "atol"))
 def _refine_batch(params0, n, points, target, forbid, weight, const, box, penalty, taus, *, max_steps, rtol, atol):
+    """Every brick of a batch through the temperatures ``taus``, ``max_steps`` BFGS steps each
+    (vmap over bricks of a scan over temperatures). Called through :func:`_batch_solver`."""
     import optimistix as optx
 
     def one(p0, n_, pts, tgt, fb, w, c, bx):
@@ -178,6 +181,56 @@ def _refine_batch(params0, n, points, target, forbid, weight, const, box, penalt
         return _vertices(y, n_), codes[-1]
 
     return jax.vmap(one)(params0, n, points, target, forbid, weight, const, box)
+
+
+@cache
+def _batch_solver(n_max: int, n_taus: int, max_steps: int, rtol: float, atol: float, dtype: str):
+    """:func:`_refine_batch` for these settings, exported once for any batch size and point count
+    (JAX shape polymorphism), kept on disk beside the compilation cache and in memory.
+
+    Why: each (batch size, point-count bucket) used to be traced anew, about 0.3 s each (vmap of
+    a scan of optimistix's BFGS), and a wall needs some two dozen of them, so the first call of
+    a process took about 12 s more than a warm one even when every compilation came from the
+    persistent cache. The exported function is traced once per settings and machine; a new
+    shape then costs a lowering and a cached compilation. Its results are bit for bit those of
+    the jitted function. The file's name hashes this module's source and the versions of JAX,
+    equinox and optimistix, so a change to any of them exports anew."""
+    import hashlib
+
+    import equinox
+    import optimistix
+    from jax import export
+
+    from .._jax import cache_dir
+
+    key = repr((n_max, n_taus, max_steps, rtol, atol, dtype, jax.__version__, equinox.__version__))
+    key += repr(optimistix.__version__) + Path(__file__).read_text(encoding="utf-8")
+    folder = cache_dir()
+    path = None if folder is None else folder / f"refine-{hashlib.sha256(key.encode()).hexdigest()[:32]}.jaxexport"
+    if path is not None and path.is_file():
+        try:
+            return export.deserialize(bytearray(path.read_bytes()))
+        except Exception:  # a partial or foreign file: export anew and replace it
+            pass
+    b, p = export.symbolic_shape("b, p")
+    dt = jnp.dtype(dtype)
+
+    def spec(*shape, t=dt):
+        return jax.ShapeDtypeStruct(shape, t)
+
+    fn = jax.jit(partial(_refine_batch, max_steps=max_steps, rtol=rtol, atol=atol))
+    args = (spec(b, n_max, 2), spec(b, t=jnp.int32), spec(b, p, 2), spec(b, p), spec(b, p), spec(b, p))
+    args += (spec(b), spec(b, 2), spec(), spec(n_taus))
+    exported = export.export(fn)(*args)
+    if path is not None:
+        try:
+            blob = exported.serialize()
+            tmp = path.with_suffix(f".{os.getpid()}.tmp")
+            tmp.write_bytes(blob)
+            os.replace(tmp, path)  # whole or not at all, also with workers exporting at once
+        except (ImportError, OSError):  # no flatbuffers, or a read-only cache: in memory only
+            pass
+    return exported
 
 
 # ----------------------------------------------------------------------------------------------
@@ -406,7 +459,8 @@ def _run_jobs(
                 p0[r, : len(s)] = s
                 p0[r, len(s) :] = s[-1]
                 n[r] = len(s)
-            out = _refine_batch(
+            solver = _batch_solver(n_max, len(taus), steps, config.rtol, config.atol, dt.name)
+            out = solver.call(
                 jnp.asarray(p0, dt),
                 jnp.asarray(n),
                 jnp.asarray(pts, dt),
@@ -417,9 +471,6 @@ def _run_jobs(
                 jnp.asarray(box, dt),
                 jnp.asarray(config.penalty, dt),
                 jnp.asarray(taus, dtype=dt),
-                max_steps=steps,
-                rtol=config.rtol,
-                atol=config.atol,
             )
             out, codes = (np.asarray(a) for a in out)
             for r, i in enumerate(chunk):

@@ -5,7 +5,8 @@ rasteriser gives every pixel centre an inside probability ``sigmoid(d / tau)`` f
 distance ``d`` to the polygon's boundary (positive inside, by crossing count), so Dice becomes
 differentiable in the vertex positions. All bricks of a wall are refined at once: each brick's
 pixels are those of a crop around it (so the cost follows brick size, not image size), flattened
-and padded to one of a few sizes, vmapped and jit-compiled; optimistix's BFGS minimises, over a
+and padded to one of a few sizes, vmapped and compiled (the batch solver exported once for any
+batch and size, :func:`_batch_solver`); optimistix's BFGS minimises, over a
 temperature schedule from smooth to sharp, the number of misclassified pixels
 ``sum(m) (1 - softDice) + penalty x sum(p over forbidden pixels)``. The smooth temperatures see
 the pixels at half resolution (``coarse_stages``), the sharp ones every pixel.

@@ -62,7 +62,8 @@ def mortar_cells(polygons: Sequence[np.ndarray], reach: float, *, pixel: float =
     polygon itself keeps its convex hull."""
     from scipy.ndimage import distance_transform_edt
     from scipy.spatial import ConvexHull
-    from skimage.draw import polygon as fill_polygon
+
+    from ..wall2d.dice import polygon_pixels
 
     hulls = [shapely.Polygon(p).convex_hull for p in polygons]
     if len(hulls) <= 1 or reach <= 0:
@@ -74,7 +75,7 @@ def mortar_cells(polygons: Sequence[np.ndarray], reach: float, *, pixel: float =
     label = np.zeros((ny, nx), dtype=np.int32)
     for i, h in enumerate(hulls):
         xy = np.asarray(h.exterior.coords)
-        rr, cc = fill_polygon((xy[:, 1] - y0) / pixel - 0.5, (xy[:, 0] - x0) / pixel - 0.5, shape=label.shape)
+        rr, cc = polygon_pixels((xy[:, 1] - y0) / pixel - 0.5, (xy[:, 0] - x0) / pixel - 0.5, label.shape)
         label[rr, cc] = i + 1
     dist, (ri, ci) = distance_transform_edt(label == 0, return_indices=True)
     nearest = label[ri, ci]

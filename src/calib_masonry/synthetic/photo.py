@@ -166,7 +166,7 @@ def _background(params, size, rng) -> np.ndarray:
     below = np.nonzero(elev < -1e-6)
     # the ground: where each ray below the horizon meets z = 0
     px, py = xs[0, below[1]], ys[below[0], 0]
-    r = [m[k, 0] * px + m[k, 1] * py + m[k, 2] for k in range(3)]
+    r = [m[k, 0] * px + m[k, 1] * py + m[k, 2] for k in range(2)] + [rz[below]]
     norm = np.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
     t = -params[6] / np.minimum(r[2] / norm, -1e-6)
     gx = params[4] + t * (r[0] / norm)

@@ -20,6 +20,8 @@ import math
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = [
     "PARAM_NAMES",
     "angles_from_rotation",
@@ -28,6 +30,7 @@ __all__ = [
     "image_from_wall_homography",
     "intrinsics",
     "normalise_homography",
+    "order_corners",
     "principal_point",
     "project",
     "theta_from_heading",
@@ -129,3 +132,34 @@ def focal_px_from_35mm(focal_35mm: float, image_size: tuple[int, int]) -> float:
     """Focal length in pixels from a 35 mm-equivalent focal length (diagonal convention)."""
     w, h = image_size
     return focal_35mm * math.hypot(w, h) / math.hypot(36.0, 24.0)
+
+
+def order_corners(points: np.ndarray, *, where: str = "--corners") -> np.ndarray:
+    """Four image points in any order -> lower-left, lower-right, upper-right, upper-left.
+
+    Raises InputError for repeated, collinear or non-convex (self-crossing) quadrilaterals.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if pts.shape != (4, 2) or not np.all(np.isfinite(pts)):
+        raise InputError(f"{where}: need exactly 4 finite corners x1,y1,...,x4,y4, got {pts.size} numbers")
+    centre = pts.mean(axis=0)
+    ang = np.arctan2(-(pts[:, 1] - centre[1]), pts[:, 0] - centre[0])  # counter-clockwise as seen (y up)
+    ccw = pts[np.argsort(ang)]
+    span = float(np.max(np.ptp(pts, axis=0)))
+    q = ccw * np.array([1.0, -1.0])  # y up, so the order is counter-clockwise
+    edges = np.roll(q, -1, axis=0) - q
+    nxt = np.roll(edges, -1, axis=0)
+    cross = edges[:, 0] * nxt[:, 1] - edges[:, 1] * nxt[:, 0]
+    if span < 4.0 or np.min(np.abs(cross)) < 1e-3 * span**2:
+        raise InputError(
+            f"{where}: the corners are repeated or three of them are collinear; click the wall's four corners"
+        )
+    if not (np.all(cross > 0) or np.all(cross < 0)):
+        raise InputError(
+            f"{where}: the corners do not form a convex quadrilateral (self-crossing or dented); "
+            "click the wall's four outer corners"
+        )
+    # start from the lower-left: of the two lowest points in the image (largest y), the left one
+    low = np.argsort(-ccw[:, 1])[:2]
+    start = low[np.argmin(ccw[low, 0])]
+    return np.roll(ccw, -start, axis=0)

@@ -11,8 +11,9 @@ camera centre (wall frame) and the wall's W and H. Residuals, each divided by it
 - the camera height above the wall's base (a prior, ``camera_height_m`` +- sigma);
 - the focal length when known (EXIF or ``--focal-px``) and any known width or height.
 
-The solve runs under ``jax.jit`` on inputs padded to a few fixed sizes, so photos with different
-numbers of segments reuse one compilation. The covariance of the parameters is ``(J^T J)^-1`` at
+The solve is exported once (``jax.export``, kept on disk, so a new process does not trace it) and
+runs on inputs padded to a few fixed sizes, so photos with different numbers of segments reuse one
+compilation. The covariance of the parameters is ``(J^T J)^-1`` at
 the solution (residuals are already in units of their noise).
 """
 
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cache
 
 import numpy as np
 
@@ -29,6 +31,7 @@ from .camera import (
     PARAM_NAMES,
     angles_from_rotation,
     image_from_wall_homography,
+    order_corners,
     principal_point,
     project,
 )
@@ -48,7 +51,9 @@ __all__ = [
 
 # Parameter scales: the solver works on params / SCALE so every unknown is of order one.
 SCALE = np.array([1000.0, 0.1, 0.1, 0.1, 1.0, 1.0, 1.0, 1.0, 1.0])
-_BUCKETS = (0, 16, 64, 256, 1024)
+# padded segment counts: each is one compilation of the exported fit (a photo with no segments
+# pads to the first; padding has weight 0, so it adds exact zeros to every sum)
+_BUCKETS = (16, 64, 256, 1024)
 MAX_SEGMENTS = _BUCKETS[-1]
 
 
@@ -145,37 +150,6 @@ class CalibrationResult(HasFit):
 
 # ----------------------------------------------------------------------------------------------
 # corners and the closed-form start
-
-
-def order_corners(points: np.ndarray, *, where: str = "--corners") -> np.ndarray:
-    """Four image points in any order -> lower-left, lower-right, upper-right, upper-left.
-
-    Raises InputError for repeated, collinear or non-convex (self-crossing) quadrilaterals.
-    """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    if pts.shape != (4, 2) or not np.all(np.isfinite(pts)):
-        raise InputError(f"{where}: need exactly 4 finite corners x1,y1,...,x4,y4, got {pts.size} numbers")
-    centre = pts.mean(axis=0)
-    ang = np.arctan2(-(pts[:, 1] - centre[1]), pts[:, 0] - centre[0])  # counter-clockwise as seen (y up)
-    ccw = pts[np.argsort(ang)]
-    span = float(np.max(np.ptp(pts, axis=0)))
-    q = ccw * np.array([1.0, -1.0])  # y up, so the order is counter-clockwise
-    edges = np.roll(q, -1, axis=0) - q
-    nxt = np.roll(edges, -1, axis=0)
-    cross = edges[:, 0] * nxt[:, 1] - edges[:, 1] * nxt[:, 0]
-    if span < 4.0 or np.min(np.abs(cross)) < 1e-3 * span**2:
-        raise InputError(
-            f"{where}: the corners are repeated or three of them are collinear; click the wall's four corners"
-        )
-    if not (np.all(cross > 0) or np.all(cross < 0)):
-        raise InputError(
-            f"{where}: the corners do not form a convex quadrilateral (self-crossing or dented); "
-            "click the wall's four outer corners"
-        )
-    # start from the lower-left: of the two lowest points in the image (largest y), the left one
-    low = np.argsort(-ccw[:, 1])[:2]
-    start = low[np.argmin(ccw[low, 0])]
-    return np.roll(ccw, -start, axis=0)
 
 
 def homography_dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -335,11 +309,47 @@ def residual_vector(u, data):
     )
 
 
-@jax.jit
-def _solve(u0, data):
+def _solve_fn(u0, data):
     u, ok, steps, jac, r = least_squares(residual_vector, u0, data)
     corner_px, bed, head = _parts(u * SCALE, data)
     return u, ok, steps, jac, r, corner_px, bed, head
+
+
+@cache
+def _solver():
+    """:func:`_solve_fn` exported once for any number of bed and head segments and kept on disk
+    (:func:`calib_masonry._jax.exported`): tracing optimistix's Levenberg-Marquardt and its
+    Jacobian took 1-2 s of every process that fitted a photo (the solve itself takes
+    milliseconds). It returns the jitted function's parameters, status and Jacobian bit for bit,
+    and its residuals to rounding (test)."""
+    from pathlib import Path
+
+    from jax import export
+
+    from .. import _jax
+    from . import camera, lm
+
+    nb, nh = export.symbolic_shape("nb, nh")
+
+    def spec(*shape):
+        return jax.ShapeDtypeStruct(shape, jnp.float64)
+
+    data = {
+        "pp": spec(2),
+        "corners": spec(4, 2),
+        "corner_w": spec(4),
+        "bed": spec(nb, 4),
+        "bed_w": spec(nb),
+        "head": spec(nh, 4),
+        "head_w": spec(nh),
+        "prior": spec(8),
+    }
+    sources = [Path(__file__), Path(camera.__file__), Path(lm.__file__)]
+    return _jax.exported("camera-fit", _solve_fn, (spec(len(SCALE)), data), sources=sources)
+
+
+def _solve(u0, data):
+    return _solver().call(u0, data)
 
 
 def _inliers(seg: np.ndarray, dist: np.ndarray) -> np.ndarray:

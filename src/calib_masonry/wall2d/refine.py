@@ -25,10 +25,8 @@ Convention: image coordinates (x = column, y = row, pixel centres at integers).
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, replace
 from functools import cache, partial
-from pathlib import Path
 
 import numpy as np
 import shapely
@@ -187,51 +185,34 @@ def _refine_batch(params0, n, points, target, forbid, weight, const, box, penalt
 @cache
 def _batch_solver(n_max: int, n_taus: int, max_steps: int, rtol: float, atol: float, dtype: str):
     """:func:`_refine_batch` for these settings, exported once for any batch size and point count
-    (JAX shape polymorphism), kept on disk beside the compilation cache and in memory.
+    (JAX shape polymorphism), kept on disk beside the compilation cache and in memory
+    (:func:`calib_masonry._jax.exported`).
 
     Why: each (batch size, point-count bucket) used to be traced anew, about 0.3 s each (vmap of
     a scan of optimistix's BFGS), and a wall needs some two dozen of them, so the first call of
     a process took about 12 s more than a warm one even when every compilation came from the
     persistent cache. The exported function is traced once per settings and machine; a new
     shape then costs a lowering and a cached compilation. Its results are bit for bit those of
-    the jitted function. The file's name hashes this module's source and the versions of JAX,
-    equinox and optimistix, so a change to any of them exports anew."""
-    import hashlib
-
-    import equinox
-    import optimistix
+    the jitted function."""
     from jax import export
 
-    from .._jax import cache_dir
+    from .._jax import exported
 
-    key = repr((n_max, n_taus, max_steps, rtol, atol, dtype, jax.__version__, equinox.__version__))
-    key += repr(optimistix.__version__) + Path(__file__).read_text(encoding="utf-8")
-    folder = cache_dir()
-    path = None if folder is None else folder / f"refine-{hashlib.sha256(key.encode()).hexdigest()[:32]}.jaxexport"
-    if path is not None and path.is_file():
-        try:
-            return export.deserialize(bytearray(path.read_bytes()))
-        except Exception:  # a partial or foreign file: export anew and replace it
-            pass
     b, p = export.symbolic_shape("b, p")
     dt = jnp.dtype(dtype)
 
     def spec(*shape, t=dt):
         return jax.ShapeDtypeStruct(shape, t)
 
-    fn = jax.jit(partial(_refine_batch, max_steps=max_steps, rtol=rtol, atol=atol))
     args = (spec(b, n_max, 2), spec(b, t=jnp.int32), spec(b, p, 2), spec(b, p), spec(b, p), spec(b, p))
     args += (spec(b), spec(b, 2), spec(), spec(n_taus))
-    exported = export.export(fn)(*args)
-    if path is not None:
-        try:
-            blob = exported.serialize()
-            tmp = path.with_suffix(f".{os.getpid()}.tmp")
-            tmp.write_bytes(blob)
-            os.replace(tmp, path)  # whole or not at all, also with workers exporting at once
-        except (ImportError, OSError):  # no flatbuffers, or a read-only cache: in memory only
-            pass
-    return exported
+    return exported(
+        "refine",
+        partial(_refine_batch, max_steps=max_steps, rtol=rtol, atol=atol),
+        args,
+        sources=[__file__],
+        settings=(n_max, n_taus, max_steps, rtol, atol, dtype),
+    )
 
 
 # ----------------------------------------------------------------------------------------------

@@ -119,6 +119,60 @@ def test_residual_gradients_match_central_differences():
     assert np.max(np.abs(jac - fd)) <= 1e-5 * max(1.0, np.max(np.abs(jac)))
 
 
+def test_the_exported_camera_fit_is_the_jitted_one_bit_for_bit(tmp_path, monkeypatch):
+    # the camera fit runs exported once for any segment count (and kept on disk, so a new process
+    # does not trace it); for two segment buckets, in memory and from the file, it must give the
+    # jitted fit's parameters, status, steps and Jacobian exactly (the residuals it returns are
+    # evaluated by differently fused code: equal to rounding, 1e-16 px measured)
+    import jax
+    import jax.numpy as jnp
+
+    import calib_masonry.calibrate.fit as fit
+
+    monkeypatch.setenv("CALIB_MASONRY_CACHE", str(tmp_path))
+    fit._solver.cache_clear()
+    truth = _camera(yaw=-0.2, pitch=0.15)
+    direct = jax.jit(fit._solve_fn)
+    for n, seed in [(5, 1), (30, 2)]:  # the buckets of 16 and 64 segments
+        corners, bed, head = _observations(truth, rng=np.random.default_rng(seed), noise=0.7)
+        inp = CalibrationInput(SIZE, order_corners(corners), bed_segments=bed[:n], head_segments=head[:n])
+        data = {k: jnp.asarray(v) for k, v in pack(inp).items()}
+        u0 = jnp.asarray(fit.initial_params(inp) / SCALE)
+        expect = [np.asarray(a) for a in direct(u0, data)]
+        for fresh in (False, True):
+            if fresh:  # from the file the first export wrote
+                fit._solver.cache_clear()
+            got = [np.asarray(g) for g in fit._solve(u0, data)]
+            assert all(np.array_equal(g, e) for g, e in zip(got[:4], expect[:4]))
+            assert all(np.allclose(g, e, rtol=0, atol=1e-12) for g, e in zip(got[4:], expect[4:]))
+    assert len(list(tmp_path.glob("camera-fit-*.jaxexport"))) == 1
+    fit._solver.cache_clear()
+
+
+def test_side_profiles_sample_exactly_the_blurred_photo():
+    # refine_quad samples the photo blurred by 0.7 px along each side; blurring only the crop
+    # the samples need must give exactly (bit for bit) the samples of the whole blurred photo,
+    # also for points beyond the photo's edges and all beyond one edge
+    from scipy import ndimage
+
+    from calib_masonry.calibrate.lines import _SIDE_BLUR_PX, _blurred_samples
+
+    rng = np.random.default_rng(5)
+    rgb = rng.random((90, 70, 3)).astype(np.float32)
+    whole = ndimage.gaussian_filter(rgb, (_SIDE_BLUR_PX, _SIDE_BLUR_PX, 0))
+    cases = [
+        (rng.uniform(20, 40, 50), rng.uniform(10, 30, 50)),  # inside
+        (rng.uniform(-3, 95, 200), rng.uniform(-4, 8, 200)),  # a band across the left edge
+        (rng.uniform(85, 93, 30), rng.uniform(30, 75, 30)),  # beyond the bottom and right edges
+        (rng.uniform(-9, -2, 20), rng.uniform(10, 60, 20)),  # all above the top edge
+    ]
+    for rows, cols in cases:
+        expect = np.stack(
+            [ndimage.map_coordinates(whole[..., c], [rows, cols], order=1, mode="nearest") for c in range(3)], -1
+        )
+        assert np.array_equal(_blurred_samples(rgb, rows, cols), expect)
+
+
 def test_covariance_shrinks_as_observations_are_added():
     truth = _camera(yaw=0.25, pitch=0.15)
     corners, bed, head = _observations(truth, rng=np.random.default_rng(5), noise=1.0)

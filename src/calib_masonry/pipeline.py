@@ -93,10 +93,6 @@ def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) ->
     photos = {}
     walls = []
     todo = [w for w in spec.walls if w.mask is None and w.image is not None]
-    if todo:
-        from .calibrate.rectify import import_resampling_early
-
-        import_resampling_early()
     bar = _progress(total=len(todo), desc="calibrate photos", unit="photo", enabled=progress)
     for wall in spec.walls:
         if wall in todo:

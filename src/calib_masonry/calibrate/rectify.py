@@ -1,8 +1,8 @@
 """One photo to a calibrated wall: detect or take the corners, fit, check, resample to an orthophoto.
 
 ``calibrate_photo`` is the library call behind ``calib-masonry rectify`` and behind ``build`` on
-structure files that name photos. ``rectify_image`` resamples with kornia's ``warp_perspective``
-(bilinear; a Gaussian pre-blur when the wall is shrunk, so the orthophoto does not alias).
+structure files that name photos. ``rectify_image`` resamples the photo by the fitted homography
+(bilinear, scipy; a Gaussian pre-blur when the wall is shrunk, so the orthophoto does not alias).
 """
 
 from __future__ import annotations
@@ -10,14 +10,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._threads import background, thread_map
 from ..errors import FitFailed, InputError
 from ..io import Photo, check_output, read_photo, staged_output, write_json, write_mask, write_rgb
-from .camera import px_per_m
-from .fit import CalibrationInput, CalibrationResult, calibrate, order_corners
+from .camera import order_corners, px_per_m
 from .lines import DetectConfig, Detection, detect_wall, refine_quad, segments_in_quad
+
+if TYPE_CHECKING:
+    from .fit import CalibrationResult
 
 __all__ = [
     "CalibrateConfig",
@@ -127,6 +131,8 @@ def parse_corners(text: str) -> tuple[float, ...]:
 
 def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = CalibrateConfig()) -> PhotoCalibration:
     """Fit the camera and the wall to one photo; refuse a fit whose residual is above ``max_rms_px``."""
+    from .fit import CalibrationInput, calibrate  # JAX loads here, not with the module
+
     if not isinstance(photo, Photo):
         photo = read_photo(photo)
     w, h = photo.size
@@ -241,18 +247,16 @@ def rect_from_wall(width_m: float, height_m: float, shape: tuple[int, int]) -> n
     return np.array([[cols / width_m, 0.0, -0.5], [0.0, -rows / height_m, rows - 0.5], [0.0, 0.0, 1.0]])
 
 
-def import_resampling_early(figures: bool = False) -> None:
-    """Start importing torch and kornia (1.3-1.6 s; with ``figures`` also matplotlib) on a second
-    thread, so that it runs while this one reads, searches and fits the photo: ``rectify_image``
-    then finds them loaded. numpy and scipy, which both sides import, are loaded before the thread
-    starts; an import that fails there fails again, with its message, where it is needed."""
+def import_early(figures: bool = True) -> None:
+    """Start importing JAX with the camera fit (0.3 s) and, with ``figures``, matplotlib (0.4 s) on a
+    second thread, so that it runs while this one reads and searches the photo (mostly in scipy,
+    which releases the GIL). numpy and scipy, which both sides import, are loaded before the
+    thread starts; an import that fails there fails again, with its message, where it is needed."""
     import threading
 
     def load() -> None:
         try:
-            import kornia.filters  # noqa: F401
-            import kornia.geometry.transform  # noqa: F401
-            import torch  # noqa: F401
+            from . import fit  # noqa: F401
 
             if figures:
                 import matplotlib.collections  # noqa: F401
@@ -272,17 +276,29 @@ def rectify_image(
     *,
     nearest: bool = False,
 ) -> np.ndarray:
-    """Resample a photo ``(rows, cols[, C])`` into the wall's orthophoto at ``px_per_m``."""
-    import torch
-    from kornia.filters import gaussian_blur2d
-    from kornia.geometry.transform import warp_perspective
+    """Resample a photo ``(rows, cols[, C])`` into the wall's orthophoto ``(R, C'[, C])`` at
+    ``px_per_m`` (``R = round(H px_per_m)``, ``C' = round(W px_per_m)``), in float32.
+
+    Convention: pixel centres at integers, (x = column, y = row); the orthophoto's pixel ``(x, y)``
+    shows the photo at ``image_from_ortho @ (x, y, 1)``, interpolated bilinearly (or, with
+    ``nearest``, from the nearest pixel), zero beyond the photo's edges (and blended with zero
+    within half a pixel of them, as kornia's ``warp_perspective`` with zero padding does). Where
+    the wall is shrunk by more than 1.25 photo pixels per orthophoto pixel, the photo is first
+    blurred by a Gaussian of 0.45 times that factor (truncated at 3 sigma, mirrored at the
+    edges), so the orthophoto does not alias.
+
+    This is the bilinear homography warp of kornia's ``warp_perspective`` (which this function
+    used until it was measured: importing torch took 1 s of every 3-7 s ``rectify``, and torch's
+    separable blur of a photo 0.75 s) done by scipy's ``map_coordinates``, in row strips (on every
+    core) so the coordinate arrays stay small."""
+    from scipy import ndimage
 
     shape = (max(2, round(height_m * px_per_m)), max(2, round(width_m * px_per_m)))
-    m = rect_from_wall(width_m, height_m, shape) @ wall_from_image
+    ortho_from_image = rect_from_wall(width_m, height_m, shape) @ wall_from_image
+    image_from_ortho = np.linalg.inv(ortho_from_image)
     img = np.asarray(image, dtype=np.float32)
     chans = img[..., None] if img.ndim == 2 else img
-    # float32, as the photo is: a float64 copy of a 6 MP photo and its blur were 300 MB more at the peak
-    src = torch.from_numpy(np.ascontiguousarray(chans)).permute(2, 0, 1)[None]
+    s = 1.0
     if not nearest:
         # photo pixels per orthophoto pixel at the wall's corners: blur when the wall is shrunk
         corners = np.array([[0, 0], [width_m, 0], [width_m, height_m], [0, height_m]])
@@ -293,21 +309,32 @@ def rectify_image(
             q = image_from_wall @ np.r_[c + [1.0 / px_per_m, 0], 1]
             shrink.append(np.linalg.norm(p[:2] / p[2] - q[:2] / q[2]))
         s = float(np.median(shrink))
-        if s > 1.25:
-            sigma = 0.45 * s
-            k = int(2 * math.ceil(3 * sigma) + 1)
-            src = gaussian_blur2d(src, (k, k), (sigma, sigma))
-    out = (
-        warp_perspective(
-            src,
-            torch.from_numpy(m.astype(np.float32))[None],
-            shape,
-            mode="nearest" if nearest else "bilinear",
-            align_corners=True,
-        )[0]
-        .permute(1, 2, 0)
-        .numpy()
-    )
+    planes = [np.ascontiguousarray(chans[..., c]) for c in range(chans.shape[2])]
+    if not nearest and s > 1.25:
+        sigma = 0.45 * s
+        radius = math.ceil(3 * sigma)
+        planes = thread_map(lambda p: ndimage.gaussian_filter(p, sigma, mode="mirror", radius=radius), planes)
+    out = np.empty(shape + (len(planes),), np.float32)
+    xs = np.arange(shape[1], dtype=np.float64)
+
+    def strip(r0: int) -> None:
+        ys = np.arange(r0, min(shape[0], r0 + rows_per_strip), dtype=np.float64)
+        q = image_from_ortho @ np.stack(
+            [
+                np.broadcast_to(xs, (len(ys), len(xs))),
+                np.broadcast_to(ys[:, None], (len(ys), len(xs))),
+                np.ones((len(ys), len(xs))),
+            ]
+        ).reshape(3, -1)
+        coords = np.stack([q[1] / q[2], q[0] / q[2]])
+        for c, plane in enumerate(planes):
+            out[r0 : r0 + len(ys), :, c] = ndimage.map_coordinates(
+                plane, coords, order=0 if nearest else 1, mode="grid-constant", cval=0.0
+            ).reshape(len(ys), len(xs))
+
+    # strips of about 2^18 pixels, on every core (scipy's interpolation releases the GIL)
+    rows_per_strip = max(1, (1 << 18) // shape[1])
+    thread_map(strip, range(0, shape[0], rows_per_strip))
     return out[..., 0] if img.ndim == 2 else out
 
 
@@ -326,7 +353,7 @@ def rectify_to_folder(
     from .figures import plot_calibration
 
     check_output(out, command="rectify", overwrite=overwrite)
-    import_resampling_early(figures=figure)
+    import_early(figures=figure)
     cal = calibrate_photo(photo_path, config)
     res = cal.result
     if px_per_m is None:  # the photo's own resolution at the wall's centre, rounded
@@ -351,13 +378,17 @@ def rectify_to_folder(
     doc["px_per_m"] = px_per_m
     doc["rectified_shape"] = list(rect.shape[:2])
     with staged_output(out, "rectify", overwrite=overwrite, keep=[photo_path, mask_path]) as stage:
-        write_rgb(stage / "rectified.png", rect)
-        if mask is not None:
-            rm = rectify_image(mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m)
-            write_mask(stage / "rectified_mask.png", rm >= 0.5)
-        write_json(stage / "calibration.json", doc)
-        if figure:
-            plot_calibration(cal, rect, stage / "overlay.png")
+        # the PNG's encoding (zlib releases the GIL) runs on the second core while the overlay draws
+        png = background(write_rgb, stage / "rectified.png", rect)
+        try:
+            if mask is not None:
+                rm = rectify_image(mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m)
+                write_mask(stage / "rectified_mask.png", rm >= 0.5)
+            write_json(stage / "calibration.json", doc)
+            if figure:
+                plot_calibration(cal, rect, stage / "overlay.png")
+        finally:
+            png.result()  # also on the way out of an error: the staging folder is removed after it
     return doc
 
 

@@ -63,7 +63,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     from dataclasses import replace
 
     from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify
-    from .errors import CalibMasonryError
+    from .errors import CalibMasonryError, raise_if_stopped
     from .wall2d.segment import PhotoSegmentConfig, segment_photo
 
     kwargs = {}
@@ -75,6 +75,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     elif not math.isnan(wall.height_m):
         known["known_height_m"] = wall.height_m
     config = CalibrateConfig(corners_px=wall.corners_px, focal_px=wall.focal_px, **kwargs, **known)
+    raise_if_stopped()
     try:
         cal = calibrate_photo(wall.image, config)
     except CalibMasonryError as exc:
@@ -82,27 +83,59 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     res = cal.result
     width = res.width_m if math.isnan(wall.width_m) else wall.width_m
     height = res.height_m if math.isnan(wall.height_m) else wall.height_m
+    raise_if_stopped()
     # the fitted wall's frame stretched onto the typed W x H: the photo's outline maps onto the wall
     rect = rectify(cal, px_per_m=spec.photo_px_per_m, width_m=width, height_m=height)
+    raise_if_stopped()
     mask = segment_photo(rect, PhotoSegmentConfig(window_px=int(round(0.5 * spec.photo_px_per_m))))
     return PhotoWall(calibration=cal, rectified=rect, mask=mask, wall=replace(wall, width_m=width, height_m=height))
 
 
+def _import_photo_stage() -> None:
+    """Import what :func:`photo_wall` imports on first use. Two threads importing the same
+    package at once can see it half initialised (seen: matplotlib's ``rcParams`` missing), so the
+    threads of :func:`resolve_photo_walls` start with everything loaded."""
+    import scipy.spatial  # noqa: F401
+    import skimage.color  # noqa: F401
+    import skimage.feature  # noqa: F401
+    import skimage.filters  # noqa: F401
+    import skimage.measure  # noqa: F401
+    import skimage.morphology  # noqa: F401
+    import skimage.transform  # noqa: F401
+
+    from .calibrate import fit, lines, rectify  # noqa: F401
+    from .wall2d import segment  # noqa: F401
+
+
 def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) -> tuple[StructureSpec, dict]:
-    """Calibrate every photo wall; the spec with fitted sizes filled in, and the photo results by wall name."""
-    photos = {}
-    walls = []
+    """Calibrate every photo wall; the spec with fitted sizes filled in, and the photo results by wall name.
+
+    The walls are done two at a time on threads (scipy's filters and interpolation, which do most
+    of the work, release the GIL): each wall's result depends on its own photo only, so the order
+    changes nothing. A stop request ends each wall at its next stage."""
+    from ._threads import cpu_count
+    from .errors import raise_if_stopped
+
     todo = [w for w in spec.walls if w.mask is None and w.image is not None]
     bar = _progress(total=len(todo), desc="calibrate photos", unit="photo", enabled=progress)
-    for wall in spec.walls:
-        if wall in todo:
-            pw = photo_wall(wall, spec)
-            photos[wall.name] = pw
-            walls.append(pw.wall)
-            bar.update()
-        else:
-            walls.append(wall)
+    done: dict = {}
+    if todo:
+        from concurrent.futures import ThreadPoolExecutor, as_completed
+
+        _import_photo_stage()  # here, not by two threads at once (a half-imported module, seen)
+
+        pool = ThreadPoolExecutor(max_workers=min(2, cpu_count(), len(todo)), thread_name_prefix="calib-masonry-photo")
+        try:
+            futures = {pool.submit(photo_wall, wall, spec): wall.name for wall in todo}
+            for future in as_completed(futures):
+                done[futures[future]] = future.result()
+                bar.update()
+                raise_if_stopped()
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
     bar.close()
+    walls = [done[w.name].wall if w.name in done else w for w in spec.walls]
+    photos = {w.name: done[w.name] for w in todo}
     return spec.with_walls(tuple(walls)), photos
 
 

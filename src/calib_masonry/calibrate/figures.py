@@ -12,10 +12,13 @@ from .camera import project
 __all__ = ["plot_calibration", "plot_corner", "plot_footprint"]
 
 
-def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
+def plot_calibration(cal, rect, path: Path) -> None:
     """Left: the photo, the fitted wall outline (green), the clicked or detected corners (red),
     bed (orange) and head (cyan) joint segments used by the fit, the vanishing directions.
-    Right: the rectified orthophoto with a 1 m grid."""
+    Right: the rectified orthophoto with a 1 m grid.
+
+    ``rect`` is the orthophoto ``(rows, cols, 3)``, or a callable that returns it: the photo's
+    panel is drawn while it runs (``rectify`` resamples on other threads meanwhile)."""
     from matplotlib.collections import LineCollection
 
     from .. import _figure as plt
@@ -67,6 +70,8 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
         f"RMS residual {res.rms_residual_px:.2f} px, {res.status.value}",
         fontsize=9,
     )
+    if callable(rect):
+        rect = rect()
     rows, cols = rect.shape[:2]
     rstep = max(1, math.ceil(max(rows, cols) / 900))
     b.imshow(np.clip(rect[::rstep, ::rstep], 0, 1), extent=(0, w_m, 0, h_m))
@@ -81,7 +86,9 @@ def plot_calibration(cal, rect: np.ndarray, path: Path) -> None:
         f"H = {h_m:.3f} +- {res.sigma('height_m'):.3f} m",
         fontsize=9,
     )
-    fig.tight_layout()
+    # fixed margins for this fixed layout: matplotlib's tight_layout measured every text to find
+    # them (0.11 s of the figure's 0.45 s)
+    fig.subplots_adjust(left=0.045, right=0.99, bottom=0.07, top=0.92, wspace=0.12)
     plt.save(fig, path, dpi=110)
     plt.close(fig)
 

@@ -131,7 +131,6 @@ def parse_corners(text: str) -> tuple[float, ...]:
 
 def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = CalibrateConfig()) -> PhotoCalibration:
     """Fit the camera and the wall to one photo; refuse a fit whose residual is above ``max_rms_px``."""
-    from .fit import CalibrationInput, calibrate  # JAX loads here, not with the module
 
     if not isinstance(photo, Photo):
         photo = read_photo(photo)
@@ -177,6 +176,8 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             bed = head = np.zeros((0, 4))
         mode = "automatic"
         sigma = config.corner_sigma_px or 1.0
+    from .fit import CalibrationInput, calibrate  # JAX loads here (or on import_early's thread)
+
     inp = CalibrationInput(
         image_size=(w, h),
         corners_px=corners,
@@ -251,8 +252,15 @@ def import_early(figures: bool = True) -> None:
     """Start importing JAX with the camera fit (0.3 s) and, with ``figures``, matplotlib (0.4 s) on a
     second thread, so that it runs while this one reads and searches the photo (mostly in scipy,
     which releases the GIL). numpy and scipy, which both sides import, are loaded before the
-    thread starts; an import that fails there fails again, with its message, where it is needed."""
+    thread starts, and so are the detection's scikit-image modules (two threads importing one
+    package at once can see it half initialised); an import that fails there fails again, with its
+    message, where it is needed."""
     import threading
+
+    import scipy.spatial  # noqa: F401
+    import skimage.feature  # noqa: F401
+    import skimage.measure  # noqa: F401
+    import skimage.transform  # noqa: F401
 
     def load() -> None:
         try:
@@ -373,22 +381,27 @@ def rectify_to_folder(
                 f"--mask {mask_path}: {mask.shape[1]} x {mask.shape[0]} px, but the photo is "
                 f"{cal.photo.size[0]} x {cal.photo.size[1]}; give the mask of this photo"
             )
-    rect = rectify(cal, px_per_m=px_per_m)
     doc = cal.to_json()
     doc["px_per_m"] = px_per_m
-    doc["rectified_shape"] = list(rect.shape[:2])
     with staged_output(out, "rectify", overwrite=overwrite, keep=[photo_path, mask_path]) as stage:
-        # the PNG's encoding (zlib releases the GIL) runs on the second core while the overlay draws
-        png = background(write_rgb, stage / "rectified.png", rect)
+        # resampling (scipy) and the PNG's encoding (zlib) release the GIL: they run on the other
+        # core while the overlay draws
+        def orthophoto() -> np.ndarray:
+            rect = rectify(cal, px_per_m=px_per_m)
+            write_rgb(stage / "rectified.png", rect)
+            return rect
+
+        job = background(orthophoto)
         try:
+            if figure:
+                plot_calibration(cal, job.result, stage / "overlay.png")
             if mask is not None:
                 rm = rectify_image(mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m)
                 write_mask(stage / "rectified_mask.png", rm >= 0.5)
-            write_json(stage / "calibration.json", doc)
-            if figure:
-                plot_calibration(cal, rect, stage / "overlay.png")
         finally:
-            png.result()  # also on the way out of an error: the staging folder is removed after it
+            rect = job.result()  # also on the way out of an error: the staging folder is removed after it
+        doc["rectified_shape"] = list(rect.shape[:2])
+        write_json(stage / "calibration.json", doc)
     return doc
 
 

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from .._threads import background, thread_map
+
 __all__ = ["PhotoSegmentConfig", "SegmentConfig", "label_bricks", "segment_photo"]
 
 _FOUR = ndimage.generate_binary_structure(2, 1)
@@ -112,33 +114,43 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
     from skimage.filters import threshold_otsu
     from skimage.morphology import disk
 
-    img = ndimage.gaussian_filter(np.asarray(rgb, dtype=np.float64)[..., :3], (config.smooth_px, config.smooth_px, 0))
+    # float32, as the orthophoto is: CIELAB of a 5 MP orthophoto took 1.5 s in float64 and 0.2 s in
+    # float32 (scikit-image keeps the dtype); the paper example's six masks came out identical
+    img = ndimage.gaussian_filter(np.asarray(rgb, dtype=np.float32)[..., :3], (config.smooth_px, config.smooth_px, 0))
     lab = rgb2lab(np.clip(img, 0, 1))
     chroma = np.hypot(lab[..., 1], lab[..., 2])
     fp = disk(config.joint_px)
+    chans = (np.ascontiguousarray(lab[..., 0]), chroma)
+
+    def top_hat(job):  # white (light mortar) or black (dark mortar) top-hat of a channel
+        chan, white = job
+        if white:
+            return chan - ndimage.grey_opening(chan, footprint=fp)
+        return ndimage.grey_closing(chan, footprint=fp) - chan
+
+    # the four morphological filters on every core (scipy's filters release the GIL)
+    responses = thread_map(top_hat, [(c, white) for c in chans for white in (True, False)])
     best, best_sep = None, -1.0
-    for chan in (lab[..., 0], chroma):
-        for resp in (chan - ndimage.grey_opening(chan, footprint=fp), ndimage.grey_closing(chan, footprint=fp) - chan):
-            scale = float(np.percentile(resp, 99))
-            if scale <= 1e-9:
-                continue
-            r = np.clip(resp / scale, 0, 1.5)
-            t = threshold_otsu(r)
-            lo, hi = r[r <= t], r[r > t]
-            if len(lo) == 0 or len(hi) == 0:
-                continue
-            sep = (hi.mean() - lo.mean()) ** 2 * len(lo) * len(hi) / r.size**2 / max(r.var(), 1e-12)
-            if sep > best_sep:
-                best, best_sep = r, sep
+    for resp in responses:
+        scale = float(np.percentile(resp, 99))
+        if scale <= 1e-9:
+            continue
+        r = np.clip(resp / scale, 0, 1.5)
+        t = threshold_otsu(r)
+        lo, hi = r[r <= t], r[r > t]
+        if len(lo) == 0 or len(hi) == 0:
+            continue
+        sep = (hi.mean() - lo.mean()) ** 2 * len(lo) * len(hi) / r.size**2 / max(r.var(), 1e-12)
+        if sep > best_sep:
+            best, best_sep = r, sep
     if best is None:
         return np.ones(rgb.shape[:2], dtype=bool)
     # the local joint level: the mean response of likely-joint pixels (above a low global cut)
     # in a Gaussian window, so faint joints far from the camera get their own threshold
     likely = best > max(config.floor, 0.5 * threshold_otsu(best))
     sigma = max(1.0, config.window_px / 4)
-    level = ndimage.gaussian_filter(best * likely, sigma) / np.maximum(
-        ndimage.gaussian_filter(likely * 1.0, sigma), 1e-6
-    )
+    weight = background(ndimage.gaussian_filter, likely * 1.0, sigma)  # the two wide filters at once
+    level = ndimage.gaussian_filter(best * likely, sigma) / np.maximum(weight.result(), 1e-6)
     mortar = (best > 0.5 * level) & (best > config.floor)
     bricks = ~mortar
     if config.separate_px > 0:

@@ -1,9 +1,9 @@
 """The paper example built from perspective photos instead of masks, compared with its truth.
 
 For each seed (the tests and the tuning never used the defaults): `synth --photos` of the paper
-example's scenario with that seed, `build` on structure_photos.toml (automatic calibration, kornia
+example's scenario with that seed, `build` on structure_photos.toml (automatic calibration,
 rectification at 300 px/m, top-hat segmentation, trace at 5 vertices, assemble), `compare` with
-the truth. Twice per seed: W and H typed as in the method's Table 1, and W and H left out so that
+the truth; then where each build's time went (its summary.json's stage seconds). Twice per seed: W and H typed as in the method's Table 1, and W and H left out so that
 the calibrated values (camera height given, as measured on site) are used.
 
     .venv/bin/python experiments/build_from_photos.py [--seeds 201 202]
@@ -35,6 +35,7 @@ def main() -> None:
         f"{'seed':>5} {'W, H':>8} {'precision':>9} {'recall':>7} {'Dice min':>8} {'median':>7} {'centroid mm':>11} "
         f"{'volume':>7} {'seconds':>7}"
     )
+    stages = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in a.seeds:
             spec = replace(base, synthetic=replace(base.synthetic, seed=seed))
@@ -51,7 +52,8 @@ def main() -> None:
             for label, s in (("typed", photo_spec), ("fitted", fitted)):
                 t0 = time.perf_counter()
                 out = Path(tmp) / f"b{seed}{label}"
-                build_to_folder(s, out, figures=False, progress=False)
+                summary = build_to_folder(s, out, figures=False, progress=False)
+                stages.append((seed, label, summary["seconds"], time.perf_counter() - t0))
                 m = compare_dirs(out, data / "truth")
                 print(
                     f"{seed:>5} {label:>8} {m['precision']:>9.4f} {m['recall']:>7.4f} {m['dice']['min']:>8.4f} "
@@ -59,6 +61,12 @@ def main() -> None:
                     f"{m['total_volume_m3']['relative_error']:>+7.2%} {time.perf_counter() - t0:>7.1f}",
                     flush=True,
                 )
+
+    names = list(dict.fromkeys(k for _, _, sec, _ in stages for k in sec))
+    print("\nstage seconds per build (summary.json; the photo stage runs two photos at a time)")
+    print(f"{'seed':>5} {'W, H':>8} " + " ".join(f"{n[:22]:>22}" for n in names) + f" {'whole':>7}")
+    for seed, label, sec, whole in stages:
+        print(f"{seed:>5} {label:>8} " + " ".join(f"{sec.get(n, 0.0):>22.2f}" for n in names) + f" {whole:>7.1f}")
 
 
 if __name__ == "__main__":

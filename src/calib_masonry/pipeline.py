@@ -52,10 +52,11 @@ class BuildResult:
 class PhotoWall:
     """A wall built from a photo: its calibration, orthophoto and segmented mask."""
 
-    calibration: object  # calibrate.rectify.PhotoCalibration
+    calibration: object  # calibrate.rectify.PhotoCalibration, its photo a preview (see photo_size)
     rectified: np.ndarray
     mask: np.ndarray
     wall: WallSpec  # with W and H resolved (typed values kept, missing ones fitted)
+    photo_size: tuple[int, int] | None = None  # (width, height) of the photo the preview shrinks
 
 
 def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
@@ -88,7 +89,17 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     rect = rectify(cal, px_per_m=spec.photo_px_per_m, width_m=width, height_m=height)
     raise_if_stopped()
     mask = segment_photo(rect, PhotoSegmentConfig(window_px=int(round(0.5 * spec.photo_px_per_m))))
-    return PhotoWall(calibration=cal, rectified=rect, mask=mask, wall=replace(wall, width_m=width, height_m=height))
+    # keep a preview of the photo for the overlay figure, not the photo: six 6 MP photos held
+    # until the figures are drawn were 430 MB of a build's peak
+    step = max(1, math.ceil(max(cal.photo.rgb.shape[:2]) / 900))  # what the figure shows
+    preview = replace(cal.photo, rgb=np.ascontiguousarray(cal.photo.rgb[::step, ::step]))
+    return PhotoWall(
+        calibration=replace(cal, photo=preview),
+        rectified=rect,
+        mask=mask,
+        wall=replace(wall, width_m=width, height_m=height),
+        photo_size=cal.photo.size,
+    )
 
 
 def _import_photo_stage() -> None:
@@ -314,7 +325,7 @@ def _write_photo_wall(pw: PhotoWall, folder: Path, *, figures: bool) -> None:
     write_rgb(folder / "rectified.png", pw.rectified)
     write_mask(folder / "mask.png", pw.mask)
     if figures:
-        plot_calibration(pw.calibration, pw.rectified, folder / "overlay.png")
+        plot_calibration(pw.calibration, pw.rectified, folder / "overlay.png", photo_size=pw.photo_size)
 
 
 def build_to_folder(

@@ -12,23 +12,26 @@ from .camera import project
 __all__ = ["plot_calibration", "plot_corner", "plot_footprint"]
 
 
-def plot_calibration(cal, rect, path: Path) -> None:
+def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | None = None) -> None:
     """Left: the photo, the fitted wall outline (green), the clicked or detected corners (red),
     bed (orange) and head (cyan) joint segments used by the fit, the vanishing directions.
     Right: the rectified orthophoto with a 1 m grid.
 
     ``rect`` is the orthophoto ``(rows, cols, 3)``, or a callable that returns it: the photo's
-    panel is drawn while it runs (``rectify`` resamples on other threads meanwhile)."""
+    panel is drawn while it runs (``rectify`` resamples on other threads meanwhile).
+    ``photo_size`` ``(width, height)``: the photo's size in pixels when ``cal.photo.rgb`` is a
+    reduced copy of it (a build keeps only a preview of each photo, not the photo)."""
     from matplotlib.collections import LineCollection
 
     from .. import _figure as plt
 
     res = cal.result
     rgb = cal.photo.rgb
+    width, height = photo_size if photo_size is not None else (rgb.shape[1], rgb.shape[0])
     # each panel is about 800 px wide at the saved size: a finer image only costs resampling time
     step = max(1, math.ceil(max(rgb.shape[:2]) / 900))
     fig, (a, b) = plt.subplots(1, 2, figsize=(14, 7.5), gridspec_kw={"width_ratios": [1, 1]})
-    a.imshow(rgb[::step, ::step], extent=(-0.5, rgb.shape[1] - 0.5, rgb.shape[0] - 0.5, -0.5))
+    a.imshow(rgb[::step, ::step], extent=(-0.5, width - 0.5, height - 0.5, -0.5))
     h = res.image_from_wall
     w_m, h_m = res.width_m, res.height_m
     # fitted outline, and 1 m grid lines of the wall drawn through the camera
@@ -60,8 +63,8 @@ def plot_calibration(cal, rect, path: Path) -> None:
                 a.add_collection(
                     LineCollection(seg.reshape(-1, 2, 2), colors=col, linewidths=0.6, label=f"{name} ({len(seg)})")
                 )
-    a.set_xlim(-0.5, rgb.shape[1] - 0.5)
-    a.set_ylim(rgb.shape[0] - 0.5, -0.5)
+    a.set_xlim(-0.5, width - 0.5)
+    a.set_ylim(height - 0.5, -0.5)
     a.legend(loc="lower left", fontsize=7, framealpha=0.8)
     cam = res.camera_json()
     a.set_title(

@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import os
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-__all__ = ["background", "cpu_count", "thread_map"]
+__all__ = ["background", "cpu_count", "thread_imap", "thread_map"]
 
 
 def cpu_count() -> int:
@@ -54,11 +54,23 @@ def background(fn: Callable, *args, **kwargs) -> _Background:
     return _Background(fn, args, kwargs)
 
 
+def thread_imap(fn: Callable, items: Iterable, *, workers: int | None = None, name: str = "work") -> Iterator:
+    """``fn(x)`` for each of ``items``, yielded in order, computed on up to ``workers`` threads
+    (default: one per CPU) named ``calib-masonry-<name>``. Leaving the loop early (an error, a
+    stop request, ``close()``) cancels the items not yet started and waits for those running, so
+    nothing runs on after the caller has moved on (a staging folder removed under a writer)."""
+    items = list(items)
+    workers = max(1, min(len(items), workers or cpu_count()))
+    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix=f"calib-masonry-{name}")
+    try:
+        yield from pool.map(fn, items)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 def thread_map(fn: Callable, items: Iterable, *, workers: int | None = None) -> list:
     """``[fn(x) for x in items]``, on up to ``workers`` threads (default: one per CPU), in order."""
     items = list(items)
-    workers = min(len(items), workers or cpu_count())
-    if workers <= 1:
+    if min(len(items), workers or cpu_count()) <= 1:
         return [fn(x) for x in items]
-    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="calib-masonry-work") as pool:
-        return list(pool.map(fn, items))
+    return list(thread_imap(fn, items, workers=workers))

@@ -106,16 +106,14 @@ def _import_photo_stage() -> None:
     """Import what :func:`photo_wall` imports on first use. Two threads importing the same
     package at once can see it half initialised (seen: matplotlib's ``rcParams`` missing), so the
     threads of :func:`resolve_photo_walls` start with everything loaded."""
-    import scipy.spatial  # noqa: F401
     import skimage.color  # noqa: F401
-    import skimage.feature  # noqa: F401
     import skimage.filters  # noqa: F401
-    import skimage.measure  # noqa: F401
     import skimage.morphology  # noqa: F401
-    import skimage.transform  # noqa: F401
 
-    from .calibrate import fit, lines, rectify  # noqa: F401
+    from .calibrate import fit, rectify  # noqa: F401
     from .wall2d import segment  # noqa: F401
+
+    rectify.import_detection()
 
 
 def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) -> tuple[StructureSpec, dict]:
@@ -124,29 +122,18 @@ def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) ->
     The walls are done two at a time on threads (scipy's filters and interpolation, which do most
     of the work, release the GIL): each wall's result depends on its own photo only, so the order
     changes nothing. A stop request ends each wall at its next stage."""
-    from ._threads import cpu_count
-    from .errors import raise_if_stopped
+    from contextlib import closing
+
+    from ._threads import cpu_count, thread_imap
 
     todo = [w for w in spec.walls if w.mask is None and w.image is not None]
-    bar = _progress(total=len(todo), desc="calibrate photos", unit="photo", enabled=progress)
-    done: dict = {}
     if todo:
-        from concurrent.futures import ThreadPoolExecutor, as_completed
-
         _import_photo_stage()  # here, not by two threads at once (a half-imported module, seen)
-
-        pool = ThreadPoolExecutor(max_workers=min(2, cpu_count(), len(todo)), thread_name_prefix="calib-masonry-photo")
-        try:
-            futures = {pool.submit(photo_wall, wall, spec): wall.name for wall in todo}
-            for future in as_completed(futures):
-                done[futures[future]] = future.result()
-                bar.update()
-                raise_if_stopped()
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
-    bar.close()
-    walls = [done[w.name].wall if w.name in done else w for w in spec.walls]
-    photos = {w.name: done[w.name] for w in todo}
+    done = thread_imap(lambda wall: photo_wall(wall, spec), todo, workers=min(2, cpu_count()), name="photo")
+    with closing(done):  # an error or a stop ends the other walls here, not when the traceback goes
+        bar = _progress(done, total=len(todo), desc="calibrate photos", unit="photo", enabled=progress)
+        photos = {wall.name: pw for pw, wall in zip(bar, todo)}  # the bar first: it ends its line
+    walls = [photos[w.name].wall if w.name in photos else w for w in spec.walls]
     return spec.with_walls(tuple(walls)), photos
 
 

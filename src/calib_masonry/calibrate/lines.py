@@ -540,11 +540,16 @@ def segments_in_quad(seg: np.ndarray, quad: np.ndarray, shrink: float = 0.01) ->
     return seg[_in_convex(seg[:, :2], q) & _in_convex(seg[:, 2:], q)]
 
 
+def _work_scale(shape: tuple[int, ...], long_side_px: int) -> float:
+    """The factor that shrinks an image of this shape to at most ``long_side_px`` (never enlarges)."""
+    return min(1.0, long_side_px / max(shape[:2]))
+
+
 def working_gray(rgb: np.ndarray, long_side_px: int) -> tuple[np.ndarray, float]:
     """The photo's grey levels shrunk (antialiased) to at most ``long_side_px``, and the factor."""
     from skimage.transform import rescale
 
-    s = min(1.0, long_side_px / max(rgb.shape[:2]))
+    s = _work_scale(rgb.shape, long_side_px)
     gray = rgb.mean(axis=-1)
     return (rescale(gray, s, anti_aliasing=True) if s < 1 else gray), s
 
@@ -559,11 +564,11 @@ def _shrunk_colour(rgb: np.ndarray, s: float) -> np.ndarray:
 def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detection:
     """Find the wall's corners and joint segments in an RGB photo ``(rows, cols, 3)`` in [0, 1]."""
 
-    s = min(1.0, config.work_long_side_px / max(rgb.shape[:2]))
+    s = _work_scale(rgb.shape, config.work_long_side_px)
     # the shrunk colour photo (for the wall's colours, below) on a second core while this one
     # finds the segments: scipy's filters release the GIL
     colour = background(_shrunk_colour, rgb, s)
-    small, s = working_gray(rgb, config.work_long_side_px)
+    small, _ = working_gray(rgb, config.work_long_side_px)
     seg = _hough_segments(small, config)
     if len(seg) < 8:
         raise FitFailed(

@@ -131,7 +131,6 @@ def parse_corners(text: str) -> tuple[float, ...]:
 
 def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = CalibrateConfig()) -> PhotoCalibration:
     """Fit the camera and the wall to one photo; refuse a fit whose residual is above ``max_rms_px``."""
-
     if not isinstance(photo, Photo):
         photo = read_photo(photo)
     w, h = photo.size
@@ -248,19 +247,24 @@ def rect_from_wall(width_m: float, height_m: float, shape: tuple[int, int]) -> n
     return np.array([[cols / width_m, 0.0, -0.5], [0.0, -rows / height_m, rows - 0.5], [0.0, 0.0, 1.0]])
 
 
-def import_early(figures: bool = True) -> None:
-    """Start importing JAX with the camera fit (0.3 s) and, with ``figures``, matplotlib (0.4 s) on a
-    second thread, so that it runs while this one reads and searches the photo (mostly in scipy,
-    which releases the GIL). numpy and scipy, which both sides import, are loaded before the
-    thread starts, and so are the detection's scikit-image modules (two threads importing one
-    package at once can see it half initialised); an import that fails there fails again, with its
-    message, where it is needed."""
-    import threading
-
+def import_detection() -> None:
+    """Import the modules the automatic detection imports on first use, in this thread: two
+    threads importing one package at once can see it half initialised (seen with matplotlib)."""
     import scipy.spatial  # noqa: F401
     import skimage.feature  # noqa: F401
     import skimage.measure  # noqa: F401
     import skimage.transform  # noqa: F401
+
+
+def import_early(figures: bool = True) -> None:
+    """Start importing JAX with the camera fit (0.3 s) and, with ``figures``, matplotlib (0.4 s) on a
+    second thread, so that it runs while this one reads and searches the photo (mostly in scipy,
+    which releases the GIL). numpy and scipy, which both sides import, are loaded before the
+    thread starts, and so are the detection's modules (:func:`import_detection`); an import that
+    fails there fails again, with its message, where it is needed."""
+    import threading
+
+    import_detection()
 
     def load() -> None:
         try:

@@ -53,8 +53,7 @@ def _shots(jobs: list, progress, desc: str):
     GIL for the heavy work (``synth --photos`` of the paper example 1.7x faster on 2 cores). Two
     at a time because each photo in flight holds a few hundred MB. A stop request ends the work
     at the next photo."""
-    from concurrent.futures import ThreadPoolExecutor
-
+    from .._threads import thread_imap
     from ..errors import raise_if_stopped
     from ..progress import progress as _progress
 
@@ -63,11 +62,11 @@ def _shots(jobs: list, progress, desc: str):
         name, render = job
         return name, render()
 
-    pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="calib-masonry-photo")
+    shots = thread_imap(run, jobs, workers=2, name="photo")
     try:
-        yield from _progress(pool.map(run, jobs), desc=desc, unit="photo", enabled=progress, total=len(jobs))
+        yield from _progress(shots, desc=desc, unit="photo", enabled=progress, total=len(jobs))
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        shots.close()  # the threads end with this generator, not when the progress wrapper goes
 
 
 def _photograph(spec: StructureSpec, pieces, photos: PhotoSpec, stage: Path, out: Path, progress) -> list[dict]:

@@ -47,3 +47,30 @@ def test_a_requested_stop_ends_a_loop_at_its_next_step(monkeypatch):
         with pytest.raises(errors.Terminated):
             bar.update()
         errors._STOP.clear()
+
+
+def test_a_signal_inside_a_deferred_section_is_raised_on_the_way_out(monkeypatch):
+    import signal
+    import threading
+
+    import pytest
+
+    from calib_masonry import errors
+
+    monkeypatch.setattr(errors, "_STOP", threading.Event())
+    reached = []
+    with pytest.raises(errors.Terminated):
+        with errors.signals_deferred():
+            with errors.signals_deferred():
+                errors.on_signal(signal.SIGTERM, None)  # held back, even in a nested section
+                reached.append("inner")
+            reached.append("outer")
+    assert reached == ["inner", "outer"] and errors.stop_requested() and not errors._PENDING
+    with pytest.raises(KeyboardInterrupt) as caught:
+        errors.on_signal(signal.SIGINT, None)  # outside a section: at once
+    assert not isinstance(caught.value, errors.Terminated)
+    with pytest.raises(ValueError):  # the block's own error wins; the held signal is dropped with it
+        with errors.signals_deferred():
+            errors.on_signal(signal.SIGINT, None)
+            raise ValueError
+    assert not errors._PENDING

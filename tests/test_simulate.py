@@ -692,3 +692,23 @@ def test_every_stone_of_an_unseen_tower_lies_on_a_joint(tmp_path, seed, height, 
     # under its own weight the joint model cracks (almost) nothing: utilisation over 1 in at most
     # 0.5 % of the joints (3 and 16 of 1128 and 657 before)
     assert (state.utilisation > 1.0).sum() <= 0.005 * jm.nj
+
+
+def test_sigterm_during_blender_start_up_is_raised_after_it_not_inside_it():
+    """A SIGTERM sent to the process while bpy imports reaches whichever thread does not block it;
+    the CLI's handler then ran inside Blender's start-up and the process died with SIGSEGV (seen in
+    CI). The handler's exception is held until Blender has started."""
+    child = (
+        "import os, signal, sys, threading, time\n"
+        "from calib_masonry.errors import Terminated, on_signal\n"
+        "from calib_masonry.simulation.blender import require_bpy\n"
+        "signal.signal(signal.SIGTERM, on_signal)\n"
+        "threading.Thread(target=lambda: (time.sleep(0.3), os.kill(os.getpid(), signal.SIGTERM))).start()\n"
+        "try:\n"
+        "    require_bpy()\n"
+        "except Terminated:\n"
+        "    print('raised after start-up:', hasattr(sys.modules.get('bpy'), 'ops'))\n"
+        "    sys.exit(3)\n"
+    )
+    p = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 3 and "raised after start-up: True" in p.stdout, p.stderr[-2000:]

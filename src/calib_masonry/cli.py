@@ -15,7 +15,7 @@ import warnings
 from pathlib import Path
 from typing import NoReturn
 
-from .errors import CalibMasonryError, Terminated, request_stop
+from .errors import CalibMasonryError, Terminated, on_signal
 
 __all__ = ["main"]
 
@@ -456,11 +456,6 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _terminate(signum, frame) -> None:
-    request_stop()  # kept even if some library swallows the exception below
-    raise Terminated()
-
-
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     warnings.showwarning = _print_warning
@@ -468,7 +463,8 @@ def main(argv: list[str] | None = None) -> int:
         from .io import trust_large_images
 
         trust_large_images()
-    previous = signal.signal(signal.SIGTERM, _terminate)  # `kill`, `timeout` and schedulers send SIGTERM
+    # `kill`, `timeout` and schedulers send SIGTERM; both signals may be held back (errors.signals_deferred)
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
     try:
         return int(args.func(args) or 0)
     except CalibMasonryError as exc:
@@ -483,7 +479,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: {what}; nothing was written", file=sys.stderr)
         return 2
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 if __name__ == "__main__":  # pragma: no cover

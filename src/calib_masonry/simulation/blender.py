@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import BackendMissing
+from ..errors import BackendMissing, signals_deferred
 from ..progress import progress as _progress
 from .joints import CrackTracker
 from .scene import Scene, joint_axes
@@ -76,10 +76,12 @@ def _one_cpu():
 def _signals_held():
     """Hold SIGTERM and Ctrl-C back while Blender runs Python of its own (start-up, factory
     settings, saving, baking): an exception raised by the CLI's signal handler inside it crashes
-    Blender with SIGSEGV. A signal that came meanwhile is handled on the way out."""
+    Blender with SIGSEGV. A signal that came meanwhile is handled on the way out. The mask keeps
+    the signal from this thread; the deferral covers the signal delivered to another thread."""
     held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT})
     try:
-        yield
+        with signals_deferred():
+            yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, held)
 

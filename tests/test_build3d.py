@@ -118,3 +118,88 @@ def test_assemble_removes_given_end_faces():
     walls = [WallPolygons(w, (0, 1), (_rect(0, 0.4, 0, 0.3), _rect(0.5, 1.0, 0, 0.3))) for w in range(4)]
     s = assemble(spec.footprint, walls, name=spec.name, end_faces=[{0}, set(), set(), set()])
     assert len(s.bricks) == 7 and s.removed[0] == (0,)
+
+
+def _solid(xy, x0, x1, rotation, shift):
+    """The prism over the polygon ``xy`` in (y, z), from x = x0 to x1, rotated and shifted."""
+    from calib_masonry.build3d.assemble import Brick
+    from calib_masonry.build3d.extrude import Polyhedron
+
+    frame = WallFrame(0, np.zeros(2), 0.0, 5.0, 3.0, x1 - x0)  # the wall's y is its thickness
+    p = prism(np.asarray(xy, float), frame)  # (x, z) outline, extruded along y
+    v = p.vertices[:, [1, 0, 2]] + [x0, 0.0, 0.0]  # thickness along x; the outline in (y, z)
+    faces = p.faces[:, ::-1]  # swapping two axes mirrors the solid: keep it outward
+    return Brick(
+        id=0, wall=0, label=0, polygon_m=np.asarray(xy, float), solid=Polyhedron(v @ rotation.T + shift, faces)
+    )
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_contact_patch_of_two_facing_prisms_is_their_overlap(seed):
+    """Two prisms face each other across 10 mm, one with an L-shaped (non-convex) face, in an
+    arbitrary orientation: the patch is the faces' overlap, its section and outline that overlap's."""
+    from dataclasses import replace
+
+    import shapely
+    from scipy.spatial.transform import Rotation
+
+    from calib_masonry.build3d.contacts import contact_patches, joint_axes
+
+    rng = np.random.default_rng(seed)
+    R = Rotation.random(random_state=seed).as_matrix()
+    t = rng.normal(size=3)
+    rect = [(0.0, 0.0), (0.5, 0.0), (0.5, 0.3), (0.0, 0.3)]
+    ell = [(0.1, -0.1), (0.7, -0.1), (0.7, 0.05), (0.3, 0.05), (0.3, 0.4), (0.1, 0.4)]
+    a = _solid(rect, 0.0, 1.0, R, t)
+    b = replace(_solid(ell, 1.01, 2.0, R, t), id=1)
+    far = replace(_solid(rect, 3.0, 4.0, R, t), id=2)  # beyond the reach: no patch
+    (patch,) = contact_patches([a, b, far], max_gap_m=0.03, progress=False)
+    overlap = shapely.Polygon(rect).intersection(shapely.Polygon(ell))
+    assert (patch.a, patch.b) == (0, 1)
+    assert np.allclose(patch.normal, R @ [1.0, 0, 0], atol=1e-12) and math.isclose(patch.gap_m, 0.01, rel_tol=1e-9)
+    assert math.isclose(patch.area_m2, overlap.area, rel_tol=1e-12)
+    c = overlap.centroid
+    assert np.allclose(patch.centroid, R @ [1.005, c.x, c.y] + t, atol=1e-12)
+    # second moments about the centroid, turned into the joint frame, against shapely's polygon
+    yz = np.asarray(overlap.exterior.coords) - [c.x, c.y]
+    u, v, _ = (x[0] for x in joint_axes(patch.normal[None]))
+    to_uv = np.array([[u @ R[:, 1], u @ R[:, 2]], [v @ R[:, 1], v @ R[:, 2]]])
+    x, y = yz[:-1, 0], yz[:-1, 1]
+    x1, y1 = yz[1:, 0], yz[1:, 1]
+    cr = x * y1 - x1 * y
+    sign = np.sign(cr.sum())
+    Jyy = sign * (cr * (x**2 + x * x1 + x1**2)).sum() / 12
+    Jzz = sign * (cr * (y**2 + y * y1 + y1**2)).sum() / 12
+    Jyz = sign * (cr * (x * y1 + 2 * x * y + 2 * x1 * y1 + x1 * y)).sum() / 24
+    J = to_uv @ np.array([[Jyy, Jyz], [Jyz, Jzz]]) @ to_uv.T
+    assert np.allclose(patch.moments, [J[0, 0], J[1, 1], J[0, 1]], rtol=0, atol=1e-14)
+    hull = np.asarray(overlap.convex_hull.exterior.coords)[:-1] - [c.x, c.y]
+    corners = {tuple(np.round(p, 9)) for p in patch.outline @ to_uv}  # (u, v) back to (y, z)
+    assert corners == {tuple(np.round(p, 9)) for p in hull}
+    assert math.isclose(patch.min_width_m, 0.3, rel_tol=1e-9)  # the overlap is 0.4 wide and 0.3 tall
+
+
+def test_least_width_of_convex_polygons_is_their_narrowest_extent():
+    from scipy.optimize import minimize_scalar
+
+    from calib_masonry.build3d.contacts import _least_widths
+
+    rng = np.random.default_rng(5)
+    angles = np.linspace(0, np.pi, 20001)
+    directions = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    for k in (3, 4, 7, 12):
+        hulls = []
+        for _ in range(5):
+            a = np.sort(rng.uniform(0, 2 * np.pi, k))
+            r = rng.uniform(0.5, 1.5, 2)
+            hulls.append(np.column_stack([r[0] * np.cos(a), r[1] * np.sin(a)]))  # convex: on an ellipse
+        hulls = np.array(hulls)
+        across = np.ptp(np.einsum("hkj,aj->hka", hulls, directions), axis=1)  # (H, angles)
+        brute = []
+        for h, best in zip(hulls, angles[across.argmin(axis=1)]):  # refined between the samples
+            width = lambda a, h=h: np.ptp(h @ [np.cos(a), np.sin(a)])  # noqa: E731
+            step = angles[1]
+            brute.append(minimize_scalar(width, bounds=(best - step, best + step), options={"xatol": 1e-12}).fun)
+        least = _least_widths(hulls)
+        assert np.all(least <= across.min(axis=1) + 1e-12)  # no direction is narrower
+        assert np.allclose(least, brute, rtol=0, atol=1e-7)  # and it is attained (to the search's tolerance)

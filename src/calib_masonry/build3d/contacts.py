@@ -120,7 +120,7 @@ class ContactPatch:
     centroid: np.ndarray
     area_m2: float
     gap_m: float
-    min_width_m: float = 0.0  # the patch's narrower principal extent (the lever arm in bending)
+    min_width_m: float = 0.0  # the patch's least width: across its narrowest direction (its convex hull's)
     # second moments (int u^2 dA, int v^2 dA, int u v dA) about the centroid in the joint frame
     # (:func:`joint_axes`), m^4, and the outline's corners (OUTLINE_POINTS, 2) in (u, v), m
     moments: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -154,21 +154,87 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-def _ring_moments(xy: np.ndarray) -> np.ndarray:
-    """(A, int x dA, int y dA, int x^2 dA, int y^2 dA, int x y dA) of a closed ring ``(k + 1, 2)``,
-    signed by its orientation (Green's theorem)."""
-    x0, y0, x1, y1 = xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1]
+def _ring_moments(xy: np.ndarray, ring: np.ndarray, count: int) -> np.ndarray:
+    """(A, int x dA, int y dA, int x^2 dA, int y^2 dA, int x y dA) ``(count, 6)`` of closed rings
+    whose corners ``xy`` ``(K, 2)`` (each ring closed, rings one after the other) belong to ring
+    ``ring`` ``(K,)``, signed by each ring's orientation (Green's theorem)."""
+    same = ring[:-1] == ring[1:]  # the edges: consecutive corners of one ring
+    x0, y0, x1, y1 = xy[:-1, 0][same], xy[:-1, 1][same], xy[1:, 0][same], xy[1:, 1][same]
     c = x0 * y1 - x1 * y0
-    return np.array(
-        [
-            c.sum() / 2,
-            (c * (x0 + x1)).sum() / 6,
-            (c * (y0 + y1)).sum() / 6,
-            (c * (x0**2 + x0 * x1 + x1**2)).sum() / 12,
-            (c * (y0**2 + y0 * y1 + y1**2)).sum() / 12,
-            (c * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)).sum() / 24,
-        ]
+    terms = (
+        c / 2,
+        c * (x0 + x1) / 6,
+        c * (y0 + y1) / 6,
+        c * (x0**2 + x0 * x1 + x1**2) / 12,
+        c * (y0**2 + y0 * y1 + y1**2) / 12,
+        c * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0) / 24,
     )
+    edge_ring = ring[:-1][same]
+    return np.stack([np.bincount(edge_ring, t, minlength=count) for t in terms], axis=1)
+
+
+def patch_sections(
+    polys: np.ndarray, bases: np.ndarray, normals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`patch_section` of many patches at once: ``polys`` ``(P,)`` shapely geometries,
+    ``bases`` ``(P, 2, 3)``, ``normals`` ``(P, 3)``; returns centroids ``(P, 2)``, moments
+    ``(P, 3)``, outlines ``(P, OUTLINE_POINTS, 2)``, areas ``(P,)`` and least widths ``(P,)``
+    (:func:`_least_width` of the convex hull)."""
+    count = len(polys)
+    bases = np.asarray(bases, dtype=np.float64).reshape(count, 2, 3)
+    parts, owner = shapely.get_parts(np.asarray(polys, dtype=object), return_index=True)
+    keep = (shapely.get_type_id(parts) == 3) & (shapely.area(parts) > 0)  # polygons with an area
+    parts, owner = shapely.orient_polygons(parts[keep]), owner[keep]  # exteriors CCW, holes CW
+    rings, part_of_ring = shapely.get_rings(parts, return_index=True)
+    xy, ring = shapely.get_coordinates(rings, return_index=True)
+    per_ring = _ring_moments(xy, ring, len(rings))
+    m = np.stack([np.bincount(owner[part_of_ring], per_ring[:, k], minlength=count) for k in range(6)], axis=1)
+    area = m[:, 0]
+    ok = area > 0
+    safe = np.where(ok, area, 1.0)
+    cx, cy = m[:, 1] / safe, m[:, 2] / safe
+    jxx, jyy, jxy = m[:, 3] - area * cx * cx, m[:, 4] - area * cy * cy, m[:, 5] - area * cx * cy
+    u, v, _ = joint_axes(normals)
+    rot = np.stack([np.einsum("pk,pjk->pj", u, bases), np.einsum("pk,pjk->pj", v, bases)], axis=1)  # (x, y) -> (u, v)
+    J = rot @ np.stack([np.stack([jxx, jxy], -1), np.stack([jxy, jyy], -1)], axis=1) @ np.transpose(rot, (0, 2, 1))
+    moments = np.where(ok[:, None], np.stack([J[:, 0, 0], J[:, 1, 1], J[:, 0, 1]], axis=1), 0.0)
+    centroids = np.where(ok[:, None], np.stack([cx, cy], axis=1), 0.0)
+    # the outline: the convex hull of the polygon parts' corners, about the centroid, in (u, v)
+    outer, at = shapely.get_coordinates(shapely.get_exterior_ring(parts), return_index=True)
+    with_parts, rank = np.unique(owner[at], return_inverse=True)  # indices must run 0, 1, 2, ...
+    hulls = shapely.convex_hull(shapely.multipoints(outer, indices=rank.ravel()))
+    hulls = shapely.simplify(hulls, 1e-9)  # GEOS keeps some corners that lie on an edge: not corners
+    outlines = np.zeros((count, OUTLINE_POINTS, 2))
+    widths = np.zeros(count)
+    polygon = (shapely.get_type_id(hulls) == 3) & ok[with_parts]
+    corners, at = shapely.get_coordinates(shapely.get_exterior_ring(hulls[polygon]), return_index=True)
+    patch = with_parts[polygon]
+    start = np.searchsorted(at, np.arange(len(patch) + 1))
+    sizes = np.diff(start) - 1  # the rings are closed: the first corner repeated at the end
+    for k in np.unique(sizes):  # the hulls with k corners at once
+        which = np.flatnonzero(sizes == k)
+        pts = corners[start[which][:, None] + np.arange(k)]  # (H, k, 2)
+        p = patch[which]
+        widths[p] = _least_widths(pts)
+        if k > OUTLINE_POINTS:  # keep the corners farthest apart: evenly along the hull
+            pts = pts[:, np.linspace(0, k, OUTLINE_POINTS, endpoint=False).astype(int)]
+        outline = np.einsum("hkj,hij->hki", pts - centroids[p][:, None], rot[p])
+        n = min(k, OUTLINE_POINTS)
+        outlines[p, :n] = outline
+        outlines[p, n:] = outline[:, -1:]
+    # a patch whose hull is a line or a point: its outline is its centroid
+    return centroids, moments, outlines, np.where(ok, area, 0.0), widths
+
+
+def _least_widths(hulls: np.ndarray) -> np.ndarray:
+    """The least widths of convex polygons ``(H, k, 2)`` (corners in order): the smallest extent
+    across any direction, which is across one of the polygon's edges (rotating calipers)."""
+    edges = np.roll(hulls, -1, axis=1) - hulls
+    length = np.linalg.norm(edges, axis=2)
+    normals = np.stack([-edges[..., 1], edges[..., 0]], axis=2) / np.where(length > 0, length, 1.0)[..., None]
+    across = np.einsum("hkj,hej->hke", hulls, normals)  # every corner along every edge's normal
+    extent = np.where(length > 0, across.max(axis=1) - across.min(axis=1), np.inf)
+    return np.where(np.isfinite(extent.min(axis=1)), extent.min(axis=1), 0.0)
 
 
 def patch_section(
@@ -179,80 +245,76 @@ def patch_section(
     2D coordinates ``(2,)``, the second moments ``(I_uu, I_vv, I_uv)`` about the centroid in the
     frame of :func:`joint_axes` of ``normal``, its outline's corners ``(OUTLINE_POINTS, 2)`` in
     (u, v) about the centroid (the convex hull, padded by repeats), and its area."""
-    parts = [g for g in getattr(poly, "geoms", [poly]) if isinstance(g, shapely.Polygon) and g.area > 0]
-    m = np.zeros(6)
-    for g in parts:
-        g = shapely.geometry.polygon.orient(g, 1.0)
-        m += _ring_moments(np.asarray(g.exterior.coords))
-        for hole in g.interiors:
-            m += _ring_moments(np.asarray(hole.coords))
-    area = m[0]
-    if area <= 0:
-        return np.zeros(2), np.zeros(3), np.zeros((OUTLINE_POINTS, 2)), 0.0
-    cx, cy = m[1] / area, m[2] / area
-    jxx = m[3] - area * cx * cx
-    jyy = m[4] - area * cy * cy
-    jxy = m[5] - area * cx * cy
-    u, v, _ = (a[0] for a in joint_axes(np.asarray(normal, dtype=np.float64)[None]))
-    rot = np.array([[u @ basis[0], u @ basis[1]], [v @ basis[0], v @ basis[1]]])  # (x, y) -> (u, v)
-    J = rot @ np.array([[jxx, jxy], [jxy, jyy]]) @ rot.T
-    hull = shapely.union_all(parts).convex_hull
-    pts = np.asarray(hull.exterior.coords)[:-1] if isinstance(hull, shapely.Polygon) else np.array([[cx, cy]])
-    if len(pts) > OUTLINE_POINTS:  # keep the corners farthest apart: evenly along the hull
-        pts = pts[np.linspace(0, len(pts), OUTLINE_POINTS, endpoint=False).astype(int)]
-    outline = (pts - [cx, cy]) @ rot.T
-    outline = np.vstack([outline, np.repeat(outline[-1:], OUTLINE_POINTS - len(outline), axis=0)])
-    return np.array([cx, cy]), np.array([J[0, 0], J[1, 1], J[0, 1]]), outline, float(area)
+    c, m, outline, area, _ = patch_sections(
+        np.array([poly], dtype=object), np.asarray(basis)[None], np.asarray(normal, dtype=np.float64)[None]
+    )
+    return c[0], m[0], outline[0], float(area[0])
 
 
-def _planar_faces(
-    p: Polyhedron, angle_tol: float = 1e-3
-) -> list[tuple[np.ndarray, float, shapely.Geometry, np.ndarray]]:
-    """Planar faces of a polyhedron: (unit normal, offset n.x, polygon in the plane's 2D basis, basis)."""
-    v = p.vertices[p.faces]
+@dataclass(frozen=True)
+class _Faces:
+    """The planar faces of many polyhedra: ``normal`` ``(F, 3)`` unit, ``offset`` ``(F,)`` (n.x),
+    ``poly`` ``(F,)`` the face in its plane's 2D basis ``basis`` ``(F, 2, 3)``; the faces of
+    polyhedron i are ``start[i]:start[i + 1]``, in the order their first triangles come."""
+
+    normal: np.ndarray
+    offset: np.ndarray
+    poly: np.ndarray
+    basis: np.ndarray
+    start: np.ndarray
+
+
+def _planar_faces(solids: Sequence[Polyhedron], angle_tol: float = 1e-3) -> _Faces:
+    """The planar faces of ``solids``: each face the union of the triangles whose normals and plane
+    offsets agree within ``angle_tol`` and 10 um."""
+    v = np.concatenate([p.vertices[p.faces] for p in solids])  # every triangle (T, 3, 3)
+    owner = np.repeat(np.arange(len(solids)), [len(p.faces) for p in solids])
     n = _cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     area2 = np.linalg.norm(n, axis=1)
     ok = area2 > 1e-15
-    n = n[ok] / area2[ok, None]
-    v = v[ok]
+    n, v, owner = n[ok] / area2[ok, None], v[ok], owner[ok]
     d = np.einsum("ij,ij->i", n, v[:, 0])
-    groups: dict[tuple, list[int]] = {}
-    for i, (ni, di) in enumerate(zip(n, d)):
-        key = (round(ni[0] / angle_tol), round(ni[1] / angle_tol), round(ni[2] / angle_tol), round(di * 1e5))
-        groups.setdefault(key, []).append(i)
-    out = []
-    for idx in groups.values():
-        normal = n[idx].mean(axis=0)
-        normal /= np.linalg.norm(normal)
-        offset = float(np.mean(d[idx]))
-        basis = _plane_basis(normal)
-        tris = shapely.polygons(v[idx] @ basis.T)  # all of the face's triangles at once
-        poly = shapely.union_all(tris[shapely.area(tris) > 0])
-        out.append((normal, offset, poly, basis))
-    return out
+    key = np.column_stack([owner, np.round(n / angle_tol), np.round(d * 1e5)]).astype(np.int64)
+    _, first, group = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    group = group.ravel()
+    # faces numbered by polyhedron, then by their first triangle (sorting the key would order them by normal)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    group = rank[group]
+    count = len(order)
+    sizes = np.bincount(group, minlength=count)
+    normal = np.stack([np.bincount(group, n[:, k], minlength=count) for k in range(3)], axis=1) / sizes[:, None]
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    offset = np.bincount(group, d, minlength=count) / sizes
+    basis = _plane_bases(normal)
+    tri = np.einsum("tck,tjk->tcj", v, basis[group])  # each triangle in its face's 2D basis
+    tris = shapely.polygons(tri)
+    tri_area = shapely.area(tris)
+    face_owner = owner[first[order]]
+    # a convex face (the sides of an extruded brick, a cut end) is its corners' convex hull; the
+    # others are the union of their triangles
+    by_group = np.argsort(group, kind="stable")  # the triangles face by face
+    hull = shapely.convex_hull(shapely.multipoints(tri[by_group].reshape(-1, 2), indices=np.repeat(group[by_group], 3)))
+    convex = np.isclose(shapely.area(hull), np.bincount(group, tri_area, minlength=count), rtol=1e-9, atol=0.0)
+    poly = hull.astype(object)
+    bounds = np.concatenate([[0], np.cumsum(sizes)])
+    for g in np.flatnonzero(~convex):
+        members = by_group[bounds[g] : bounds[g + 1]]
+        poly[g] = shapely.union_all(tris[members[tri_area[members] > 0]])
+    start = np.searchsorted(face_owner, np.arange(len(solids) + 1))
+    return _Faces(normal=normal, offset=offset, poly=poly, basis=basis, start=start)
 
 
-def _plane_basis(normal: np.ndarray) -> np.ndarray:
-    """Two orthonormal vectors ``(2, 3)`` spanning the plane with this normal."""
-    nx, ny, nz = (float(x) for x in normal)
-    # normal x helper, with the helper Z, or X where the normal is nearly along Z (written out:
-    # np.cross on single vectors was a tenth of the build's time)
-    u = np.array([ny, -nx, 0.0]) if abs(nz) < 0.9 else np.array([0.0, nz, -ny])
-    u /= np.linalg.norm(u)
-    ux, uy, uz = u
-    w = np.array([ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux])
-    return np.vstack([u, w])
-
-
-def _min_width(poly: shapely.Geometry) -> float:
-    """The narrower extent of a patch along its principal axes."""
-    hull = poly.convex_hull
-    if not isinstance(hull, shapely.Polygon):
-        return 0.0
-    pts = np.asarray(hull.exterior.coords)[:-1]
-    centred = pts - pts.mean(axis=0)
-    _, _, vt = np.linalg.svd(centred, full_matrices=False)
-    return float(np.ptp(centred @ vt[1]))
+def _plane_bases(normal: np.ndarray) -> np.ndarray:
+    """Two orthonormal vectors ``(N, 2, 3)`` spanning each plane with the normal ``(N, 3)``: normal
+    x helper, with the helper Z, or X where the normal is nearly along Z."""
+    nx, ny, nz = normal[:, 0], normal[:, 1], normal[:, 2]
+    zero = np.zeros_like(nx)
+    along_z = np.abs(nz) >= 0.9
+    u = np.where(along_z[:, None], np.stack([zero, nz, -ny], 1), np.stack([ny, -nx, zero], 1))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return np.stack([u, _cross(normal, u)], axis=1)
 
 
 def contact_patches(
@@ -267,49 +329,63 @@ def contact_patches(
     """Patches where two bricks' faces face each other across at most ``max_gap_m``.
 
     Any orientation: faces are matched by anti-parallel normals (within ``angle_deg``) and plane
-    distance, and the patch is the exact overlap of the two faces projected on a common plane.
-    Faces that overlap by more than ``-min_gap_m`` are not a joint. ``progress``: see
-    :func:`calib_masonry.progress.progress` (None: a bar on a terminal, log lines otherwise, for a
-    step that can take tens of seconds on a large structure).
+    distance, and the patch is the exact overlap of the two faces projected on a common plane (of
+    the pair's face pairs that qualify, the one with the largest overlap). Faces that overlap by
+    more than ``-min_gap_m`` are not a joint. ``progress``: see
+    :func:`calib_masonry.progress.progress` (None: a bar on a terminal, log lines otherwise).
     """
     from ..progress import progress as _progress
 
-    faces = [_planar_faces(b.solid) for b in _progress(bricks, desc="joint faces", unit="brick", enabled=progress)]
+    if not bricks:
+        return []
+    bar = _progress(total=3, desc="joint patches", unit="step", enabled=progress)
+    f = _planar_faces([b.solid for b in bricks])
+    bar.update()
     lo = np.array([b.solid.vertices.min(axis=0) for b in bricks]) - max_gap_m
     hi = np.array([b.solid.vertices.max(axis=0) for b in bricks]) + max_gap_m
-    cos_tol = np.cos(np.radians(angle_deg))
-    out: list[ContactPatch] = []
-    for a, b in _progress(box_pairs(lo, hi, -1e-12), desc="joint patches", unit="pair", enabled=progress):
-        best = None
-        for na, da, pa, basis in faces[a]:
-            for nb, db, pb, basis_b in faces[b]:
-                if float(na @ nb) > -cos_tol:
-                    continue
-                gap = -db - da  # distance from a's plane to b's plane along na (nb ~ -na)
-                if gap < min_gap_m or gap > max_gap_m:
-                    continue
-                # b's face in 3D, projected on a's plane basis
-                inter = pa.intersection(shapely.transform(pb, lambda xy: (xy @ basis_b + db * nb) @ basis.T))
-                if inter.area < min_area_m2:
-                    continue
-                if best is None or inter.area > best[0]:
-                    best = (inter.area, na, da, gap, inter, basis)
-        if best is not None:
-            area, normal, da, gap, inter, basis = best
-            c2, moments, outline, _ = patch_section(inter, basis, normal)
-            centroid = c2 @ basis + (da + 0.5 * gap) * normal
-            out.append(
-                ContactPatch(
-                    a=bricks[a].id,
-                    b=bricks[b].id,
-                    normal=normal,
-                    centroid=centroid,
-                    area_m2=float(area),
-                    gap_m=float(gap),
-                    min_width_m=_min_width(inter),
-                    moments=moments,
-                    outline=outline,
-                )
-            )
+    pairs = np.array(list(box_pairs(lo, hi, -1e-12)), dtype=np.int64).reshape(-1, 2)
+    # every face of a against every face of b, pair by pair (a's faces outer)
+    na = np.diff(f.start)[pairs[:, 0]]
+    nb = np.diff(f.start)[pairs[:, 1]]
+    combos = na * nb
+    pair = np.repeat(np.arange(len(pairs)), combos)
+    k = np.arange(combos.sum()) - np.repeat(np.cumsum(combos) - combos, combos)
+    fa = f.start[pairs[pair, 0]] + k // nb[pair]
+    fb = f.start[pairs[pair, 1]] + k % nb[pair]
+    gap = -f.offset[fb] - f.offset[fa]  # distance from a's plane to b's plane along a's normal (b's ~ -a's)
+    facing = np.einsum("ij,ij->i", f.normal[fa], f.normal[fb]) <= -np.cos(np.radians(angle_deg))
+    near = (gap >= min_gap_m) & (gap <= max_gap_m)
+    cand = np.flatnonzero(facing & near)
+    pair, fa, fb, gap = pair[cand], fa[cand], fb[cand], gap[cand]
+    # b's face in 3D, projected on a's plane basis, and its overlap with a's face
+    xy, at = shapely.get_coordinates(f.poly[fb], return_index=True)
+    p3 = xy[:, :1] * f.basis[fb[at], 0] + xy[:, 1:] * f.basis[fb[at], 1] + (f.offset[fb] * f.normal[fb].T).T[at]
+    projected = shapely.transform(f.poly[fb], lambda _: np.einsum("ik,ijk->ij", p3, f.basis[fa[at]]))
+    inter = shapely.intersection(f.poly[fa], projected)
+    area = shapely.area(inter)
+    bar.update()
+    # per pair, the largest overlap of at least min_area_m2 (the first of equals)
+    big = np.flatnonzero(area >= min_area_m2)
+    best = big[np.lexsort((big, -area[big], pair[big]))]
+    best = best[np.concatenate([[True], pair[best][1:] != pair[best][:-1]])] if len(best) else best
+    normal, basis = f.normal[fa[best]], f.basis[fa[best]]
+    c2, moments, outlines, _, widths = patch_sections(inter[best], basis, normal)
+    centroid = np.einsum("pj,pjk->pk", c2, basis) + (f.offset[fa[best]] + 0.5 * gap[best])[:, None] * normal
+    bar.update()
+    bar.close()
+    out = [
+        ContactPatch(
+            a=bricks[pairs[pair[i], 0]].id,
+            b=bricks[pairs[pair[i], 1]].id,
+            normal=normal[j],
+            centroid=centroid[j],
+            area_m2=float(area[i]),
+            gap_m=float(gap[i]),
+            min_width_m=float(widths[j]),
+            moments=moments[j],
+            outline=outlines[j],
+        )
+        for j, i in enumerate(best)
+    ]
     out.sort(key=lambda c: (c.a, c.b))
     return out

@@ -99,9 +99,11 @@ def mortar_cells(polygons: Sequence[np.ndarray], reach: float, *, pixel: float =
         ]
     ) * pixel + [x0, y0]
     ends_lab = np.tile(klab, 4)
+    by_label = np.argsort(ends_lab, kind="stable")  # each cell's ends in one slice, in their order
+    ends, bounds = ends[by_label], np.searchsorted(ends_lab[by_label], np.arange(len(hulls) + 2))
     cells = []
     for i, h in enumerate(hulls):
-        own = np.vstack([np.asarray(h.exterior.coords), ends[ends_lab == i + 1]])
+        own = np.vstack([np.asarray(h.exterior.coords), ends[bounds[i + 1] : bounds[i + 2]]])
         cell = shapely.Polygon(own[ConvexHull(own).vertices]).intersection(extent)
         cells.append(cell if cell.geom_type == "Polygon" else h)
     tree = shapely.STRtree(cells)

@@ -365,18 +365,27 @@ def _overlapping_unbonded(bodies: Sequence[Body], bonded: set[tuple[int, int]], 
 
     lo = np.array([b.location + b.vertices.min(axis=0) for b in bodies])
     hi = np.array([b.location + b.vertices.max(axis=0) for b in bodies])
-    facets: dict[int, np.ndarray] = {}  # each body's hull, computed once however many pairs it is in
+    hulls: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # each body's hull, once however many pairs it is in
 
-    def hull(k: int) -> np.ndarray:
-        if k not in facets:
-            facets[k] = ConvexHull(bodies[k].vertices + bodies[k].location).equations
-        return facets[k]
+    def hull(k: int) -> tuple[np.ndarray, np.ndarray]:
+        if k not in hulls:
+            h = ConvexHull(bodies[k].vertices + bodies[k].location)
+            hulls[k] = h.equations, h.points[h.vertices]
+        return hulls[k]
+
+    def apart(facets: np.ndarray, corners: np.ndarray) -> bool:
+        # a facet plane with all the other hull's corners within tol_m of its outer side: a ball
+        # inside both hulls would have its centre there, so its radius is at most tol_m
+        return bool(np.any((corners @ facets[:, :3].T + facets[:, 3]).min(axis=0) >= -tol_m))
 
     out: set[int] = set()
     for i, j in box_pairs(lo, hi, tol_m):
         if (i, j) in bonded:
             continue
-        if _hull_overlap_depth(hull(i), hull(j)) > tol_m:
+        (fi, ci), (fj, cj) = hull(i), hull(j)
+        if apart(fi, cj) or apart(fj, ci):  # most neighbours across a joint: no linear programme needed
+            continue
+        if _hull_overlap_depth(fi, fj) > tol_m:
             out.update((i, j))
     return out
 

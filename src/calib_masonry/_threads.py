@@ -48,6 +48,11 @@ class _Background:
             raise self._error
         return self._value
 
+    def wait(self) -> None:
+        """Wait for the function to return, whatever it did (for the way out of an error, so that
+        nothing runs on in a staging folder being removed)."""
+        self._thread.join()
+
 
 def background(fn: Callable, *args, **kwargs) -> _Background:
     """Start ``fn(*args, **kwargs)`` on a thread of its own; ``.result()`` waits for it."""

@@ -459,10 +459,11 @@ def _parser() -> argparse.ArgumentParser:
 def _tune_malloc() -> None:
     """Keep glibc from holding freed image memory: a build from photos works on two threads, and
     glibc gave each its own heaps (arenas), which kept the photo stage's freed arrays after it
-    ended, where the main thread's later stages could not reuse them (1.26-1.35 GB peak for the
-    paper example from its six photos). Two arenas at most and arrays of 16 MB or more in their own
-    mappings, returned when freed: 0.97-1.03 GB, in the same time (measured). Settings the user
-    made in the environment are left alone; other C libraries are left as they are."""
+    ended, where the main thread's later stages could not reuse them. Two arenas at most and
+    arrays of 16 MB or more in their own mappings, returned when freed: the paper example from its
+    six photos peaked at 0.89-0.94 GB with these settings and 1.27-1.31 GB without, in the same
+    time (measured, three and two runs). Settings the user made in the environment are left
+    alone; other C libraries are left as they are."""
     import os
     import platform
 

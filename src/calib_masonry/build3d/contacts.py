@@ -15,7 +15,7 @@ import numpy as np
 import shapely
 
 from .assemble import Brick
-from .extrude import Polyhedron
+from .extrude import Polyhedron, _cross
 
 __all__ = [
     "Interpenetration",
@@ -138,20 +138,6 @@ def joint_axes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     u = _cross(helper, n)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     return u, _cross(n, u), n
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` of rows ``(N, 3)``, the same products and differences (so the same bits),
-    without its axis handling, which cost 50 us a call: a tenth of the contact search, which
-    calls it for one normal at a time."""
-    return np.stack(
-        [
-            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
-        ],
-        axis=1,
-    )
 
 
 def _ring_moments(xy: np.ndarray, ring: np.ndarray, count: int) -> np.ndarray:

@@ -38,6 +38,20 @@ class Polyhedron:
         return trimesh.Trimesh(self.vertices, self.faces, process=False)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of rows ``(N, 3)``, the same products and differences (so the same bits),
+    without its axis handling, which cost 50 us a call: a tenth of the contact search
+    and of every small solid's volume and centroid."""
+    return np.stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ],
+        axis=1,
+    )
+
+
 def polygon_area(poly: np.ndarray) -> float:
     """Signed shoelace area of ``poly`` ``(k, 2)`` (positive when counter-clockwise)."""
     x, y = poly[:, 0], poly[:, 1]
@@ -46,12 +60,12 @@ def polygon_area(poly: np.ndarray) -> float:
 
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     a, b, c = (vertices[faces[:, k]] for k in range(3))
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+    return float(np.einsum("ij,ij->i", a, _cross(b, c)).sum() / 6.0)
 
 
 def _centroid(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     a, b, c = (vertices[faces[:, k]] for k in range(3))
-    v = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    v = np.einsum("ij,ij->i", a, _cross(b, c)) / 6.0
     total = v.sum()
     if abs(total) < 1e-300:
         return vertices.mean(axis=0)

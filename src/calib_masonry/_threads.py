@@ -48,14 +48,19 @@ class _Background:
             raise self._error
         return self._value
 
-    def wait(self) -> None:
-        """Wait for the function to return, whatever it did (for the way out of an error, so that
-        nothing runs on in a staging folder being removed)."""
+    def __enter__(self) -> _Background:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        """Wait for the function however the block ends, so that nothing runs on after it (a
+        writer in a staging folder being removed); an error of the block goes on, the function's
+        own is raised by ``result()``."""
         self._thread.join()
 
 
 def background(fn: Callable, *args, **kwargs) -> _Background:
-    """Start ``fn(*args, **kwargs)`` on a thread of its own; ``.result()`` waits for it."""
+    """Start ``fn(*args, **kwargs)`` on a thread of its own; ``.result()`` waits for it, and so
+    does leaving a ``with background(...)`` block, by an error or not."""
     return _Background(fn, args, kwargs)
 
 

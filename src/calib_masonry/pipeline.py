@@ -318,13 +318,11 @@ def _write_photo_walls(photos: dict[str, PhotoWall], folder: Path, *, figures: b
         doc = pw.calibration.to_json()
         doc.update(used_width_m=pw.wall.width_m, used_height_m=pw.wall.height_m, rectified_shape=list(pw.mask.shape))
         write_json(folder / name / "calibration.json", doc)
-    job = background(images)
-    try:
+    with background(images) as job:  # waited for however the figures end
         if figures:
             for name, pw in photos.items():
                 plot_calibration(pw.calibration, pw.rectified, folder / name / "overlay.png", photo_size=pw.photo_size)
-    finally:
-        job.result()  # waited for however the figures end: nothing writes on into a removed stage
+    job.result()
 
 
 def build_to_folder(

@@ -165,7 +165,7 @@ def patch_sections(
     """:func:`patch_section` of many patches at once: ``polys`` ``(P,)`` shapely geometries,
     ``bases`` ``(P, 2, 3)``, ``normals`` ``(P, 3)``; returns centroids ``(P, 2)``, moments
     ``(P, 3)``, outlines ``(P, OUTLINE_POINTS, 2)``, areas ``(P,)`` and least widths ``(P,)``
-    (:func:`_least_width` of the convex hull)."""
+    (:func:`_least_widths` of the convex hull)."""
     count = len(polys)
     bases = np.asarray(bases, dtype=np.float64).reshape(count, 2, 3)
     parts, owner = shapely.get_parts(np.asarray(polys, dtype=object), return_index=True)
@@ -219,8 +219,8 @@ def _least_widths(hulls: np.ndarray) -> np.ndarray:
     length = np.linalg.norm(edges, axis=2)
     normals = np.stack([-edges[..., 1], edges[..., 0]], axis=2) / np.where(length > 0, length, 1.0)[..., None]
     across = np.einsum("hkj,hej->hke", hulls, normals)  # every corner along every edge's normal
-    extent = np.where(length > 0, across.max(axis=1) - across.min(axis=1), np.inf)
-    return np.where(np.isfinite(extent.min(axis=1)), extent.min(axis=1), 0.0)
+    least = np.where(length > 0, across.max(axis=1) - across.min(axis=1), np.inf).min(axis=1)
+    return np.where(np.isfinite(least), least, 0.0)
 
 
 def patch_section(
@@ -345,7 +345,7 @@ def contact_patches(
     pair, fa, fb, gap = pair[cand], fa[cand], fb[cand], gap[cand]
     # b's face in 3D, projected on a's plane basis, and its overlap with a's face
     xy, at = shapely.get_coordinates(f.poly[fb], return_index=True)
-    p3 = xy[:, :1] * f.basis[fb[at], 0] + xy[:, 1:] * f.basis[fb[at], 1] + (f.offset[fb] * f.normal[fb].T).T[at]
+    p3 = xy[:, :1] * f.basis[fb[at], 0] + xy[:, 1:] * f.basis[fb[at], 1] + (f.offset[fb, None] * f.normal[fb])[at]
     projected = shapely.transform(f.poly[fb], lambda _: np.einsum("ik,ijk->ij", p3, f.basis[fa[at]]))
     inter = shapely.intersection(f.poly[fa], projected)
     area = shapely.area(inter)

@@ -275,7 +275,7 @@ def _blurred_samples(rgb: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.
     # a point beyond the photo's edge has the crop reach that edge, where "nearest" extends it
     # as it extends the whole photo
     coords = [rows - lo_r, cols - lo_c]
-    return np.stack([ndimage.map_coordinates(crop[..., c], coords, order=1, mode="nearest") for c in range(3)], -1)
+    return np.stack([ndimage.map_coordinates(crop[..., k], coords, order=1, mode="nearest") for k in range(3)], -1)
 
 
 def _refine_side(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray] | None:

@@ -395,15 +395,13 @@ def rectify_to_folder(
             write_rgb(stage / "rectified.png", rect)
             return rect
 
-        job = background(orthophoto)
-        try:
+        with background(orthophoto) as job:  # waited for on the way out of an error too
             if figure:
                 plot_calibration(cal, job.result, stage / "overlay.png")
             if mask is not None:
                 rm = rectify_image(mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m)
                 write_mask(stage / "rectified_mask.png", rm >= 0.5)
-        finally:
-            rect = job.result()  # also on the way out of an error: the staging folder is removed after it
+        rect = job.result()
         doc["rectified_shape"] = list(rect.shape[:2])
         write_json(stage / "calibration.json", doc)
     return doc

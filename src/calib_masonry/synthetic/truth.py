@@ -214,12 +214,8 @@ def synthesize(
         if photos is None:
             side()
         else:
-            job = background(side)
-            try:
+            with background(side) as job:  # waited for before the stage is removed, however it ends
                 truth["photos"], truth["corner_photos"] = _photograph(spec, pieces, photos, stage, out, progress)
-            except BaseException:
-                job.wait()  # before the stage is removed
-                raise
             job.result()
         write_json(stage / "truth" / "truth.json", truth)
         built_spec = replace(spec, walls=tuple(new_walls), synthetic=None, photos=None)

@@ -456,14 +456,20 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _tune_malloc() -> None:
-    """Keep glibc from holding freed image memory: a build from photos works on two threads, and
-    glibc gave each its own heaps (arenas), which kept the photo stage's freed arrays after it
-    ended, where the main thread's later stages could not reuse them. Two arenas at most and
-    arrays of 16 MB or more in their own mappings, returned when freed: the paper example from its
-    six photos peaked at 0.89-0.94 GB with these settings and 1.27-1.31 GB without, in the same
-    time (measured, three and two runs). Settings the user made in the environment are left
-    alone; other C libraries are left as they are."""
+def _tune_malloc(keep_freed: bool = False) -> None:
+    """Keep glibc's heaps few: a build from photos works on two threads, and glibc gave each its
+    own heap (arena), which kept the photo stage's freed arrays after it ended, where the main
+    thread's later stages could not reuse them. One heap for all threads: the paper example from
+    its six photos peaked at 0.89-0.91 GB and took 25.7-26.5 s (four runs) against 1.27-1.35 GB
+    and 27.2 s with glibc's defaults, and 0.89-0.97 GB in 26.9-28.9 s with the two heaps and 16 MB
+    mmap threshold used before (every freed array of 16 MB or more was unmapped, and the next one
+    page-faulted in afresh: 6-7 s of system time against 4).
+
+    ``keep_freed`` (``synth --photos``, which renders one 6 MP photo after another on two threads,
+    each through the same sizes of float arrays): freed arrays of any size stay in the heap for
+    the next photo instead of going back to the kernel: 26.3-28.0 s and 1.9-2.0 GB against
+    28.8-32.9 s and 1.7-2.0 GB (system time 3 s against 8-11 s). Settings the user made in the
+    environment are left alone; other C libraries are left as they are."""
     import os
     import platform
 
@@ -477,14 +483,16 @@ def _tune_malloc() -> None:
         mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):  # pragma: no cover - a glibc without mallopt
         return
-    m_mmap_threshold, m_arena_max = -3, -8  # from glibc's malloc.h
-    mallopt(m_arena_max, 2)
-    mallopt(m_mmap_threshold, 16 << 20)
+    m_trim_threshold, m_mmap_threshold, m_arena_max = -1, -3, -8  # from glibc's malloc.h
+    mallopt(m_arena_max, 1)
+    if keep_freed:
+        mallopt(m_mmap_threshold, 1 << 30)
+        mallopt(m_trim_threshold, 1 << 30)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    _tune_malloc()
+    _tune_malloc(keep_freed=args.func is _cmd_synth and bool(getattr(args, "photos", False)))
     warnings.showwarning = _print_warning
     if args.trust_large_images:
         from .io import trust_large_images

@@ -13,87 +13,84 @@ __all__ = ["plot_calibration", "plot_corner", "plot_footprint"]
 
 
 def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | None = None) -> None:
-    """Left: the photo, the fitted wall outline (green), the clicked or detected corners (red),
-    bed (orange) and head (cyan) joint segments used by the fit, the vanishing directions.
-    Right: the rectified orthophoto with a 1 m grid.
+    """Left: the photo, the fitted wall outline (green) and its 1 m grid drawn through the camera
+    (white), the clicked or detected corners (red), the bed (orange) and head (cyan) joint segments
+    used by the fit. Right: the rectified orthophoto with a 1 m grid and metre ticks.
 
     ``rect`` is the orthophoto ``(rows, cols, 3)``, or a callable that returns it: the photo's
     panel is drawn while it runs (``rectify`` resamples on other threads meanwhile).
     ``photo_size`` ``(width, height)``: the photo's size in pixels when ``cal.photo.rgb`` is a
-    reduced copy of it (a build keeps only a preview of each photo, not the photo)."""
-    from matplotlib.collections import LineCollection
+    reduced copy of it (a build keeps only a preview of each photo, not the photo).
 
-    from .. import _figure as plt
+    Drawn with Pillow (:mod:`calib_masonry._raster`), not matplotlib: importing and drawing a
+    matplotlib figure was a quarter of ``rectify``'s time."""
+    from .._raster import Canvas, nice_step
 
     res = cal.result
     rgb = cal.photo.rgb
     width, height = photo_size if photo_size is not None else (rgb.shape[1], rgb.shape[0])
-    # each panel is about 800 px wide at the saved size: a finer image only costs resampling time
-    step = max(1, math.ceil(max(rgb.shape[:2]) / 900))
-    fig, (a, b) = plt.subplots(1, 2, figsize=(14, 7.5), gridspec_kw={"width_ratios": [1, 1]})
-    a.imshow(rgb[::step, ::step], extent=(-0.5, width - 0.5, height - 0.5, -0.5))
-    h = res.image_from_wall
     w_m, h_m = res.width_m, res.height_m
-    # fitted outline, and 1 m grid lines of the wall drawn through the camera
-    t = np.linspace(0, 1, 50)
-    edge = np.concatenate(
-        [
-            np.c_[t * w_m, 0 * t],
-            np.c_[w_m + 0 * t, t * h_m],
-            np.c_[(1 - t) * w_m, h_m + 0 * t],
-            np.c_[0 * t, (1 - t) * h_m],
-        ]
-    )
-    e = project(h, edge)
-    a.plot(e[:, 0], e[:, 1], "-", color="lime", lw=1.2, label="fitted outline")
-    grid = [project(h, np.array([[x, 0], [x, h_m]])) for x in np.arange(1.0, w_m, 1.0)]
-    grid += [project(h, np.array([[0, z], [w_m, z]])) for z in np.arange(1.0, h_m, 1.0)]
-    a.add_collection(LineCollection(grid, colors="white", linewidths=0.5, alpha=0.7, label="fitted 1 m grid"))
-    if cal.detection is not None:
-        c = cal.detection.corners_px
-        lab = "detected corners"
-    else:
-        c = res.corners_px()
-        lab = "clicked corners (fitted)"
-    a.plot(c[:, 0], c[:, 1], "o", mfc="none", mec="red", ms=9, label=lab)
+    side, top, bottom, margin, gap = 760, 64, 48, 12, 78  # px: panel images at most side x side
+    k = side / max(width, height)
+    photo_wh = (max(1, round(width * k)), max(1, round(height * k)))
+    kr = side / max(w_m, h_m)
+    ortho_wh = (max(1, round(w_m * kr)), max(1, round(h_m * kr)))
+    canvas = Canvas(margin + photo_wh[0] + gap + ortho_wh[0] + margin, top + max(photo_wh[1], ortho_wh[1]) + bottom)
+    a = canvas.image_panel(rgb, margin, top, photo_wh, (-0.5, -0.5, width - 0.5, height - 0.5))
+    h = res.image_from_wall
+    # the fitted 1 m grid and outline of the wall, drawn through the camera
+    for x in np.arange(1.0, w_m, 1.0):
+        canvas.polyline(a, project(h, np.array([[x, 0], [x, h_m]])), "white", alpha=0.7)
+    for z in np.arange(1.0, h_m, 1.0):
+        canvas.polyline(a, project(h, np.array([[0, z], [w_m, z]])), "white", alpha=0.7)
+    corners_m = np.array([[0, 0], [w_m, 0], [w_m, h_m], [0, h_m]], dtype=np.float64)
+    canvas.polyline(a, project(h, corners_m), "lime", width=2, closed=True)
     det = cal.detection
+    entries = [("line", "lime", "fitted outline"), ("line", "white", "fitted 1 m grid")]
     if det is not None:
         for seg, col, name in ((det.bed_segments, "orange", "bed joints"), (det.head_segments, "cyan", "head joints")):
             if len(seg):
-                a.add_collection(
-                    LineCollection(seg.reshape(-1, 2, 2), colors=col, linewidths=0.6, label=f"{name} ({len(seg)})")
-                )
-    a.set_xlim(-0.5, width - 0.5)
-    a.set_ylim(height - 0.5, -0.5)
-    a.legend(loc="lower left", fontsize=7, framealpha=0.8)
+                canvas.segments(a, np.asarray(seg).reshape(-1, 4), col)
+                entries.append(("line", col, f"{name} ({len(seg)})"))
+        c, label = det.corners_px, "detected corners"
+    else:
+        c, label = res.corners_px(), "clicked corners (fitted)"
+    canvas.rings(a, c, "red")
+    entries.append(("ring", "red", label))
+    canvas.legend(a, entries)
     cam = res.camera_json()
-    a.set_title(
-        f"{cal.photo.path.name}: {cal.mode}, f = {cam['focal_px']:.0f} px ({cal.focal_source}), "
-        f"yaw {cam['yaw_deg']:.1f}, pitch {cam['pitch_deg']:.1f}, roll {cam['roll_deg']:.1f} deg\n"
-        f"RMS residual {res.rms_residual_px:.2f} px, {res.status.value}",
-        fontsize=9,
+    canvas.text(
+        (margin, 8),
+        f"{cal.photo.path.name} ({width} x {height} px): {cal.mode}, f = {cam['focal_px']:.0f} px "
+        f"({cal.focal_source})\nyaw {cam['yaw_deg']:.1f}, pitch {cam['pitch_deg']:.1f}, roll "
+        f"{cam['roll_deg']:.1f} deg\nRMS residual {res.rms_residual_px:.2f} px, {res.status.value}",
     )
     if callable(rect):
         rect = rect()
     rows, cols = rect.shape[:2]
-    rstep = max(1, math.ceil(max(rows, cols) / 900))
-    b.imshow(np.clip(rect[::rstep, ::rstep], 0, 1), extent=(0, w_m, 0, h_m))
+    x0 = margin + photo_wh[0] + gap
+    b = canvas.image_panel(rect, x0, top, ortho_wh, (0.0, 0.0, w_m, h_m), flip=True)
     for x in np.arange(1.0, w_m, 1.0):
-        b.axvline(x, color="white", lw=0.5, alpha=0.7)
+        canvas.polyline(b, [[x, 0], [x, h_m]], "white", alpha=0.7)
     for z in np.arange(1.0, h_m, 1.0):
-        b.axhline(z, color="white", lw=0.5, alpha=0.7)
-    b.set_xlabel("x along the wall [m]")
-    b.set_ylabel("z [m]")
-    b.set_title(
-        f"orthophoto {cols} x {rows} px: W = {w_m:.3f} +- {res.sigma('width_m'):.3f} m, "
+        canvas.polyline(b, [[0, z], [w_m, z]], "white", alpha=0.7)
+    # metre ticks: every 1, 2 or 5 x 10^k m, at least 45 px apart
+    for x in np.arange(0.0, w_m + 1e-9, nice_step(w_m, ortho_wh[0])):
+        ((px, py),) = b.xy([[x, 0.0]])
+        canvas.draw.line([(px, py), (px, py + 4)], fill=(0, 0, 0, 255))
+        canvas.text((px, py + 6), f"{x:g}", size=11, anchor="ma")
+    for z in np.arange(0.0, h_m + 1e-9, nice_step(h_m, ortho_wh[1])):
+        ((px, py),) = b.xy([[0.0, z]])
+        canvas.draw.line([(px - 4, py), (px, py)], fill=(0, 0, 0, 255))
+        canvas.text((px - 6, py), f"{z:g}", size=11, anchor="rm")
+    canvas.text((x0 + ortho_wh[0] / 2, top + ortho_wh[1] + 24), "x along the wall [m]", size=12, anchor="ma")
+    canvas.text((x0 - 6, top - 4), "z [m]", size=12, anchor="rd")
+    canvas.text(
+        (x0, 8),
+        f"orthophoto {cols} x {rows} px\nW = {w_m:.3f} +- {res.sigma('width_m'):.3f} m, "
         f"H = {h_m:.3f} +- {res.sigma('height_m'):.3f} m",
-        fontsize=9,
     )
-    # fixed margins for this fixed layout: matplotlib's tight_layout measured every text to find
-    # them (0.11 s of the figure's 0.45 s)
-    fig.subplots_adjust(left=0.045, right=0.99, bottom=0.07, top=0.92, wspace=0.12)
-    plt.save(fig, path, dpi=110)
-    plt.close(fig)
+    canvas.save(path)
 
 
 def plot_footprint(widths, thetas, adjusted_w, adjusted_t, names, path: Path, *, title: str = "") -> None:

@@ -257,7 +257,7 @@ def import_detection() -> None:
 
 
 def import_early(figures: bool = True) -> None:
-    """Start importing JAX with the camera fit (0.3 s) and, with ``figures``, matplotlib (0.4 s) on a
+    """Start importing JAX with the camera fit (0.3 s) and, with ``figures``, Pillow's drawing on a
     second thread, so that it runs while this one reads and searches the photo (mostly in scipy,
     which releases the GIL). numpy and scipy, which both sides import, are loaded before the
     thread starts, and so are the detection's modules (:func:`import_detection`); an import that
@@ -271,8 +271,9 @@ def import_early(figures: bool = True) -> None:
             from . import fit  # noqa: F401
 
             if figures:
-                import matplotlib.collections  # noqa: F401
-                import matplotlib.figure  # noqa: F401
+                from .. import _raster
+
+                _raster.font(12)  # the font file is read once, here
         except Exception:  # noqa: BLE001 - reported by the import where it is needed
             pass
 

@@ -467,6 +467,14 @@ def test_rectify_cli_writes_calibration_json(photo_set, tmp_path, capsys):
     assert np.allclose(got, [[0, 0], [w, 0], [w, ht], [0, ht]], atol=0.03)
     assert (out / "rectified.png").is_file() and (out / "overlay.png").is_file()
     assert doc["rectified_shape"] == [round(doc["height_m"] * 150), round(doc["width_m"] * 150)]
+    from PIL import Image
+
+    with Image.open(out / "overlay.png") as im:  # two panels of at most 760 px, and their titles
+        overlay = np.asarray(im.convert("RGB"))
+    assert 1000 < overlay.shape[1] < 1700 and 700 < overlay.shape[0] < 900
+    # the fitted outline is drawn in lime, the detected corners in red
+    for colour in ((0, 255, 0), (255, 0, 0)):
+        assert np.count_nonzero(np.all(overlay == colour, axis=-1)) > 50
 
 
 @pytest.mark.parametrize(
@@ -631,3 +639,25 @@ def test_the_wide_gaussian_is_the_direct_one_within_half_a_percent(shape, sigma)
     coarse = _wide_gaussian(field, sigma)
     assert coarse.shape == field.shape and coarse.dtype == field.dtype
     assert np.abs(coarse - direct).max() < 5e-3 * np.ptp(direct)  # half a percent of what the blur spans
+
+
+def test_fill_holes_is_scipys_binary_fill_holes():
+    from scipy import ndimage
+
+    from calib_masonry.calibrate.lines import fill_holes
+
+    rng = np.random.default_rng(7)
+    for _ in range(40):
+        shape = (int(rng.integers(1, 90)), int(rng.integers(1, 90)))
+        m = ndimage.gaussian_filter(rng.normal(size=shape), rng.uniform(0.5, 3.0)) > rng.normal(0.0, 0.05)
+        assert np.array_equal(fill_holes(m), ndimage.binary_fill_holes(m))
+
+
+def test_distances_to_many_vanishing_points_are_those_to_each_bit_for_bit():
+    from calib_masonry.calibrate.lines import _dist_to_vp, _dist_to_vps
+
+    rng = np.random.default_rng(3)
+    seg = rng.normal(size=(60, 4))
+    vps = np.r_[rng.normal(size=(20, 3)), [[1.0, 0.5, 0.0]]]  # one at infinity
+    many = _dist_to_vps(seg, vps)
+    assert all(np.array_equal(many[k], _dist_to_vp(seg, vp)) for k, vp in enumerate(vps))

@@ -180,6 +180,16 @@ def _dist_to_vp(seg: np.ndarray, vp: np.ndarray) -> np.ndarray:
     return 0.5 * np.abs(cross) / (np.linalg.norm(to, axis=1) + 1e-300)
 
 
+def _dist_to_vps(seg: np.ndarray, vps: np.ndarray) -> np.ndarray:
+    """:func:`_dist_to_vp` of every segment from each of the points ``vps`` ``(k, 3)``: ``(k, n)``,
+    the same arithmetic element by element."""
+    mid = (seg[:, :2] + seg[:, 2:]) / 2
+    d = seg[:, 2:] - seg[:, :2]
+    to = vps[:, None, :2] - mid[None] * vps[:, None, 2:3]
+    cross = d[:, 0] * to[..., 1] - d[:, 1] * to[..., 0]
+    return 0.5 * np.abs(cross) / (np.linalg.norm(to, axis=-1) + 1e-300)
+
+
 def _vanishing_point(
     seg: np.ndarray, tol: float, cfg: DetectConfig, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -189,16 +199,17 @@ def _vanishing_point(
     lines = _lines(seg)
     length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
     prob = length / length.sum()
-    best, best_score = None, -1.0
-    for _ in range(cfg.ransac_iterations):
-        i, j = rng.choice(len(seg), size=2, replace=False, p=prob)
-        vp = np.cross(lines[i], lines[j])
-        if not np.all(np.isfinite(vp)) or np.linalg.norm(vp) == 0:
-            continue
-        inl = _dist_to_vp(seg, vp) < tol
-        score = float(length[inl].sum())
-        if score > best_score:
-            best, best_score = vp, score
+    # the hypotheses drawn one at a time (the random stream of a loop that scored each in turn),
+    # then scored together; each score is summed as that loop summed it, so the first of the best
+    # is the same hypothesis, to the bit
+    pairs = np.array([rng.choice(len(seg), size=2, replace=False, p=prob) for _ in range(cfg.ransac_iterations)])
+    vps = np.cross(lines[pairs[:, 0]], lines[pairs[:, 1]])
+    valid = np.all(np.isfinite(vps), axis=1) & (np.linalg.norm(vps, axis=1) != 0)
+    if not valid.any():
+        raise FitFailed("automatic mode: the joint lines found are all parallel; no vanishing point")
+    inliers = _dist_to_vps(seg, vps) < tol
+    scores = np.array([float(length[m].sum()) if ok else -1.0 for m, ok in zip(inliers, valid)])
+    best = vps[int(np.argmax(scores))]
     inl = _dist_to_vp(seg, best) < tol
     for _ in range(3):
         w = np.sqrt(length[inl])
@@ -353,6 +364,17 @@ def _inside_convex(shape: tuple[int, int], quad: np.ndarray) -> np.ndarray:
     return (xs > lo[:, None]) & (xs < hi[:, None])
 
 
+def fill_holes(mask: np.ndarray) -> np.ndarray:
+    """``scipy.ndimage.binary_fill_holes`` of a 2-D mask (4-connected background), by labelling:
+    the background's components that touch the border stay, every other one is filled. The same
+    pixels in a fifth of the time (the propagation by repeated dilation was 0.03 s a call here)."""
+    lab, n = ndimage.label(~mask)
+    outside = np.zeros(n + 1, dtype=bool)
+    outside[np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]])] = True
+    outside[0] = False
+    return ~outside[lab]
+
+
 def _colour_bins(rgb_small: np.ndarray, bins: int = 16) -> np.ndarray:
     """Each pixel's cell in a ``bins``^3 colour histogram."""
     idx = np.clip((rgb_small * bins).astype(int), 0, bins - 1)
@@ -375,7 +397,7 @@ def _wall_mask(rgb_small: np.ndarray, quad: np.ndarray, flat: np.ndarray | None 
     h_bg = np.bincount(flat[outer], minlength=bins**3) + 1.0
     ratio = np.log(h_wall / h_wall.sum()) - np.log(h_bg / h_bg.sum())
     score = ndimage.gaussian_filter(ratio[flat], 2.0)
-    wall = ndimage.binary_fill_holes(score > 0)
+    wall = fill_holes(score > 0)
     lab = label(wall)
     centre_label = lab[round(np.clip(c[1], 0, rows - 1)), round(np.clip(c[0], 0, cols - 1))]
     if centre_label == 0:
@@ -550,7 +572,10 @@ def working_gray(rgb: np.ndarray, long_side_px: int) -> tuple[np.ndarray, float]
     from skimage.transform import rescale
 
     s = _work_scale(rgb.shape, long_side_px)
-    gray = rgb.mean(axis=-1)
+    # the channels' mean, as rgb.mean(axis=-1) sums and divides (the same bits), in a fifth of its time
+    gray = rgb[..., 0] + rgb[..., 1]
+    gray += rgb[..., 2]
+    gray /= 3
     return (rescale(gray, s, anti_aliasing=True) if s < 1 else gray), s
 
 

@@ -85,65 +85,81 @@ class Panel:
 
 
 class Canvas:
-    """A white RGB canvas with a blending drawer (colours may carry an alpha)."""
+    """A white RGB canvas. Each image panel is drawn on its own layer, so that lines running past
+    its edges (an outline partly outside the photo) are clipped to it; :meth:`save` pastes the
+    layers in. Colours may carry an alpha (blended)."""
 
     def __init__(self, width: int, height: int):
         from PIL import Image, ImageDraw
 
         self.image = Image.new("RGB", (int(width), int(height)), COLOURS["white"])
         self.draw = ImageDraw.Draw(self.image, "RGBA")
+        self._layers: dict[Panel, tuple] = {}
 
     def image_panel(self, img: np.ndarray, x0: int, y0: int, size: tuple[int, int], box, *, flip=False) -> Panel:
-        """Paste ``img`` (rows, cols[, 3]) in [0, 1] resized to ``size`` (w, h) at ``(x0, y0)``; the
-        panel shows the source box ``(u0, v0, u1, v1)``."""
-        from PIL import Image
+        """A panel showing ``img`` (rows, cols[, 3]) in [0, 1] resized to ``size`` (w, h) at
+        ``(x0, y0)``; ``box`` ``(u0, v0, u1, v1)`` is the source frame's extent it shows."""
+        from PIL import Image, ImageDraw
 
-        pil = Image.fromarray(to_uint8(img, max(size))).resize(size, Image.Resampling.BILINEAR)
-        self.image.paste(pil, (int(x0), int(y0)))
-        self.draw.rectangle([x0 - 1, y0 - 1, x0 + size[0], y0 + size[1]], outline=COLOURS["grey"])
-        return Panel(x0, y0, size[0], size[1], *box, flip=flip)
+        layer = Image.fromarray(to_uint8(img, max(size))).resize(size, Image.Resampling.BILINEAR)
+        panel = Panel(x0, y0, size[0], size[1], *box, flip=flip)
+        self._layers[panel] = (layer, ImageDraw.Draw(layer, "RGBA"))
+        return panel
+
+    def _on(self, panel: Panel, pts) -> tuple:
+        """The panel's drawer and ``pts`` in its layer's pixels."""
+        return self._layers[panel][1], [(x - panel.x0, y - panel.y0) for x, y in panel.xy(pts)]
 
     def polyline(self, panel: Panel, pts, colour, width: int = 1, alpha: float = 1.0, closed=False) -> None:
-        xy = panel.xy(pts)
+        draw, xy = self._on(panel, pts)
         if closed:
             xy = xy + xy[:1]
-        self.draw.line(xy, fill=_rgba(colour, alpha), width=width)
+        draw.line(xy, fill=_rgba(colour, alpha), width=width)
 
     def segments(self, panel: Panel, segs: np.ndarray, colour, width: int = 1, alpha: float = 1.0) -> None:
         """Segments ``(n, 4)``: x0, y0, x1, y1 in the source frame."""
         fill = _rgba(colour, alpha)
-        for a, b in zip(panel.xy(segs[:, :2]), panel.xy(segs[:, 2:])):
-            self.draw.line([a, b], fill=fill, width=width)
+        draw, xy = self._on(panel, np.asarray(segs, dtype=np.float64).reshape(-1, 2))
+        for a, b in zip(xy[0::2], xy[1::2]):
+            draw.line([a, b], fill=fill, width=width)
 
     def rings(self, panel: Panel, pts, colour, radius: float = 6.0, width: int = 2) -> None:
-        for x, y in panel.xy(pts):
-            self.draw.ellipse([x - radius, y - radius, x + radius, y + radius], outline=_rgba(colour), width=width)
+        draw, xy = self._on(panel, pts)
+        for x, y in xy:
+            draw.ellipse([x - radius, y - radius, x + radius, y + radius], outline=_rgba(colour), width=width)
 
     def text(self, xy, text: str, size: int = 12, colour="black", anchor: str = "la") -> None:
+        """Text on the canvas (outside the panels), at canvas pixels ``xy``."""
         self.draw.multiline_text(xy, text, fill=_rgba(colour), font=font(size), anchor=anchor, spacing=3)
 
     def legend(self, panel: Panel, entries: list[tuple[str, str, str]], size: int = 11) -> None:
         """A box in the panel's lower left corner: ``(kind, colour, label)``, kind ``"line"`` or
         ``"ring"``."""
+        draw = self._layers[panel][1]
         f = font(size)
         pad, swatch, row = 6, 22, size + 6
-        width = pad * 3 + swatch + max(int(self.draw.textlength(lab, font=f)) for _, _, lab in entries)
+        width = pad * 3 + swatch + max(int(draw.textlength(lab, font=f)) for _, _, lab in entries)
         height = pad * 2 + row * len(entries)
-        x0, y1 = panel.x0 + 8, panel.y0 + panel.h - 8
+        x0, y1 = 8, panel.h - 8
         y0 = y1 - height
-        self.draw.rectangle([x0, y0, x0 + width, y1], fill=(255, 255, 255, 205), outline=COLOURS["grey"])
+        draw.rectangle([x0, y0, x0 + width, y1], fill=(255, 255, 255, 205), outline=COLOURS["grey"])
         for i, (kind, colour, label) in enumerate(entries):
             yc = y0 + pad + row * i + row / 2
             if kind == "ring":
                 xc = x0 + pad + swatch / 2
-                self.draw.ellipse([xc - 4, yc - 4, xc + 4, yc + 4], outline=_rgba(colour), width=2)
+                draw.ellipse([xc - 4, yc - 4, xc + 4, yc + 4], outline=_rgba(colour), width=2)
             else:  # a grey rim, so that a white line shows on the white box
-                self.draw.line([(x0 + pad - 1, yc), (x0 + pad + swatch + 1, yc)], fill=_rgba("grey"), width=5)
-                self.draw.line([(x0 + pad, yc), (x0 + pad + swatch, yc)], fill=_rgba(colour), width=3)
-            self.draw.text((x0 + 2 * pad + swatch, yc), label, fill=_rgba("black"), font=f, anchor="lm")
+                draw.line([(x0 + pad - 1, yc), (x0 + pad + swatch + 1, yc)], fill=_rgba("grey"), width=5)
+                draw.line([(x0 + pad, yc), (x0 + pad + swatch, yc)], fill=_rgba(colour), width=3)
+            draw.text((x0 + 2 * pad + swatch, yc), label, fill=_rgba("black"), font=f, anchor="lm")
 
     def save(self, path) -> None:
-        """A PNG at zlib level 1 (as :func:`calib_masonry._figure.save`)."""
+        """The panels pasted in, framed, and the canvas written as a PNG at zlib level 1 (as
+        :func:`calib_masonry._figure.save`)."""
+        for panel, (layer, _) in self._layers.items():
+            self.image.paste(layer, (int(panel.x0), int(panel.y0)))
+            box = [panel.x0 - 1, panel.y0 - 1, panel.x0 + panel.w, panel.y0 + panel.h]
+            self.draw.rectangle(box, outline=COLOURS["grey"])
         self.image.save(path, compress_level=1)
 
 

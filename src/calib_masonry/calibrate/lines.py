@@ -202,13 +202,18 @@ def _vanishing_point(
     # the hypotheses drawn one at a time (the random stream of a loop that scored each in turn),
     # then scored together; each score is summed as that loop summed it, so the first of the best
     # is the same hypothesis, to the bit
-    pairs = np.array([rng.choice(len(seg), size=2, replace=False, p=prob) for _ in range(cfg.ransac_iterations)])
+    pairs = [rng.choice(len(seg), size=2, replace=False, p=prob) for _ in range(cfg.ransac_iterations)]
+    pairs = np.array(pairs, dtype=np.intp).reshape(-1, 2)
     vps = np.cross(lines[pairs[:, 0]], lines[pairs[:, 1]])
     valid = np.all(np.isfinite(vps), axis=1) & (np.linalg.norm(vps, axis=1) != 0)
     if not valid.any():
-        raise FitFailed("automatic mode: the joint lines found are all parallel; no vanishing point")
-    inliers = _dist_to_vps(seg, vps) < tol
-    scores = np.array([float(length[m].sum()) if ok else -1.0 for m, ok in zip(inliers, valid)])
+        raise FitFailed("automatic mode: no two joint lines meet in a vanishing point; click the corners")
+    scores = np.full(len(vps), -1.0)
+    for k0 in range(0, len(vps), 64):  # 64 hypotheses at a time: (64, segments, 2) temporaries
+        inliers = _dist_to_vps(seg, vps[k0 : k0 + 64]) < tol
+        for k, m in enumerate(inliers, start=k0):
+            if valid[k]:
+                scores[k] = float(length[m].sum())
     best = vps[int(np.argmax(scores))]
     inl = _dist_to_vp(seg, best) < tol
     for _ in range(3):
@@ -573,9 +578,12 @@ def working_gray(rgb: np.ndarray, long_side_px: int) -> tuple[np.ndarray, float]
 
     s = _work_scale(rgb.shape, long_side_px)
     # the channels' mean, as rgb.mean(axis=-1) sums and divides (the same bits), in a fifth of its time
-    gray = rgb[..., 0] + rgb[..., 1]
-    gray += rgb[..., 2]
-    gray /= 3
+    if rgb.dtype in (np.float32, np.float64):
+        gray = rgb[..., 0] + rgb[..., 1]
+        gray += rgb[..., 2]
+        gray /= 3
+    else:  # integers would overflow in the sum
+        gray = rgb.mean(axis=-1)
     return (rescale(gray, s, anti_aliasing=True) if s < 1 else gray), s
 
 

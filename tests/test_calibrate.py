@@ -382,6 +382,21 @@ def test_build_from_photos_matches_truth(photo_set, tmp_path):
     assert m["precision"] >= 0.95 and m["recall"] >= 0.95 and m["dice"]["median"] >= 0.95
 
 
+def test_photo_walls_traced_on_their_threads_are_traced_as_after(photo_set):
+    from calib_masonry.pipeline import resolve_photo_walls, trace_wall
+    from calib_masonry.spec import load_structure
+
+    data, _ = photo_set
+    spec = load_structure(data / "structure_photos.toml")
+    _, photos = resolve_photo_walls(spec, progress=False, trace=True)
+    for pw in photos.values():
+        after = trace_wall(pw.wall, spec, pw.mask, progress=False)
+        assert pw.trace is not None and pw.trace.image_shape == after.image_shape
+        assert len(pw.trace.bricks) == len(after.bricks) > 0
+        for a, b in zip(pw.trace.bricks, after.bricks):
+            assert a.id == b.id and a.dice == b.dice and np.array_equal(a.vertices_xy, b.vertices_xy)
+
+
 def test_photo_wall_without_size_takes_the_fitted_one(photo_set, tmp_path):
     from calib_masonry.spec import load_structure
 

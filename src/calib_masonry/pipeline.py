@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -57,12 +57,11 @@ class PhotoWall:
     mask: np.ndarray
     wall: WallSpec  # with W and H resolved (typed values kept, missing ones fitted)
     photo_size: tuple[int, int] | None = None  # (width, height) of the photo the preview shrinks
+    trace: TraceResult | None = None  # the mask traced (resolve_photo_walls with trace=True)
 
 
 def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     """Calibrate a wall's photo, rectify it onto the wall (W x H) and segment bricks from mortar."""
-    from dataclasses import replace
-
     from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify
     from .errors import CalibMasonryError, raise_if_stopped
     from .wall2d.segment import PhotoSegmentConfig, segment_photo
@@ -116,12 +115,17 @@ def _import_photo_stage() -> None:
     rectify.import_detection()
 
 
-def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) -> tuple[StructureSpec, dict]:
+def resolve_photo_walls(
+    spec: StructureSpec, *, progress: bool | None = None, trace: bool = False
+) -> tuple[StructureSpec, dict]:
     """Calibrate every photo wall; the spec with fitted sizes filled in, and the photo results by wall name.
 
     The walls are done two at a time on threads (scipy's filters and interpolation, which do most
     of the work, release the GIL): each wall's result depends on its own photo only, so the order
-    changes nothing. A stop request ends each wall at its next stage."""
+    changes nothing. A stop request ends each wall at its next stage. With ``trace``, each wall's
+    mask is also traced on its thread (:func:`trace_wall`, the same result as tracing it after),
+    while the other thread works on its photo; walls that refine their outlines are left to the
+    caller (their JAX batches and progress bars belong on the main thread)."""
     from contextlib import closing
 
     from ._threads import cpu_count, thread_imap
@@ -129,7 +133,14 @@ def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) ->
     todo = [w for w in spec.walls if w.mask is None and w.image is not None]
     if todo:
         _import_photo_stage()  # here, not by two threads at once (a half-imported module, seen)
-    done = thread_imap(lambda wall: photo_wall(wall, spec), todo, workers=min(2, cpu_count()), name="photo")
+
+    def one(wall: WallSpec) -> PhotoWall:
+        pw = photo_wall(wall, spec)
+        if trace and not wall.refine:
+            pw = replace(pw, trace=trace_wall(pw.wall, spec, pw.mask, progress=False))
+        return pw
+
+    done = thread_imap(one, todo, workers=min(2, cpu_count()), name="photo")
     with closing(done):  # an error or a stop ends the other walls here, not when the traceback goes
         bar = _progress(done, total=len(todo), desc="calibrate photos", unit="photo", enabled=progress)
         photos = {wall.name: pw for pw, wall in zip(bar, todo)}  # the bar first: it ends its line
@@ -137,7 +148,9 @@ def resolve_photo_walls(spec: StructureSpec, *, progress: bool | None = None) ->
     return spec.with_walls(tuple(walls)), photos
 
 
-def trace_wall(wall: WallSpec, spec: StructureSpec, mask: np.ndarray | None = None) -> TraceResult:
+def trace_wall(
+    wall: WallSpec, spec: StructureSpec, mask: np.ndarray | None = None, *, progress: bool | None = None
+) -> TraceResult:
     """Read, check and trace one wall's mask (or the mask segmented from its photo)."""
     if mask is None:
         if wall.mask is None:
@@ -159,7 +172,7 @@ def trace_wall(wall: WallSpec, spec: StructureSpec, mask: np.ndarray | None = No
     config = TraceConfig(
         vertices=wall.vertices, target_dice=wall.target_dice if wall.vertices is None else None, refine=refine
     )
-    result = trace_mask(mask, config)
+    result = trace_mask(mask, config, progress=progress)
     if not result.bricks:
         source = f"mask {wall.mask}" if wall.mask is not None else f"photo {wall.image}"
         raise InputError(
@@ -202,11 +215,12 @@ def build(
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     todo = tuple(w for w in spec.walls if w.name not in traces_given)
-    resolved, photos = resolve_photo_walls(spec.with_walls(todo), progress=progress) if todo else (spec, {})
+    resolved, photos = resolve_photo_walls(spec.with_walls(todo), progress=progress, trace=True) if todo else (spec, {})
     fitted = {w.name: w for w in resolved.walls if w.name not in traces_given}
     spec = spec.with_walls(tuple(fitted.get(w.name, w) for w in spec.walls))
-    if photos:
-        seconds["calibrate_rectify_segment"] = time.perf_counter() - t0
+    if photos:  # calibrated, rectified, segmented and (unless they refine) traced
+        seconds["photo_walls"] = time.perf_counter() - t0
+    traces_given.update({name: pw.trace for name, pw in photos.items() if pw.trace is not None})
     t0 = time.perf_counter()
     traces = []
     for wall in _progress(spec.walls, desc="trace walls", unit="wall", enabled=progress):

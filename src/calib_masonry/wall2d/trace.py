@@ -179,20 +179,21 @@ def _simplify(outline: np.ndarray, region: np.ndarray, config: TraceConfig) -> t
     return best_poly, best_dice
 
 
-def trace_mask(mask: np.ndarray, config: TraceConfig = TraceConfig()) -> TraceResult:
+def trace_mask(mask: np.ndarray, config: TraceConfig = TraceConfig(), *, progress: bool | None = None) -> TraceResult:
     """Label the bricks of ``mask`` ``(rows, cols)`` and simplify each to a polygon.
 
     With ``config.refine`` set, the polygons are then refined by soft Dice (all bricks at once):
     for a fixed count, from the better of the splitting and Visvalingam-Whyatt polygons; for a
     target Dice, count by count from 3 vertices, each brick stopping at the first count whose
-    refined polygon reaches the target.
+    refined polygon reaches the target. ``progress``: as :func:`calib_masonry.progress.progress`'s
+    ``enabled`` (False on a worker thread, whose bar would cut through the main thread's).
     """
-    from ..progress import progress
+    from ..progress import progress as _progress
 
     labels = label_bricks(mask, config.segment)
     slices = ndimage.find_objects(labels)
     items = []
-    for k, slc in enumerate(progress(slices, desc="trace outlines", unit="brick"), start=1):
+    for k, slc in enumerate(_progress(slices, desc="trace outlines", unit="brick", enabled=progress), start=1):
         if slc is None:
             continue
         region = labels[slc] == k
@@ -203,7 +204,7 @@ def trace_mask(mask: np.ndarray, config: TraceConfig = TraceConfig()) -> TraceRe
         bricks = _refined(labels, items, config)
     else:
         bricks = []
-        for k, region, outline, offset in progress(items, desc="simplify", unit="brick"):
+        for k, region, outline, offset in _progress(items, desc="simplify", unit="brick", enabled=progress):
             poly, dice = _simplify(outline, region, config)
             bricks.append(
                 TracedBrick(

@@ -14,7 +14,7 @@ from functools import cache
 
 import numpy as np
 
-__all__ = ["Canvas", "Panel", "font", "nice_step", "to_uint8"]
+__all__ = ["Canvas", "Panel", "font", "nice_step", "text_width", "to_uint8"]
 
 #: colours by name, as the matplotlib figures name them
 COLOURS = {
@@ -34,6 +34,11 @@ def font(size: int):
     from PIL import ImageFont
 
     return ImageFont.load_default(size=size)
+
+
+def text_width(text: str, size: int = 12) -> int:
+    """The width in px of ``text``'s widest line in :func:`font` ``(size)``."""
+    return max(math.ceil(font(size).getlength(line)) for line in text.split("\n"))
 
 
 def to_uint8(img: np.ndarray, max_side: int) -> np.ndarray:

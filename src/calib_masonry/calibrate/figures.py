@@ -24,7 +24,7 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
 
     Drawn with Pillow (:mod:`calib_masonry._raster`), not matplotlib: importing and drawing a
     matplotlib figure was a quarter of ``rectify``'s time."""
-    from .._raster import Canvas, nice_step
+    from .._raster import Canvas, nice_step, text_width
 
     res = cal.result
     rgb = cal.photo.rgb
@@ -35,7 +35,18 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
     photo_wh = (max(1, round(width * k)), max(1, round(height * k)))
     kr = side / max(w_m, h_m)
     ortho_wh = (max(1, round(w_m * kr)), max(1, round(h_m * kr)))
-    canvas = Canvas(margin + photo_wh[0] + gap + ortho_wh[0] + margin, top + max(photo_wh[1], ortho_wh[1]) + bottom)
+    cam = res.camera_json()
+    left_title = (
+        f"{cal.photo.path.name} ({width} x {height} px): {cal.mode}, f = {cam['focal_px']:.0f} px "
+        f"({cal.focal_source})\nyaw {cam['yaw_deg']:.1f}, pitch {cam['pitch_deg']:.1f}, roll "
+        f"{cam['roll_deg']:.1f} deg\nRMS residual {res.rms_residual_px:.2f} px, {res.status.value}"
+    )
+    sizes = f"W = {w_m:.3f} +- {res.sigma('width_m'):.3f} m, H = {h_m:.3f} +- {res.sigma('height_m'):.3f} m"
+    # each column as wide as its panel or its title (a tall narrow wall's orthophoto is narrow)
+    left_w = max(photo_wh[0], text_width(left_title))
+    right_w = max(ortho_wh[0], text_width(f"orthophoto 99999 x 99999 px\n{sizes}"), text_width("x along the wall [m]"))
+    x0 = margin + left_w + gap
+    canvas = Canvas(x0 + right_w + margin, top + max(photo_wh[1], ortho_wh[1]) + bottom)
     a = canvas.image_panel(rgb, margin, top, photo_wh, (-0.5, -0.5, width - 0.5, height - 0.5))
     h = res.image_from_wall
     # the fitted 1 m grid and outline of the wall, drawn through the camera
@@ -58,17 +69,10 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
     canvas.rings(a, c, "red")
     entries.append(("ring", "red", label))
     canvas.legend(a, entries)
-    cam = res.camera_json()
-    canvas.text(
-        (margin, 8),
-        f"{cal.photo.path.name} ({width} x {height} px): {cal.mode}, f = {cam['focal_px']:.0f} px "
-        f"({cal.focal_source})\nyaw {cam['yaw_deg']:.1f}, pitch {cam['pitch_deg']:.1f}, roll "
-        f"{cam['roll_deg']:.1f} deg\nRMS residual {res.rms_residual_px:.2f} px, {res.status.value}",
-    )
+    canvas.text((margin, 8), left_title)
     if callable(rect):
         rect = rect()
     rows, cols = rect.shape[:2]
-    x0 = margin + photo_wh[0] + gap
     b = canvas.image_panel(rect, x0, top, ortho_wh, (0.0, 0.0, w_m, h_m), flip=True)
     for x in np.arange(1.0, w_m, 1.0):
         canvas.polyline(b, [[x, 0], [x, h_m]], "white", alpha=0.7)
@@ -85,11 +89,7 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
         canvas.text((px - 6, py), f"{z:g}", size=11, anchor="rm")
     canvas.text((x0 + ortho_wh[0] / 2, top + ortho_wh[1] + 24), "x along the wall [m]", size=12, anchor="ma")
     canvas.text((x0 - 6, top - 4), "z [m]", size=12, anchor="rd")
-    canvas.text(
-        (x0, 8),
-        f"orthophoto {cols} x {rows} px\nW = {w_m:.3f} +- {res.sigma('width_m'):.3f} m, "
-        f"H = {h_m:.3f} +- {res.sigma('height_m'):.3f} m",
-    )
+    canvas.text((x0, 8), f"orthophoto {cols} x {rows} px\n{sizes}")
     canvas.save(path)
 
 

@@ -122,3 +122,21 @@ def test_polygon_pixels_are_scikit_images_pixel_for_pixel():
         expect = skimage_polygon(r, c, shape=shape)
         got = polygon_pixels(r, c, shape)
         assert np.array_equal(got[0], expect[0]) and np.array_equal(got[1], expect[1]), (r, c, shape)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_grey_morphology_is_scipys_erosion_and_dilation(seed):
+    from scipy import ndimage
+    from skimage.morphology import diamond, disk
+
+    from calib_masonry.wall2d.segment import grey_morphology
+
+    rng = np.random.default_rng(seed)
+    # disks, a diamond and a rectangle go the fast way (unions of centred rectangles), a ring to scipy
+    ring = disk(3)
+    ring[2:5, 2:5] = False  # a hollow centre: not a union of centred rectangles
+    for fp in [disk(r) for r in range(1, 7)] + [diamond(2), np.ones((3, 7), bool), ring]:
+        for shape in [(1, 1), (2, 40), (9, 9), (40, 3), (70, 55), (300, 260)]:
+            a = rng.random(shape).astype(np.float32)
+            assert np.array_equal(grey_morphology(a, fp, np.minimum), ndimage.grey_erosion(a, footprint=fp))
+            assert np.array_equal(grey_morphology(a, fp, np.maximum), ndimage.grey_dilation(a, footprint=fp))

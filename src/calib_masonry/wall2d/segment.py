@@ -140,6 +140,79 @@ def _wide_gaussian(img: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
+def _rectangles(footprint: np.ndarray) -> list[tuple[int, int]] | None:
+    """``(height, width)`` of centred rectangles whose union is ``footprint`` (a disk's rows are
+    centred runs that narrow away from the middle row), or None for a footprint that is not such
+    a union."""
+    fp = np.asarray(footprint, dtype=bool)
+    rows, cols = fp.shape
+    if rows % 2 == 0 or cols % 2 == 0 or not np.array_equal(fp, fp[::-1]) or not np.array_equal(fp, fp[:, ::-1]):
+        return None
+    widths = []
+    for row in fp:
+        xs = np.flatnonzero(row)
+        if len(xs) == 0 or xs[-1] - xs[0] + 1 != len(xs):  # a symmetric run is centred
+            return None
+        widths.append(len(xs))
+    w = np.array(widths)
+    if np.any(np.diff(w[rows // 2 :]) > 0):
+        return None
+    out = []
+    for width in sorted(set(widths)):
+        taller = np.flatnonzero(w >= width)  # a run of rows about the middle
+        out.append((int(taller[-1] - taller[0] + 1), width))
+    return out
+
+
+def _sliding(a: np.ndarray, n: int, axis: int, op) -> np.ndarray:
+    """``op`` (np.minimum or np.maximum) over every ``n`` consecutive elements along ``axis``
+    (the ``len - n + 1`` full windows), by doubling: windows of 2, 4, ... p <= n, then two windows
+    of p that overlap to cover n (exact: min and max take no rounding)."""
+    length = a.shape[axis]
+
+    def part(x, start, stop):
+        return x[start:stop] if axis == 0 else x[:, start:stop]
+
+    p, w = 1, a
+    while 2 * p <= n:
+        w = op(part(w, 0, length - 2 * p + 1), part(w, p, length - p + 1))
+        p *= 2
+    if p < n:
+        w = op(part(w, 0, length - n + 1), part(w, n - p, length - p + 1))
+    return w
+
+
+def grey_morphology(image: np.ndarray, footprint: np.ndarray, op) -> np.ndarray:
+    """scipy's ``grey_erosion`` (``op`` np.minimum) or ``grey_dilation`` (np.maximum) of a 2-D
+    image by a symmetric footprint, mirrored at the edges (scipy's "reflect"): the same values.
+    A footprint that is a union of centred rectangles (a disk) is done as that union of separable
+    sliding windows, two to five times faster than scipy's filter over the footprint's pixels (the
+    segmentation's four top-hats were a third of a photo wall's time); any other footprint goes
+    to scipy."""
+    rects = _rectangles(footprint)
+    ry, rx = footprint.shape[0] // 2, footprint.shape[1] // 2
+    rows, cols = image.shape
+    if rects is None or rows <= ry or cols <= rx:
+        f = ndimage.grey_erosion if op is np.minimum else ndimage.grey_dilation
+        return f(image, footprint=footprint, mode="reflect")
+    padded = np.pad(image, ((ry, ry), (rx, rx)), mode="symmetric")  # = scipy's "reflect"
+    out = np.empty_like(image)
+    band = max(1, (1 << 16) // cols)  # rows at a time: the temporaries stay in cache, and small
+    for r0 in range(0, rows, band):
+        r1 = min(rows, r0 + band)
+        block = padded[r0 : r1 + 2 * ry]  # the band's rows and the footprint's reach above and below
+        for k, (h, w) in enumerate(rects):
+            x0 = rx - (w - 1) // 2  # the window of the output's first column starts here
+            t = _sliding(block, w, 1, op)[:, x0 : x0 + cols]
+            y0 = ry - (h - 1) // 2
+            t = _sliding(t, h, 0, op)[y0 : y0 + r1 - r0]
+            if k == 0:
+                out[r0:r1] = t
+            else:
+                op(out[r0:r1], t, out=out[r0:r1])
+    return out
+
+
 def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConfig()) -> np.ndarray:
     """Boolean brick mask ``(rows, cols)`` of a rectified RGB photo in [0, 1] (bricks True)."""
     from skimage.color import rgb2lab
@@ -161,9 +234,9 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
 
     def top_hat(job):  # white (light mortar) or black (dark mortar) top-hat of a channel
         chan, white = job
-        if white:
-            return chan - ndimage.grey_opening(chan, footprint=fp)
-        return ndimage.grey_closing(chan, footprint=fp) - chan
+        if white:  # scipy's grey_opening and grey_closing, the same values
+            return chan - grey_morphology(grey_morphology(chan, fp, np.minimum), fp, np.maximum)
+        return grey_morphology(grey_morphology(chan, fp, np.maximum), fp, np.minimum) - chan
 
     # the four morphological filters on every core (scipy's filters release the GIL)
     responses = thread_map(top_hat, [(c, white) for c in chans for white in (True, False)])

@@ -105,11 +105,10 @@ def main() -> None:
         gb = [g for _, g in rs]
         aim_s, aim_gb = aims.get(name, (None, None))
         aim = "" if aim_s is None else f"<= {aim_s:g} s" + ("" if aim_gb is None else f", <= {aim_gb:g} GB")
-        met = (
-            ""
-            if aim_s is None
-            else ("  met" if max(sec) <= aim_s and (aim_gb is None or max(gb) <= aim_gb) else "  NOT met")
-        )
+        met = ""
+        if aim_s is not None:  # a noisy machine: how many runs met the aim, and whether all did
+            within = sum(s <= aim_s and (aim_gb is None or g <= aim_gb) for s, g in rs)
+            met = f" ({within}/{len(rs)} runs)" + ("  met" if within == len(rs) else "  NOT met")
         print(
             f"{name:30s} {len(rs):4d} {statistics.median(sec):9.2f} {min(sec):6.2f}-{max(sec):<6.2f} "
             f"{min(gb):5.2f}-{max(gb):<5.2f}  {aim}{met}"

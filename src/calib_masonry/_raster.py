@@ -14,7 +14,9 @@ from functools import cache
 
 import numpy as np
 
-__all__ = ["Canvas", "Panel", "font", "nice_step", "text_width", "to_uint8"]
+from .io import to_uint8
+
+__all__ = ["Canvas", "Panel", "font", "nice_step", "preview_uint8", "text_width"]
 
 #: colours by name, as the matplotlib figures name them
 COLOURS = {
@@ -41,17 +43,12 @@ def text_width(text: str, size: int = 12) -> int:
     return max(math.ceil(font(size).getlength(line)) for line in text.split("\n"))
 
 
-def to_uint8(img: np.ndarray, max_side: int) -> np.ndarray:
+def preview_uint8(img: np.ndarray, max_side: int) -> np.ndarray:
     """An image in [0, 1] (rows, cols[, 3]), taken every ``step`` pixels so that its larger side is
     at most twice ``max_side`` (the panel's resize smooths the rest), as RGB uint8."""
     step = max(1, math.floor(max(img.shape[:2]) / (2 * max_side)))
-    sub = np.asarray(img[::step, ::step], dtype=np.float32)
-    if sub.ndim == 2:
-        sub = np.repeat(sub[..., None], 3, axis=-1)
-    out = np.clip(sub, 0.0, 1.0)
-    out *= 255.0
-    out += 0.5
-    return out.astype(np.uint8)
+    sub = to_uint8(img[::step, ::step])
+    return np.repeat(sub[..., None], 3, axis=-1) if sub.ndim == 2 else sub
 
 
 def nice_step(span: float, length_px: float, min_px: float = 45.0) -> float:
@@ -106,7 +103,7 @@ class Canvas:
         ``(x0, y0)``; ``box`` ``(u0, v0, u1, v1)`` is the source frame's extent it shows."""
         from PIL import Image, ImageDraw
 
-        layer = Image.fromarray(to_uint8(img, max(size))).resize(size, Image.Resampling.BILINEAR)
+        layer = Image.fromarray(preview_uint8(img, max(size))).resize(size, Image.Resampling.BILINEAR)
         panel = Panel(x0, y0, size[0], size[1], *box, flip=flip)
         self._layers[panel] = (layer, ImageDraw.Draw(layer, "RGBA"))
         return panel

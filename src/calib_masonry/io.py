@@ -34,6 +34,7 @@ __all__ = [
     "OUTPUT_MARKER",
     "output_command",
     "remove_stale_staging",
+    "to_uint8",
     "trust_large_images",
     "staged_file",
     "staged_output",
@@ -179,10 +180,15 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
     return arr >= float(lo) + 0.5 * span
 
 
+def to_uint8(img: np.ndarray) -> np.ndarray:
+    """An image in [0, 1] as 8-bit values, rounded to the nearest."""
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
 def write_rgb(path: Path, rgb: np.ndarray) -> None:
     """Write an RGB image in [0, 1] as an 8-bit PNG, with zlib's fastest level: a photo-sized
     orthophoto took 0.80 s at the default level and 0.17 s at this one, 18 % larger (measured)."""
-    Image.fromarray((np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8)).save(path, compress_level=1)
+    Image.fromarray(to_uint8(rgb)).save(path, compress_level=1)
 
 
 def write_mask(path: Path, mask: np.ndarray) -> None:

@@ -173,16 +173,11 @@ def _lines(seg: np.ndarray) -> np.ndarray:
 
 def _dist_to_vp(seg: np.ndarray, vp: np.ndarray) -> np.ndarray:
     """Distance of each segment's endpoints from the line through its midpoint and ``vp``."""
-    mid = (seg[:, :2] + seg[:, 2:]) / 2
-    d = seg[:, 2:] - seg[:, :2]
-    to = vp[:2][None, :] - mid * vp[2]
-    cross = d[:, 0] * to[:, 1] - d[:, 1] * to[:, 0]
-    return 0.5 * np.abs(cross) / (np.linalg.norm(to, axis=1) + 1e-300)
+    return _dist_to_vps(seg, np.asarray(vp)[None])[0]
 
 
 def _dist_to_vps(seg: np.ndarray, vps: np.ndarray) -> np.ndarray:
-    """:func:`_dist_to_vp` of every segment from each of the points ``vps`` ``(k, 3)``: ``(k, n)``,
-    the same arithmetic element by element."""
+    """:func:`_dist_to_vp` of every segment from each of the points ``vps`` ``(k, 3)``: ``(k, n)``."""
     mid = (seg[:, :2] + seg[:, 2:]) / 2
     d = seg[:, 2:] - seg[:, :2]
     to = vps[:, None, :2] - mid[None] * vps[:, None, 2:3]

@@ -238,7 +238,7 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
             return chan - grey_morphology(grey_morphology(chan, fp, np.minimum), fp, np.maximum)
         return grey_morphology(grey_morphology(chan, fp, np.maximum), fp, np.minimum) - chan
 
-    # the four morphological filters on every core (scipy's filters release the GIL)
+    # the four morphological filters on every core (numpy's minimum and maximum release the GIL)
     responses = thread_map(top_hat, [(c, white) for c in chans for white in (True, False)])
     best, best_sep = None, -1.0
     for resp in responses:

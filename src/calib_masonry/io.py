@@ -26,6 +26,7 @@ from .errors import InputError, raise_if_stopped
 
 __all__ = [
     "json_bytes",
+    "records_json_bytes",
     "Photo",
     "read_json",
     "read_mask",
@@ -219,6 +220,45 @@ def _jsonable(obj: Any, exact: bool = False) -> Any:
 def json_bytes(obj: Any, *, exact: bool = False) -> bytes:
     """The bytes :func:`write_json` writes for ``obj``."""
     return (json.dumps(_jsonable(obj, exact), indent=1) + "\n").encode("utf-8")
+
+
+def _json_default(obj: Any) -> Any:
+    """What json's encoder cannot write itself, as :func:`_jsonable` converts it."""
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return float(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, Path):
+        return obj.as_posix()
+    raise TypeError(f"JSON: cannot write a {type(obj).__name__}")
+
+
+def records_json_bytes(doc: dict) -> bytes:
+    """Exact-float JSON of a document whose lists are records (bricks.json): each list value of
+    ``doc`` is written one item to a line. It reads back as the document :func:`json_bytes` with
+    ``exact`` writes (non-finite floats as null, numpy values as numbers), but is written by json's
+    C encoder, which an indented layout cannot use: the paper example's bricks.json (1,587 bricks)
+    took 1.2 s to convert and indent in Python, 0.1 s this way."""
+
+    def dump(value: Any) -> str:
+        try:
+            return json.dumps(value, allow_nan=False, default=_json_default)
+        except ValueError:  # a NaN or infinity somewhere: written as null, as _jsonable does
+            return json.dumps(_jsonable(value, True))
+
+    parts = []
+    for key, value in doc.items():
+        name = json.dumps(str(key))
+        if isinstance(value, (list, tuple)) and value:
+            rows = ",\n".join("  " + dump(item) for item in value)
+            parts.append(f" {name}: [\n{rows}\n ]")
+        else:
+            parts.append(f" {name}: {dump(value)}")
+    return ("{\n" + ",\n".join(parts) + "\n}\n").encode("utf-8")
 
 
 def write_json(path: Path, obj: Any, *, exact: bool = False) -> None:

@@ -417,7 +417,7 @@ def write_build(
         t0 = time.perf_counter()
         export_mesh(s, stage / "model.stl")
         export_mesh(s, stage / "model.glb")  # one node per brick: opens in Blender, three.js, any glTF viewer
-        write_bricks_json(s, stage / "bricks.json")
+        raw = write_bricks_json(s, stage / "bricks.json")
         result.seconds["export"] = time.perf_counter() - t0
         if blend and s.bricks:
             t0 = time.perf_counter()
@@ -446,7 +446,7 @@ def write_build(
             from .simulation.run import store_geometry
 
             t0 = time.perf_counter()
-            store_geometry(s, stage)
+            store_geometry(s, stage, bricks_json=raw)
             summary["seconds"]["simulation_geometry"] = round(time.perf_counter() - t0, 4)
         write_json(stage / "summary.json", summary)
     return summary

@@ -12,13 +12,14 @@ import numpy as np
 import trimesh
 
 from ..errors import InputError
-from ..io import write_json
+from ..io import records_json_bytes
 from .assemble import Structure3D
 
 __all__ = [
     "EXPORTERS",
     "export_mesh",
     "bricks_json",
+    "bricks_json_bytes",
     "bricks_from_json",
     "write_bricks_json",
     "plot_walls",
@@ -44,11 +45,20 @@ def export_mesh(structure: Structure3D, path: Path) -> None:
         raise InputError(f"{path}: unknown mesh format; use one of {sorted(EXPORTERS)}")
     mesh = structure_mesh(structure)
     if kind == "glb":
-        # one node per brick, named by wall and id, coloured by wall (the same colours as model.png)
+        # one node per brick, named by wall and id; one material per wall, named by it and of its
+        # colour in model.png (a material per wall, not colours per face: 0.25 s against 0.7 s for
+        # the paper example's 1,587 bricks, and a wall's bricks share a material in Blender)
         scene = trimesh.Scene()
+        materials = {}
         for wall, name, m in _brick_meshes(structure):
-            rgba = (wall_colour(wall) * 255).astype(np.uint8)
-            m.visual = trimesh.visual.ColorVisuals(m, face_colors=np.tile(rgba, (len(m.faces), 1)))
+            if wall not in materials:
+                materials[wall] = trimesh.visual.material.PBRMaterial(
+                    name=structure.footprint.walls[wall].name,
+                    baseColorFactor=(wall_colour(wall) * 255).astype(np.uint8),
+                    metallicFactor=0.0,
+                    roughnessFactor=1.0,
+                )
+            m.visual = trimesh.visual.TextureVisuals(material=materials[wall])
             scene.add_geometry(m, node_name=name, geom_name=name)
         data = scene.export(file_type="glb")
     else:
@@ -116,8 +126,17 @@ def bricks_json(structure: Structure3D) -> dict:
     }
 
 
-def write_bricks_json(structure: Structure3D, path: Path) -> None:
-    write_json(path, bricks_json(structure), exact=True)
+def bricks_json_bytes(structure: Structure3D) -> bytes:
+    """The bytes of bricks.json: exact floats (a model read back is bit for bit the one written),
+    a brick to a line (:func:`calib_masonry.io.records_json_bytes`)."""
+    return records_json_bytes(bricks_json(structure))
+
+
+def write_bricks_json(structure: Structure3D, path: Path) -> bytes:
+    """Write bricks.json; returns its bytes (the simulation geometry is keyed by them)."""
+    data = bricks_json_bytes(structure)
+    Path(path).write_bytes(data)
+    return data
 
 
 def plot_walls(
@@ -141,7 +160,7 @@ def plot_walls(
     for w, ax in enumerate(axes[0]):
         own = structure.bricks_of(w)
         dice = np.array([b.dice for b in own])
-        colours = [cmap(0.5) if not np.isfinite(d) else cmap(np.clip((d - 0.9) / 0.1, 0, 1)) for d in dice]
+        colours = cmap(np.where(np.isfinite(dice), np.clip((dice - 0.9) / 0.1, 0, 1), 0.5))  # (n, 4), one call
         ax.add_collection(
             PolyCollection([b.polygon_m for b in own], facecolors=colours, edgecolors="k", linewidths=0.2)
         )

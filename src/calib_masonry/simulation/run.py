@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from ..build3d.assemble import Structure3D
-from ..build3d.export import bricks_from_json, bricks_json
+from ..build3d.export import bricks_from_json, bricks_json_bytes
 from ..build3d.place import Footprint, WallGeometry, corners, wall_frames
 from ..errors import InputError
-from ..io import check_output, json_bytes, read_json, staged_output, write_json
+from ..io import check_output, read_json, staged_output, write_json
 from .ground_motion import G, GroundMotion, read_accelerogram, synthetic_motion
 from .joints import joint_stiffness
 from .scene import (
@@ -207,12 +207,12 @@ def load_model(model_dir: str | Path):
     return model_from_json(*read_model_json(model_dir), model_dir)
 
 
-def _geometry_key(bricks_json_bytes: bytes, closed, max_gap_m: float, mortar_fill: bool) -> str:
+def _geometry_key(raw: bytes, closed, max_gap_m: float, mortar_fill: bool) -> str:
     """What a model's simulation geometry is computed from: the bricks.json bytes, whether the
     footprint is closed, the joint reach and the mortar fill."""
     import hashlib
 
-    h = hashlib.sha256(bricks_json_bytes)
+    h = hashlib.sha256(raw)
     h.update(repr((closed, float(max_gap_m), bool(mortar_fill))).encode())
     return h.hexdigest()
 
@@ -234,14 +234,20 @@ def simulation_geometry(
 
 
 def store_geometry(
-    structure: Structure3D, model_dir: str | Path, *, max_gap_m: float = 0.06, mortar_fill: bool = True
+    structure: Structure3D,
+    model_dir: str | Path,
+    *,
+    max_gap_m: float = 0.06,
+    mortar_fill: bool = True,
+    bricks_json: bytes | None = None,
 ) -> SceneGeometry:
     """Compute the simulation geometry of ``structure`` in memory and store it in ``model_dir`` (a
-    ``build`` stage) as sim_geometry.npz, keyed by the bricks.json that build writes for it."""
+    ``build`` stage) as sim_geometry.npz, keyed by the bricks.json that build writes for it
+    (``bricks_json``, its bytes, when the caller has them already; else made here)."""
     geometry = simulation_geometry(structure, max_gap_m=max_gap_m, mortar_fill=mortar_fill)
-    key = _geometry_key(
-        json_bytes(bricks_json(structure), exact=True), structure.footprint.is_closed, max_gap_m, mortar_fill
-    )
+    if bricks_json is None:
+        bricks_json = bricks_json_bytes(structure)
+    key = _geometry_key(bricks_json, structure.footprint.is_closed, max_gap_m, mortar_fill)
     save_geometry(geometry, Path(model_dir) / GEOMETRY_FILE, key)
     return geometry
 

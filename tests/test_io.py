@@ -150,3 +150,26 @@ def test_a_requested_stop_is_never_committed_even_if_its_exception_was_swallowed
             except BaseException:  # what such an import does
                 pass
     assert list(tmp_path.iterdir()) == []
+
+
+def test_records_json_reads_back_as_the_indented_exact_json(tmp_path):
+    import json
+    from pathlib import Path
+
+    from calib_masonry.io import json_bytes, records_json_bytes
+
+    rng = np.random.default_rng(5)
+    doc = {
+        "name": "w",
+        "empty": [],
+        "rows": [
+            {"xy": rng.normal(size=(3, 2)), "n": np.int64(7), "ok": np.bool_(True), "f": float(rng.normal())},
+            {"dice": float("nan"), "where": Path("a/b.png"), "t": (1, 2.5)},  # a NaN: the slow path for this row
+        ],
+        "scale": 0.1 + 0.2,  # exact, not rounded
+    }
+    raw = records_json_bytes(doc)
+    assert json.loads(raw) == json.loads(json_bytes(doc, exact=True))
+    lines = raw.decode().splitlines()
+    assert len(lines) == 9 and lines[4].startswith('  {"xy": ')  # a record to a line
+    assert json.loads(raw)["rows"][1]["dice"] is None and json.loads(raw)["scale"] == 0.1 + 0.2

@@ -155,9 +155,54 @@ def test_stylite_refined_truth_dice_per_wall(tmp_path):
     assert b["max_interpenetration_m3"] <= 1e-9
 
 
+def _pooled(rng, lanes, sizes, block, length):
+    """Random bricks (hexagons against rectangles) laid out in a pool as _run_jobs lays them."""
+    angle = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    p0 = np.stack([8 * np.cos(angle), 6 * np.sin(angle)], -1)[None] + rng.normal(0, 1, (lanes, 6, 2))
+    pool_pts = np.full((length, 2), 1e4)
+    pool_coef = np.zeros((3, length))
+    off, nblk, m = np.zeros(lanes, np.int32), np.zeros(lanes, np.int32), np.zeros(lanes)
+    at = 0
+    for r, k in enumerate(sizes):
+        pts = rng.uniform(-12, 12, (k, 2))
+        t = ((np.abs(pts[:, 0]) < 7) & (np.abs(pts[:, 1]) < 5)).astype(float)
+        f = (pts[:, 0] > 10).astype(float)
+        pool_pts[at : at + k] = pts
+        pool_coef[:, at : at + k] = t, np.ones(k), f
+        off[r], nblk[r], m[r] = at, -(-k // block), t.sum()
+        at += block * nblk[r]
+    return p0, pool_pts, pool_coef, off, nblk, m
+
+
+def test_pooled_loss_and_gradient_are_the_direct_soft_dice_loss():
+    # the block loop (any brick size, one program) and its written-out Jacobian must give the
+    # loss of the whole band at once and the gradient reverse-mode differentiation gives
+    import calib_masonry.wall2d.refine as refine
+
+    rng = np.random.default_rng(5)
+    p0, pool_pts, pool_coef, off, nblk, m = _pooled(rng, 2, [700, 300], 128, 2048)
+    params = jnp.asarray(np.concatenate([p0[1], p0[1][-1:]]))  # a padded (repeated) last vertex
+    n, const, box, tau, penalty = 6, 3.0, jnp.asarray([11.0, 11.0]), 0.8, 4.0
+    pts = jnp.asarray(pool_pts[off[1] : off[1] + 300])
+    wt, w, wf = (jnp.asarray(c) for c in pool_coef[:, off[1] : off[1] + 300])
+
+    def direct(x):
+        v = refine._vertices(x, n)
+        p = refine.soft_inside(pts, v, tau)
+        dice = 2.0 * (wt @ p + const) / (w @ p + const + m[1])
+        outside = jnp.maximum(jnp.abs(v) - box, 0.0)
+        return m[1] * (1.0 - dice) + penalty * (wf @ p) + 100.0 * penalty * jnp.sum(outside**2)
+
+    args = (n, jnp.asarray(pool_pts), jnp.asarray(pool_coef), off[1], nblk[1], m[1], const, box, tau, penalty, 128)
+    assert np.isclose(refine._loss(params, args), direct(params), rtol=1e-12)
+    g = jax.grad(refine._loss)(params, args)
+    assert np.allclose(g, jax.grad(direct)(params), rtol=1e-9, atol=1e-9)
+    assert np.abs(g).max() > 1e-3  # not a trivially flat start
+
+
 def test_the_exported_batch_solver_is_the_jitted_function_bit_for_bit(tmp_path, monkeypatch):
-    # the refinement calls its batch solver exported once for any batch size and point count
-    # (and kept on disk); for two shapes and from the file, it must give exactly what jit gives
+    # the refinement calls its batch solver exported once for any batch and pool size (and kept
+    # on disk); for two shapes and from the file, it must give exactly what jit gives
     from functools import partial
 
     import calib_masonry.wall2d.refine as refine
@@ -166,29 +211,28 @@ def test_the_exported_batch_solver_is_the_jitted_function_bit_for_bit(tmp_path, 
     refine._batch_solver.cache_clear()
     rng = np.random.default_rng(3)
     taus = jnp.asarray([1.5, 0.35])
-    direct = jax.jit(partial(refine._refine_batch, max_steps=12, rtol=1e-6, atol=1e-4))
-    for batch, size in [(2, 96), (3, 160)]:
-        angle = np.linspace(0, 2 * np.pi, 6, endpoint=False)
-        p0 = np.stack([8 * np.cos(angle), 6 * np.sin(angle)], -1)[None] + rng.normal(0, 1, (batch, 6, 2))
-        pts = rng.uniform(-12, 12, (batch, size, 2))
-        target = (np.abs(pts[..., 0]) < 7) & (np.abs(pts[..., 1]) < 5)
+    direct = jax.jit(partial(refine._refine_batch, max_steps=12, rtol=1e-6, atol=1e-4, block=64))
+    for lanes, sizes, length in [(2, [96, 150], 512), (3, [160, 40, 0], 1024)]:
+        p0, pool_pts, pool_coef, off, nblk, m = _pooled(rng, lanes, sizes, 64, length)
         args = (
             jnp.asarray(p0),
-            jnp.full(batch, 6, dtype=jnp.int32),
-            jnp.asarray(pts),
-            jnp.asarray(target, float),
-            jnp.zeros((batch, size)),
-            jnp.ones((batch, size)),
-            jnp.zeros(batch),
-            jnp.full((batch, 2), 12.0),
+            jnp.full(lanes, 6, dtype=jnp.int32),
+            jnp.asarray(pool_pts),
+            jnp.asarray(pool_coef),
+            jnp.asarray(off),
+            jnp.asarray(nblk),
+            jnp.asarray(m),
+            jnp.zeros(lanes),
+            jnp.full((lanes, 2), 12.0),
             jnp.asarray(1.0),
             taus,
         )
         expect = [np.asarray(a) for a in direct(*args)]
+        assert np.abs(expect[0] - p0).max() > 0.1  # the solver moved the vertices
         for fresh in (False, True):
             if fresh:  # from the file written by the first export
                 refine._batch_solver.cache_clear()
-            got = refine._batch_solver(6, 2, 12, 1e-6, 1e-4, "float64").call(*args)
+            got = refine._batch_solver(6, 2, 12, 1e-6, 1e-4, "float64", 64)(*args)
             assert all(np.array_equal(np.asarray(g), e) for g, e in zip(got, expect))
     assert len(list(tmp_path.glob("refine-*.jaxexport"))) == 1
     refine._batch_solver.cache_clear()

@@ -3,10 +3,12 @@
 The splitting method keeps its vertices on the traced outline; here they are free. A soft
 rasteriser gives every pixel centre an inside probability ``sigmoid(d / tau)`` from its signed
 distance ``d`` to the polygon's boundary (positive inside, by crossing count), so Dice becomes
-differentiable in the vertex positions. All bricks of a wall are refined at once: each brick's
-pixels are those of a crop around it (so the cost follows brick size, not image size), flattened
-and padded to one of a few sizes, vmapped and compiled (the batch solver exported once for any
-batch and size, :func:`_batch_solver`); optimistix's BFGS minimises, over a
+differentiable in the vertex positions. Each brick's pixels are those of a band around its
+outline in a crop around it (so the cost follows the outline, not the image or the crop): they
+are laid out in whole blocks in a pool of fixed size, which the loss sums block by block, with
+its Jacobian written out (:func:`_block_sums`), so that one compiled program per schedule serves
+bricks of every size (the batch solver exported once, :func:`_batch_solver`, and called once a
+brick, asynchronously); optimistix's BFGS minimises, over a
 temperature schedule from smooth to sharp, the number of misclassified pixels
 ``sum(m) (1 - softDice) + penalty x sum(p over forbidden pixels)``. The smooth temperatures see
 the pixels at half resolution (``coarse_stages``), the sharp ones every pixel.
@@ -69,7 +71,14 @@ class RefineConfig:
     # the mean Dice at 4 to 8 vertices is no lower than with every stage at full resolution.
     # 0: every stage sees every pixel.
     coarse_stages: int = 3
-    chunk: int = 32
+    # bricks per call of the batch solver (vmapped lanes), points per block of the band's loop,
+    # and points of the pool a call's bricks share: fixed, so that one compiled program per
+    # schedule serves any wall (a brick of more than ``pool_points`` points gets a pool of its
+    # own, one more compilation). One brick a call was the fastest on the SWAT stones and no
+    # slower on small ones: a vmapped batch runs until its slowest brick has converged.
+    chunk: int = 1
+    block: int = 512
+    pool_points: int = 1 << 16
     rtol: float = 1e-6
     atol: float = 1e-4
     dtype: str = "float32"
@@ -110,6 +119,13 @@ def signed_distance(points: jnp.ndarray, verts: jnp.ndarray) -> jnp.ndarray:
     closest = ap - t[..., None] * ab[None]
     d2 = jnp.min(jnp.sum(closest * closest, axis=-1), axis=1)
     dist = jnp.sqrt(d2 + 1e-12)
+    return jnp.where(_inside(points, verts), dist, -dist)
+
+
+def _inside(points: jnp.ndarray, verts: jnp.ndarray) -> jnp.ndarray:
+    """Whether each point is inside the polygon: the even-odd crossing rule, half-open in y."""
+    a = verts
+    b = jnp.roll(verts, -1, axis=0)
     py = points[:, 1:2]
     px = points[:, 0:1]
     ay, by = a[None, :, 1], b[None, :, 1]
@@ -117,8 +133,7 @@ def signed_distance(points: jnp.ndarray, verts: jnp.ndarray) -> jnp.ndarray:
     dy = jnp.where(by != ay, by - ay, 1.0)
     xint = a[None, :, 0] + (py - ay) * (b[None, :, 0] - a[None, :, 0]) / dy
     crossings = jnp.sum(straddle & (px < xint), axis=1)
-    inside = (crossings % 2) == 1
-    return jnp.where(inside, dist, -dist)
+    return (crossings % 2) == 1
 
 
 def soft_inside(points: jnp.ndarray, verts: jnp.ndarray, tau: float) -> jnp.ndarray:
@@ -144,30 +159,97 @@ def _vertices(params, n):
     return params[idx]
 
 
+def _block_sums(verts, pts, coef, tau):
+    """``coef @ p`` ``(3,)`` for one block of points ``(S, 2)``, the rows of ``coef`` ``(3, S)`` being
+    ``w t``, ``w`` and ``w f`` (weight, target, forbidden), and its Jacobian ``(3, N, 2)`` in the
+    vertices.
+
+    The Jacobian is written out: a point's signed distance moves only with the two vertices of
+    its nearest edge, ``d|p - q| / da = -u (1 - t)`` and ``d|p - q| / db = -u t`` for the closest
+    point ``q = a + t (b - a)`` and the unit vector ``u`` from ``q`` to ``p`` (the derivative
+    through ``t`` vanishes: ``t`` is optimal, or clipped and constant). It is what reverse-mode
+    differentiation of :func:`signed_distance` gives (a test checks), at the cost of one pass."""
+    a = verts
+    ab = jnp.roll(verts, -1, axis=0) - a
+    ap = pts[:, None, :] - a[None, :, :]  # (S, N, 2)
+    len2 = jnp.sum(ab * ab, axis=-1)
+    t = jnp.clip(jnp.sum(ap * ab[None], axis=-1) / jnp.where(len2 > 0, len2, 1.0), 0.0, 1.0)  # (S, N)
+    closest = ap - t[..., None] * ab[None]
+    d2 = jnp.sum(closest * closest, axis=-1)
+    nearest = jnp.argmin(d2, axis=1)
+    onehot = (jnp.arange(verts.shape[0])[None, :] == nearest[:, None]).astype(pts.dtype)  # (S, N)
+    dist = jnp.sqrt(jnp.min(d2, axis=1) + 1e-12)
+    sign = jnp.where(_inside(pts, verts), 1.0, -1.0).astype(pts.dtype)
+    p = jax.nn.sigmoid(sign * dist / tau)
+    g = coef * (sign * p * (1.0 - p) / tau)[None, :]  # (3, S): d(sum)/d(dist) per point
+    te = jnp.sum(onehot * t, axis=1)
+    u = jnp.einsum("sn,snd->sd", onehot, closest) / dist[:, None]
+    ga = jnp.einsum("ks,sn,sd->knd", g, onehot, -u * (1.0 - te)[:, None])
+    gb = jnp.einsum("ks,sn,sd->knd", g, onehot, -u * te[:, None])
+    return coef @ p, ga + jnp.roll(gb, 1, axis=1)
+
+
+def _pool_sums_and_jacobian(verts, pool_pts, pool_coef, off, nblk, tau, block):
+    """The band sums of one brick whose points are the ``nblk`` blocks of ``block`` points from
+    ``off`` in the pool, with their Jacobian in the vertices: a loop over blocks, so that one
+    compiled program serves any brick size (its cost follows the brick's points, not the pool's)."""
+
+    def body(carry):
+        i, s, j = carry
+        start = off + i * block
+        pts = jax.lax.dynamic_slice_in_dim(pool_pts, start, block, 0)
+        coef = jax.lax.dynamic_slice_in_dim(pool_coef, start, block, 1)
+        v, g = _block_sums(verts, pts, coef, tau)
+        return i + 1, s + v, j + g
+
+    zero = jnp.zeros((), pool_pts.dtype)
+    init = (jnp.zeros((), nblk.dtype), jnp.zeros(3, zero.dtype), jnp.zeros((3, *verts.shape), zero.dtype))
+    _, s, j = jax.lax.while_loop(lambda c: c[0] < nblk, body, init)
+    return s, j
+
+
+@partial(jax.custom_jvp, nondiff_argnums=(6,))
+def _pool_sums(verts, pool_pts, pool_coef, off, nblk, tau, block):
+    """``(sum w t p, sum w p, sum w f p)`` over the brick's band, ``p`` the soft inside
+    probability. Its derivative is the Jacobian the block loop accumulates (a loop has no reverse
+    derivative of its own); only the vertices are differentiated."""
+    return _pool_sums_and_jacobian(verts, pool_pts, pool_coef, off, nblk, tau, block)[0]
+
+
+@_pool_sums.defjvp
+def _pool_sums_jvp(block, primals, tangents):
+    s, jac = _pool_sums_and_jacobian(*primals, block)
+    return s, jnp.tensordot(jac, tangents[0].astype(jac.dtype), axes=2)
+
+
 def _loss(params, args):
-    n, points, target, forbid, weight, const, box, tau, penalty = args
+    n, pool_pts, pool_coef, off, nblk, m, const, box, tau, penalty, block = args
     verts = _vertices(params, n)
-    p = soft_inside(points, verts, tau)
-    tp = jnp.sum(weight * target * p) + const
-    m = jnp.sum(weight * target) + const
-    dice = 2.0 * tp / (jnp.sum(weight * p) + const + m)
+    wtp, wp, wfp = _pool_sums(verts, pool_pts, pool_coef, off, nblk, tau, block)
+    dice = 2.0 * (wtp + const) / (wp + const + m)
     # a barrier keeps every vertex inside the crop, where the pixels that judge it are
     outside = jnp.maximum(jnp.abs(verts) - box, 0.0)
-    return m * (1.0 - dice) + penalty * jnp.sum(weight * forbid * p) + 100.0 * penalty * jnp.sum(outside**2)
+    return m * (1.0 - dice) + penalty * wfp + 100.0 * penalty * jnp.sum(outside**2)
 
 
-def _refine_batch(params0, n, points, target, forbid, weight, const, box, penalty, taus, *, max_steps, rtol, atol):
+def _refine_batch(
+    params0, n, pool_pts, pool_coef, off, nblk, m, const, box, penalty, taus, *, max_steps, rtol, atol, block
+):
     """Every brick of a batch through the temperatures ``taus``, ``max_steps`` BFGS steps each
-    (vmap over bricks of a scan over temperatures). Called through :func:`_batch_solver`."""
+    (vmap over bricks of a scan over temperatures). Brick ``b``'s band is the ``nblk[b]`` blocks of
+    ``block`` points from ``off[b]`` in the pool shared by the batch: ``pool_pts`` ``(L, 2)`` and
+    ``pool_coef`` ``(3, L)`` (weight x target, weight, weight x forbidden); ``m`` is the brick's
+    region in pixels and ``const`` the pixels inside both it and the polygon that the band leaves
+    out. Called through :func:`_batch_solver`."""
     import optimistix as optx
 
-    def one(p0, n_, pts, tgt, fb, w, c, bx):
+    def one(p0, n_, o, nb, m_, c, bx):
         def stage(y, tau):
             sol = optx.minimise(
                 _loss,
                 optx.BFGS(rtol=rtol, atol=atol),
                 y,
-                args=(n_, pts, tgt, fb, w, c, bx, tau, penalty),
+                args=(n_, pool_pts, pool_coef, o, nb, m_, c, bx, tau, penalty, block),
                 max_steps=max_steps,
                 throw=False,
             )
@@ -179,50 +261,47 @@ def _refine_batch(params0, n, points, target, forbid, weight, const, box, penalt
         y, codes = jax.lax.scan(stage, p0, taus)
         return _vertices(y, n_), codes[-1]
 
-    return jax.vmap(one)(params0, n, points, target, forbid, weight, const, box)
+    return jax.vmap(one)(params0, n, off, nblk, m, const, box)
 
 
 @cache
-def _batch_solver(n_max: int, n_taus: int, max_steps: int, rtol: float, atol: float, dtype: str):
-    """:func:`_refine_batch` for these settings, exported once for any batch size and point count
-    (JAX shape polymorphism), kept on disk beside the compilation cache and in memory
+def _batch_solver(n_max: int, n_taus: int, max_steps: int, rtol: float, atol: float, dtype: str, block: int):
+    """:func:`_refine_batch` for these settings, exported once for any batch and pool size (JAX
+    shape polymorphism), kept on disk beside the compilation cache and in memory
     (:func:`calib_masonry._jax.exported`).
 
-    Why: each (batch size, point-count bucket) used to be traced anew, about 0.3 s each (vmap of
-    a scan of optimistix's BFGS), and a wall needs some two dozen of them, so the first call of
-    a process took about 12 s more than a warm one even when every compilation came from the
-    persistent cache. The exported function is traced once per settings and machine; a new
-    shape then costs a lowering and a cached compilation. Its results are bit for bit those of
-    the jitted function."""
+    Why: tracing it (vmap of a scan of optimistix's BFGS) takes about a second, far more than
+    most solves; exported, it is traced once per settings and machine. The refinement calls it
+    with one batch size and one pool size (:func:`_run_jobs`), so a process compiles it once per
+    schedule, or finds it in the persistent compilation cache. Its results are bit for bit those
+    of the jitted function. Returned jitted, for jit's fast dispatch: a wall makes a call per
+    brick."""
     from jax import export
 
     from .._jax import exported
 
-    b, p = export.symbolic_shape("b, p")
+    b, length = export.symbolic_shape("b, L", constraints=[f"L >= {block}"])
     dt = jnp.dtype(dtype)
 
     def spec(*shape, t=dt):
         return jax.ShapeDtypeStruct(shape, t)
 
-    args = (spec(b, n_max, 2), spec(b, t=jnp.int32), spec(b, p, 2), spec(b, p), spec(b, p), spec(b, p))
-    args += (spec(b), spec(b, 2), spec(), spec(n_taus))
-    return exported(
-        "refine",
-        partial(_refine_batch, max_steps=max_steps, rtol=rtol, atol=atol),
-        args,
-        sources=[__file__],
-        settings=(n_max, n_taus, max_steps, rtol, atol, dtype),
+    i32 = jnp.int32
+    args = (spec(b, n_max, 2), spec(b, t=i32), spec(length, 2), spec(3, length), spec(b, t=i32), spec(b, t=i32))
+    args += (spec(b), spec(b), spec(b, 2), spec(), spec(n_taus))
+    return jax.jit(
+        exported(
+            "refine",
+            partial(_refine_batch, max_steps=max_steps, rtol=rtol, atol=atol, block=block),
+            args,
+            sources=[__file__],
+            settings=(n_max, n_taus, max_steps, rtol, atol, dtype, block),
+        ).call
     )
 
 
 # ----------------------------------------------------------------------------------------------
 # data preparation (numpy) and the batched driver
-
-
-def _bucket(size: int) -> int:
-    k = max(6, math.ceil(math.log2(max(size, 1))))
-    lo = 2**k
-    return int(0.75 * lo) if size <= 0.75 * lo else lo
 
 
 @dataclass(frozen=True)
@@ -397,6 +476,18 @@ def refine_polygons(
     return _resolve_overlaps([keep[i] for i in order], splitting, [best[i] for i in order])
 
 
+def _chunks(sizes: list[int], lanes: int, pool: int) -> list[list[int]]:
+    """Job indices in runs of at most ``lanes`` whose ``sizes`` (points) sum to at most ``pool``,
+    by increasing size (bricks solved together take similar numbers of steps and blocks)."""
+    out: list[list[int]] = []
+    for i in sorted(range(len(sizes)), key=lambda i: (sizes[i], i)):
+        if out and len(out[-1]) < lanes and sum(sizes[j] for j in out[-1]) + sizes[i] <= pool:
+            out[-1].append(i)
+        else:
+            out.append([i])
+    return out
+
+
 def _run_jobs(
     bricks: list[_Brick],
     starts: list[np.ndarray],
@@ -406,59 +497,64 @@ def _run_jobs(
     desc: str,
 ) -> tuple[list[np.ndarray | None], list[FitStatus]]:
     """The BFGS solution of every job under its schedule (temperatures, steps per temperature) and
-    its solver's status at the last temperature."""
+    its solver's status at the last temperature.
+
+    Every call of the batch solver has the same shapes: ``config.chunk`` bricks (unused lanes have
+    no points) and a pool of ``config.pool_points`` points (more only for a brick larger than
+    that), each brick's band padded to whole blocks of ``config.block`` points. So one compiled
+    program per schedule serves every wall, whatever its bricks' sizes."""
     n_max = 4 * math.ceil(max(len(s) for s in starts) / 4)  # few vertex-count shapes to compile
     results: list[np.ndarray | None] = [None] * len(bricks)
     statuses: list[FitStatus] = [FitStatus.DIVERGED] * len(bricks)
-    buckets: dict[tuple[tuple[tuple[float, ...], int], int], list[int]] = {}
-    for i, b in enumerate(bricks):
-        buckets.setdefault((schedules[i], _bucket(len(b.points))), []).append(i)
+    groups: dict[tuple[tuple[float, ...], int], list[int]] = {}
+    for i in range(len(bricks)):
+        groups.setdefault(schedules[i], []).append(i)
     dt = jnp.dtype(config.dtype)
+    blk, lanes = config.block, config.chunk
+    sizes = [blk * math.ceil(len(b.points) / blk) for b in bricks]
     bar = _progress(total=len(bricks), desc=desc, unit="brick")
-    for ((taus, steps), size), members in sorted(buckets.items()):
-        for c in range(0, len(members), config.chunk):
-            chunk = members[c : c + config.chunk]
-            pad = min(config.chunk, 2 ** math.ceil(math.log2(len(chunk)))) - len(chunk)
-            idx = chunk + [chunk[0]] * pad  # pad the batch with repeats (results ignored)
-            pts = np.full((len(idx), size, 2), 1e4)
-            tgt = np.zeros((len(idx), size))
-            fb = np.zeros((len(idx), size))
-            w = np.zeros((len(idx), size))
-            const = np.zeros(len(idx))
-            box = np.zeros((len(idx), 2))
-            p0 = np.zeros((len(idx), n_max, 2))
-            n = np.zeros(len(idx), dtype=np.int32)
-            for r, i in enumerate(idx):
+    pending = []
+    for (taus, steps), members in sorted(groups.items()):
+        solver = _batch_solver(n_max, len(taus), steps, config.rtol, config.atol, dt.name, blk)
+        penalty, taus_arr = np.asarray(config.penalty, dt), np.asarray(taus, dt)
+        for run in _chunks([sizes[i] for i in members], lanes, config.pool_points):
+            chunk = [members[r] for r in run]
+            total = sum(sizes[i] for i in chunk)
+            length = config.pool_points if total <= config.pool_points else 1 << math.ceil(math.log2(total))
+            f = dt.type  # numpy arrays of the solver's dtype: no conversion on the way in
+            pool_pts = np.full((length, 2), 1e4, f)  # padding: far outside every polygon, weight 0
+            pool_coef = np.zeros((3, length), f)
+            off = np.zeros(lanes, dtype=np.int32)
+            nblk = np.zeros(lanes, dtype=np.int32)
+            m = np.zeros(lanes, f)
+            const = np.zeros(lanes, f)
+            box = np.ones((lanes, 2), f)
+            p0 = np.zeros((lanes, n_max, 2), f)
+            n = np.ones(lanes, dtype=np.int32)
+            at = 0
+            for r, i in enumerate(chunk):
                 b = bricks[i]
                 k = len(b.points)
-                pts[r, :k] = b.points
-                tgt[r, :k] = b.target
-                fb[r, :k] = b.forbid
-                w[r, :k] = 1.0 if b.weight is None else b.weight
+                w = np.ones(k) if b.weight is None else b.weight
+                pool_pts[at : at + k] = b.points
+                pool_coef[:, at : at + k] = w * b.target, w, w * b.forbid
+                off[r], nblk[r] = at, sizes[i] // blk
+                at += sizes[i]
+                m[r] = float(np.sum(w * b.target)) + b.const
                 const[r] = b.const
                 box[r] = b.centre - 0.5  # half the crop, less half a pixel
                 s = starts[i] - b.origin - b.centre
                 p0[r, : len(s)] = s
                 p0[r, len(s) :] = s[-1]
                 n[r] = len(s)
-            solver = _batch_solver(n_max, len(taus), steps, config.rtol, config.atol, dt.name)
-            out = solver.call(
-                jnp.asarray(p0, dt),
-                jnp.asarray(n),
-                jnp.asarray(pts, dt),
-                jnp.asarray(tgt, dt),
-                jnp.asarray(fb, dt),
-                jnp.asarray(w, dt),
-                jnp.asarray(const, dt),
-                jnp.asarray(box, dt),
-                jnp.asarray(config.penalty, dt),
-                jnp.asarray(taus, dtype=dt),
-            )
-            out, codes = (np.asarray(a) for a in out)
-            for r, i in enumerate(chunk):
-                results[i] = out[r, : len(starts[i])] + bricks[i].centre + bricks[i].origin
-                statuses[i] = _SOLVER_STATUS[int(codes[r])]
-            bar.update(len(chunk))
+            out = solver(p0, n, pool_pts, pool_coef, off, nblk, m, const, box, penalty, taus_arr)
+            pending.append((chunk, out))
+    for chunk, out in pending:  # dispatched above, asynchronously: collected as they finish
+        out, codes = (np.asarray(a) for a in out)
+        for r, i in enumerate(chunk):
+            results[i] = out[r, : len(starts[i])] + bricks[i].centre + bricks[i].origin
+            statuses[i] = _SOLVER_STATUS[int(codes[r])]
+        bar.update(len(chunk))
     bar.close()
     return results, statuses
 

@@ -152,12 +152,13 @@ def order_corners(points: np.ndarray, *, where: str = "--corners") -> np.ndarray
     cross = edges[:, 0] * nxt[:, 1] - edges[:, 1] * nxt[:, 0]
     if span < 4.0 or np.min(np.abs(cross)) < 1e-3 * span**2:
         raise InputError(
-            f"{where}: the corners are repeated or three of them are collinear; click the wall's four corners"
+            f"{where}: the corners are repeated or three of them are collinear; click the wall's four corners "
+            "with --corners x1,y1,...,x4,y4"
         )
     if not (np.all(cross > 0) or np.all(cross < 0)):
         raise InputError(
             f"{where}: the corners do not form a convex quadrilateral (self-crossing or dented); "
-            "click the wall's four outer corners"
+            "click the wall's four outer corners with --corners x1,y1,...,x4,y4"
         )
     # start from the lower-left: of the two lowest points in the image (largest y), the left one
     low = np.argsort(-ccw[:, 1])[:2]

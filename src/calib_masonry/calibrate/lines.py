@@ -202,7 +202,9 @@ def _vanishing_point(
     vps = np.cross(lines[pairs[:, 0]], lines[pairs[:, 1]])
     valid = np.all(np.isfinite(vps), axis=1) & (np.linalg.norm(vps, axis=1) != 0)
     if not valid.any():
-        raise FitFailed("automatic mode: no two joint lines meet in a vanishing point; click the corners")
+        raise FitFailed(
+            "automatic mode: no two joint lines meet in a vanishing point; click the corners with --corners x1,y1,...,x4,y4"
+        )
     scores = np.full(len(vps), -1.0)
     for k0 in range(0, len(vps), 64):  # 64 hypotheses at a time: (64, segments, 2) temporaries
         inliers = _dist_to_vps(seg, vps[k0 : k0 + 64]) < tol
@@ -403,6 +405,14 @@ def _wall_mask(rgb_small: np.ndarray, quad: np.ndarray, flat: np.ndarray | None 
     if centre_label == 0:
         return wall
     return lab == centre_label
+
+
+def _joint_box(points: np.ndarray) -> np.ndarray:
+    """The upright rectangle (LL, LR, UR, UL, image pixels) spanned by the middle 80 % of the joint
+    segments' ends ``(n, 2)`` in each direction: where the wall surely is, whatever the joints'
+    vanishing points say."""
+    (x0, y0), (x1, y1) = np.percentile(points, 10, axis=0), np.percentile(points, 90, axis=0)
+    return np.array([[x0, y1], [x1, y1], [x1, y0], [x0, y0]])
 
 
 def _grow_to_mask(mask: np.ndarray, rect_from_px: np.ndarray) -> np.ndarray | None:
@@ -635,7 +645,10 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     o = np.array([0.0, 0.0, 1.0])
     vanishing_line = np.cross(vp_b, vp_h)
     if abs(vanishing_line @ o) < 1e-12:
-        raise FitFailed("automatic mode: the wall's vanishing line passes through the image centre; click the corners")
+        raise FitFailed(
+            "automatic mode: the wall's vanishing line passes through the image centre; click the corners with "
+            "--corners x1,y1,...,x4,y4"
+        )
     p = np.stack([np.cross(vp_h, o), np.cross(vp_b, o), vanishing_line])
 
     def rect(pts):
@@ -649,7 +662,10 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     bed_mid_u = (b1[:, 0] + b2[:, 0]) / 2
     inside = (bed_mid_u > u0) & (bed_mid_u < u1)
     if inside.sum() < 3:
-        raise FitFailed("automatic mode: no wall found (joint lines do not outline a wall); click the corners")
+        raise FitFailed(
+            "automatic mode: no wall found (joint lines do not outline a wall); click the corners with "
+            "--corners x1,y1,...,x4,y4"
+        )
     bed_v = ((b1[:, 1] + b2[:, 1]) / 2)[inside]
     v0, v1 = _densest_run(bed_v, np.abs(b2[:, 0] - b1[:, 0])[inside])
     quad_r = np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]])
@@ -689,12 +705,24 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     free = _snap_to_mask(mask, quad_small, None, reach=0.03)
     if free is not None and np.max(np.linalg.norm(free - quad_small, axis=1)) < 0.1 * scale:
         quad_small = free
+    rows, cols = rgb.shape[:2]
+    slack = 0.02 * max(rows, cols)
+
+    def outside(q):
+        return np.any(q < -slack) or np.any(q[:, 0] > cols - 1 + slack) or np.any(q[:, 1] > rows - 1 + slack)
+
+    if outline is None and outside((quad_small + 0.5) / s - 0.5):
+        # the joints' vanishing points were wrong enough to grow the outline into the sky or the
+        # ground (a tall wall seen nearly square-on: its head joints are short, its sides nearly
+        # parallel): start again from where the joints are, without their vanishing points
+        box = _joint_box(np.r_[bed[:, :2], bed[:, 2:], head[:, :2], head[:, 2:]] * scale + centre)
+        again = _quad_of_mask(_wall_mask(rgb_small, box, flat))
+        if again is not None:
+            quad_small = again
     quad = order_corners((quad_small + 0.5) / s - 0.5, where="automatic mode")
     # refine each side in the full photo
     quad = refine_quad(rgb, quad, (config.refine_halfwidth_px or 6.0 / s, 2.5 / s))
-    rows, cols = rgb.shape[:2]
-    slack = 0.02 * max(rows, cols)
-    if np.any(quad < -slack) or np.any(quad[:, 0] > cols - 1 + slack) or np.any(quad[:, 1] > rows - 1 + slack):
+    if outside(quad):
         raise FitFailed(
             "automatic mode: the outline found runs outside the photo (lines of the surroundings taken for "
             "joints); click the wall's corners with --corners x1,y1,...,x4,y4"

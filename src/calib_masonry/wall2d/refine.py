@@ -526,7 +526,7 @@ def _run_jobs(
             pool_coef = np.zeros((3, length), f)
             off = np.zeros(lanes, dtype=np.int32)
             nblk = np.zeros(lanes, dtype=np.int32)
-            m = np.zeros(lanes, f)
+            m = np.ones(lanes, f)  # an unused lane: no points, a constant loss (0/0 would be NaN)
             const = np.zeros(lanes, f)
             box = np.ones((lanes, 2), f)
             p0 = np.zeros((lanes, n_max, 2), f)

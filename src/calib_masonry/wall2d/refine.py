@@ -74,8 +74,10 @@ class RefineConfig:
     # bricks per call of the batch solver (vmapped lanes), points per block of the band's loop,
     # and points of the pool a call's bricks share: fixed, so that one compiled program per
     # schedule serves any wall (a brick of more than ``pool_points`` points gets a pool of its
-    # own, one more compilation). One brick a call was the fastest on the SWAT stones and no
-    # slower on small ones: a vmapped batch runs until its slowest brick has converged.
+    # own, one more compilation). One brick a call was the fastest on the SWAT stones (3.0-3.6 s
+    # warm against 7.0-7.9 s with 16-32 bricks a call) and about as fast on small ones (1,000 at
+    # 100 px/m: 4.4-4.6 s, the size buckets before it 4.1-4.5 s): a vmapped batch runs until its
+    # slowest brick has converged.
     chunk: int = 1
     block: int = 512
     pool_points: int = 1 << 16

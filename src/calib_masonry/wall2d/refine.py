@@ -111,17 +111,22 @@ def signed_distance(points: jnp.ndarray, verts: jnp.ndarray) -> jnp.ndarray:
     in the vertices, so gradients flow through the distance only. Zero-length edges (repeated
     vertices, used for padding) are harmless.
     """
+    _, closest = _closest_on_edges(points, verts)
+    d2 = jnp.min(jnp.sum(closest * closest, axis=-1), axis=1)
+    dist = jnp.sqrt(d2 + 1e-12)
+    return jnp.where(_inside(points, verts), dist, -dist)
+
+
+def _closest_on_edges(points: jnp.ndarray, verts: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """For each point and each edge ``a -> b`` of the polygon: the parameter ``t`` ``(P, N)`` of
+    the edge's point ``q = a + t (b - a)`` closest to it, and ``p - q`` ``(P, N, 2)``."""
     a = verts
-    b = jnp.roll(verts, -1, axis=0)
-    ab = b - a  # (N, 2)
+    ab = jnp.roll(verts, -1, axis=0) - a  # (N, 2)
     ap = points[:, None, :] - a[None, :, :]  # (P, N, 2)
     len2 = jnp.sum(ab * ab, axis=-1)  # (N,)
     safe = jnp.where(len2 > 0, len2, 1.0)
     t = jnp.clip(jnp.sum(ap * ab[None], axis=-1) / safe, 0.0, 1.0)
-    closest = ap - t[..., None] * ab[None]
-    d2 = jnp.min(jnp.sum(closest * closest, axis=-1), axis=1)
-    dist = jnp.sqrt(d2 + 1e-12)
-    return jnp.where(_inside(points, verts), dist, -dist)
+    return t, ap - t[..., None] * ab[None]
 
 
 def _inside(points: jnp.ndarray, verts: jnp.ndarray) -> jnp.ndarray:
@@ -171,12 +176,7 @@ def _block_sums(verts, pts, coef, tau):
     point ``q = a + t (b - a)`` and the unit vector ``u`` from ``q`` to ``p`` (the derivative
     through ``t`` vanishes: ``t`` is optimal, or clipped and constant). It is what reverse-mode
     differentiation of :func:`signed_distance` gives (a test checks), at the cost of one pass."""
-    a = verts
-    ab = jnp.roll(verts, -1, axis=0) - a
-    ap = pts[:, None, :] - a[None, :, :]  # (S, N, 2)
-    len2 = jnp.sum(ab * ab, axis=-1)
-    t = jnp.clip(jnp.sum(ap * ab[None], axis=-1) / jnp.where(len2 > 0, len2, 1.0), 0.0, 1.0)  # (S, N)
-    closest = ap - t[..., None] * ab[None]
+    t, closest = _closest_on_edges(pts, verts)  # (S, N), (S, N, 2)
     d2 = jnp.sum(closest * closest, axis=-1)
     nearest = jnp.argmin(d2, axis=1)
     onehot = (jnp.arange(verts.shape[0])[None, :] == nearest[:, None]).astype(pts.dtype)  # (S, N)
@@ -204,8 +204,7 @@ def _pool_sums_and_jacobian(verts, pool_pts, pool_coef, off, nblk, tau, block):
         v, g = _block_sums(verts, pts, coef, tau)
         return i + 1, s + v, j + g
 
-    zero = jnp.zeros((), pool_pts.dtype)
-    init = (jnp.zeros((), nblk.dtype), jnp.zeros(3, zero.dtype), jnp.zeros((3, *verts.shape), zero.dtype))
+    init = (jnp.zeros((), nblk.dtype), jnp.zeros(3, pool_pts.dtype), jnp.zeros((3, *verts.shape), pool_pts.dtype))
     _, s, j = jax.lax.while_loop(lambda c: c[0] < nblk, body, init)
     return s, j
 
@@ -512,6 +511,7 @@ def _run_jobs(
     for i in range(len(bricks)):
         groups.setdefault(schedules[i], []).append(i)
     dt = jnp.dtype(config.dtype)
+    f = dt.type  # numpy arrays of the solver's dtype: no conversion on the way in
     blk, lanes = config.block, config.chunk
     sizes = [blk * math.ceil(len(b.points) / blk) for b in bricks]
     bar = _progress(total=len(bricks), desc=desc, unit="brick")
@@ -523,7 +523,6 @@ def _run_jobs(
             chunk = [members[r] for r in run]
             total = sum(sizes[i] for i in chunk)
             length = config.pool_points if total <= config.pool_points else 1 << math.ceil(math.log2(total))
-            f = dt.type  # numpy arrays of the solver's dtype: no conversion on the way in
             pool_pts = np.full((length, 2), 1e4, f)  # padding: far outside every polygon, weight 0
             pool_coef = np.zeros((3, length), f)
             off = np.zeros(lanes, dtype=np.int32)

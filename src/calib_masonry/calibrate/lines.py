@@ -672,8 +672,11 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     q = np.c_[quad_r, np.ones(4)] @ np.linalg.inv(p).T
     quad_n = q[:, :2] / q[:, 2:3]
 
-    def to_full(pts):
-        return (pts * scale + centre + 0.5) / s - 0.5
+    def small_to_full(pts):  # the working image's pixels -> the photo's
+        return (pts + 0.5) / s - 0.5
+
+    def to_full(pts):  # centred, scaled working coordinates -> the photo's pixels
+        return small_to_full(pts * scale + centre)
 
     # snap the sides to where the wall's colours end (joint-free strips at the edges, weak edges)
     rgb_small = colour.result()
@@ -711,7 +714,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     def outside(q):
         return np.any(q < -slack) or np.any(q[:, 0] > cols - 1 + slack) or np.any(q[:, 1] > rows - 1 + slack)
 
-    if outline is None and outside((quad_small + 0.5) / s - 0.5):
+    if outline is None and outside(small_to_full(quad_small)):
         # the joints' vanishing points were wrong enough to grow the outline into the sky or the
         # ground (a tall wall seen nearly square-on: its head joints are short, its sides nearly
         # parallel): start again from where the joints are, without their vanishing points
@@ -719,7 +722,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
         again = _quad_of_mask(_wall_mask(rgb_small, box, flat))
         if again is not None:
             quad_small = again
-    quad = order_corners((quad_small + 0.5) / s - 0.5, where="automatic mode")
+    quad = order_corners(small_to_full(quad_small), where="automatic mode")
     # refine each side in the full photo
     quad = refine_quad(rgb, quad, (config.refine_halfwidth_px or 6.0 / s, 2.5 / s))
     if outside(quad):

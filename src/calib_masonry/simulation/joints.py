@@ -825,6 +825,13 @@ class CrackTracker:
         self.seconds = 0.0
         self._unit = None
 
+    @property
+    def reads_poses(self) -> bool:
+        """Whether :meth:`step` reads the poses: only for bodies that bear on the plate without a
+        foundation joint (where they touch it is Bullet's). Otherwise a step's outcome follows from
+        the load and the tracker's own state alone."""
+        return self.model.n_all > self.model.nj
+
     def _unit_states(self) -> list[JointState]:
         if self._unit is None:
             eye = np.eye(3)

@@ -48,10 +48,6 @@ class _Background:
             raise self._error
         return self._value
 
-    def join(self) -> None:
-        """Wait for the function to return, without its value or its exception."""
-        self._thread.join()
-
     def __enter__(self) -> _Background:
         return self
 
@@ -59,7 +55,7 @@ class _Background:
         """Wait for the function however the block ends, so that nothing runs on after it (a
         writer in a staging folder being removed); an error of the block goes on, the function's
         own is raised by ``result()``."""
-        self.join()
+        self._thread.join()
 
 
 def background(fn: Callable, *args, **kwargs) -> _Background:

@@ -325,7 +325,7 @@ class JointModel:
         self._lu: dict = {}
         self._joint_part: tuple | None = None
         self._symbolic: dict = {}  # CHOLMOD's analysis of each tangent's sparsity pattern (see _newton_step)
-        self.factorisations = 0  # sparse LU factorisations, over the model's life
+        self.factorisations = 0  # sparse factorisations (LU or Cholesky), over the model's life
         self._U: np.ndarray | None = None  # the last committed solve's motion
         self._last: tuple | None = None
         self.newton_iterations = 0  # of the last solve

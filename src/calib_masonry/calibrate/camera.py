@@ -134,6 +134,10 @@ def focal_px_from_35mm(focal_35mm: float, image_size: tuple[int, int]) -> float:
     return focal_35mm * math.hypot(w, h) / math.hypot(36.0, 24.0)
 
 
+#: the flag that gives the wall's corners by hand, named by every message of a failed detection
+CORNERS_FLAG = "--corners x1,y1,...,x4,y4"
+
+
 def order_corners(points: np.ndarray, *, where: str = "--corners") -> np.ndarray:
     """Four image points in any order -> lower-left, lower-right, upper-right, upper-left.
 
@@ -153,12 +157,12 @@ def order_corners(points: np.ndarray, *, where: str = "--corners") -> np.ndarray
     if span < 4.0 or np.min(np.abs(cross)) < 1e-3 * span**2:
         raise InputError(
             f"{where}: the corners are repeated or three of them are collinear; click the wall's four corners "
-            "with --corners x1,y1,...,x4,y4"
+            f"with {CORNERS_FLAG}"
         )
     if not (np.all(cross > 0) or np.all(cross < 0)):
         raise InputError(
             f"{where}: the corners do not form a convex quadrilateral (self-crossing or dented); "
-            "click the wall's four outer corners with --corners x1,y1,...,x4,y4"
+            f"click the wall's four outer corners with {CORNERS_FLAG}"
         )
     # start from the lower-left: of the two lowest points in the image (largest y), the left one
     low = np.argsort(-ccw[:, 1])[:2]

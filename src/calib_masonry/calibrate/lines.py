@@ -27,7 +27,7 @@ from scipy import ndimage
 
 from .._threads import background
 from ..errors import CalibMasonryError, FitFailed
-from .camera import order_corners
+from .camera import CORNERS_FLAG, order_corners
 
 __all__ = ["DetectConfig", "Detection", "detect_wall", "refine_quad", "segments_in_quad"]
 
@@ -203,7 +203,7 @@ def _vanishing_point(
     valid = np.all(np.isfinite(vps), axis=1) & (np.linalg.norm(vps, axis=1) != 0)
     if not valid.any():
         raise FitFailed(
-            "automatic mode: no two joint lines meet in a vanishing point; click the corners with --corners x1,y1,...,x4,y4"
+            f"automatic mode: no two joint lines meet in a vanishing point; click the corners with {CORNERS_FLAG}"
         )
     scores = np.full(len(vps), -1.0)
     for k0 in range(0, len(vps), 64):  # 64 hypotheses at a time: (64, segments, 2) temporaries
@@ -611,7 +611,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     if len(seg) < 8:
         raise FitFailed(
             "automatic mode: no wall found (almost no straight edges in the photo); click the corners "
-            "with --corners x1,y1,...,x4,y4"
+            f"with {CORNERS_FLAG}"
         )
     ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
     from_h = np.minimum(ang, 180.0 - ang)
@@ -633,13 +633,13 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     except FitFailed:
         raise FitFailed(
             "automatic mode: no wall found (too few horizontal or vertical joint lines); click the "
-            "corners with --corners x1,y1,...,x4,y4"
+            f"corners with {CORNERS_FLAG}"
         ) from None
     bed, head = hn[inl_b], vn[inl_h]
     if len(bed) < 4 or len(head) < 4:
         raise FitFailed(
             "automatic mode: no wall found (too few mortar-joint lines agree on a wall plane); click the "
-            "corners with --corners x1,y1,...,x4,y4"
+            f"corners with {CORNERS_FLAG}"
         )
     # rectify: vp_b -> (1, 0, 0), vp_h -> (0, 1, 0)
     o = np.array([0.0, 0.0, 1.0])
@@ -647,7 +647,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     if abs(vanishing_line @ o) < 1e-12:
         raise FitFailed(
             "automatic mode: the wall's vanishing line passes through the image centre; click the corners with "
-            "--corners x1,y1,...,x4,y4"
+            f"{CORNERS_FLAG}"
         )
     p = np.stack([np.cross(vp_h, o), np.cross(vp_b, o), vanishing_line])
 
@@ -663,8 +663,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     inside = (bed_mid_u > u0) & (bed_mid_u < u1)
     if inside.sum() < 3:
         raise FitFailed(
-            "automatic mode: no wall found (joint lines do not outline a wall); click the corners with "
-            "--corners x1,y1,...,x4,y4"
+            f"automatic mode: no wall found (joint lines do not outline a wall); click the corners with {CORNERS_FLAG}"
         )
     bed_v = ((b1[:, 1] + b2[:, 1]) / 2)[inside]
     v0, v1 = _densest_run(bed_v, np.abs(b2[:, 0] - b1[:, 0])[inside])
@@ -728,7 +727,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
     if outside(quad):
         raise FitFailed(
             "automatic mode: the outline found runs outside the photo (lines of the surroundings taken for "
-            "joints); click the wall's corners with --corners x1,y1,...,x4,y4"
+            f"joints); click the wall's corners with {CORNERS_FLAG}"
         )
     bed_full = np.c_[to_full(bed[:, :2]), to_full(bed[:, 2:])]
     head_full = np.c_[to_full(head[:, :2]), to_full(head[:, 2:])]

@@ -286,3 +286,24 @@ def test_a_block_on_a_cracked_joint_tips_or_slides_where_statics_says(size, dire
             break
     assert onset is not None
     assert onset == pytest.approx(expected, abs=0.0101)
+
+
+@pytest.mark.parametrize("load", [1.5, 3.0])
+def test_nothing_cracks_from_a_run_away(load):
+    # a column loaded past the lateral load at which its cracked base lets it rock: the base cracks
+    # from an equilibrium, the solve on what is left runs away (a mechanism), and nothing else cracks
+    # in that load; the state returned is the last equilibrium's, not the run-away iterate's (its
+    # forces are set by where the iteration stopped)
+    mat = Material(tensile_strength=0.01e6)
+    sc = _column(4, material=mat)
+    lam, _, worst = _first_crack(sc)
+    g = np.array([load * lam * G, 0.0, -G])
+    jm = JointModel(sc)
+    closed = np.ones((jm.nj, OUTLINE_POINTS), bool)
+    cracked, _, state = jm.crack(g, np.ones(jm.nj, bool), closed, runaway_m=1e-3)
+    assert list(cracked) == [worst]
+    moved = jm.corner_motion()
+    assert moved[worst] > 1e-3  # the base has run away
+    assert not np.array_equal(jm.state(jm._U).utilisation, state.utilisation)
+    first, _ = JointModel(sc).solve(g, np.ones(jm.nj, bool))
+    assert np.array_equal(state.utilisation, first.utilisation)

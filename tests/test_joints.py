@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 import shapely
 
 from calib_masonry.build3d.contacts import OUTLINE_POINTS, joint_axes, patch_section
@@ -307,3 +308,23 @@ def test_nothing_cracks_from_a_run_away(load):
     assert not np.array_equal(jm.state(jm._U).utilisation, state.utilisation)
     first, _ = JointModel(sc).solve(g, np.ones(jm.nj, bool))
     assert np.array_equal(state.utilisation, first.utilisation)
+
+
+def test_the_sparse_cholesky_solve_is_exact_and_its_kept_analysis_changes_no_bit():
+    from calib_masonry.simulation.joints import _cholesky_solve
+
+    rng = np.random.default_rng(3)
+    n = 300
+    B = sp.random(n, n, density=0.02, random_state=rng, format="csc")
+    A = (B @ B.T + sp.eye(n)).tocsc()  # symmetric positive definite
+    b = rng.normal(size=n)
+    kept: dict = {}
+    x = _cholesky_solve(A, b, kept)
+    assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
+    A2 = (A + 0.5 * sp.eye(n)).tocsc()  # the same pattern, other values: the kept analysis serves
+    x2 = _cholesky_solve(A2, b, kept)
+    assert len(kept) == 1
+    np.testing.assert_array_equal(x2, _cholesky_solve(A2, b, {}))
+    assert np.linalg.norm(A2 @ x2 - b) <= 1e-10 * np.linalg.norm(b)
+    with pytest.raises(ArithmeticError):
+        _cholesky_solve((A - 1e3 * sp.eye(n)).tocsc(), b, {})

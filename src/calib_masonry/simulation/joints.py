@@ -274,28 +274,31 @@ def _inside_outline(outline: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.nda
     return pos | neg
 
 
-def _cholesky_solve(A: sp.csc_matrix, b: np.ndarray, symbolic: dict) -> np.ndarray:
+def _cholesky_solve(A: sp.csc_matrix, b: np.ndarray, cache: dict) -> np.ndarray:
     """``A^-1 b`` for a symmetric positive definite ``A`` by CHOLMOD's supernodal Cholesky
-    factorisation of its lower triangle (through cvxopt). The fill-reducing analysis (AMD) of each
-    sparsity pattern is kept in ``symbolic`` (the last few): within a contact solve the pattern
-    stays the same. Raises ArithmeticError where ``A`` is not positive definite."""
+    factorisation of its lower triangle (through cvxopt). For each sparsity pattern (the last few,
+    in ``cache``) the fill-reducing analysis (AMD) and the lower triangle's place in ``A`` are
+    kept: within a contact solve the pattern stays the same. Raises ArithmeticError where ``A``
+    is not positive definite."""
     from cvxopt import cholmod, matrix, spmatrix
 
-    L = sp.tril(A, format="csc")
-    L.sort_indices()
+    A.sort_indices()
     n = A.shape[0]
-    key = (n, L.indptr.tobytes(), L.indices.tobytes())
-    cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(L.indptr))
-    M = spmatrix(matrix(L.data), matrix(L.indices.astype(np.int64)), matrix(cols), (n, n))
-    F = symbolic.pop(key, None)
-    if F is None:
-        F = cholmod.symbolic(M)
-    cholmod.numeric(M, F)
-    symbolic[key] = F
-    while len(symbolic) > 4:
-        symbolic.pop(next(iter(symbolic)))
+    key = (n, A.indptr.tobytes(), A.indices.tobytes())
+    entry = cache.pop(key, None)
+    if entry is None:
+        cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(A.indptr))
+        lower = np.flatnonzero(A.indices >= cols)
+        rows, cols = matrix(A.indices[lower].astype(np.int64)), matrix(cols[lower])
+        symbolic = cholmod.symbolic(spmatrix(matrix(A.data[lower]), rows, cols, (n, n)))
+        entry = (lower, rows, cols, symbolic)
+    lower, rows, cols, symbolic = entry
+    cholmod.numeric(spmatrix(matrix(A.data[lower]), rows, cols, (n, n)), symbolic)
+    cache[key] = entry
+    while len(cache) > 4:
+        cache.pop(next(iter(cache)))
     x = matrix(np.ascontiguousarray(b, dtype=np.float64))
-    cholmod.solve(F, x)
+    cholmod.solve(symbolic, x)
     return np.array(x).ravel()
 
 

@@ -118,6 +118,17 @@ def _first_crack(sc, direction=(1.0, 0.0)):
     return hi, FAILURE_MODES[st.mode[int(st.utilisation.argmax())]], int(st.utilisation.argmax())
 
 
+#: a mortar weak in tension, so that a column's base cracks first and then rocks
+WEAK_MORTAR = Material(tensile_strength=0.01e6)
+
+
+def _past_first_crack(sc, factor):
+    """The load ``m g`` at ``factor`` times the lateral acceleration that first cracks ``sc`` (along
+    x, with gravity), and the joint that cracks first."""
+    lam, _, worst = _first_crack(sc)
+    return np.array([factor * lam * G, 0.0, -G]), worst
+
+
 @pytest.mark.parametrize(
     "height, f_t, governs", [(0.6, 0.2e6, "tension"), (6.0, 0.02e6, "tension"), (3.0, 0.0, "tension")]
 )
@@ -180,11 +191,10 @@ def test_cracked_joints_carry_compression_only():
 def test_cracks_cascade_event_by_event_in_one_load():
     # a column pushed past its base's first crack: the base cracks first, in tension, and the
     # cascade in the same load goes on from there
-    sc = _column(3, material=Material(tensile_strength=0.01e6))
+    sc = _column(3, material=WEAK_MORTAR)
     jm = JointModel(sc)
-    lam, _, worst = _first_crack(sc)
+    g, worst = _past_first_crack(sc, 1.05)
     assert sc.bonds[worst].b < 0  # the base cracks first
-    g = np.array([1.05 * lam * G, 0.0, -G])
     cracked, modes, st = jm.crack(g, np.ones(jm.nj, bool), np.ones((jm.nj, OUTLINE_POINTS), bool))
     assert cracked[0] == worst
     assert FAILURE_MODES[modes[0]] == "tension"
@@ -195,14 +205,12 @@ def test_a_block_let_go_changes_nothing_for_the_rest(load):
     # a column with one more block on top whose joint Bullet has let go (cracked, no corner in the
     # model): that block floats on its weak spring, a kilometre away in the model, and must not
     # make the rest's solve look like a mechanism; the rest cracks as the column without it does
-    mat = Material(tensile_strength=0.01e6)
-    ref = _column(3, material=mat)
-    lam, _, _ = _first_crack(ref)
-    g = np.array([load * lam * G, 0.0, -G])
+    ref = _column(3, material=WEAK_MORTAR)
+    g, _ = _past_first_crack(ref, load)
     expect, expect_modes, _ = JointModel(ref).crack(
         g, np.ones(3, bool), np.ones((3, OUTLINE_POINTS), bool), runaway_m=1e-3
     )
-    sc = _column(4, material=mat)
+    sc = _column(4, material=WEAK_MORTAR)
     closed = np.ones((4, OUTLINE_POINTS), bool)
     closed[3] = False
     cracked, modes, _ = JointModel(sc).crack(g, np.array([True, True, True, False]), closed, runaway_m=1e-3)
@@ -214,12 +222,11 @@ def test_a_let_go_block_starts_where_its_weak_spring_holds_it():
     # the let-go block is held by its weak spring alone: its equilibrium is the load over eps m (a
     # rigid translation, g / eps); the solve starts it there, so it costs no Newton steps more than
     # the column without it (it used to take a dozen capped steps to float a kilometre away)
-    mat = Material(tensile_strength=0.01e6)
     g = np.array([0.3 * G, 0.0, -G])
     intact = np.array([True, True, False])
-    ref = JointModel(_column(3, material=mat))
+    ref = JointModel(_column(3, material=WEAK_MORTAR))
     ref.solve(g, intact)
-    model = JointModel(_column(4, material=mat))
+    model = JointModel(_column(4, material=WEAK_MORTAR))
     closed = np.ones((4, OUTLINE_POINTS), bool)
     closed[3] = False
     state, _ = model.solve(g, np.append(intact, False), closed)
@@ -295,10 +302,8 @@ def test_nothing_cracks_from_a_run_away(load):
     # from an equilibrium, the solve on what is left runs away (a mechanism), and nothing else cracks
     # in that load; the state returned is the last equilibrium's, not the run-away iterate's (its
     # forces are set by where the iteration stopped)
-    mat = Material(tensile_strength=0.01e6)
-    sc = _column(4, material=mat)
-    lam, _, worst = _first_crack(sc)
-    g = np.array([load * lam * G, 0.0, -G])
+    sc = _column(4, material=WEAK_MORTAR)
+    g, worst = _past_first_crack(sc, load)
     jm = JointModel(sc)
     closed = np.ones((jm.nj, OUTLINE_POINTS), bool)
     cracked, _, state = jm.crack(g, np.ones(jm.nj, bool), closed, runaway_m=1e-3)

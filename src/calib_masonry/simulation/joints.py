@@ -336,7 +336,7 @@ class JointModel:
         self._reg = sp.diags(reg.ravel())
         self._lu: dict = {}
         self._joint_part: tuple | None = None
-        self._symbolic: dict = {}  # CHOLMOD's analysis per tangent sparsity pattern (see _cholesky_solve)
+        self._cholesky: dict = {}  # CHOLMOD's analysis and lower-triangle index per tangent pattern (_cholesky_solve)
         self.factorisations = 0  # sparse factorisations (LU or Cholesky), over the model's life
         self._U: np.ndarray | None = None  # the last committed solve's motion
         self._last: tuple | None = None
@@ -594,7 +594,7 @@ class JointModel:
         J = (K0 + P.T @ Tm @ P).tocsc()
         self.factorisations += 1
         try:
-            return -_cholesky_solve(J, r, self._symbolic)
+            return -_cholesky_solve(J, r, self._cholesky)
         except ArithmeticError:  # not positive definite in floating point (not seen): a general LU
             return spla.splu(J, **_LU_OPTIONS).solve(-r)
 

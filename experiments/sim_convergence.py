@@ -69,7 +69,7 @@ def main() -> None:
     p.add_argument("--models", nargs="+", default=["paper_example", "stylite"])
     p.add_argument("--settings", nargs="+", default=list(SETTINGS), choices=list(SETTINGS))
     p.add_argument("--pga", nargs="+", type=float, default=[round(0.05 * k, 2) for k in range(1, 13)])
-    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    p.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2], help="none: gravity only")
     p.add_argument("--duration", type=float, default=10.0, help="seconds of ground motion per quake run")
     p.add_argument("--gravity-s", type=float, default=20.0, help="seconds under gravity alone (0: skip)")
     args = p.parse_args()

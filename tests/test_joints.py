@@ -315,21 +315,25 @@ def test_nothing_cracks_from_a_run_away(load):
     assert np.array_equal(state.utilisation, first.utilisation)
 
 
-def test_the_sparse_cholesky_solve_is_exact_and_its_kept_analysis_changes_no_bit():
-    from calib_masonry.simulation.joints import _cholesky_solve
+def test_the_fixed_pattern_cholesky_solve_is_exact_for_any_subset_of_blocks():
+    from calib_masonry.simulation.joints import _scatter, _Tangent
 
     rng = np.random.default_rng(3)
-    n = 300
-    B = sp.random(n, n, density=0.02, random_state=rng, format="csc")
-    A = (B @ B.T + sp.eye(n)).tocsc()  # symmetric positive definite
-    b = rng.normal(size=n)
-    kept: dict = {}
-    x = _cholesky_solve(A, b, kept)
-    assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
-    A2 = (A + 0.5 * sp.eye(n)).tocsc()  # the same pattern, other values: the kept analysis serves
-    x2 = _cholesky_solve(A2, b, kept)
-    assert len(kept) == 1
-    np.testing.assert_array_equal(x2, _cholesky_solve(A2, b, {}))
-    assert np.linalg.norm(A2 @ x2 - b) <= 1e-10 * np.linalg.norm(b)
+    nb, nj = 40, 90
+    a = rng.integers(0, nb, nj)
+    b = (a + rng.integers(1, nb, nj)) % nb  # another body
+    dofs = np.concatenate([6 * a[:, None] + np.arange(6), 6 * b[:, None] + np.arange(6)], axis=1)
+    n = 6 * nb
+    tan = _Tangent(dofs, n)
+    G = rng.normal(size=(nj, 12, 12))
+    blocks = G @ np.transpose(G, (0, 2, 1))  # positive semi-definite blocks
+    diag = rng.uniform(0.5, 1.0, n)
+    rhs = rng.normal(size=n)
+    for joints in (np.arange(nj), rng.choice(nj, 25, replace=False), np.array([3, 3, 7, 11, 11, 11])):
+        values = tan.values(joints, blocks[joints], diag)
+        x = tan.solve(values, rhs)
+        A = (_scatter(dofs[joints], blocks[joints], n) + sp.diags(diag)).tocsc()  # the same matrix, summed by scipy
+        assert np.linalg.norm(A @ x - rhs) <= 1e-10 * np.linalg.norm(rhs)
+        np.testing.assert_array_equal(x, _Tangent(dofs, n).solve(values, rhs))  # a new analysis changes no bit
     with pytest.raises(ArithmeticError):
-        _cholesky_solve((A - 1e3 * sp.eye(n)).tocsc(), b, {})
+        tan.solve(tan.values(np.arange(nj), blocks, diag - 1e3), rhs)

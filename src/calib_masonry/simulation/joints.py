@@ -274,32 +274,64 @@ def _inside_outline(outline: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.nda
     return pos | neg
 
 
-def _cholesky_solve(A: sp.csc_matrix, b: np.ndarray, cache: dict) -> np.ndarray:
-    """``A^-1 b`` for a symmetric positive definite ``A`` by CHOLMOD's supernodal Cholesky
-    factorisation of its lower triangle (through cvxopt). For each sparsity pattern (the last few,
-    in ``cache``) the fill-reducing analysis (AMD) and the lower triangle's place in ``A`` are
-    kept: within a contact solve the pattern stays the same. Raises ArithmeticError where ``A``
-    is not positive definite."""
-    from cvxopt import cholmod, matrix, spmatrix
+class _Tangent:
+    """The contact iteration's matrix ``K0 + P^T T_s P`` (:meth:`JointModel._newton_step`) on one
+    sparsity pattern for the model's life, factorised by CHOLMOD's supernodal Cholesky (through
+    cvxopt).
 
-    A.sort_indices()
-    n = A.shape[0]
-    key = (n, A.indptr.tobytes(), A.indices.tobytes())
-    entry = cache.pop(key, None)
-    if entry is None:
-        cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(A.indptr))
-        lower = np.flatnonzero(A.indices >= cols)
-        rows, cols = matrix(A.indices[lower].astype(np.int64)), matrix(cols[lower])
-        symbolic = cholmod.symbolic(spmatrix(matrix(A.data[lower]), rows, cols, (n, n)))
-        entry = (lower, rows, cols, symbolic)
-    lower, rows, cols, symbolic = entry
-    cholmod.numeric(spmatrix(matrix(A.data[lower]), rows, cols, (n, n)), symbolic)
-    cache[key] = entry
-    while len(cache) > 4:
-        cache.pop(next(iter(cache)))
-    x = matrix(np.ascontiguousarray(b, dtype=np.float64))
-    cholmod.solve(symbolic, x)
-    return np.array(x).ravel()
+    Every term couples the two bodies of one joint: an intact joint's stiffness and its cracked
+    corners' contacts alike fill that joint's 12 x 12 block, and the weak springs the diagonal. So
+    the lower triangle of the union of all joints' blocks holds every matrix the iteration meets:
+    its fill-reducing analysis (AMD) is done once, each block's place in it is kept, and a new
+    matrix is its values summed into those places (``np.bincount``), with no sparse-matrix
+    arithmetic, sorting or pattern comparison. A block that is zero (a joint let go) costs its
+    entries' share of the factorisation, as it did while the joint was intact."""
+
+    def __init__(self, dofs: np.ndarray, n: int) -> None:
+        from cvxopt import cholmod, matrix, spmatrix
+
+        rows = np.repeat(dofs, 12, axis=1).astype(np.int64)  # (J, 144): entry (i, j) of block at i * 12 + j
+        cols = np.tile(dofs, (1, 12)).astype(np.int64)
+        self.lower = rows >= cols  # (J, 144) the entries that CHOLMOD reads (the lower triangle)
+        diag = np.arange(n, dtype=np.int64)
+        key = np.concatenate([cols[self.lower] * n + rows[self.lower], diag * n + diag])
+        place, slot = np.unique(key, return_inverse=True)  # column-major: CHOLMOD's own order
+        self.slot = np.full(rows.shape, -1, dtype=np.int64)
+        self.slot[self.lower] = slot[: -n]
+        self.diag_slot = slot[-n:]
+        self.nnz = place.size
+        self.n = n
+        self._A = spmatrix(matrix(np.ones(self.nnz)), matrix(place % n), matrix(place // n), (n, n))
+        self._symbolic = cholmod.symbolic(self._A)
+        self._base: tuple[bytes, np.ndarray] | None = None
+
+    def values(self, joints: np.ndarray, blocks: np.ndarray, diag: np.ndarray | None = None) -> np.ndarray:
+        """The lower triangle's values ``(nnz,)`` of the sum of the 12 x 12 ``blocks`` ``(M, 12, 12)``
+        of ``joints`` ``(M,)`` (joints may repeat) and of ``diag`` ``(n,)`` on the diagonal."""
+        lower = self.lower[joints]
+        w = blocks.reshape(-1, 144)[lower]
+        out = np.bincount(self.slot[joints][lower], weights=w, minlength=self.nnz).astype(np.float64, copy=False)
+        if diag is not None:
+            out[self.diag_slot] += diag
+        return out
+
+    def base(self, key: bytes, make) -> np.ndarray:
+        """The values of the intact joints' part and the weak springs, kept for the last ``key``
+        (``make()`` computes them)."""
+        if self._base is None or self._base[0] != key:
+            self._base = (key, make())
+        return self._base[1]
+
+    def solve(self, values: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """``A^-1 b`` for the symmetric positive definite ``A`` of these lower-triangle ``values``.
+        Raises ArithmeticError where ``A`` is not positive definite."""
+        from cvxopt import cholmod, matrix
+
+        self._A.V = matrix(values)
+        cholmod.numeric(self._A, self._symbolic)
+        x = matrix(np.ascontiguousarray(b, dtype=np.float64))
+        cholmod.solve(self._symbolic, x)
+        return np.array(x).ravel()
 
 
 class JointModel:
@@ -336,7 +368,7 @@ class JointModel:
         self._reg = sp.diags(reg.ravel())
         self._lu: dict = {}
         self._joint_part: tuple | None = None
-        self._cholesky: dict = {}  # CHOLMOD's analysis and lower-triangle index per tangent pattern (_cholesky_solve)
+        self._tangent: _Tangent | None = None  # the contact iteration's matrix and its analysis, made at first use
         self.factorisations = 0  # sparse factorisations (LU or Cholesky), over the model's life
         self._U: np.ndarray | None = None  # the last committed solve's motion
         self._last: tuple | None = None
@@ -570,15 +602,16 @@ class JointModel:
         F, T = self._contact_forces(jc, kc, gap)
         return K0 @ U - rhs + P.T @ F.ravel(), (gap, T)
 
-    def _newton_step(self, K0, P, T, r) -> np.ndarray:
+    def _newton_step(self, intact, jc, kc, K0, P, T, r) -> np.ndarray:
         """The step ``-J^-1 r`` for ``J = K0 + P^T T_s P``, with ``T_s`` the corners' tangents ``T``
         ``(C, 3, 3)`` without the friction's dependence on the normal displacement (``T[:, :2, 2]``,
         the only part that is not symmetric).
 
         ``J`` is then symmetric positive definite (``K0`` is, with the weak springs; each corner's
         normal stiffness and its shear stiffness at a fixed normal force are), so it is factorised
-        by a sparse Cholesky factorisation (CHOLMOD's supernodal one) instead of a general LU: on
-        the paper example's 9,522 unknowns 18 ms against SuperLU's 140 ms. The step is that of a
+        by a sparse Cholesky factorisation (CHOLMOD's supernodal one, on a pattern fixed for the
+        model's life: :class:`_Tangent`) instead of a general LU: on the paper example's 9,522
+        unknowns 18 ms against SuperLU's 140 ms. The step is that of a
         quasi-Newton iteration: it converges to the same out-of-balance tolerance (linearly where
         corners slide under a changing normal force), in more but much cheaper steps. On the
         paper example's 0.3 g quake every joint cracks at the same frame in the same mode as with
@@ -586,17 +619,26 @@ class JointModel:
         the exact tangent's cascade changed with the tolerance; this iteration's, with crack rounds
         only from equilibria (:meth:`crack`), is the same from tolerance 1e-3 to 1e-5 on the
         Stylite tower's 0.3 g quake (experiments/joint_solver_settings.py)."""
-        C = len(T)
+        if self._tangent is None:
+            self._tangent = _Tangent(self.dofs, 6 * self.nb)
+        tan = self._tangent
+
+        def base() -> np.ndarray:
+            idx = np.flatnonzero(intact)
+            return tan.values(idx, self.Kj[idx], self._reg.diagonal())
+
         Ts = T.copy()
         Ts[:, :2, 2] = 0.0
-        rows = np.repeat(np.arange(3 * C).reshape(C, 3), 3, axis=0).ravel()
-        Tm = sp.csr_matrix((Ts.ravel(), rows, np.arange(0, 9 * C + 1, 3)), shape=(3 * C, 3 * C))
-        J = (K0 + P.T @ Tm @ P).tocsc()
+        Lc = self._corner_L[jc, kc]  # (C, 3, 12)
+        blocks = np.einsum("cai,caj->cij", Lc, np.einsum("cab,cbj->caj", Ts, Lc))
         self.factorisations += 1
         try:
-            return -_cholesky_solve(J, r, self._cholesky)
+            return -tan.solve(tan.base(intact.tobytes(), base) + tan.values(jc, blocks), r)
         except ArithmeticError:  # not positive definite in floating point (not seen): a general LU
-            return spla.splu(J, **_LU_OPTIONS).solve(-r)
+            C = len(T)
+            rows = np.repeat(np.arange(3 * C).reshape(C, 3), 3, axis=0).ravel()
+            Tm = sp.csr_matrix((Ts.ravel(), rows, np.arange(0, 9 * C + 1, 3)), shape=(3 * C, 3 * C))
+            return spla.splu((K0 + P.T @ Tm @ P).tocsc(), **_LU_OPTIONS).solve(-r)
 
     def _contact_newton(self, intact, jc, kc, rhs, start: np.ndarray | None = None) -> np.ndarray:
         """The motion ``U`` (6 B,) that balances ``rhs`` with the contact corners ``jc, kc``, from
@@ -634,7 +676,7 @@ class JointModel:
                     break  # stalled
             gap, T = st
             norm0 = np.linalg.norm(r)
-            dU = self._newton_step(K0, P, T, r)
+            dU = self._newton_step(intact, jc, kc, K0, P, T, r)
             # a step that would move anything by more than ``step_m`` (or three times the largest
             # motion so far) is shortened: a free body's full step is g / eps, metres; then halved
             # while it does not lower the out-of-balance force

@@ -297,7 +297,7 @@ class _Tangent:
         key = np.concatenate([cols[self.lower] * n + rows[self.lower], diag * n + diag])
         place, slot = np.unique(key, return_inverse=True)  # column-major: CHOLMOD's own order
         self.slot = np.full(rows.shape, -1, dtype=np.int64)
-        self.slot[self.lower] = slot[: -n]
+        self.slot[self.lower] = slot[:-n]
         self.diag_slot = slot[-n:]
         self.nnz = place.size
         self.n = n
@@ -372,6 +372,7 @@ class JointModel:
         self.factorisations = 0  # sparse factorisations (LU or Cholesky), over the model's life
         self._U: np.ndarray | None = None  # the last committed solve's motion
         self._last: tuple | None = None
+        self._motion_of: tuple | None = None  # (U, _motion(U)) of the last call: asked twice per load
         self.newton_iterations = 0  # of the last solve
         self.converged = True  # whether the last solve met ``settings.tol``
         self.n_all = len(bonds)
@@ -815,14 +816,18 @@ class JointModel:
         committed solve (0 before any)."""
         if self._U is None or self.n_all == 0:
             return np.zeros(self.n_all)
-        return self._motion(self._U)
+        return self._motion(self._U).copy()
 
     def _motion(self, U: np.ndarray) -> np.ndarray:
         """The largest relative displacement ``(J',)`` (m) of each joint's corners under the motion ``U``."""
         if self.n_all == 0:
             return np.zeros(0)
+        if self._motion_of is not None and self._motion_of[0] is U:  # the crack rounds' check, then the tracker's
+            return self._motion_of[1]
         rel = np.einsum("jkab,jb->jka", self._corner_L, U[self.dofs])
-        return np.linalg.norm(rel, axis=2).max(axis=1)
+        out = np.linalg.norm(rel, axis=2).max(axis=1)
+        self._motion_of = (U, out)
+        return out
 
     def forget(self, joints: np.ndarray) -> None:
         """Drop the kept motion and the slip of these joints' corners: after a mechanism has run

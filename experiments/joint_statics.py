@@ -11,8 +11,9 @@ static linear programme of the tests (associative friction).
 
 With Coulomb (non-associative) friction the real collapse load is at most the programme's; where
 the mechanism rocks it should be close to it. Measured on the 2026-11-24 code: within 6 % below to
-2 % above the programme at mu 0.6 (the test's 12 x 3 panel 0.395 against 0.420 g), and a side by
-side pair and the mu 5 panels well below it: where a mechanism needs the friction of a head joint
+2 % above the programme at mu 0.6 (the test's 12 x 3 panel 0.395 against 0.420 g; the same with the
+quasi-Newton solve of 2026-11-25), and a side by side pair and the mu 5 panels well below it
+(0.42-0.48 of it with that solve): where a mechanism needs the friction of a head joint
 that carries no compression at rest (stiff blocks side by side have no normal force until they
 lean on each other), the elastic path finds the weaker branch of the non-associative problem, or
 the Newton iteration stalls on those untouched corners.

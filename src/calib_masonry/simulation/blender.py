@@ -10,7 +10,16 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
 * the world is stepped with ``scene.frame_set(f)`` frame by frame, the point cache covering the run;
 * every intact mortar joint is one FIXED constraint that never breaks in Bullet: the joint model
   (:class:`~calib_masonry.simulation.joints.JointModel`) decides, before every step after the
-  warm-up, which joints the coming step's load cracks, and the run switches those off.
+  warm-up, which joints the coming step's load cracks, and the run switches those off;
+* the bodies that a chain of joints Bullet holds ties to the plate are *kinematic* (Blender's
+  "Animated"): they stand exactly where they are, and the joints among them are off in Bullet
+  (nothing for its solver to do), until the joints the run lets go set a part of the structure
+  free; that part's bodies then turn dynamic (written on the evaluated objects, as the joints'
+  switches are; they start from rest) and its joints act. Why: Bullet holds a joint rigid only
+  as far as its iterative solver converges, and a tall structure under its own weight then
+  sways by its solver's settings (a 20 m tower of 557 stones: 100 mm at 10 substeps x 50
+  iterations, 34 mm at 20 x 100, with no joint let go), while the structure the joint model
+  holds is rigid by its own account (its joints move by microns);
   ``rigid_body_constraint.enabled = False`` is written on the *evaluated* object between
   frames: it reaches the live Bullet constraint at once; writing the original object instead
   tags the depsgraph and crashed Blender in about half the trials;
@@ -34,7 +43,7 @@ from .._threads import thread_imap
 from ..errors import BackendMissing, signals_deferred
 from ..progress import progress as _progress
 from .joints import CrackTracker
-from .scene import Scene, joint_axes
+from .scene import Scene, grounded_bodies, joint_axes
 
 __all__ = ["RunOutput", "run", "require_bpy", "write_model_blend"]
 
@@ -256,7 +265,8 @@ def _key_gravity(bpy, scene: Scene) -> None:
 
 def build_scene(scene: Scene):
     """Create the Blender scene; returns (bpy, body objects, plate object, constraint objects: one
-    rigid, unbreakable FIXED constraint per mortar joint)."""
+    rigid, unbreakable FIXED constraint per mortar joint, the bodies held fixed (B,): kinematic,
+    their joints off in Bullet until they are set free)."""
     bpy = require_bpy()
     _reset(bpy)
     sc = bpy.context.scene
@@ -297,8 +307,9 @@ def build_scene(scene: Scene):
     _key_gravity(bpy, scene)
 
     warm = s.warmup_frames
+    fixed = grounded_bodies(scene.bonds, len(scene.bodies))
     objects = []
-    for b in scene.bodies:
+    for b, held_fixed in zip(scene.bodies, fixed):
         ob = _mesh_object(bpy, b.name, b.vertices, b.faces, b.location, bodies_col)
         ob.rotation_mode = "QUATERNION"
         ob.rotation_quaternion = tuple(float(x) for x in b.rotation)
@@ -313,6 +324,7 @@ def build_scene(scene: Scene):
         rb.restitution = float(b.restitution)
         rb.linear_damping = rb.angular_damping = s.warmup_damping if warm > 0 else 0.0
         rb.use_deactivation = False
+        rb.kinematic = bool(held_fixed)
         objects.append(ob)
 
     constraints = []
@@ -333,8 +345,9 @@ def build_scene(scene: Scene):
             c.object2 = plate if bond.b < 0 else objects[bond.b]
             c.disable_collisions = True  # an intact joint's bricks do not touch: the joint carries the load
             c.use_breaking = False  # the joint model decides when a joint cracks (see joints.py)
+            c.enabled = not fixed[bond.a]  # a joint of the part held fixed acts once that part is set free
             constraints.append(e)
-    return bpy, objects, plate, constraints
+    return bpy, objects, plate, constraints, fixed
 
 
 def run(
@@ -361,7 +374,7 @@ def run(
     output then holds the frames up to that one.
     """
     t0 = time.perf_counter()
-    bpy, objects, plate, constraints = build_scene(scene)
+    bpy, objects, plate, constraints, fixed = build_scene(scene)
     sc = bpy.context.scene
     seconds_build = time.perf_counter() - t0
     s = scene.solver
@@ -401,11 +414,27 @@ def run(
         for k in np.flatnonzero(np.isfinite(switch_off_s)):
             schedule.setdefault(warm + int(round(float(switch_off_s[k]) * s.fps)), []).append(int(k))
 
-    def switch_off(bonds) -> None:
+    held = np.ones(len(scene.bonds), dtype=bool)  # the joints Bullet holds
+    bond_a = np.array([b.a for b in scene.bonds], dtype=np.int64)
+    freed_at = np.full(nb, -1)  # the frame at which each body held fixed was set free
+
+    def switch_off(bonds, frame: int) -> None:
         for k in bonds:
             live = constraints[k].evaluated_get(depsgraph).rigid_body_constraint
             live.enabled = False
             live.disable_collisions = False  # the cracked joint's bricks bear on each other
+        held[list(bonds)] = False
+        # the part of the structure that no held joint ties to the plate any more is set free:
+        # its bodies turn dynamic (from rest) and the held joints among them act in Bullet
+        free = np.flatnonzero(fixed & ~grounded_bodies(scene.bonds, nb, held))
+        if free.size == 0:
+            return
+        fixed[free] = False
+        freed_at[free] = frame
+        for j in free:
+            objects[j].evaluated_get(depsgraph).rigid_body.kinematic = False
+        for k in np.flatnonzero(held & np.isin(bond_a, free)):
+            constraints[k].evaluated_get(depsgraph).rigid_body_constraint.enabled = True
 
     def check(f: int, p: int):
         # the joints that step f's load cracks and Bullet must let go, given the poses of frame p
@@ -439,9 +468,10 @@ def run(
                     ahead = thread_imap(lambda k, w=i - 1: check(k, w), range(f, frames + 1), workers=1, name="joints")
                 p = i - 1
                 release, utilisation[p] = next(ahead) if ahead is not None else check(f, p)
-                switch_off(release)
+                if len(release):
+                    switch_off(release, f)
             elif f - 1 in schedule:
-                switch_off(schedule[f - 1])
+                switch_off(schedule[f - 1], f)
             sc.frame_set(f + 1)  # our frame f is Blender's frame f + 1
             if record:
                 grab(i)
@@ -464,6 +494,13 @@ def run(
         rw.point_cache.frame_end = len(mats)  # a pushover may have stopped early
         with bpy.context.temp_override(scene=sc, point_cache=rw.point_cache), _signals_held():
             bpy.ops.ptcache.bake_from_cache()
+        # a body held fixed plays its own (still) place, a dynamic one the cache: the bodies set
+        # free in the run are keyed from fixed to dynamic at the frame they were set free
+        for j in np.flatnonzero(freed_at >= 0):
+            rb = objects[j].rigid_body
+            rb.keyframe_insert("kinematic", frame=1)
+            rb.kinematic = False
+            rb.keyframe_insert("kinematic", frame=int(freed_at[j]) + 1)  # our frame f is Blender's f + 1
         sc.frame_end = len(mats)
         sc.frame_set(1)
         with _signals_held():

@@ -55,6 +55,7 @@ __all__ = [
     "MASONRY",
     "joint_axes",
     "footing_patches",
+    "grounded_bodies",
 ]
 
 
@@ -281,6 +282,25 @@ class Scene:
     @property
     def frames(self) -> int:
         return int(round((self.solver.warmup_s + self.duration_s) * self.solver.fps))
+
+
+def grounded_bodies(bonds: Sequence[Bond], n_bodies: int, held: np.ndarray | None = None) -> np.ndarray:
+    """``(B,)`` True for the bodies that a chain of ``held`` joints (default: all) ties to the
+    ground plate (a foundation joint, ``b < 0``, at its end). Bullet holds such a body fixed: the
+    structure it belongs to is rigid and stands on the plate (see simulation/blender.py)."""
+    import scipy.sparse as sp
+    import scipy.sparse.csgraph as csgraph
+
+    grounded = np.zeros(n_bodies, dtype=bool)
+    if not bonds or n_bodies == 0:
+        return grounded
+    held = np.ones(len(bonds), dtype=bool) if held is None else np.asarray(held, dtype=bool)
+    a = np.array([bd.a for bd in bonds], dtype=np.int64)
+    b = np.array([bd.b for bd in bonds], dtype=np.int64)
+    b = np.where(b < 0, n_bodies, b)  # the plate is node n_bodies
+    graph = sp.csr_matrix((np.ones(int(held.sum())), (a[held], b[held])), shape=(n_bodies + 1,) * 2)
+    _, label = csgraph.connected_components(graph, directed=False)
+    return label[:n_bodies] == label[n_bodies]
 
 
 def _body(

@@ -287,17 +287,18 @@ class _Tangent:
     arithmetic, sorting or pattern comparison. A block that is zero (a joint let go) costs its
     entries' share of the factorisation, as it did while the joint was intact."""
 
+    #: A symmetric 12 x 12 block is summed by its 78 entries ``(ROW[p], COL[p])``, ``ROW >= COL``.
+    ROW, COL = np.tril_indices(12)
+
     def __init__(self, dofs: np.ndarray, n: int) -> None:
         from cvxopt import cholmod, matrix, spmatrix
 
-        rows = np.repeat(dofs, 12, axis=1).astype(np.int64)  # (J, 144): entry (i, j) of block at i * 12 + j
-        cols = np.tile(dofs, (1, 12)).astype(np.int64)
-        self.lower = rows >= cols  # (J, 144) the entries that CHOLMOD reads (the lower triangle)
+        gi, gj = dofs[:, self.ROW].astype(np.int64), dofs[:, self.COL].astype(np.int64)
+        rows, cols = np.maximum(gi, gj), np.minimum(gi, gj)  # each entry's place in the lower triangle
         diag = np.arange(n, dtype=np.int64)
-        key = np.concatenate([cols[self.lower] * n + rows[self.lower], diag * n + diag])
+        key = np.concatenate([(cols * n + rows).ravel(), diag * n + diag])
         place, slot = np.unique(key, return_inverse=True)  # column-major: CHOLMOD's own order
-        self.slot = np.full(rows.shape, -1, dtype=np.int64)
-        self.slot[self.lower] = slot[:-n]
+        self.slot = slot[:-n].reshape(dofs.shape[0], len(self.ROW))  # (J, 78)
         self.diag_slot = slot[-n:]
         self.nnz = place.size
         self.n = n
@@ -306,11 +307,12 @@ class _Tangent:
         self._base: tuple[bytes, np.ndarray] | None = None
 
     def values(self, joints: np.ndarray, blocks: np.ndarray, diag: np.ndarray | None = None) -> np.ndarray:
-        """The lower triangle's values ``(nnz,)`` of the sum of the 12 x 12 ``blocks`` ``(M, 12, 12)``
-        of ``joints`` ``(M,)`` (joints may repeat) and of ``diag`` ``(n,)`` on the diagonal."""
-        lower = self.lower[joints]
-        w = blocks.reshape(-1, 144)[lower]
-        out = np.bincount(self.slot[joints][lower], weights=w, minlength=self.nnz).astype(np.float64, copy=False)
+        """The lower triangle's values ``(nnz,)`` of the sum of the symmetric 12 x 12 blocks of
+        ``joints`` ``(M,)`` (joints may repeat), given by their entries ``blocks`` ``(M, 78)`` at
+        ``(I, J)``, and of ``diag`` ``(n,)`` on the diagonal. (A foundation joint's block has its
+        b half at a's place, and zero there.)"""
+        out = np.bincount(self.slot[joints].ravel(), weights=blocks.ravel(), minlength=self.nnz)
+        out = out.astype(np.float64, copy=False)
         if diag is not None:
             out[self.diag_slot] += diag
         return out
@@ -626,12 +628,13 @@ class JointModel:
 
         def base() -> np.ndarray:
             idx = np.flatnonzero(intact)
-            return tan.values(idx, self.Kj[idx], self._reg.diagonal())
+            return tan.values(idx, self.Kj[idx][:, tan.ROW, tan.COL], self._reg.diagonal())
 
         Ts = T.copy()
         Ts[:, :2, 2] = 0.0
         Lc = self._corner_L[jc, kc]  # (C, 3, 12)
-        blocks = np.einsum("cai,caj->cij", Lc, np.einsum("cab,cbj->caj", Ts, Lc))
+        TL = Ts @ Lc
+        blocks = np.einsum("cap,cap->cp", Lc[:, :, tan.ROW], TL[:, :, tan.COL])  # (Lc^T Ts Lc)[ROW, COL]
         self.factorisations += 1
         try:
             return -tan.solve(tan.base(intact.tobytes(), base) + tan.values(jc, blocks), r)
@@ -692,10 +695,10 @@ class JointModel:
                 # Newton's step does not lower the out-of-balance force (the contact law bends
                 # within a few smoothing widths): a full step on the elastic stiffness of the
                 # touching corners instead, the initial-stiffness iteration of plasticity
-                active = np.zeros((self.n_all, self.outline.shape[1]), bool)
+                Te = np.zeros_like(T)
                 touch = gap[:, 2] < 0.0
-                active[jc[touch], kc[touch]] = True
-                dU = -self._solve(intact, active, r)
+                Te[touch] = self._corner_k[jc[touch], kc[touch]][:, :, None] * np.eye(3)
+                dU = self._newton_step(intact, jc, kc, K0, P, Te, r)
                 a = min(1.0, cap / max(float(np.abs(dU).max()), 1e-300))
                 r_new, st_new = self._residual(K0, P, jc, kc, U + a * dU, rhs)
             U = U + a * dU

@@ -9,7 +9,9 @@ about ``m / (16 dt^2)`` (a 23 kg brick at a 4 ms step: 90 kN/m, so a mortar join
 centimetres before it carried its tensile strength).
 
 So the two jobs are split. Bullet keeps every intact joint rigid and unbreakable and does what it
-is good at: rigid-body motion, contacts, friction, impacts once joints have cracked. Whether a joint
+is good at: rigid-body motion, contacts, friction, impacts once joints have cracked. (The part of
+the structure that the joints Bullet holds tie to the plate is kinematic in Bullet, exactly
+still, until the joints let go set a piece of it free: simulation/blender.py.) Whether a joint
 cracks is decided here, from the joint forces of an elastic model of the same joints, as the
 distinct-element codes UDEC and 3DEC model a mortar interface (Lourenco and Rots 1997; Itasca,
 3DEC manual, "joint stiffness"): a zero-thickness interface between rigid bricks with

@@ -363,9 +363,10 @@ def run(
     and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
     joint model cracking joints before each step (:class:`~calib_masonry.simulation.joints.CrackTracker`).
 
-    Damping is switched, and cracked joints switched off, on the evaluated copies of the objects,
-    which hold the live Bullet bodies and constraints (writing the originals tags the depsgraph
-    and crashed Blender in about half the trials). With ``record=False`` only the stepping is done
+    Damping is switched, cracked joints switched off and bodies set free (kinematic -> dynamic,
+    with the held joints among them switched on) on the evaluated copies of the objects, which
+    hold the live Bullet bodies and constraints (writing the originals tags the depsgraph and
+    crashed Blender in about half the trials). With ``record=False`` only the stepping is done
     (the bare-Bullet baseline): no poses are read and no joint model runs; ``switch_off_s`` (per
     bond, seconds after the warm-up, NaN for never; the ``bond_release_time_s`` of a recorded run)
     then replays that run's joint switches on a schedule fixed in advance, so the baseline does the

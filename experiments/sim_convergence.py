@@ -13,7 +13,9 @@ Then the collapse PGA of every seed at every setting, and its largest change fro
     .venv/bin/python experiments/sim_convergence.py                      # everything (hours on 2 cores)
     .venv/bin/python experiments/sim_convergence.py --models paper_example --seeds 0 --pga 0.2 0.3 0.4
 
-Each model is built into a temporary folder from data_synthetic/<model>/structure.toml.
+Each model is built into a temporary folder from data_synthetic/<model>/structure.toml, or from
+any structure file given by its path (``--models path/to/structure.toml``: a structure never used
+in tuning).
 """
 
 from __future__ import annotations
@@ -66,7 +68,12 @@ def one_run(model: Path, solver: SolverSettings, pga: float, seed: int, duration
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--models", nargs="+", default=["paper_example", "stylite"])
+    p.add_argument(
+        "--models",
+        nargs="+",
+        default=["paper_example", "stylite"],
+        help="names under data_synthetic/ or paths to any structure.toml",
+    )
     p.add_argument("--settings", nargs="+", default=list(SETTINGS), choices=list(SETTINGS))
     p.add_argument("--pga", nargs="+", type=float, default=[round(0.05 * k, 2) for k in range(1, 13)])
     p.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2], help="none: gravity only")
@@ -77,10 +84,9 @@ def main() -> None:
     collapse: dict[tuple[str, str, int], float | None] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.models:
-            model = Path(tmp) / name
-            build_to_folder(
-                load_structure(ROOT / "data_synthetic" / name / "structure.toml"), model, figures=False, progress=False
-            )
+            model = Path(tmp) / Path(name).stem
+            toml = Path(name) if name.endswith(".toml") else ROOT / "data_synthetic" / name / "structure.toml"
+            build_to_folder(load_structure(toml), model, figures=False, progress=False)
             for setting in args.settings:
                 solver = SETTINGS[setting]
                 label = f"{name:14s} {setting:14s}"

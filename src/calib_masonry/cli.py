@@ -404,7 +404,7 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--units", default=None, choices=("g", "m/s2"), help="of a CSV --accelerogram (default g)")
     m.add_argument("--fps", type=int, default=None, help="frames per second (default: the tested settings, 25)")
     m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")
-    m.add_argument("--iterations", type=int, default=None, help="solver iterations per substep (default 50)")
+    m.add_argument("--iterations", type=int, default=None, help="solver iterations per substep (default 150)")
     m.add_argument(
         "--pushover",
         action="store_true",

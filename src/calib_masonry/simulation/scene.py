@@ -130,9 +130,10 @@ class SolverSettings:
     the pieces set free. A freed piece of hundreds of bricks is held together by Bullet's rigid
     constraints only as far as the iterative solve converges, and a soft piece rocks where a rigid
     one topples: the Stylite tower (seed 2, 0.15 g), freed above a cracked joint near its base,
-    moved 0.3 % of its stones at 50 iterations, 21 % at 2x substeps, 36 % at 100 iterations, and
-    85 % and 83 % with 150 iterations at 10 and 20 substeps (experiments/sim_convergence.py
-    gives the table at these defaults)."""
+    moved 0.3 % of its stones at 50 iterations, 21 % at 2x substeps and 36 % at 100 iterations,
+    so that its collapse PGA was 0.25, 0.35 and 0.20 g; at 150 iterations 41 %, and 66 % and
+    68 % at 2x substeps and at 300 iterations: collapse PGAs 0.20, 0.15 and 0.15 g
+    (experiments/sim_convergence.py; the table is in the README)."""
 
     fps: int = 25
     substeps: int = 10

@@ -119,11 +119,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.csgraph as csgraph
 import scipy.sparse.linalg as spla
 
 from ..errors import InputError
-from .scene import Bond, Material, Scene, footing_patches, joint_axes
+from .scene import Bond, Material, Scene, footing_patches, joint_axes, plate_linked
 
 __all__ = [
     "ContactSettings",
@@ -304,7 +303,6 @@ class _Tangent:
         self.slot = slot[:-n].reshape(dofs.shape[0], len(self.ROW))  # (J, 78)
         self.diag_slot = slot[-n:]
         self.nnz = place.size
-        self.n = n
         self._A = spmatrix(matrix(np.ones(self.nnz)), matrix(place % n), matrix(place // n), (n, n))
         self._symbolic = cholmod.symbolic(self._A)
         self._base: tuple[bytes, np.ndarray] | None = None
@@ -312,7 +310,7 @@ class _Tangent:
     def values(self, joints: np.ndarray, blocks: np.ndarray, diag: np.ndarray | None = None) -> np.ndarray:
         """The lower triangle's values ``(nnz,)`` of the sum of the symmetric 12 x 12 blocks of
         ``joints`` ``(M,)`` (joints may repeat), given by their entries ``blocks`` ``(M, 78)`` at
-        ``(I, J)``, and of ``diag`` ``(n,)`` on the diagonal. (A foundation joint's block has its
+        ``(ROW, COL)``, and of ``diag`` ``(n,)`` on the diagonal. (A foundation joint's block has its
         b half at a's place, and zero there.)"""
         out = np.bincount(self.slot[joints].ravel(), weights=blocks.ravel(), minlength=self.nnz)
         out = out.astype(np.float64, copy=False)
@@ -714,13 +712,7 @@ class JointModel:
         (joints may repeat) ties to the ground."""
         linked = intact.copy()
         linked[jc] = True
-        grounded = np.zeros(self.nb, dtype=bool)
-        grounded[self.a[linked & self.ground]] = True
-        pair = linked & ~self.ground
-        a, b = self.a[pair], self.b[pair]
-        graph = sp.csr_matrix((np.ones(a.size), (a, b)), shape=(self.nb, self.nb))
-        _, label = csgraph.connected_components(graph, directed=False)
-        return ~np.isin(label, label[grounded])
+        return ~plate_linked(self.a, self.b, self.nb, linked)
 
     def commit(self) -> None:
         """Keep the last solve's slip of every contact corner (and its motion, the next solve's start):

@@ -56,6 +56,7 @@ __all__ = [
     "joint_axes",
     "footing_patches",
     "grounded_bodies",
+    "plate_linked",
 ]
 
 
@@ -294,23 +295,29 @@ class Scene:
         return int(round((self.solver.warmup_s + self.duration_s) * self.solver.fps))
 
 
+def plate_linked(a: np.ndarray, b: np.ndarray, n_bodies: int, linked: np.ndarray) -> np.ndarray:
+    """``(B,)`` True for the bodies that a chain of the ``linked`` joints (of bodies ``a`` and ``b``,
+    ``b < 0`` the ground plate; joints may repeat) ties to the plate."""
+    import scipy.sparse as sp
+    import scipy.sparse.csgraph as csgraph
+
+    linked = np.asarray(linked, dtype=bool)
+    b = np.where(b < 0, n_bodies, b)  # the plate is node n_bodies
+    graph = sp.csr_matrix((np.ones(int(linked.sum())), (a[linked], b[linked])), shape=(n_bodies + 1,) * 2)
+    _, label = csgraph.connected_components(graph, directed=False)
+    return label[:n_bodies] == label[n_bodies]
+
+
 def grounded_bodies(bonds: Sequence[Bond], n_bodies: int, held: np.ndarray | None = None) -> np.ndarray:
     """``(B,)`` True for the bodies that a chain of ``held`` joints (default: all) ties to the
     ground plate (a foundation joint, ``b < 0``, at its end). Bullet holds such a body fixed: the
     structure it belongs to is rigid and stands on the plate (see simulation/blender.py)."""
-    import scipy.sparse as sp
-    import scipy.sparse.csgraph as csgraph
-
-    grounded = np.zeros(n_bodies, dtype=bool)
     if not bonds or n_bodies == 0:
-        return grounded
-    held = np.ones(len(bonds), dtype=bool) if held is None else np.asarray(held, dtype=bool)
+        return np.zeros(n_bodies, dtype=bool)
+    held = np.ones(len(bonds), dtype=bool) if held is None else held
     a = np.array([bd.a for bd in bonds], dtype=np.int64)
     b = np.array([bd.b for bd in bonds], dtype=np.int64)
-    b = np.where(b < 0, n_bodies, b)  # the plate is node n_bodies
-    graph = sp.csr_matrix((np.ones(int(held.sum())), (a[held], b[held])), shape=(n_bodies + 1,) * 2)
-    _, label = csgraph.connected_components(graph, directed=False)
-    return label[:n_bodies] == label[n_bodies]
+    return plate_linked(a, b, n_bodies, held)
 
 
 def _body(

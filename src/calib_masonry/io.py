@@ -182,12 +182,14 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
 
 
 def to_uint8(img: np.ndarray) -> np.ndarray:
-    """An image in [0, 1] as 8-bit values, rounded to the nearest."""
+    """An image in [0, 1] as 8-bit values, rounded to the nearest (8-bit values as they are)."""
+    if img.dtype == np.uint8:
+        return img
     return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
 def write_rgb(path: Path, rgb: np.ndarray) -> None:
-    """Write an RGB image in [0, 1] as an 8-bit PNG, with zlib's fastest level: a photo-sized
+    """Write an RGB image in [0, 1] (or 8-bit) as an 8-bit PNG, with zlib's fastest level: a photo-sized
     orthophoto took 0.80 s at the default level and 0.17 s at this one, 18 % larger (measured)."""
     Image.fromarray(to_uint8(rgb)).save(path, compress_level=1)
 

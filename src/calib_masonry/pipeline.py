@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -10,13 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ._threads import background
 from .build3d.assemble import Structure3D, WallPolygons, assemble
 from .build3d.contacts import max_interpenetration
 from .build3d.export import export_mesh, plot_model, plot_walls, write_bricks_json
 from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
-from .io import check_output, read_mask, staged_output, warn, write_json, write_mask, write_rgb
+from .io import check_output, read_mask, staged_output, to_uint8, warn, write_json, write_mask, write_rgb
 from .progress import progress as _progress
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
@@ -53,7 +55,7 @@ class PhotoWall:
     """A wall built from a photo: its calibration, orthophoto and segmented mask."""
 
     calibration: object  # calibrate.rectify.PhotoCalibration, its photo a preview (see photo_size)
-    rectified: np.ndarray
+    rectified: np.ndarray  # the orthophoto, (rows, cols, 3) uint8 (as rectified.png holds it)
     mask: np.ndarray
     wall: WallSpec  # with W and H resolved (typed values kept, missing ones fitted)
     photo_size: tuple[int, int] | None = None  # (width, height) of the photo the preview shrinks
@@ -94,7 +96,9 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     preview = replace(cal.photo, rgb=np.ascontiguousarray(cal.photo.rgb[::step, ::step]))
     return PhotoWall(
         calibration=replace(cal, photo=preview),
-        rectified=rect,
+        # 8-bit, as written: a float orthophoto per wall held until the figures are drawn was 4x
+        # the memory (37 MB a paper-example wall) for the same PNG
+        rectified=to_uint8(rect),
         mask=mask,
         wall=replace(wall, width_m=width, height_m=height),
         photo_size=cal.photo.size,
@@ -413,7 +417,14 @@ def write_build(
     inter = max_interpenetration(s.bricks)
     result.seconds["interpenetration_check"] = time.perf_counter() - t0
     inputs = [spec.source, *(w.mask for w in spec.walls), *(w.image for w in spec.walls)]
-    with staged_output(out, "build", overwrite=overwrite, keep=inputs) as stage:
+    want_geometry = simulation_geometry and bool(s.bricks)
+    # the simulation's bodies and contact patches, computed once here rather than in every
+    # `simulate` run of this model, on a second core while the meshes, model.blend and figures are
+    # written (joined however the block ends)
+    with (
+        staged_output(out, "build", overwrite=overwrite, keep=inputs) as stage,
+        background(_timed_geometry, s) if want_geometry else contextlib.nullcontext() as geometry,
+    ):
         t0 = time.perf_counter()
         export_mesh(s, stage / "model.stl")
         export_mesh(s, stage / "model.glb")  # one node per brick: opens in Blender, three.js, any glTF viewer
@@ -438,18 +449,31 @@ def write_build(
             plot_walls(s, stage / "walls.png", removed_polygons=removed)
             plot_model(s, stage / "model.png")
             result.seconds["figures"] = time.perf_counter() - t0
-        _write_photo_walls(result.photos, stage / "photos", figures=figures)
+        if result.photos:
+            t0 = time.perf_counter()
+            _write_photo_walls(result.photos, stage / "photos", figures=figures)
+            result.seconds["photo_files"] = time.perf_counter() - t0
         summary = _summary(result, inter)
-        if simulation_geometry and s.bricks:
-            # the simulation's bodies and contact patches, computed once here rather than in every
-            # `simulate` run of this model (about 2 s on the Stylite tower, 4 s on the paper example)
+        if want_geometry:
             from .simulation.run import store_geometry
 
             t0 = time.perf_counter()
-            store_geometry(s, stage, bricks_json=raw)
-            summary["seconds"]["simulation_geometry"] = round(time.perf_counter() - t0, 4)
+            computed, seconds = geometry.result()
+            store_geometry(s, stage, bricks_json=raw, geometry=computed)
+            # its own time on its thread (about 2 s on the Stylite tower, 4 s on the paper
+            # example), and how long the build waited for it
+            summary["seconds"]["simulation_geometry"] = round(seconds, 4)
+            summary["seconds"]["simulation_geometry_wait"] = round(time.perf_counter() - t0, 4)
         write_json(stage / "summary.json", summary)
     return summary
+
+
+def _timed_geometry(structure: Structure3D):
+    """The simulation geometry of ``structure`` and the seconds it took."""
+    from .simulation.run import simulation_geometry
+
+    t0 = time.perf_counter()
+    return simulation_geometry(structure), time.perf_counter() - t0
 
 
 def find_demo_data(explicit: str | Path | None = None) -> Path:

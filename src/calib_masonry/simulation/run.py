@@ -240,11 +240,14 @@ def store_geometry(
     max_gap_m: float = 0.06,
     mortar_fill: bool = True,
     bricks_json: bytes | None = None,
+    geometry: SceneGeometry | None = None,
 ) -> SceneGeometry:
-    """Compute the simulation geometry of ``structure`` in memory and store it in ``model_dir`` (a
-    ``build`` stage) as sim_geometry.npz, keyed by the bricks.json that build writes for it
-    (``bricks_json``, its bytes, when the caller has them already; else made here)."""
-    geometry = simulation_geometry(structure, max_gap_m=max_gap_m, mortar_fill=mortar_fill)
+    """Compute the simulation geometry of ``structure`` in memory (unless the caller has computed
+    it already with these settings: ``geometry``) and store it in ``model_dir`` (a ``build``
+    stage) as sim_geometry.npz, keyed by the bricks.json that build writes for it (``bricks_json``,
+    its bytes, when the caller has them already; else made here)."""
+    if geometry is None:
+        geometry = simulation_geometry(structure, max_gap_m=max_gap_m, mortar_fill=mortar_fill)
     if bricks_json is None:
         bricks_json = bricks_json_bytes(structure)
     key = _geometry_key(bricks_json, structure.footprint.is_closed, max_gap_m, mortar_fill)

@@ -708,3 +708,25 @@ def test_distances_to_many_vanishing_points_are_those_to_each_bit_for_bit():
     vps = np.r_[rng.normal(size=(20, 3)), [[1.0, 0.5, 0.0]]]  # one at infinity
     many = _dist_to_vps(seg, vps)
     assert all(np.array_equal(many[k], _dist_to_vp(seg, vp)) for k, vp in enumerate(vps))
+
+
+@pytest.mark.parametrize("shape", [(3000, 2000), (2999, 2001), (1201, 4000)])
+@pytest.mark.parametrize("s", [0.2333, 0.35, 0.4667, 0.7])
+def test_shrink_samples_rescales_grid(shape, s):
+    """The block-mean shrink puts its samples where scikit-image's rescale does (a linear ramp
+    comes out the same, edges aside), with its output shape and float32 kept; on a photo-like
+    image it differs from rescale only by the antialiasing kernel's shape."""
+    from scipy.ndimage import gaussian_filter
+    from skimage.transform import rescale
+
+    from calib_masonry.calibrate.lines import shrink
+
+    y, x = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float32)
+    ramp = 0.3 * x + 0.7 * y
+    ours, theirs = shrink(ramp, s), rescale(ramp, s, anti_aliasing=True)
+    assert ours.shape == theirs.shape and ours.dtype == np.float32
+    assert np.abs(ours - theirs)[3:-3, 3:-3].max() < 1e-3 * ramp.max()
+    rng = np.random.default_rng(5)
+    noise = gaussian_filter(rng.random(shape, dtype=np.float32), 3.0)
+    diff = np.abs(shrink(noise, s) - rescale(noise, s, anti_aliasing=True))[3:-3, 3:-3]
+    assert diff.mean() < 0.1 * noise.std()

@@ -195,8 +195,9 @@ def write_rgb(path: Path, rgb: np.ndarray) -> None:
 
 
 def write_mask(path: Path, mask: np.ndarray) -> None:
-    """Write a boolean mask as an 8-bit PNG (255 = brick)."""
-    Image.fromarray(np.where(mask, 255, 0).astype(np.uint8), mode="L").save(path, optimize=True)
+    """Write a boolean mask as an 8-bit PNG (255 = brick), at zlib's default level: Pillow's
+    ``optimize`` took 0.13 s for a paper-example wall's mask (27 KB) and this 0.03 s (32 KB)."""
+    Image.fromarray(np.where(mask, 255, 0).astype(np.uint8), mode="L").save(path, compress_level=6)
 
 
 #: the values json's encoder cannot write itself, which :func:`_json_default` converts

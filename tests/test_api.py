@@ -80,11 +80,12 @@ def test_two_simulate_calls_in_one_process_agree(built):
     """The same inputs give the same run in one process, with no re-executed child.
 
     Our side is bit-identical (the scene, its order, the gravity keys, the joint model). Bullet's
-    side is bit-identical in most runs but not all: its dynamic AABB tree orders nodes by memory
-    address, so the order in which contacts are solved, and the last bits of the poses, follow the
-    heap. With Blender's task scheduler on one thread the poses were bit-identical in 8 of 8
-    standalone processes and in 3 of 4 CI runs of this test; the fourth differed by 0.01 mm with
-    the same cracks. The test asserts that much, and bit-identity of everything we control."""
+    side is bit-identical in most runs but not all: with Blender's task scheduler on one thread the
+    poses were bit-identical in 8 of 8 standalone processes and in 3 of 4 CI runs of this test; the
+    fourth differed by 0.01 mm with the same cracks. Why is not shown: Bullet's AABB tree orders
+    nodes by memory address, but four calls with the C heap scrambled between them were
+    bit-identical (2026-11-26). The test asserts that much, and bit-identity of everything we
+    control."""
     pytest.importorskip("bpy")
     from calib_masonry import Material, Pushover, simulate, synthetic_motion
     from calib_masonry.simulation.blender import _gravity_per_frame

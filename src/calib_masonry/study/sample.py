@@ -7,14 +7,15 @@ with a ``[simulate]`` table it runs Bullet under the sample's load. What does no
 samples of a worker (a structure file, a mask's trace, a photo's calibration, the simulation
 geometry of an unvaried model) is computed once per worker process and cached.
 
-Bullet orders its broad-phase tree by memory address, so a simulation's last bits depend on what
-else allocates memory meanwhile. Fresh single-threaded processes gave the same poses every time
-measured (0 of 13 differed, Blender's task scheduler on one thread), but a dask worker has threads
-of its own (event loop, heartbeats, profiler): run there, one sample once differed between a
-LocalCluster worker and a separate ``dask worker`` (measured in CI), and two runs in one pytest
-process once differed by 0.01 mm. Each simulation therefore runs in a fresh single-threaded
-child process (``python -m calib_masonry.study.child``): the same sample gives the same poses on
-any worker, in any order, busy or not.
+Runs of one sample have differed in their last bits, and why is not shown. Fresh single-threaded
+processes gave the same poses every time measured (0 of 13 differed, Blender's task scheduler on
+one thread), but run in a dask worker's own process (threads of its own: event loop, heartbeats,
+profiler) one sample once differed between a LocalCluster worker and a separate ``dask worker``
+(measured in CI), and two runs in one pytest process once differed by 0.01 mm. Bullet orders its
+broad-phase tree by memory address, the cause first suspected; but scrambling the C heap between
+two calls in one process did not change a bit (measured). Each simulation therefore runs in a
+fresh single-threaded child process (``python -m calib_masonry.study.child``): the same sample
+gives the same poses on any worker, in any order, busy or not.
 """
 
 from __future__ import annotations

@@ -1,0 +1,90 @@
+"""Experiment: do two simulate() calls in one process give the same poses, and does the C heap's layout matter?
+
+The scene of ``tests/test_api.py::test_two_simulate_calls_in_one_process_agree`` (four stretcher
+walls, 1.2-1.6 x 0.8 m, seed 31; a 2 s two-component motion at 0.5 g, seed 3; a weak mortar so
+that joints crack). The run labels are done in order; ``scramble`` between them allocates 200,000
+blocks of 16-200 bytes with malloc and frees two thirds of them in random order, so that the heap's
+free lists (where Bullet's next tree nodes come from) are in another order; ``--direct-bpy``
+imports bpy before the library does (Blender's task scheduler then has a thread per core). Prints
+each run's largest difference from the first and whether it is bit-identical.
+
+    .venv/bin/python experiments/sim_determinism.py a b scramble c scramble d [--direct-bpy]
+
+Measured 2026-11-26 on 20e642f (2-core Xeon VM, another job running): runs a-d bit-identical,
+with and without ``--direct-bpy``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+SCENARIO = """[structure]
+name = "determinism"
+thickness_m = 0.18
+vertices = 5
+
+[synthetic]
+layout = "stretcher"
+px_per_m = 200
+seed = 31
+"""
+
+
+def scramble(seed: int) -> list[int]:
+    """Allocate 200,000 small blocks and free two thirds of them in random order; the kept third is returned."""
+    libc = ctypes.CDLL(None)
+    libc.malloc.restype = ctypes.c_void_p
+    libc.malloc.argtypes = [ctypes.c_size_t]
+    libc.free.argtypes = [ctypes.c_void_p]
+    rng = np.random.default_rng(seed)
+    blocks = [libc.malloc(int(n)) for n in rng.integers(16, 200, 200_000)]
+    for i in rng.permutation(len(blocks)):
+        if i % 3:
+            libc.free(blocks[i])
+    return [b for i, b in enumerate(blocks) if not i % 3]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("runs", nargs="+", help="run labels, and 'scramble' between them")
+    ap.add_argument("--direct-bpy", action="store_true")
+    a = ap.parse_args()
+    if a.direct_bpy:
+        import bpy  # noqa: F401, PLC0415 - before the library's own import, on purpose
+
+    import calib_masonry as cm
+    from calib_masonry.synthetic.truth import synthesize
+
+    root = Path(tempfile.mkdtemp())
+    walls = [(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)]
+    text = SCENARIO + "".join(
+        f'\n[[wall]]\nname = "w{i}"\nwidth_m = {w}\nheight_m = {h}\ntheta_deg = {t}\n'
+        for i, (w, h, t) in enumerate(walls)
+    )
+    (root / "s.toml").write_text(text)
+    synthesize(cm.load_structure(root / "s.toml", require_sources=False), root / "data", figures=False)
+    result = cm.build(cm.load_structure(root / "data" / "structure.toml"), progress=False)
+    motion = cm.synthetic_motion(0.5, 2.0, seed=3, components=2)
+    weak = cm.Material(tensile_strength=2e3, shear_strength=3e3)
+    kept, runs = [], []
+    for k, label in enumerate(a.runs):
+        if label == "scramble":
+            kept += scramble(k)
+            continue
+        out = cm.simulate(result.structure, motion, material=weak, progress=False)
+        runs.append((label, out.output.positions.copy(), out.summary["bonds_broken"]))
+    first = runs[0][1]
+    for label, pos, broken in runs:
+        print(
+            f"{label}: joints broken {broken}, largest difference from the first run "
+            f"{np.abs(pos - first).max() * 1000:.6f} mm, bit-identical {np.array_equal(pos, first)}"
+        )
+
+
+if __name__ == "__main__":
+    main()

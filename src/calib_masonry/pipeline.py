@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._threads import background
+from ._threads import background, cpu_count, thread_imap
 from .build3d.assemble import Structure3D, WallPolygons, assemble
 from .build3d.contacts import max_interpenetration
 from .build3d.export import export_mesh, plot_model, plot_walls, write_bricks_json
@@ -130,10 +130,6 @@ def resolve_photo_walls(
     mask is also traced on its thread (:func:`trace_wall`, the same result as tracing it after),
     while the other thread works on its photo; walls that refine their outlines are left to the
     caller (their JAX batches and progress bars belong on the main thread)."""
-    from contextlib import closing
-
-    from ._threads import cpu_count, thread_imap
-
     todo = [w for w in spec.walls if w.mask is None and w.image is not None]
     if todo:
         _import_photo_stage()  # here, not by two threads at once (a half-imported module, seen)
@@ -145,7 +141,7 @@ def resolve_photo_walls(
         return pw
 
     done = thread_imap(one, todo, workers=min(2, cpu_count()), name="photo")
-    with closing(done):  # an error or a stop ends the other walls here, not when the traceback goes
+    with contextlib.closing(done):  # an error or a stop ends the other walls here, not when the traceback goes
         bar = _progress(done, total=len(todo), desc="calibrate photos", unit="photo", enabled=progress)
         photos = {wall.name: pw for pw, wall in zip(bar, todo)}  # the bar first: it ends its line
     walls = [photos[w.name].wall if w.name in photos else w for w in spec.walls]
@@ -323,7 +319,6 @@ def _write_photo_walls(photos: dict[str, PhotoWall], folder: Path, *, figures: b
     """Each photo wall's calibration, orthophoto, mask and overlay figure in ``folder/<name>``.
     The PNGs are encoded on a second thread while this one draws the figures (Pillow encodes
     without the GIL): 3.1 -> 1.85 s for the paper example's six walls."""
-    from ._threads import background
     from .calibrate.figures import plot_calibration
 
     def images() -> None:

@@ -5,13 +5,15 @@ walls, 1.2-1.6 x 0.8 m, seed 31; a 2 s two-component motion at 0.5 g, seed 3; a 
 that joints crack). The run labels are done in order; ``scramble`` between them allocates 200,000
 blocks of 16-200 bytes with malloc and frees two thirds of them in random order, so that the heap's
 free lists (where Bullet's next tree nodes come from) are in another order; ``--direct-bpy``
-imports bpy before the library does (Blender's task scheduler then has a thread per core). Prints
-each run's largest difference from the first and whether it is bit-identical.
+imports bpy before the library does (Blender's task scheduler then has a thread per core);
+``--churn`` runs, beside the simulations, a thread that allocates all the time and keeps a dask
+LocalCluster (threads, in this process) and JAX busy, as a pytest process or a dask worker would.
+Prints each run's largest difference from the first and whether it is bit-identical.
 
-    .venv/bin/python experiments/sim_determinism.py a b scramble c scramble d [--direct-bpy]
+    .venv/bin/python experiments/sim_determinism.py a b scramble c scramble d [--direct-bpy] [--churn]
 
-Measured 2026-11-26 on 20e642f (2-core Xeon VM, another job running): runs a-d bit-identical,
-with and without ``--direct-bpy``.
+Measured 2026-11-26 on 873bcfd (2-core Xeon VM, another job running): runs a-d bit-identical, with
+``scramble`` between them, with ``--direct-bpy`` and with ``--churn``.
 """
 
 from __future__ import annotations
@@ -49,13 +51,41 @@ def scramble(seed: int) -> list[int]:
     return [b for i, b in enumerate(blocks) if not i % 3]
 
 
+def churn() -> None:
+    """Start a daemon thread that allocates arrays, submits to an in-process dask cluster and runs
+    JAX, all the time."""
+    import threading
+    import time
+
+    import jax.numpy as jnp
+    from dask.distributed import Client, LocalCluster
+
+    client = Client(LocalCluster(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None))
+
+    def run() -> None:
+        rng = np.random.default_rng()
+        while True:
+            _ = [np.ones(int(n)) for n in rng.integers(1, 300, 200)]
+            try:
+                client.submit(sum, [1, 2, 3], pure=False).result()
+            except RuntimeError:  # the interpreter is shutting down
+                return
+            jnp.ones(100).block_until_ready()
+            time.sleep(0.001)
+
+    threading.Thread(target=run, daemon=True).start()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", help="run labels, and 'scramble' between them")
     ap.add_argument("--direct-bpy", action="store_true")
+    ap.add_argument("--churn", action="store_true")
     a = ap.parse_args()
     if a.direct_bpy:
         import bpy  # noqa: F401, PLC0415 - before the library's own import, on purpose
+    if a.churn:
+        churn()
 
     import calib_masonry as cm
     from calib_masonry.synthetic.truth import synthesize

@@ -35,7 +35,7 @@ from ..build3d.assemble import Brick, brick_solid
 from ..build3d.contacts import OUTLINE_POINTS, ContactPatch, box_pairs, contact_patches, joint_axes, patch_section
 from ..build3d.extrude import Polyhedron
 from ..build3d.place import Corner, WallFrame
-from ..errors import InputError
+from ..errors import InputError, raise_if_stopped
 from .ground_motion import G, GroundMotion
 from .mortar import mortar_cells
 
@@ -513,11 +513,13 @@ def scene_geometry(
     outlines: list[np.ndarray | None] = [None] * len(bricks)
     if mortar_fill:
         for w in sorted({b.wall for b in bricks}):
+            raise_if_stopped()  # a stop request (SIGTERM) ends the work here, wall by wall and brick by brick
             members = [i for i, b in enumerate(bricks) if b.wall == w]
             for i, cell in zip(members, mortar_cells([bricks[i].polygon_m for i in members], 0.5 * max_gap_m)):
                 outlines[i] = cell
 
     def make_body(i: int, outline: np.ndarray | None) -> Body:
+        raise_if_stopped()
         solid, change = _cell_solid(bricks[i], outline, frames, corners)
         return body_from_polyhedron(
             f"brick_{bricks[i].id:05d}", solid, MASONRY, mass_volume=bricks[i].volume, hull_volume_change=change

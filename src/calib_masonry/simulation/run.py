@@ -243,14 +243,15 @@ def store_geometry(
     geometry: SceneGeometry | None = None,
 ) -> SceneGeometry:
     """Compute the simulation geometry of ``structure`` in memory (unless the caller has computed
-    it already with these settings: ``geometry``) and store it in ``model_dir`` (a ``build``
-    stage) as sim_geometry.npz, keyed by the bricks.json that build writes for it (``bricks_json``,
-    its bytes, when the caller has them already; else made here)."""
+    it already: ``geometry``) and store it in ``model_dir`` (a ``build`` stage) as
+    sim_geometry.npz, keyed by the bricks.json that build writes for it (``bricks_json``, its
+    bytes, when the caller has them already; else made here) and by the joint reach and mortar
+    fill the geometry was computed with."""
     if geometry is None:
         geometry = simulation_geometry(structure, max_gap_m=max_gap_m, mortar_fill=mortar_fill)
     if bricks_json is None:
         bricks_json = bricks_json_bytes(structure)
-    key = _geometry_key(bricks_json, structure.footprint.is_closed, max_gap_m, mortar_fill)
+    key = _geometry_key(bricks_json, structure.footprint.is_closed, geometry.max_gap_m, geometry.mortar_fill)
     save_geometry(geometry, Path(model_dir) / GEOMETRY_FILE, key)
     return geometry
 

@@ -454,11 +454,11 @@ def write_build(
 
             t0 = time.perf_counter()
             computed, seconds = geometry.result()
-            store_geometry(s, stage, bricks_json=raw, geometry=computed)
             # its own time on its thread (about 2 s on the Stylite tower, 4 s on the paper
             # example), and how long the build waited for it
             summary["seconds"]["simulation_geometry"] = round(seconds, 4)
             summary["seconds"]["simulation_geometry_wait"] = round(time.perf_counter() - t0, 4)
+            store_geometry(s, stage, bricks_json=raw, geometry=computed)
         write_json(stage / "summary.json", summary)
     return summary
 

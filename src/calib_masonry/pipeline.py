@@ -107,16 +107,27 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
 
 def _import_photo_stage() -> None:
     """Import what :func:`photo_wall` imports on first use. Two threads importing the same
-    package at once can see it half initialised (seen: matplotlib's ``rcParams`` missing), so the
-    threads of :func:`resolve_photo_walls` start with everything loaded."""
-    import skimage.color  # noqa: F401
-    import skimage.filters  # noqa: F401
-    import skimage.morphology  # noqa: F401
+    package at once can see it half initialised (seen: matplotlib's ``rcParams`` missing) or
+    deadlock (CPython 3.11, gh-83065), so the threads of :func:`resolve_photo_walls` start with
+    everything loaded (tests/test_thread_imports.py checks that they import nothing)."""
+    import jax
+    from skimage.color import rgb2lab  # noqa: F401 - loads scikit-image's submodule (lazy_loader)
+    from skimage.filters import threshold_otsu  # noqa: F401
+    from skimage.measure import find_contours  # noqa: F401
+    from skimage.morphology import disk  # noqa: F401
 
-    from .calibrate import fit, rectify  # noqa: F401
+    from .calibrate import fit, rectify
     from .wall2d import segment  # noqa: F401
 
     rectify.import_detection()
+    jax.devices()  # JAX's backends are set up on first use, looking for plugins (imports)
+    fit._solver()  # the camera fit, read from disk (jax.export)
+    try:  # the MLIR dialects its first call lowers to
+        import jaxlib.mlir.dialects.builtin  # noqa: F401
+        import jaxlib.mlir.dialects.mhlo  # noqa: F401
+        import jaxlib.mlir.extras.meta  # noqa: F401
+    except ImportError:  # pragma: no cover - another jaxlib's layout: imported where first needed
+        pass
 
 
 def resolve_photo_walls(
@@ -413,6 +424,12 @@ def write_build(
     result.seconds["interpenetration_check"] = time.perf_counter() - t0
     inputs = [spec.source, *(w.mask for w in spec.walls), *(w.image for w in spec.walls)]
     want_geometry = simulation_geometry and bool(s.bricks)
+    if want_geometry:
+        # imported here, not on the geometry's thread while this one imports bpy, trimesh's
+        # exporters and matplotlib: two threads importing modules of one package at once can
+        # deadlock in CPython 3.11's import locks (gh-83065). A CI run hung in the demo's build,
+        # where this was the one place two threads imported at once (cause not shown).
+        from .simulation import run  # noqa: F401
     # the simulation's bodies and contact patches, computed once here rather than in every
     # `simulate` run of this model, on a second core while the meshes, model.blend and figures are
     # written (joined however the block ends)

@@ -250,10 +250,18 @@ def rect_from_wall(width_m: float, height_m: float, shape: tuple[int, int]) -> n
 def import_detection() -> None:
     """Import the modules the automatic detection imports on first use, in this thread: two
     threads importing one package at once can see it half initialised (seen with matplotlib)."""
+    import encodings.ascii  # noqa: F401 - EXIF text
+
     import scipy.spatial  # noqa: F401
-    import skimage.feature  # noqa: F401
-    import skimage.measure  # noqa: F401
-    import skimage.transform  # noqa: F401
+    from PIL import Image, ImageOps, TiffImagePlugin  # noqa: F401 - the photo's reader and its EXIF
+
+    # scikit-image loads a submodule when one of its names is first asked for (lazy_loader):
+    # the names the detection asks for, asked for here
+    from skimage.feature import canny, hessian_matrix, hessian_matrix_eigvals  # noqa: F401
+    from skimage.measure import label  # noqa: F401
+    from skimage.transform import probabilistic_hough_line  # noqa: F401
+
+    Image.preinit()  # Pillow's common formats' plugins (JPEG, PNG, ...), loaded on the first open
 
 
 def import_early(figures: bool = True) -> None:

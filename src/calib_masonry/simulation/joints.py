@@ -276,6 +276,13 @@ def _inside_outline(outline: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.nda
     return pos | neg
 
 
+def import_solver() -> None:
+    """Import the sparse Cholesky (cvxopt's CHOLMOD) on the calling thread, before the joint model
+    first factorises on a thread of its own beside Bullet's (two threads importing modules of one
+    package at once can hang in CPython 3.11's import locks, gh-83065)."""
+    from cvxopt import cholmod, matrix, spmatrix  # noqa: F401
+
+
 class _Tangent:
     """The contact iteration's matrix ``K0 + P^T T_s P`` (:meth:`JointModel._newton_step`) on one
     sparsity pattern for the model's life, factorised by CHOLMOD's supernodal Cholesky (through

@@ -212,6 +212,14 @@ def synthesize(
         if photos is None:
             side()
         else:
+            # what the threads import, imported here first (two threads importing one package
+            # at once can hang in CPython 3.11's import locks, gh-83065)
+            from .._figure import import_matplotlib
+            from .photo import import_renderer
+
+            import_renderer()
+            if figures:
+                import_matplotlib()
             with background(side) as job:  # waited for before the stage is removed, however it ends
                 truth["photos"], truth["corner_photos"] = _photograph(spec, pieces, photos, stage, out, progress)
             job.result()

@@ -1,4 +1,6 @@
 import json
+import os
+import signal
 import subprocess
 import sys
 
@@ -11,10 +13,25 @@ from calib_masonry.cli import main
 from .conftest import DATA, SWAT
 
 
-def _run(*args, cwd=None):
-    return subprocess.run(
-        [sys.executable, "-m", "calib_masonry", *map(str, args)], capture_output=True, text=True, cwd=cwd
-    )
+def _run(*args, cwd=None, timeout=600):
+    """The CLI in a process of its own. One that hangs fails the test with its threads' Python
+    stacks (faulthandler, on SIGABRT) instead of holding up the whole run."""
+    env = dict(os.environ, PYTHONFAULTHANDLER="1")
+    with subprocess.Popen(
+        [sys.executable, "-m", "calib_masonry", *map(str, args)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=cwd,
+        env=env,
+    ) as p:
+        try:
+            out, err = p.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.send_signal(signal.SIGABRT)
+            out, err = p.communicate()
+            pytest.fail(f"calib-masonry {' '.join(map(str, args))} hung for {timeout} s; its threads:\n{err[-6000:]}")
+    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 def test_trace_cli_writes_polygons_json(tmp_path):

@@ -428,12 +428,17 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
 
 
 def _run_scene(scene: Scene, name: str, *, progress: bool | None, blend_path: Path | None) -> SimulationResult:
+    from threadpoolctl import threadpool_limits
+
     from .blender import require_bpy, run
     from .results import collapse_multiplier, metrics, pushover_stop
 
     require_bpy()
     stop = pushover_stop(scene) if scene.pushover is not None else None
-    out = run(scene, progress=progress, blend_path=blend_path, stop=stop)
+    # one BLAS thread for the joint model's solves, whatever the process's setting (a dask worker,
+    # a notebook): a threaded BLAS splits a sum by its thread count, and so rounds it another way
+    with threadpool_limits(limits=1, user_api="blas"):
+        out = run(scene, progress=progress, blend_path=blend_path, stop=stop)
     m = metrics(scene, out)
     curve = collapse_multiplier(scene, out, m) if scene.pushover is not None else None
     return SimulationResult(

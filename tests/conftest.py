@@ -13,6 +13,20 @@ try:  # float64 for every JAX computation a test makes, not only those after cal
 except ImportError:  # pragma: no cover - the calibration extra is not installed
     pass
 
+
+def need_bpy(*, module_level: bool = False):
+    """Blender's bpy, imported as the library imports it (its task scheduler with one thread, as
+    in every command), or skip the test. ``pytest.importorskip("bpy")`` would import it with a
+    thread per core into the test process, and every simulation of the run would inherit that."""
+    from calib_masonry.errors import BackendMissing
+    from calib_masonry.simulation.blender import require_bpy
+
+    try:
+        return require_bpy()
+    except BackendMissing:
+        pytest.skip("Blender's bpy is not installed", allow_module_level=module_level)
+
+
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "data_synthetic"
 SWAT = ROOT.parent / "shared" / "data" / "external" / "swat" / "WR2_250_new.png"

@@ -82,11 +82,15 @@ def test_two_simulate_calls_in_one_process_agree(built):
     Our side is bit-identical (the scene, its order, the gravity keys, the joint model). Bullet's
     side is bit-identical in most runs but not all: with Blender's task scheduler on one thread the
     poses were bit-identical in 8 of 8 standalone processes and in 3 of 4 CI runs of this test; the
-    fourth differed by 0.01 mm with the same cracks. Why is not shown: Bullet's AABB tree orders
-    nodes by memory address, but four calls with the C heap scrambled between them were
-    bit-identical (2026-11-26). The test asserts that much, and bit-identity of everything we
-    control."""
-    pytest.importorskip("bpy")
+    fourth differed by 0.01 mm with the same cracks. Why is not shown: four calls with the C heap
+    scrambled between them were bit-identical, and so were runs in processes with other hash
+    seeds or with bpy's scheduler on a thread per core (2026-11-26); but a study sample that
+    collapses gave other poses in a dask worker's own process under load, with BLAS on one thread
+    (2026-11-26). The test asserts that much, and bit-identity of everything we control. bpy is
+    imported as the library imports it (``need_bpy``), and ``simulate`` runs BLAS on one thread."""
+    from .conftest import need_bpy
+
+    need_bpy()
     from calib_masonry import Material, Pushover, simulate, synthetic_motion
     from calib_masonry.simulation.blender import _gravity_per_frame
     from calib_masonry.simulation.run import scene_for

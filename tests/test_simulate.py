@@ -9,7 +9,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-pytest.importorskip("bpy")
+from .conftest import need_bpy
+
+need_bpy(module_level=True)
 
 from calib_masonry.simulation.blender import _box, run  # noqa: E402
 from calib_masonry.simulation.ground_motion import G, constant_acceleration  # noqa: E402
@@ -687,7 +689,7 @@ def test_the_same_record_in_g_and_in_m_per_s2_gives_the_same_run(small_model, tm
 
 def test_scene_blend_replays_the_run(small_model, tmp_path):
     """Opening scene.blend and going to its last frame puts every brick where poses.npz says."""
-    bpy = pytest.importorskip("bpy")
+    bpy = need_bpy()
     from calib_masonry.simulation.run import SimulationConfig, simulate_to_folder
     from calib_masonry.simulation.scene import Material
 

@@ -224,7 +224,15 @@ def test_fragility_study_resumes_after_a_kill_and_matches_a_separate_scheduler_a
         # identical rows, simulation included: every sample's simulation runs in a fresh
         # single-threaded child whose Blender starts its task scheduler with one thread, so its heap
         # layout (which Bullet's broad phase follows) depends neither on the worker nor on the load
-        assert remote == local
+        differ = {
+            i: {
+                k: (local[i].get(k), remote[i].get(k))
+                for k in set(local[i]) | set(remote[i])
+                if local[i].get(k) != remote[i].get(k)
+            }
+            for i in local
+        }
+        assert remote == local, differ
     finally:
         for proc in (worker, sched):
             if proc is not None:

@@ -81,6 +81,7 @@ def main() -> None:
     ap.add_argument("runs", nargs="+", help="run labels, and 'scramble' between them")
     ap.add_argument("--direct-bpy", action="store_true")
     ap.add_argument("--churn", action="store_true")
+    ap.add_argument("--save", type=Path, help="write the first run's positions here (.npy), to compare processes")
     a = ap.parse_args()
     if a.direct_bpy:
         import bpy  # noqa: F401, PLC0415 - before the library's own import, on purpose
@@ -109,6 +110,8 @@ def main() -> None:
         out = cm.simulate(result.structure, motion, material=weak, progress=False)
         runs.append((label, out.output.positions.copy(), out.summary["bonds_broken"]))
     first = runs[0][1]
+    if a.save:
+        np.save(a.save, first)
     for label, pos, broken in runs:
         print(
             f"{label}: joints broken {broken}, largest difference from the first run "

@@ -11,9 +11,14 @@ LocalCluster (threads, in this process) and JAX busy, as a pytest process or a d
 Prints each run's largest difference from the first and whether it is bit-identical.
 
     .venv/bin/python experiments/sim_determinism.py a b scramble c scramble d [--direct-bpy] [--churn]
+        [--pga G] [--duration S] [--save FIRST.npy]
 
 Measured 2026-11-26 on 873bcfd (2-core Xeon VM, another job running): runs a-d bit-identical, with
 ``scramble`` between them, with ``--direct-bpy`` and with ``--churn``.
+Measured 2026-11-26 (second session) on a98494c: ``a --save`` in processes with PYTHONHASHSEED 1,
+2, 3, and ``a b --direct-bpy`` in four processes while CI ran: all bit-identical with each other.
+A collapse (``a b c --churn --pga 1.2 --duration 3``: 112 joints cracked, 54 % of bricks moved)
+with the other core loaded (``yes``): bit-identical.
 """
 
 from __future__ import annotations
@@ -81,6 +86,8 @@ def main() -> None:
     ap.add_argument("runs", nargs="+", help="run labels, and 'scramble' between them")
     ap.add_argument("--direct-bpy", action="store_true")
     ap.add_argument("--churn", action="store_true")
+    ap.add_argument("--pga", type=float, default=0.5, help="peak ground acceleration, g (default 0.5)")
+    ap.add_argument("--duration", type=float, default=2.0, help="seconds of motion (default 2)")
     ap.add_argument("--save", type=Path, help="write the first run's positions here (.npy), to compare processes")
     a = ap.parse_args()
     if a.direct_bpy:
@@ -100,7 +107,7 @@ def main() -> None:
     (root / "s.toml").write_text(text)
     synthesize(cm.load_structure(root / "s.toml", require_sources=False), root / "data", figures=False)
     result = cm.build(cm.load_structure(root / "data" / "structure.toml"), progress=False)
-    motion = cm.synthetic_motion(0.5, 2.0, seed=3, components=2)
+    motion = cm.synthetic_motion(a.pga, a.duration, seed=3, components=2)
     weak = cm.Material(tensile_strength=2e3, shear_strength=3e3)
     kept, runs = [], []
     for k, label in enumerate(a.runs):
@@ -108,13 +115,15 @@ def main() -> None:
             kept += scramble(k)
             continue
         out = cm.simulate(result.structure, motion, material=weak, progress=False)
-        runs.append((label, out.output.positions.copy(), out.summary["bonds_broken"]))
+        runs.append(
+            (label, out.output.positions.copy(), out.summary["bonds_broken"], out.summary["moved_fraction_final"])
+        )
     first = runs[0][1]
     if a.save:
         np.save(a.save, first)
-    for label, pos, broken in runs:
+    for label, pos, broken, moved in runs:
         print(
-            f"{label}: joints broken {broken}, largest difference from the first run "
+            f"{label}: joints broken {broken}, moved {moved:.3f}, largest difference from the first run "
             f"{np.abs(pos - first).max() * 1000:.6f} mm, bit-identical {np.array_equal(pos, first)}"
         )
 

@@ -11,7 +11,7 @@ LocalCluster (threads, in this process) and JAX busy, as a pytest process or a d
 Prints each run's largest difference from the first and whether it is bit-identical.
 
     .venv/bin/python experiments/sim_determinism.py a b scramble c scramble d [--direct-bpy] [--churn]
-        [--pga G] [--duration S] [--save FIRST.npy]
+        [--churn KINDS] [--thread] [--pga G] [--duration S] [--save FIRST.npy]
 
 Measured 2026-11-26 on 873bcfd (2-core Xeon VM, another job running): runs a-d bit-identical, with
 ``scramble`` between them, with ``--direct-bpy`` and with ``--churn``.
@@ -19,6 +19,15 @@ Measured 2026-11-26 (second session) on a98494c: ``a --save`` in processes with 
 2, 3, and ``a b --direct-bpy`` in four processes while CI ran: all bit-identical with each other.
 A collapse (``a b c --churn --pga 1.2 --duration 3``: 112 joints cracked, 54 % of bricks moved)
 with the other core loaded (``yes``): bit-identical.
+``--thread`` runs each simulation on a new thread, as a dask worker runs its tasks. Alone, ``a b c
+--thread --pga 1.2 --duration 3``: bit-identical with the main thread's runs (and a segmentation
+fault as the interpreter exits). With another thread busy beside it, it is not: ``a b --thread
+--churn`` differed by 78 mm (moved 54 % against 56 %); ``--churn python`` (a thread that only
+holds the GIL) differed by 13 mm once and crashed (segmentation fault) once; ``--churn numpy``
+gave 58 % and 50 % moved (158 mm) and crashed at exit. The same churn beside runs on the main
+thread: bit-identical every time. Blender driven from a thread that is not the process's main
+one, beside other Python threads, is not reproducible: why a study's simulation runs in a child
+process of its own (``study/child.py``), on that process's main thread.
 """
 
 from __future__ import annotations
@@ -56,26 +65,36 @@ def scramble(seed: int) -> list[int]:
     return [b for i, b in enumerate(blocks) if not i % 3]
 
 
-def churn() -> None:
-    """Start a daemon thread that allocates arrays, submits to an in-process dask cluster and runs
-    JAX, all the time."""
+def churn(kinds: str = "numpy,dask,jax") -> None:
+    """Start a daemon thread that, all the time, allocates arrays (``numpy``), submits to an
+    in-process dask cluster (``dask``) and runs JAX (``jax``), or only the ``kinds`` named, or
+    only holds the GIL in pure Python (``python``)."""
     import threading
     import time
 
-    import jax.numpy as jnp
-    from dask.distributed import Client, LocalCluster
+    kinds = set(kinds.split(","))
+    client = None
+    if "dask" in kinds:
+        from dask.distributed import Client, LocalCluster
 
-    client = Client(LocalCluster(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None))
+        client = Client(LocalCluster(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None))
+    if "jax" in kinds:
+        import jax.numpy as jnp
 
     def run() -> None:
         rng = np.random.default_rng()
         while True:
-            _ = [np.ones(int(n)) for n in rng.integers(1, 300, 200)]
-            try:
-                client.submit(sum, [1, 2, 3], pure=False).result()
-            except RuntimeError:  # the interpreter is shutting down
-                return
-            jnp.ones(100).block_until_ready()
+            if "numpy" in kinds:
+                _ = [np.ones(int(n)) for n in rng.integers(1, 300, 200)]
+            if "python" in kinds:
+                _ = sum(i * i for i in range(20000))
+            if client is not None:
+                try:
+                    client.submit(sum, [1, 2, 3], pure=False).result()
+                except RuntimeError:  # the interpreter is shutting down
+                    return
+            if "jax" in kinds:
+                jnp.ones(100).block_until_ready()
             time.sleep(0.001)
 
     threading.Thread(target=run, daemon=True).start()
@@ -85,15 +104,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", help="run labels, and 'scramble' between them")
     ap.add_argument("--direct-bpy", action="store_true")
-    ap.add_argument("--churn", action="store_true")
+    ap.add_argument("--churn", nargs="?", const="numpy,dask,jax", help="kinds of churn (numpy,dask,jax,python)")
     ap.add_argument("--pga", type=float, default=0.5, help="peak ground acceleration, g (default 0.5)")
     ap.add_argument("--duration", type=float, default=2.0, help="seconds of motion (default 2)")
+    ap.add_argument("--thread", action="store_true", help="each simulation on a new thread, as in a dask worker")
     ap.add_argument("--save", type=Path, help="write the first run's positions here (.npy), to compare processes")
     a = ap.parse_args()
     if a.direct_bpy:
         import bpy  # noqa: F401, PLC0415 - before the library's own import, on purpose
     if a.churn:
-        churn()
+        churn(a.churn)
 
     import calib_masonry as cm
     from calib_masonry.synthetic.truth import synthesize
@@ -114,7 +134,13 @@ def main() -> None:
         if label == "scramble":
             kept += scramble(k)
             continue
-        out = cm.simulate(result.structure, motion, material=weak, progress=False)
+        if a.thread:
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(1) as pool:
+                out = pool.submit(cm.simulate, result.structure, motion, material=weak, progress=False).result()
+        else:
+            out = cm.simulate(result.structure, motion, material=weak, progress=False)
         runs.append(
             (label, out.output.positions.copy(), out.summary["bonds_broken"], out.summary["moved_fraction_final"])
         )

@@ -13,9 +13,14 @@ one thread), but run in a dask worker's own process (threads of its own: event l
 profiler) one sample once differed between a LocalCluster worker and a separate ``dask worker``
 (measured in CI), and two runs in one pytest process once differed by 0.01 mm. Bullet orders its
 broad-phase tree by memory address, the cause first suspected; but scrambling the C heap between
-two calls in one process did not change a bit (measured). Each simulation therefore runs in a
-fresh single-threaded child process (``python -m calib_masonry.study.child``): the same sample
-gives the same poses on any worker, in any order, busy or not.
+two calls in one process did not change a bit (measured). What does change a run is Blender
+driven from a thread other than the process's main one while another Python thread is busy, as
+a dask worker runs its tasks beside its event loop: a collapsing run differed by 13-158 mm
+between two such calls, and the process crashed (segmentation fault) in 3 of 5 tries, where the
+same calls on the main thread were bit-identical (``experiments/sim_determinism.py --thread
+--churn``, 2026-11-26). Each simulation therefore runs in a fresh single-threaded child process
+(``python -m calib_masonry.study.child``), on its main thread: the same sample gives the same
+poses on any worker, in any order, busy or not.
 """
 
 from __future__ import annotations

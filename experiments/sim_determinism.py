@@ -23,8 +23,9 @@ with the other core loaded (``yes``): bit-identical.
 --thread --pga 1.2 --duration 3``: bit-identical with the main thread's runs (and a segmentation
 fault as the interpreter exits). With another thread busy beside it, it is not: ``a b --thread
 --churn`` differed by 78 mm (moved 54 % against 56 %); ``--churn python`` (a thread that only
-holds the GIL) differed by 13 mm once and crashed (segmentation fault) once; ``--churn numpy``
-gave 58 % and 50 % moved (158 mm) and crashed at exit. The same churn beside runs on the main
+holds the GIL) differed by 13 mm; ``--churn numpy`` gave 58 % and 50 % moved (158 mm). Three
+more tries (full, python and numpy churn) crashed with a segmentation fault before the runs
+ended, and runs on a new thread also crash as the interpreter exits, churn or not. The same churn beside runs on the main
 thread: bit-identical every time. Blender driven from a thread that is not the process's main
 one, beside other Python threads, is not reproducible: why a study's simulation runs in a child
 process of its own (``study/child.py``), on that process's main thread.

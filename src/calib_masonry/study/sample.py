@@ -16,8 +16,8 @@ broad-phase tree by memory address, the cause first suspected; but scrambling th
 two calls in one process did not change a bit (measured). What does change a run is Blender
 driven from a thread other than the process's main one while another Python thread is busy, as
 a dask worker runs its tasks beside its event loop: a collapsing run differed by 13-158 mm
-between two such calls, and the process crashed (segmentation fault) in 3 of 5 tries, where the
-same calls on the main thread were bit-identical (``experiments/sim_determinism.py --thread
+between two such calls in three tries, three more crashed (segmentation fault), and the same
+calls on the main thread were bit-identical (``experiments/sim_determinism.py --thread
 --churn``, 2026-11-26). Each simulation therefore runs in a fresh single-threaded child process
 (``python -m calib_masonry.study.child``), on its main thread: the same sample gives the same
 poses on any worker, in any order, busy or not.

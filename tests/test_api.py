@@ -231,3 +231,41 @@ def test_footprint_fit_returns_the_shared_fit_result():
     assert res.fit.covariance.shape == (8, 8) and res.fit.residuals.size >= 8 and res.fit.steps > 0
     assert res.closure_gap_m < 1e-5
     assert np.allclose(res.width_sigma_m, res.fit.sigmas[:4])
+
+
+def test_simulate_off_the_main_thread_warns(monkeypatch):
+    """simulate() from a thread other than the main one warns (Blender driven so, beside busy
+    Python threads, was not reproducible: experiments/sim_determinism.py --thread). Blender itself
+    is not run here: its import is replaced by a stop right after the check."""
+    import threading
+    import warnings
+
+    from calib_masonry.simulation import blender
+    from calib_masonry.simulation.run import _run_scene
+
+    class Stop(Exception):
+        pass
+
+    def stop():
+        raise Stop
+
+    monkeypatch.setattr(blender, "require_bpy", stop)
+    caught: list = []
+
+    def call() -> None:
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            try:
+                _run_scene(None, "x", progress=False, blend_path=None)
+            except Stop:
+                pass
+        caught.extend(w)
+
+    t = threading.Thread(target=call)
+    t.start()
+    t.join()
+    assert [str(w.message).split(";")[0] for w in caught] == ["simulate: called from a thread other than the main one"]
+    with pytest.raises(Stop):  # and not on the main thread
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            _run_scene(None, "x", progress=False, blend_path=None)

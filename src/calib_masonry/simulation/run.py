@@ -15,7 +15,9 @@ model's bricks and joints, and nothing in it depends on Python's string hashing.
 from __future__ import annotations
 
 import math
+import threading
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -433,6 +435,15 @@ def _run_scene(scene: Scene, name: str, *, progress: bool | None, blend_path: Pa
     from .blender import require_bpy, run
     from .results import collapse_multiplier, metrics, pushover_stop
 
+    if threading.current_thread() is not threading.main_thread():
+        warnings.warn(
+            "simulate: called from a thread other than the main one; Blender driven so, beside other "
+            "busy Python threads, gave other poses from the same inputs and crashed at times "
+            "(experiments/sim_determinism.py --thread); call it from the main thread, or in a process "
+            "of its own as a study does",
+            RuntimeWarning,
+            stacklevel=3,
+        )
     require_bpy()
     stop = pushover_stop(scene) if scene.pushover is not None else None
     # one BLAS thread for the joint model's solves, whatever the process's setting (a dask worker,
@@ -462,7 +473,11 @@ def simulate(
 
     ``model`` is a :class:`~calib_masonry.build3d.assemble.Structure3D` or the BuildResult
     :func:`calib_masonry.build` returns, its :class:`~calib_masonry.simulation.scene.SceneGeometry`,
-    or a ``build`` output folder."""
+    or a ``build`` output folder.
+
+    Call it from the process's main thread (it warns otherwise): Blender driven from another
+    thread, beside busy Python threads (a dask worker's task thread), gave other poses from the
+    same inputs and crashed at times; a study runs each simulation in a process of its own."""
     stored = None
     if hasattr(model, "structure") and isinstance(model.structure, Structure3D):  # a BuildResult
         model = model.structure

@@ -7,7 +7,7 @@ with a ``[simulate]`` table it runs Bullet under the sample's load. What does no
 samples of a worker (a structure file, a mask's trace, a photo's calibration, the simulation
 geometry of an unvaried model) is computed once per worker process and cached.
 
-Runs of one sample have differed in their last bits, and why is not shown. Fresh single-threaded
+Runs of one sample have differed in their last bits. Fresh single-threaded
 processes gave the same poses every time measured (0 of 13 differed, Blender's task scheduler on
 one thread), but run in a dask worker's own process (threads of its own: event loop, heartbeats,
 profiler) one sample once differed between a LocalCluster worker and a separate ``dask worker``

@@ -9,8 +9,17 @@ mean offset of the left corners' and the right corners' x, and of the top corner
 Measured 2026-11-26 on d116584, those eight seeds (all within 2 %): the detected sides lie inside
 the true ones, left corners' x +0.58 px and right corners' x -0.47 px on average (the top corners'
 y +0.29 px, also inward). On walls 350-545 px wide in the photo that is 0.19-0.30 % of W, and H's
-error exceeds W's by 0.2-0.5 % in nearly every row of ``bench_tall_walls.py``. Whether the
-synthetic renderer's edge or the detector's edge location is off is not established.
+error exceeds W's by 0.2-0.5 % in nearly every row of ``bench_tall_walls.py``.
+
+Why (measured the same day with throwaway scripts on seeds 10402, 10405, 10408, 10409): the
+rendered wall's coverage (alpha) crosses 0.5 within 0.2 px of the true sides, so the renderer
+places the wall right. But the Stylite-like texture has a light margin along the wall's ends:
+the outermost three texels (about 1.2 cm) average grey 0.76, 0.67, 0.57 against 0.40 inside the
+wall, where the background is 0.59. So the photo's strongest edge is at the stones: the
+gradient peak along rows (Gaussian 1.5 px) lies 0.8-1.6 px inside the true sides (medians over
+236-293 rows). The detector comes out half a pixel inside. Whether a wall's true width should
+include such a margin (the synthetic truth's convention) or the detector should look for the
+outer edge is the question to settle.
 """
 
 from __future__ import annotations

@@ -7,10 +7,10 @@ with a ``[simulate]`` table it runs Bullet under the sample's load. What does no
 samples of a worker (a structure file, a mask's trace, a photo's calibration, the simulation
 geometry of an unvaried model) is computed once per worker process and cached.
 
-Runs of one sample have differed in their last bits. Fresh single-threaded
-processes gave the same poses every time measured (0 of 13 differed, Blender's task scheduler on
-one thread), but run in a dask worker's own process (threads of its own: event loop, heartbeats,
-profiler) one sample once differed between a LocalCluster worker and a separate ``dask worker``
+Runs of one sample have differed in their last bits. Fresh single-threaded processes gave the
+same poses every time measured (0 of 13 differed, Blender's task scheduler on one thread), but
+run in a dask worker's own process (threads of its own: event loop, heartbeats, profiler) one
+sample once differed between a LocalCluster worker and a separate ``dask worker``
 (measured in CI), and two runs in one pytest process once differed by 0.01 mm. Bullet orders its
 broad-phase tree by memory address, the cause first suspected; but scrambling the C heap between
 two calls in one process did not change a bit (measured). What does change a run is Blender

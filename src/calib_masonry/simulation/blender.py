@@ -42,7 +42,7 @@ import numpy as np
 from .._threads import thread_imap
 from ..errors import BackendMissing, signals_deferred
 from ..progress import progress as _progress
-from .joints import CrackTracker, import_solver
+from .joints import CrackTracker
 from .scene import Scene, grounded_bodies, joint_axes
 
 __all__ = ["RunOutput", "run", "require_bpy", "write_model_blend"]
@@ -455,8 +455,6 @@ def run(
     # after frame in order, while Bullet steps (frame_set releases the GIL): the joints cracked and
     # let go are those of one check before each step, and the run takes the longer of the two.
     ahead = None
-    if record and scene.bonds:  # the joint model's (its tracker starts at the warm-up's end)
-        import_solver()  # here, not first on the joints' thread
     t1 = time.perf_counter()
     sc.frame_set(1)
     if record:

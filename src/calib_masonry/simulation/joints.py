@@ -276,13 +276,6 @@ def _inside_outline(outline: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.nda
     return pos | neg
 
 
-def import_solver() -> None:
-    """Import the sparse Cholesky (cvxopt's CHOLMOD) on the calling thread, before the joint model
-    first factorises on a thread of its own beside Bullet's (two threads importing modules of one
-    package at once can hang in CPython 3.11's import locks, gh-83065)."""
-    from cvxopt import cholmod, matrix, spmatrix  # noqa: F401
-
-
 class _Tangent:
     """The contact iteration's matrix ``K0 + P^T T_s P`` (:meth:`JointModel._newton_step`) on one
     sparsity pattern for the model's life, factorised by CHOLMOD's supernodal Cholesky (through
@@ -900,6 +893,11 @@ class CrackTracker:
         *,
         settings: ContactSettings | None = None,
     ) -> None:
+        # the sparse Cholesky (cvxopt's CHOLMOD) is imported here, on the thread that builds the
+        # tracker, not first where its steps may run (a thread of their own beside Bullet's): two
+        # threads importing modules of one package at once can hang in CPython 3.11 (gh-83065)
+        from cvxopt import cholmod, matrix, spmatrix  # noqa: F401
+
         self.model = JointModel(scene, settings=settings, contact_gap_m=scene.solver.contact_gap_m)
         n = self.model.nj
         self.t0 = float(time_s)

@@ -50,6 +50,51 @@ def test_end_faces_detected_on_true_polygons(tmp_path, layout, walls, seed):
     assert found == truth
 
 
+@pytest.mark.parametrize("seed", [3, 4])
+def test_stone_walls_end_where_their_stones_do(tmp_path, seed):
+    """A free end (no corner) is a jamb: its stones' faces lie on the end's plumb line, so the wall's
+    true width is what a photo shows; an end at a corner keeps its joint to the corner's end face;
+    the stones away from the ends are the same as without the rule (the same random draws)."""
+    from calib_masonry.synthetic import layouts
+
+    p = tmp_path / "s.toml"
+    p.write_text(scenario_text([(2.9, 3.0, 0), (2.2, 3.0, 90)], layout="stones", seed=seed, t=0.4, closed=False))
+    spec = load_structure(p, require_sources=False)
+    pieces = layout_structure(spec)
+    free_start, free_end = 0, 1  # wall 0 starts free, wall 1 ends free; they meet at a corner
+    xs = {}
+    for n, ps in enumerate(pieces):
+        for q in ps:
+            xs.setdefault((n, q.course), []).append(q.polygon_m[:, 0])
+    widths = [w.width_m for w in spec.walls]
+    for (n, course), pts in xs.items():
+        lo, hi = min(float(x.min()) for x in pts), max(float(x.max()) for x in pts)
+        if n == free_start:
+            assert abs(lo) < 1e-12, (n, course, lo)  # a stone's face on the free end
+        if n == free_end:
+            assert abs(hi - widths[n]) < 1e-12, (n, course, hi)
+    # at the corner end, the courses whose corner piece the other wall owns end in a joint
+    inner = [max(float(x.max()) for x in pts) for (n, c), pts in xs.items() if n == free_start]
+    assert min(inner) < widths[free_start]
+    # without the rule, the same draws: every stone but the jamb stones is unchanged
+    original = layouts._stone
+
+    def unflushed(*args, flush_start=False, flush_end=False):
+        return original(*args)
+
+    layouts._stone = unflushed
+    try:
+        before = layout_structure(spec)
+    finally:
+        layouts._stone = original
+    assert [len(ps) for ps in before] == [len(ps) for ps in pieces]
+    changed = sum(
+        not np.array_equal(a.polygon_m, b.polygon_m) for pa, pb in zip(before, pieces) for a, b in zip(pa, pb)
+    )
+    courses = len({q.course for q in pieces[0]})
+    assert 0 < changed <= 2 * courses  # at most a jamb stone per free end and course
+
+
 def test_build_is_deterministic(make_scenario, tmp_path):
     data = make_scenario([(2.0, 1.0, 0), (1.2, 1.0, 90), (2.0, 1.0, 180), (1.2, 1.0, 270)])
     spec = load_structure(data / "structure.toml")

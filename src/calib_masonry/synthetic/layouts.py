@@ -112,20 +112,36 @@ def _lengths(
     return lengths
 
 
-def _stone(x0: float, x1: float, z0: float, z1: float, irr: float, rng: np.random.Generator) -> np.ndarray:
-    """An irregular stone inside the cell [x0, x1] x [z0, z1]: chamfered, tilted, at most 8 vertices."""
+def _stone(
+    x0: float,
+    x1: float,
+    z0: float,
+    z1: float,
+    irr: float,
+    rng: np.random.Generator,
+    *,
+    flush_start: bool = False,
+    flush_end: bool = False,
+) -> np.ndarray:
+    """An irregular stone inside the cell [x0, x1] x [z0, z1]: chamfered, tilted, at most 8 vertices.
+
+    ``flush_start`` / ``flush_end``: the stone ends a wall (a jamb stone), so its face on that end
+    lies on the cell's side x0 / x1, plumb, as a mason sets it (its corners may still be chamfered,
+    the notches mortared to the wall's end as bed joints are). The random draws are the same
+    either way, so the rest of a layout does not change with it."""
     w, h = x1 - x0, z1 - z0
     s = min(w, h)
 
     # inward shifts of the four corners tilt the edges slightly
-    def shift() -> float:
-        return float(rng.uniform(0.0, 0.06 * irr * s))
+    def shift(keep: bool = True) -> float:
+        d = float(rng.uniform(0.0, 0.06 * irr * s))
+        return d if keep else 0.0
 
     corners_xy = [
-        (x0 + shift(), z0 + shift()),
-        (x1 - shift(), z0 + shift()),
-        (x1 - shift(), z1 - shift()),
-        (x0 + shift(), z1 - shift()),
+        (x0 + shift(not flush_start), z0 + shift()),
+        (x1 - shift(not flush_end), z0 + shift()),
+        (x1 - shift(not flush_end), z1 - shift()),
+        (x0 + shift(not flush_start), z1 - shift()),
     ]
     pts: list[tuple[float, float]] = []
     for k, (cx, cz) in enumerate(corners_xy):
@@ -196,10 +212,23 @@ def layout_structure(spec: StructureSpec) -> list[list[Piece]]:
             half_first = open_start and course.index % 2 == 1
             lengths = _lengths(b - a, syn, rng, half_first=half_first, avoid=max(avoid_start, avoid_end))
             x = a
-            for length in lengths:
+            for k, length in enumerate(lengths):
                 x1 = min(x + length, b)
                 if syn.layout == "stones":
-                    poly = _stone(x, x1, z0, z1, syn.irregularity, rng)
+                    # a wall's free end (no corner there) is a jamb: its stones' faces are set to
+                    # the end's plumb line, as the corner's end faces are, so the wall ends where
+                    # its stones do (a strip of mortar beyond them, 0-1.5 cm, was not a wall's end a
+                    # mason builds, and no photo shows it against a pale sky)
+                    poly = _stone(
+                        x,
+                        x1,
+                        z0,
+                        z1,
+                        syn.irregularity,
+                        rng,
+                        flush_start=k == 0 and n not in start_corner,
+                        flush_end=k == len(lengths) - 1 and n not in end_corner,
+                    )
                 else:
                     poly = _rect(x, x1, z0, z1)
                 pieces.append(Piece(n, course.index, poly, False))

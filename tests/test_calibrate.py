@@ -332,6 +332,24 @@ def test_automatic_mode_outlines_a_tall_narrow_wall_seen_from_its_foot(seed):
     assert pinned.result.height_m == pytest.approx(height, rel=0.01)
 
 
+def test_a_singular_fit_with_focal_and_eye_height_given_names_what_else_pins_the_wall():
+    """Tall wall seed 10209: a base corner found 20 px off leaves the camera undetermined although
+    the focal length (EXIF) and the eye height are given. The error names the flags that help,
+    not those already given, and the one it names first fits (W and H within 2 %)."""
+    import calib_masonry as cm
+
+    wall, photo, truth = _tall_wall_photo(10209)
+    cfg = cm.CalibrateConfig(camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02)
+    with pytest.raises(cm.FitFailed) as err:
+        cm.calibrate_photo(photo, cfg)
+    message = str(err.value)
+    assert "singular" in message and "\n" not in message
+    assert "--known-width" in message and "--corners" in message and "--focal-px" not in message
+    pinned = cm.calibrate_photo(photo, replace(cfg, known_width_m=wall.width_m))
+    assert pinned.result.fit.ok
+    assert pinned.result.height_m == pytest.approx(wall.height_m, rel=0.02)
+
+
 def test_automatic_mode_starts_again_from_the_joints_when_their_vanishing_points_lead_it_off_the_photo(monkeypatch):
     """Seed 9135 (a tall wall; 9115 was the case before free ends became jambs, 2026-11-26): the
     joints' vanishing points grow the outline far into the sky and the ground. The outline is found

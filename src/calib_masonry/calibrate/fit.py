@@ -28,6 +28,7 @@ import numpy as np
 from .._jax import jax, jnp
 from ..errors import FitFailed, InputError
 from .camera import (
+    CORNERS_FLAG,
     PARAM_NAMES,
     angles_from_rotation,
     image_from_wall_homography,
@@ -361,6 +362,16 @@ def _inliers(seg: np.ndarray, dist: np.ndarray) -> np.ndarray:
     return seg[d <= cut]
 
 
+def _singular_advice(inp: CalibrationInput) -> str:
+    """What to add when the fit is singular: the focal length if it was not given, else what pins
+    the wall (a measured side, or corners clicked where the wall's outline is unclear); telling a
+    user who gave the focal length and the eye height to give them was no help (tall wall seed
+    10209: a base corner found 20 px off made the fit singular; --known-width fitted it)."""
+    if inp.focal_px is None:
+        return "pass --focal-px (and --camera-height), or give a photo with visible mortar joints"
+    return f"pass --known-width or --known-height, or click the wall's corners with {CORNERS_FLAG}"
+
+
 def calibrate(
     inp: CalibrationInput, *, start: np.ndarray | None = None, reject_outliers: bool = True
 ) -> CalibrationResult:
@@ -389,8 +400,7 @@ def calibrate(
         )
     if fit.status is FitStatus.SINGULAR:
         raise FitFailed(
-            "calibration: too few constraints to fit the camera (singular Jacobian); pass "
-            "--focal-px and --camera-height, or give a photo with visible mortar joints"
+            f"calibration: too few constraints to fit the camera (singular Jacobian); {_singular_advice(inp)}"
         )
     nb, nh = min(len(inp.bed_segments), MAX_SEGMENTS), min(len(inp.head_segments), MAX_SEGMENTS)
     corner_px = np.asarray(corner_px)

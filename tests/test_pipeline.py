@@ -52,9 +52,10 @@ def test_end_faces_detected_on_true_polygons(tmp_path, layout, walls, seed):
 
 @pytest.mark.parametrize("seed", [3, 4])
 def test_stone_walls_end_where_their_stones_do(tmp_path, seed):
-    """A free end (no corner) is a jamb: its stones' faces lie on the end's plumb line, so the wall's
-    true width is what a photo shows; an end at a corner keeps its joint to the corner's end face;
-    the stones away from the ends are the same as without the rule (the same random draws)."""
+    """A free end (no corner) is a jamb: its stones' faces lie on the end's plumb line; the first
+    course is bedded on the base line. So the wall's true outline is what a photo shows. An end
+    at a corner keeps its joint to the corner's end face; the stones off the outline are the same
+    as without the rule (the same random draws)."""
     from calib_masonry.synthetic import layouts
 
     p = tmp_path / "s.toml"
@@ -66,6 +67,8 @@ def test_stone_walls_end_where_their_stones_do(tmp_path, seed):
     for n, ps in enumerate(pieces):
         for q in ps:
             xs.setdefault((n, q.course), []).append(q.polygon_m[:, 0])
+            if q.course == 0:
+                assert q.polygon_m[:, 1].min() == 0.0  # on the base line
     widths = [w.width_m for w in spec.walls]
     for (n, course), pts in xs.items():
         lo, hi = min(float(x.min()) for x in pts), max(float(x.max()) for x in pts)
@@ -76,10 +79,11 @@ def test_stone_walls_end_where_their_stones_do(tmp_path, seed):
     # at the corner end, the courses whose corner piece the other wall owns end in a joint
     inner = [max(float(x.max()) for x in pts) for (n, c), pts in xs.items() if n == free_start]
     assert min(inner) < widths[free_start]
-    # without the rule, the same draws: every stone but the jamb stones is unchanged
+    # without the rule, the same draws: every stone but the jamb stones and the first course's
+    # is unchanged
     original = layouts._stone
 
-    def unflushed(*args, flush_start=False, flush_end=False):
+    def unflushed(*args, **flush):
         return original(*args)
 
     layouts._stone = unflushed
@@ -88,11 +92,15 @@ def test_stone_walls_end_where_their_stones_do(tmp_path, seed):
     finally:
         layouts._stone = original
     assert [len(ps) for ps in before] == [len(ps) for ps in pieces]
-    changed = sum(
-        not np.array_equal(a.polygon_m, b.polygon_m) for pa, pb in zip(before, pieces) for a, b in zip(pa, pb)
-    )
+    changed = [
+        (a.course, not np.array_equal(a.polygon_m, b.polygon_m))
+        for pa, pb in zip(before, pieces)
+        for a, b in zip(pa, pb)
+    ]
+    above = sum(d for c, d in changed if c > 0)
     courses = len({q.course for q in pieces[0]})
-    assert 0 < changed <= 2 * courses  # at most a jamb stone per free end and course
+    assert 0 < above <= 2 * (courses - 1)  # above the first course, a jamb stone per free end and course
+    assert sum(d for c, d in changed if c == 0) > 0
 
 
 def test_build_is_deterministic(make_scenario, tmp_path):

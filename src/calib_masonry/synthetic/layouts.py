@@ -122,13 +122,15 @@ def _stone(
     *,
     flush_start: bool = False,
     flush_end: bool = False,
+    flush_base: bool = False,
 ) -> np.ndarray:
     """An irregular stone inside the cell [x0, x1] x [z0, z1]: chamfered, tilted, at most 8 vertices.
 
     ``flush_start`` / ``flush_end``: the stone ends a wall (a jamb stone), so its face on that end
-    lies on the cell's side x0 / x1, plumb, as a mason sets it (its corners may still be chamfered,
-    the notches mortared to the wall's end as bed joints are). The random draws are the same
-    either way, so the rest of a layout does not change with it."""
+    lies on the cell's side x0 / x1, plumb, as a mason sets it; ``flush_base``: the stone is of the
+    first course, bedded on the footing, so its bottom face lies on z0. Its corners may still be
+    chamfered, the notches mortared to the wall's outline as bed joints are. The random draws are
+    the same either way, so the rest of a layout does not change with it."""
     w, h = x1 - x0, z1 - z0
     s = min(w, h)
 
@@ -138,8 +140,8 @@ def _stone(
         return d if keep else 0.0
 
     corners_xy = [
-        (x0 + shift(not flush_start), z0 + shift()),
-        (x1 - shift(not flush_end), z0 + shift()),
+        (x0 + shift(not flush_start), z0 + shift(not flush_base)),
+        (x1 - shift(not flush_end), z0 + shift(not flush_base)),
         (x1 - shift(not flush_end), z1 - shift()),
         (x0 + shift(not flush_start), z1 - shift()),
     ]
@@ -218,7 +220,10 @@ def layout_structure(spec: StructureSpec) -> list[list[Piece]]:
                     # a wall's free end (no corner there) is a jamb: its stones' faces are set to
                     # the end's plumb line, as the corner's end faces are, so the wall ends where
                     # its stones do (a strip of mortar beyond them, 0-1.5 cm, was not a wall's end a
-                    # mason builds, and no photo shows it against a pale sky)
+                    # mason builds, and no photo shows it against a pale sky); and the first
+                    # course is bedded on the footing, its stones' bottoms on the base line (a
+                    # wedge of mortar below them, 0-1.5 cm, blurred into the stones' edge in a
+                    # photo and tilted the detected base: the tall walls' scale 2-5 % off)
                     poly = _stone(
                         x,
                         x1,
@@ -228,6 +233,7 @@ def layout_structure(spec: StructureSpec) -> list[list[Piece]]:
                         rng,
                         flush_start=k == 0 and n not in start_corner,
                         flush_end=k == len(lengths) - 1 and n not in end_corner,
+                        flush_base=course.index == 0,
                     )
                 else:
                     poly = _rect(x, x1, z0, z1)

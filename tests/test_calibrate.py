@@ -362,6 +362,22 @@ def test_a_singular_fit_names_the_flags_that_were_not_given():
     assert fit.width_m == pytest.approx(wall.width_m, rel=1e-3)
 
 
+def test_automatic_mode_refuses_corners_the_joints_contradict():
+    """Tall wall seed 9143: automatic mode puts the left base corner 70 px up the wall. The corners
+    alone fit any quadrilateral, and the RMS over all residuals (2.1 px) hides the corner among
+    hundreds of joint segments, so the fit came out 60 % short and said nothing but the scale's
+    sigma. The corners' own RMS from the joints' outline (20 px) refuses it, naming --corners."""
+    import calib_masonry as cm
+
+    wall, photo, truth = _tall_wall_photo(9143)
+    cfg = cm.CalibrateConfig(camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02)
+    with pytest.raises(cm.FitFailed) as err:
+        cm.calibrate_photo(photo, cfg)
+    assert "--corners" in str(err.value) and "from the outline the mortar joints fit" in str(err.value)
+    forced = cm.calibrate_photo(photo, replace(cfg, force=True))
+    assert forced.result.rms_corner_px > 3.0 and abs(forced.result.width_m / wall.width_m - 1) > 0.1
+
+
 def test_automatic_mode_starts_again_from_the_joints_when_their_vanishing_points_lead_it_off_the_photo(monkeypatch):
     """Seed 9144 (a tall wall; 9115 and then 9135 were the case before the synthetic walls' free ends
     and base were set flush with their stones, 2026-11-26): the

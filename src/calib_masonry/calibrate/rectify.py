@@ -17,7 +17,7 @@ import numpy as np
 from .._threads import background, thread_map
 from ..errors import FitFailed, InputError
 from ..io import Photo, check_output, read_photo, staged_output, write_json, write_mask, write_rgb
-from .camera import order_corners, px_per_m
+from .camera import CORNERS_FLAG, order_corners, px_per_m
 from .lines import DetectConfig, Detection, detect_wall, refine_quad, segments_in_quad
 
 if TYPE_CHECKING:
@@ -209,6 +209,16 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
                 f"{photo.path}: RMS residual {result.rms_residual_px:.2f} px exceeds {config.max_rms_px:g} px "
                 "(corners or joints do not fit one wall plane); click the corners with --corners, "
                 "or use --force to keep it anyway"
+            )
+        if result.rms_corner_px > config.max_rms_px:
+            # the joints' lines contradict the corners: a corner found (or clicked) on something
+            # else. The RMS over all residuals hides it among hundreds of joint segments (tall wall
+            # seed 9143: a base corner 70 px up the wall, corners' RMS 20 px, all residuals' 2.1 px,
+            # W 60 % short)
+            raise FitFailed(
+                f"{photo.path}: the corners are {result.rms_corner_px:.1f} px (RMS) from the outline the mortar "
+                f"joints fit (more than {config.max_rms_px:g} px), so one is not on the wall's corner; click the "
+                f"wall's corners with {CORNERS_FLAG}, or use --force to keep it anyway"
             )
         if not (0.2 < result.width_m < 500 and 0.2 < result.height_m < 500):
             raise FitFailed(

@@ -1,10 +1,16 @@
 """``python -m calib_masonry.study.child``: one simulation of a study sample, in a fresh process.
 
 Reads a pickled job ``{"geometry": SceneGeometry, "load": GroundMotion | Pushover}`` on stdin and
-writes the pickled outcome on stdout (see :func:`outcome`). A fresh process (started with a fixed
-PYTHONHASHSEED by :func:`calib_masonry.study.sample.run_child`) allocates the same way every time,
-so Bullet's address-ordered broad phase steps the same way and the same sample gives the same poses
-on any worker.
+writes the pickled outcome on stdout (see :func:`outcome`).
+
+Why a process of its own: here the simulation runs on a process's main thread. A dask worker runs
+its tasks on threads beside its event loop, and Blender driven from a thread other than the main
+one, beside busy Python threads, gave other poses from the same inputs and crashed at times
+(``experiments/sim_determinism.py --thread --churn``; in a worker's own process a collapsing
+sample moved 79 % of its stones on one worker and 87 % on another, 2026-11-26). On a main thread
+the runs are bit-identical, whatever runs beside them. The fixed PYTHONHASHSEED of
+:func:`calib_masonry.study.sample.run_child` is kept for good measure: processes with hash seeds
+1, 2 and 3 gave bit-identical runs.
 """
 
 from __future__ import annotations

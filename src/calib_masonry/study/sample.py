@@ -309,8 +309,10 @@ def _simulate(study: Study, sample: Sample, structure) -> dict:
 
 
 def run_child(job: dict) -> dict:
-    """Run one simulation job in ``python -m calib_masonry.study.child`` (fixed hash seed; ends with
-    this process: it watches its parent) and return its outcome; a failure there is an :class:`InputError` here."""
+    """Run one simulation job in ``python -m calib_masonry.study.child`` (on that process's main
+    thread, where Blender's runs are reproducible, which a dask worker's task thread is not: see
+    :mod:`calib_masonry.study.child`; ends with this process: it watches its parent) and return its
+    outcome; a failure there is an :class:`InputError` here."""
     env = dict(os.environ, **CHILD_ENV)
     proc = subprocess.Popen(
         [sys.executable, "-m", "calib_masonry.study.child"],

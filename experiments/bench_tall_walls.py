@@ -65,6 +65,14 @@ def case(seed: int):
     return wall, photo, shot["truth"]
 
 
+def automatic(truth: dict):
+    """The calibration's configuration for a case: automatic mode, the eye height given (to 2 cm)
+    and the focal length from the photo's EXIF, as the issue's user would run it."""
+    import calib_masonry as cm
+
+    return cm.CalibrateConfig(camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02)
+
+
 def main() -> None:
     import calib_masonry as cm
     from calib_masonry.errors import CalibMasonryError
@@ -83,9 +91,7 @@ def main() -> None:
         wall, photo, truth = case(seed)
         t0 = time.perf_counter()
         try:
-            cal = cm.calibrate_photo(
-                photo, cm.CalibrateConfig(camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02)
-            )
+            cal = cm.calibrate_photo(photo, automatic(truth))
             res = cal.result
             ew = res.width_m / wall.width_m - 1
             eh = res.height_m / wall.height_m - 1

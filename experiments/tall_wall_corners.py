@@ -45,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def main() -> None:
-    from bench_tall_walls import case  # noqa: PLC0415 - the benchmark's cases, beside this file
+    from bench_tall_walls import automatic, case  # noqa: PLC0415 - the benchmark's cases, beside this file
 
     import calib_masonry as cm
 
@@ -54,9 +54,7 @@ def main() -> None:
     for seed in seeds:
         wall, photo, truth = case(seed)
         try:
-            cal = cm.calibrate_photo(
-                photo, cm.CalibrateConfig(camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02)
-            )
+            cal = cm.calibrate_photo(photo, automatic(truth))
         except cm.CalibMasonryError as exc:
             print(f"{seed}: {str(exc).splitlines()[0]}")
             continue

@@ -51,7 +51,7 @@ def test_end_faces_detected_on_true_polygons(tmp_path, layout, walls, seed):
 
 
 @pytest.mark.parametrize("seed", [3, 4])
-def test_stone_walls_end_where_their_stones_do(tmp_path, seed):
+def test_stone_walls_end_where_their_stones_do(tmp_path, monkeypatch, seed):
     """A free end (no corner) is a jamb: its stones' faces lie on the end's plumb line; the first
     course is bedded on the base line. So the wall's true outline is what a photo shows. An end
     at a corner keeps its joint to the corner's end face; the stones off the outline are the same
@@ -82,15 +82,9 @@ def test_stone_walls_end_where_their_stones_do(tmp_path, seed):
     # without the rule, the same draws: every stone but the jamb stones and the first course's
     # is unchanged
     original = layouts._stone
-
-    def unflushed(*args, **flush):
-        return original(*args)
-
-    layouts._stone = unflushed
-    try:
-        before = layout_structure(spec)
-    finally:
-        layouts._stone = original
+    monkeypatch.setattr(layouts, "_stone", lambda *args, **flush: original(*args))
+    before = layout_structure(spec)
+    monkeypatch.undo()
     assert [len(ps) for ps in before] == [len(ps) for ps in pieces]
     changed = [
         (a.course, not np.array_equal(a.polygon_m, b.polygon_m))

@@ -221,9 +221,9 @@ def test_fragility_study_resumes_after_a_kill_and_matches_a_separate_scheduler_a
         rows, _ = run_study(load_study(path), scheduler=f"tcp://127.0.0.1:{port}", progress=False)
         remote = {r["sample"]: {k: v for k, v in r.items() if k not in BOOKKEEPING} for r in rows}
         assert sorted(remote) == sorted(local)
-        # identical rows, simulation included: every sample's simulation runs in a fresh
-        # single-threaded child whose Blender starts its task scheduler with one thread, so its heap
-        # layout (which Bullet's broad phase follows) depends neither on the worker nor on the load
+        # identical rows, simulation included: every sample's simulation runs in a fresh child, on
+        # its main thread, where Blender's runs are reproducible whatever the worker or the load (on a
+        # dask worker's task thread they were not: calib_masonry.study.child)
         differ = {
             i: {
                 k: (local[i].get(k), remote[i].get(k))

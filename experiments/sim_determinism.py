@@ -11,7 +11,7 @@ LocalCluster (threads, in this process) and JAX busy, as a pytest process or a d
 Prints each run's largest difference from the first and whether it is bit-identical.
 
     .venv/bin/python experiments/sim_determinism.py a b scramble c scramble d [--direct-bpy] [--churn]
-        [--churn KINDS] [--thread] [--pga G] [--duration S] [--save FIRST.npy]
+        [--churn KINDS] [--thread | --bpy-thread | --dask] [--pga G] [--duration S] [--save FIRST.npy]
 
 Measured 2026-11-26 on 873bcfd (2-core Xeon VM, another job running): runs a-d bit-identical, with
 ``scramble`` between them, with ``--direct-bpy`` and with ``--churn``.
@@ -27,8 +27,17 @@ holds the GIL) differed by 13 mm; ``--churn numpy`` gave 58 % and 50 % moved (15
 more tries (full, python and numpy churn) crashed with a segmentation fault before the runs
 ended, and runs on a new thread also crash as the interpreter exits, churn or not. The same churn beside runs on the main
 thread: bit-identical every time. Blender driven from a thread that is not the process's main
-one, beside other Python threads, is not reproducible: why a study's simulation runs in a child
-process of its own (``study/child.py``), on that process's main thread.
+one, beside other Python threads, is not reproducible.
+Measured 2026-11-26 (third session): ``a b c --bpy-thread --churn python --pga 1.2 --duration 3``
+(bpy imported on the simulating thread, so that Blender counts it as its main one): one of four
+tries differed (238 mm), and every try crashed as the interpreter exited. A throwaway patch that
+emptied the scene with ``bpy.data.batch_remove`` instead of the factory reset, with ``--thread``:
+one of four differed (55 mm), two crashed in the depsgraph update of ``bpy.ops``.
+``--dask`` runs every simulation after the first as a coroutine task on a LocalCluster of two
+worker processes (``simulate_async``, on the worker's event loop: its main thread; the workers'
+profilers on). ``a b c d e f g --dask --pga 1.2 --duration 3``: all seven bit-identical with the
+first, run here (14.6 s); ``a b c d e --dask --churn python ...`` with the other core loaded
+(``yes``): bit-identical. That is how a study runs its simulations (``study/sample.py``).
 """
 
 from __future__ import annotations
@@ -101,6 +110,22 @@ def churn(kinds: str = "numpy,dask,jax") -> None:
     threading.Thread(target=run, daemon=True).start()
 
 
+def _cluster():
+    from dask.distributed import Client, LocalCluster
+
+    return Client(LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None))
+
+
+async def _on_loop(geometry, motion, material):
+    """A dask task's simulation on its worker's event loop (which must be the main thread)."""
+    import threading
+
+    import calib_masonry as cm
+
+    assert threading.current_thread() is threading.main_thread()
+    return await cm.simulate_async(geometry, motion, material=material, progress=False)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", help="run labels, and 'scramble' between them")
@@ -109,10 +134,29 @@ def main() -> None:
     ap.add_argument("--pga", type=float, default=0.5, help="peak ground acceleration, g (default 0.5)")
     ap.add_argument("--duration", type=float, default=2.0, help="seconds of motion (default 2)")
     ap.add_argument("--thread", action="store_true", help="each simulation on a new thread, as in a dask worker")
+    ap.add_argument(
+        "--bpy-thread",
+        action="store_true",
+        help="one thread imports bpy first (Blender's main thread then) and runs every simulation",
+    )
+    ap.add_argument(
+        "--dask",
+        action="store_true",
+        help="each simulation after the first as a coroutine task on a LocalCluster of two worker processes "
+        "(simulate_async: on the worker's event loop, its main thread); the first runs here",
+    )
     ap.add_argument("--save", type=Path, help="write the first run's positions here (.npy), to compare processes")
     a = ap.parse_args()
     if a.direct_bpy:
         import bpy  # noqa: F401, PLC0415 - before the library's own import, on purpose
+    bpy_thread = None
+    if a.bpy_thread:
+        from concurrent.futures import ThreadPoolExecutor
+
+        from calib_masonry.simulation.blender import require_bpy
+
+        bpy_thread = ThreadPoolExecutor(1)
+        bpy_thread.submit(require_bpy).result()
     if a.churn:
         churn(a.churn)
 
@@ -131,11 +175,21 @@ def main() -> None:
     motion = cm.synthetic_motion(a.pga, a.duration, seed=3, components=2)
     weak = cm.Material(tensile_strength=2e3, shear_strength=3e3)
     kept, runs = [], []
+    client = None
     for k, label in enumerate(a.runs):
         if label == "scramble":
             kept += scramble(k)
             continue
-        if a.thread:
+        if a.dask and runs:
+            if client is None:
+                client = _cluster()
+            from calib_masonry.simulation.run import simulation_geometry
+
+            geometry = simulation_geometry(result.structure)
+            out = client.submit(_on_loop, geometry, motion, weak, pure=False).result()
+        elif bpy_thread is not None:
+            out = bpy_thread.submit(cm.simulate, result.structure, motion, material=weak, progress=False).result()
+        elif a.thread:
             from concurrent.futures import ThreadPoolExecutor
 
             with ThreadPoolExecutor(1) as pool:
@@ -145,6 +199,8 @@ def main() -> None:
         runs.append(
             (label, out.output.positions.copy(), out.summary["bonds_broken"], out.summary["moved_fraction_final"])
         )
+    if client is not None:
+        client.close()
     first = runs[0][1]
     if a.save:
         np.save(a.save, first)

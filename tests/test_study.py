@@ -221,9 +221,9 @@ def test_fragility_study_resumes_after_a_kill_and_matches_a_separate_scheduler_a
         rows, _ = run_study(load_study(path), scheduler=f"tcp://127.0.0.1:{port}", progress=False)
         remote = {r["sample"]: {k: v for k, v in r.items() if k not in BOOKKEEPING} for r in rows}
         assert sorted(remote) == sorted(local)
-        # identical rows, simulation included: every sample's simulation runs in a fresh child, on
-        # its main thread, where Blender's runs are reproducible whatever the worker or the load (on a
-        # dask worker's task thread they were not: calib_masonry.study.child)
+        # identical rows, simulation included: every sample's simulation runs on its worker's event
+        # loop, the worker process's main thread, where Blender's runs are reproducible whatever the
+        # worker or the order (on a dask worker's task thread they were not: study/sample.py)
         differ = {
             i: {
                 k: (local[i].get(k), remote[i].get(k))

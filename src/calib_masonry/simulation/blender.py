@@ -32,10 +32,14 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
 from __future__ import annotations
 
 import contextlib
+import re
 import signal
+import sys
 import time
+from collections.abc import Generator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -45,10 +49,21 @@ from ..progress import progress as _progress
 from .joints import CrackTracker
 from .scene import Scene, grounded_bodies, joint_axes
 
-__all__ = ["RunOutput", "run", "require_bpy", "write_model_blend"]
+__all__ = ["RunOutput", "drain", "run", "require_bpy", "steps", "write_model_blend"]
+
+T = TypeVar("T")
+
+
+# a path Blender puts on sys.path when it starts: <...>/5.0/scripts/modules and the like
+_BLENDER_SCRIPTS = re.compile(r"[/\\]\d+\.\d+[/\\]scripts([/\\]|$)")
 
 
 def require_bpy():
+    if "bpy" not in sys.modules:
+        # a process spawned by one that ran Blender (a dask worker of a study started after a
+        # simulation) inherits Blender's script folders on sys.path, and `import bpy` would then
+        # find bpy's Python half (scripts/modules/bpy) before the module: "No module named '_bpy'"
+        sys.path[:] = [p for p in sys.path if not _BLENDER_SCRIPTS.search(p)]
     try:
         with _signals_held(), _one_cpu():
             import bpy  # noqa: PLC0415 - the one place bpy is imported
@@ -69,7 +84,6 @@ def _one_cpu():
     Stylite job differed under load, 0 of 13 with this (measured). The CPUs are given back after
     the import; the scheduler keeps its single thread."""
     import os
-    import sys
 
     if "bpy" in sys.modules or not hasattr(os, "sched_setaffinity"):
         yield
@@ -350,7 +364,21 @@ def build_scene(scene: Scene):
     return bpy, objects, plate, constraints, fixed
 
 
-def run(
+def run(scene: Scene, **options) -> RunOutput:
+    """Simulate ``scene`` in one pass: :func:`steps` with the same options, run to its end."""
+    return drain(steps(scene, **options))
+
+
+def drain(gen: Generator[int, None, T]) -> T:
+    """The value a generator of :func:`steps` (or a function built on it) returns, run to its end."""
+    while True:
+        try:
+            next(gen)
+        except StopIteration as end:
+            return end.value
+
+
+def steps(
     scene: Scene,
     *,
     progress: bool | None = None,
@@ -358,8 +386,13 @@ def run(
     record: bool = True,
     switch_off_s: np.ndarray | None = None,
     stop=None,
-) -> RunOutput:
-    """Simulate ``scene`` in one pass: the warm-up under (ramped) gravity with every joint intact
+) -> Generator[int, None, RunOutput]:
+    """Simulate ``scene`` in one pass, yielding each frame's number once it is stepped, and return
+    the :class:`RunOutput` (a caller that drives it from an event loop lets the loop run between
+    frames: :func:`calib_masonry.simulation.run.simulate_async`). Closing the generator early
+    stops the joint model's thread as an error would.
+
+    The pass: the warm-up under (ramped) gravity with every joint intact
     and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
     joint model cracking joints before each step (:class:`~calib_masonry.simulation.joints.CrackTracker`).
 
@@ -481,6 +514,7 @@ def run(
             if record and stop is not None and f > warm and stop(f, mats[i, :, :3, 3], plate_pos[i]):
                 n = f + 1
                 break
+            yield f
     finally:
         if ahead is not None:
             ahead.close()  # a pushover that has run away, an error, a signal: no check runs on after the run

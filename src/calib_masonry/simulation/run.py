@@ -18,6 +18,7 @@ import math
 import threading
 import time
 import warnings
+from collections.abc import Generator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,6 +49,7 @@ __all__ = [
     "SimulationConfig",
     "SimulationResult",
     "simulate",
+    "simulate_async",
     "write_simulation",
     "simulate_to_folder",
     "simulation_geometry",
@@ -430,31 +432,57 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
 
 
 def _run_scene(scene: Scene, name: str, *, progress: bool | None, blend_path: Path | None) -> SimulationResult:
+    from .blender import drain
+
+    return drain(_scene_steps(scene, name, progress=progress, blend_path=blend_path))
+
+
+def _scene_steps(
+    scene: Scene, name: str, *, progress: bool | None, blend_path: Path | None
+) -> Generator[int, None, SimulationResult]:
+    """The run of ``scene``, yielding after every frame (:func:`calib_masonry.simulation.blender.steps`),
+    returning its :class:`SimulationResult`."""
     from threadpoolctl import threadpool_limits
 
-    from .blender import require_bpy, run
+    from .blender import require_bpy, steps
     from .results import collapse_multiplier, metrics, pushover_stop
 
     if threading.current_thread() is not threading.main_thread():
         warnings.warn(
             "simulate: called from a thread other than the main one; Blender driven so, beside other "
             "busy Python threads, gave other poses from the same inputs and crashed at times "
-            "(experiments/sim_determinism.py --thread); call it from the main thread, or in a process "
-            "of its own as a study does",
+            "(experiments/sim_determinism.py --thread); call it from the main thread (a dask task: "
+            "simulate_async, which runs on the worker's event loop, its main thread)",
             RuntimeWarning,
-            stacklevel=3,
+            stacklevel=5,
         )
     require_bpy()
     stop = pushover_stop(scene) if scene.pushover is not None else None
     # one BLAS thread for the joint model's solves, whatever the process's setting (a dask worker,
     # a notebook): a threaded BLAS splits a sum by its thread count, and so rounds it another way
     with threadpool_limits(limits=1, user_api="blas"):
-        out = run(scene, progress=progress, blend_path=blend_path, stop=stop)
+        out = yield from steps(scene, progress=progress, blend_path=blend_path, stop=stop)
     m = metrics(scene, out)
     curve = collapse_multiplier(scene, out, m) if scene.pushover is not None else None
     return SimulationResult(
         scene=scene, output=out, metrics=m, curve=curve, summary=_summary(scene, out, m, curve, name)
     )
+
+
+def _scene(model, load, settings, material, foundation, duration_s) -> tuple[Scene, str]:
+    """The scene of a :func:`simulate` call, and the model's name."""
+    stored = None
+    if hasattr(model, "structure") and isinstance(model.structure, Structure3D):  # a BuildResult
+        model = model.structure
+    if isinstance(model, (str, Path)):
+        name = str(model)
+        model, stored = geometry_for_model(model)
+    else:
+        name = model.name if isinstance(model, Structure3D) else "model"
+    scene = scene_for(model, load, solver=settings, material=material, foundation=foundation, duration_s=duration_s)
+    if stored is not None:
+        scene.notes["geometry_stored"] = stored
+    return scene, name
 
 
 def simulate(
@@ -477,19 +505,57 @@ def simulate(
 
     Call it from the process's main thread (it warns otherwise): Blender driven from another
     thread, beside busy Python threads (a dask worker's task thread), gave other poses from the
-    same inputs and crashed at times; a study runs each simulation in a process of its own."""
-    stored = None
-    if hasattr(model, "structure") and isinstance(model.structure, Structure3D):  # a BuildResult
-        model = model.structure
-    if isinstance(model, (str, Path)):
-        name = str(model)
-        model, stored = geometry_for_model(model)
-    else:
-        name = model.name if isinstance(model, Structure3D) else "model"
-    scene = scene_for(model, load, solver=settings, material=material, foundation=foundation, duration_s=duration_s)
-    if stored is not None:
-        scene.notes["geometry_stored"] = stored
+    same inputs and crashed at times. In a dask task, await :func:`simulate_async` instead."""
+    scene, name = _scene(model, load, settings, material, foundation, duration_s)
     return _run_scene(scene, name, progress=progress, blend_path=blend_path)
+
+
+async def simulate_async(
+    model,
+    load: GroundMotion | Pushover | None = None,
+    settings: SolverSettings = SolverSettings(),
+    *,
+    material: Material = MASONRY,
+    foundation: bool = True,
+    duration_s: float | None = None,
+    progress: bool | None = None,
+) -> SimulationResult:
+    """:func:`simulate` on the running event loop's thread, handing the loop back between frames.
+
+    For a dask task (``client.submit`` of a coroutine function runs it on the worker's event loop,
+    which is the worker process's main thread): Blender then runs on the main thread, where its runs
+    are reproducible, and the worker still answers its scheduler between frames (a frame of a
+    557-stone tower takes tens of milliseconds). The scene is prepared on a thread of the loop's
+    executor. The same poses as :func:`simulate`, bit for bit; cancelling the task stops the run at
+    the next frame."""
+    import asyncio
+
+    scene, name = await asyncio.to_thread(_scene, model, load, settings, material, foundation, duration_s)
+    async with _blender_lock():  # one Blender per process: two runs on one loop take turns, whole
+        gen = _scene_steps(scene, name, progress=progress, blend_path=None)
+        try:
+            while True:
+                try:
+                    next(gen)
+                except StopIteration as end:
+                    return end.value
+                await asyncio.sleep(0)
+        finally:
+            gen.close()
+
+
+_LOCKS: dict = {}  # the running loop's Blender lock, by loop
+
+
+def _blender_lock():
+    """The lock that lets one :func:`simulate_async` at a time use this process's Blender (a dask
+    worker with two threads runs two tasks at once on its one loop)."""
+    import asyncio
+
+    loop = asyncio.get_running_loop()
+    for other in [k for k in _LOCKS if k.is_closed()]:
+        del _LOCKS[other]
+    return _LOCKS.setdefault(loop, asyncio.Lock())
 
 
 def write_simulation(

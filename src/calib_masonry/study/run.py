@@ -29,13 +29,14 @@ from ..io import OUTPUT_MARKER, check_output, write_json
 from ..progress import progress as _progress
 from .analysis import input_columns, output_columns, plot_study, summarize
 from .design import Sample, Study, samples, study_json
-from .sample import CHILD_ENV, ROW_KEYS, run_sample, warm_worker
+from .sample import ROW_KEYS, run_sample, run_sample_async, warm_worker
 
 __all__ = ["run_study", "study_to_folder", "SCHEDULER_TIMEOUT_S"]
 
 SCHEDULER_TIMEOUT_S = 10.0
-# what every worker process starts with: one thread per numerical library (a worker per core)
-WORKER_ENV = CHILD_ENV
+# what every worker process starts with: a fixed hash seed, and one thread per numerical library (a
+# worker per core; a threaded BLAS sums in an order that depends on its thread count)
+WORKER_ENV = {"PYTHONHASHSEED": "0", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 WORKER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.system-monitor.gil.enabled": False}
 
 
@@ -77,14 +78,15 @@ def check_scheduler(scheduler: str) -> None:
 
 
 @contextlib.contextmanager
-def _dask(scheduler: str | None, workers: int | None):
-    """A connected dask client for the run (None for ``workers=0``: this process)."""
+def _dask(scheduler: str | None, workers: int | None, simulate: bool = False):
+    """A connected dask client for the run (None for ``workers=0``: this process); with ``simulate``
+    its workers have started Blender."""
     if workers == 0:
         yield None
         return
     client, cluster = _client(scheduler, workers)
     try:
-        client.run(warm_worker)  # the stages' imports are start-up, not the first sample's cost
+        client.run(warm_worker, simulate)  # the stages' imports are start-up, not the first sample's cost
         yield client
     finally:
         client.close()
@@ -104,7 +106,8 @@ def _execute(
             return
         from distributed import as_completed
 
-        futures = [client.submit(run_sample, study_, s, pure=False, key=f"sample-{s.index}") for s in todo]
+        # a coroutine: the worker runs it on its event loop, its main thread, where Blender is reproducible
+        futures = [client.submit(run_sample_async, study_, s, pure=False, key=f"sample-{s.index}") for s in todo]
         try:
             for fut in as_completed(futures):
                 on_row(fut.result())
@@ -128,7 +131,7 @@ def run_study(
         check_scheduler(scheduler)
     _check_workers(workers)
     rows: dict[int, dict] = {}
-    with _dask(scheduler, workers) as client:
+    with _dask(scheduler, workers, study_.simulate is not None) as client:
         _execute(study_, samples(study_), lambda r: rows.__setitem__(r["sample"], r), client, progress=progress)
     ordered = [rows[i] for i in sorted(rows)]
     return ordered, summarize(study_, ordered)
@@ -225,7 +228,9 @@ def study_to_folder(
         check_scheduler(scheduler)
     _check_workers(workers)
     check_output(out, command="study", overwrite=overwrite)
-    with _dask(scheduler, workers) as client:  # an unreachable scheduler is refused before --out is touched
+    with _dask(
+        scheduler, workers, study_.simulate is not None
+    ) as client:  # an unreachable scheduler is refused before --out is touched
         return _run_into(study_, Path(out), client, progress=progress, overwrite=overwrite, figures=figures)
 
 

@@ -7,33 +7,26 @@ with a ``[simulate]`` table it runs Bullet under the sample's load. What does no
 samples of a worker (a structure file, a mask's trace, a photo's calibration, the simulation
 geometry of an unvaried model) is computed once per worker process and cached.
 
-Runs of one sample have differed in their last bits. Fresh single-threaded processes gave the
-same poses every time measured (0 of 13 differed, Blender's task scheduler on one thread), but
-run in a dask worker's own process (threads of its own: event loop, heartbeats, profiler) one
-sample once differed between a LocalCluster worker and a separate ``dask worker``
-(measured in CI), and two runs in one pytest process once differed by 0.01 mm. Bullet orders its
-broad-phase tree by memory address, the cause first suspected; but scrambling the C heap between
-two calls in one process did not change a bit (measured). What does change a run is Blender
-driven from a thread other than the process's main one while another Python thread is busy, as
-a dask worker runs its tasks beside its event loop: a collapsing run differed by 13-158 mm
-between two such calls in three tries, three more crashed (segmentation fault), and the same
-calls on the main thread were bit-identical (``experiments/sim_determinism.py --thread
---churn``, 2026-11-26). Each simulation therefore runs in a fresh single-threaded child process
-(``python -m calib_masonry.study.child``), on its main thread: the same sample gives the same
-poses on any worker, in any order, busy or not.
+Blender's runs are reproducible on a process's main thread, and only there: driven from another
+thread while another Python thread is busy, as a dask worker runs its tasks beside its event loop,
+a collapsing run differed by 13-158 mm between two calls and crashed at times
+(``experiments/sim_determinism.py --thread --churn``), and importing bpy on that thread does not
+help. A dask worker runs a coroutine task on its event loop, which is its process's main thread
+(distributed 2026.8): :func:`run_sample_async`, the task a study submits, builds on a thread of
+the loop's executor and simulates on the loop's thread, a frame at a time. The same sample gives
+the same row on any worker, in any order (``experiments/sim_determinism.py --dask``, and
+``tests/test_study.py``: a LocalCluster and a separate ``dask worker``, bit for bit).
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
-import os
-import pickle
-import subprocess
-import sys
 import tempfile
 import time
 import warnings
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -42,11 +35,8 @@ import numpy as np
 from ..errors import CalibMasonryError, InputError
 from .design import Sample, Study
 
-__all__ = ["run_sample", "ROW_KEYS"]
+__all__ = ["run_sample", "run_sample_async", "outcome", "ROW_KEYS"]
 
-# the child's environment, whatever the worker's: a fixed hash seed, and one BLAS thread (a threaded
-# BLAS sums in an order that depends on its thread count, and the joint model's solves use it)
-CHILD_ENV = {"PYTHONHASHSEED": "0", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 ROW_KEYS = ("sample", "point", "status", "error", "warnings", "seconds", "worker")  # the bookkeeping columns
 
 
@@ -261,7 +251,8 @@ def _sweep(study: Study, sample: Sample) -> tuple[dict, object]:
     return out, result
 
 
-def _evaluate(study: Study, sample: Sample) -> dict:
+def _evaluate(study: Study, sample: Sample) -> tuple[dict, tuple | None]:
+    """The sample's build outputs, and the simulation it asks for (model geometry, load) or None."""
     from ..pipeline import build
 
     if study.scenario is not None:
@@ -270,16 +261,15 @@ def _evaluate(study: Study, sample: Sample) -> dict:
         spec, keys, drawn = _varied(_structure(study.structure), study, sample.values, study.structure)
         result = build(spec, traces={n: _trace(*k) for n, k in keys.items()}, progress=False)
         outputs = {**drawn, **_build_outputs(result)}
-    if study.simulate is not None:
-        outputs.update(_simulate(study, sample, result.structure))
-    return outputs
+    job = _simulation(study, sample, result.structure) if study.simulate is not None else None
+    return outputs, job
 
 
 _GEOMETRY: dict = {}  # the simulation geometry of an unvaried model, once per worker
 
 
-def _simulate(study: Study, sample: Sample, structure) -> dict:
-    """Run the sample's load in a fresh child process; its outcome."""
+def _simulation(study: Study, sample: Sample, structure) -> tuple:
+    """The sample's simulation: the model's geometry and the load."""
     from ..simulation.ground_motion import synthetic_motion
     from ..simulation.run import simulation_geometry
     from ..simulation.scene import Pushover
@@ -305,41 +295,43 @@ def _simulate(study: Study, sample: Sample, structure) -> dict:
             seed=study.seed * 1000 + sample.load["record"],
             direction_deg=sim.direction_deg,
         )
-    return run_child({"geometry": geometry, "load": load})
+    return geometry, load
 
 
-def run_child(job: dict) -> dict:
-    """Run one simulation job in ``python -m calib_masonry.study.child`` (on that process's main
-    thread, where Blender's runs are reproducible, which a dask worker's task thread is not: see
-    :mod:`calib_masonry.study.child`; ends with this process: it watches its parent) and return its
-    outcome; a failure there is an :class:`InputError` here."""
-    env = dict(os.environ, **CHILD_ENV)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "calib_masonry.study.child"],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        env=env,
-    )
-    try:
-        out, err = proc.communicate(pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
-    except BaseException:
-        proc.kill()
-        proc.wait()
-        raise
-    if proc.returncode != 0:
-        lines = [ln for ln in err.decode(errors="replace").splitlines() if ln.strip()]
-        raise InputError(f"simulation: {lines[-1] if lines else f'exit code {proc.returncode}'}")
-    return pickle.loads(out)
+def outcome(result) -> dict:
+    """What a study keeps of a :class:`~calib_masonry.simulation.run.SimulationResult`."""
+    from ..simulation.results import outcome as verdict
+
+    m = result.metrics
+    moved = float(m.moved_fraction[-1])
+    out = {
+        "moved_fraction": moved,
+        "cracked_fraction": float(m.broken_fraction[-1]),
+        "roof_drift_m": float(m.roof_drift_m[-1]),
+        "max_displacement_m": float(m.max_displacement_m.max()) if len(m.max_displacement_m) else 0.0,
+        "outcome": verdict(moved),
+        "collapsed": int(verdict(moved) == "collapsed"),
+        "collapse_time_s": m.collapse_time_s,  # None: half the bricks never moved
+    }
+    if result.curve is not None:
+        cm = result.collapse_multiplier_g
+        out["collapse_multiplier_g"] = None if cm is None else float(cm)
+    return out
 
 
-def warm_worker() -> None:
+def warm_worker(simulate: bool = False) -> None:
     """Import the stages a sample calls, once per worker when the study starts, so that the first
-    sample of each worker does not pay for them (run on every worker by the study's client)."""
+    sample of each worker does not pay for them (run on every worker by the study's client, on its
+    event loop: the worker's main thread, where Blender is then started if the study simulates)."""
     from .. import pipeline  # noqa: F401
     from ..build3d import assemble  # noqa: F401
     from ..simulation import run  # noqa: F401
     from ..wall2d import trace  # noqa: F401
+
+    if simulate:
+        from ..simulation.blender import require_bpy
+
+        require_bpy()
 
 
 def _worker_name() -> str:
@@ -351,10 +343,12 @@ def _worker_name() -> str:
         return "local"
 
 
-def run_sample(study: Study, sample: Sample) -> dict:
-    """The row of one sample: its index, inputs, outputs, status (``ok`` or ``failed`` with its
-    one-line error), the warnings it raised, seconds and worker. Never raises for a failed sample
-    (only for an interrupt), so that a study goes on."""
+@contextlib.contextmanager
+def _row(sample: Sample) -> Iterator[dict]:
+    """The row of one sample, which the block fills with the sample's outputs: its index, inputs,
+    status (``ok``, or ``failed`` with the block's one-line error, which ends the block but is not
+    raised, so that a study goes on; an interrupt or a cancellation is raised), the warnings the
+    block raised, seconds and worker."""
     t0 = time.perf_counter()
     row: dict = {"sample": sample.index, "point": sample.point}
     row.update(sample.load)
@@ -366,8 +360,7 @@ def run_sample(study: Study, sample: Sample) -> dict:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            outputs = _evaluate(study, sample)
-        row.update(outputs)
+            yield row
         row.update(status="ok", error="")
     except CalibMasonryError as exc:
         row.update(status="failed", error=str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
@@ -376,4 +369,34 @@ def run_sample(study: Study, sample: Sample) -> dict:
     row["warnings"] = "; ".join(sorted({str(w.message).splitlines()[0] for w in caught}))
     row["seconds"] = round(time.perf_counter() - t0, 3)
     row["worker"] = _worker_name()
+
+
+def run_sample(study: Study, sample: Sample) -> dict:
+    """The row of one sample (see :func:`_row`), computed on the calling thread: for a study run in
+    this process, whose simulations then run on the caller's thread (the main one, from the CLI)."""
+    from ..simulation.run import simulate
+
+    with _row(sample) as row:
+        outputs, job = _evaluate(study, sample)
+        if job is not None:
+            outputs.update(outcome(simulate(*job, progress=False)))
+        row.update(outputs)
+    return row
+
+
+async def run_sample_async(study: Study, sample: Sample) -> dict:
+    """:func:`run_sample` as a dask task runs it: a coroutine, which a dask worker runs on its event
+    loop, its process's main thread. The build runs on a thread of the loop's executor; the
+    simulation runs on the loop's own thread (:func:`calib_masonry.simulation.run.simulate_async`),
+    where Blender's runs are reproducible, handing the loop back between frames, so that the
+    worker keeps answering its scheduler. The same row as :func:`run_sample`."""
+    import asyncio
+
+    from ..simulation.run import simulate_async
+
+    with _row(sample) as row:
+        outputs, job = await asyncio.to_thread(_evaluate, study, sample)
+        if job is not None:
+            outputs.update(outcome(await simulate_async(*job, progress=False)))
+        row.update(outputs)
     return row

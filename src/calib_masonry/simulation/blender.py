@@ -386,11 +386,16 @@ def steps(
     record: bool = True,
     switch_off_s: np.ndarray | None = None,
     stop=None,
+    joints_ahead: bool = True,
 ) -> Generator[int, None, RunOutput]:
     """Simulate ``scene`` in one pass, yielding each frame's number once it is stepped, and return
     the :class:`RunOutput` (a caller that drives it from an event loop lets the loop run between
     frames: :func:`calib_masonry.simulation.run.simulate_async`). Closing the generator early
-    stops the joint model's thread as an error would.
+    stops the joint model's thread as an error would. ``joints_ahead=False`` runs the joint model
+    on this thread, one check before each step, instead of ahead on a thread of its own (the same
+    run, bit for bit): a process that simulates again and again wants that, for each run with the
+    thread kept about 2 MB more of the process's memory (cause not found; the joint model alone on
+    a thread, or Blender alone, keep nothing: ``experiments/sim_memory.py``).
 
     The pass: the warm-up under (ramped) gravity with every joint intact
     and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
@@ -498,7 +503,7 @@ def steps(
         for f in _progress(range(1, frames + 1), desc="simulate", unit="frame", enabled=progress):
             i = f if record else 0
             if tracker is not None:
-                if ahead is None and not tracker.reads_poses:
+                if joints_ahead and ahead is None and not tracker.reads_poses:
                     ahead = thread_imap(lambda k, w=i - 1: check(k, w), range(f, frames + 1), workers=1, name="joints")
                 p = i - 1
                 release, utilisation[p] = next(ahead) if ahead is not None else check(f, p)

@@ -379,7 +379,7 @@ def run_sample(study: Study, sample: Sample) -> dict:
     with _row(sample) as row:
         outputs, job = _evaluate(study, sample)
         if job is not None:
-            outputs.update(outcome(simulate(*job, progress=False)))
+            outputs.update(outcome(simulate(*job, progress=False, joints_ahead=False)))
         row.update(outputs)
     return row
 

@@ -117,13 +117,28 @@ def _cluster():
 
 
 async def _on_loop(geometry, motion, material):
-    """A dask task's simulation on its worker's event loop (which must be the main thread)."""
+    """A dask task's simulation on its worker's event loop (which must be the main thread), and
+    the longest the loop waited for it between two turns, seconds."""
+    import asyncio
     import threading
+    import time
 
     import calib_masonry as cm
 
     assert threading.current_thread() is threading.main_thread()
-    return await cm.simulate_async(geometry, motion, material=material, progress=False)
+    turns = [time.perf_counter()]
+
+    async def tick() -> None:
+        while True:
+            turns.append(time.perf_counter())
+            await asyncio.sleep(0)
+
+    ticker = asyncio.create_task(tick())
+    try:
+        out = await cm.simulate_async(geometry, motion, material=material, progress=False)
+    finally:
+        ticker.cancel()
+    return out, float(max(b - a for a, b in zip(turns, turns[1:])))
 
 
 def main() -> None:
@@ -186,7 +201,8 @@ def main() -> None:
             from calib_masonry.simulation.run import simulation_geometry
 
             geometry = simulation_geometry(result.structure)
-            out = client.submit(_on_loop, geometry, motion, weak, pure=False).result()
+            out, gap = client.submit(_on_loop, geometry, motion, weak, pure=False).result()
+            print(f"{label}: the worker's event loop waited {gap * 1000:.0f} ms at most between two turns")
         elif bpy_thread is not None:
             out = bpy_thread.submit(cm.simulate, result.structure, motion, material=weak, progress=False).result()
         elif a.thread:

@@ -533,9 +533,9 @@ async def simulate_async(
 
     For a dask task (``client.submit`` of a coroutine function runs it on the worker's event loop,
     which is the worker process's main thread): Blender then runs on the main thread, where its runs
-    are reproducible, and the worker still answers its scheduler between frames (a frame of a
-    557-stone tower takes tens of milliseconds). The scene is prepared on a thread of the loop's
-    executor. The same poses as :func:`simulate`, bit for bit; cancelling the task stops the run at
+    are reproducible, and the worker still answers its scheduler between frames (the loop waits
+    one frame at most: Bullet's step and the joint model's check). The scene is prepared on a
+    thread of the loop's executor. The same poses as :func:`simulate`, bit for bit; cancelling the task stops the run at
     the next frame. The joint model runs on the loop's thread, before each step (``simulate(...,
     joints_ahead=False)``): a worker runs many simulations, and its cores are busy with workers."""
     import asyncio

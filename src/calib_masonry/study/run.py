@@ -228,9 +228,8 @@ def study_to_folder(
         check_scheduler(scheduler)
     _check_workers(workers)
     check_output(out, command="study", overwrite=overwrite)
-    with _dask(
-        scheduler, workers, study_.simulate is not None
-    ) as client:  # an unreachable scheduler is refused before --out is touched
+    # an unreachable scheduler is refused before --out is touched
+    with _dask(scheduler, workers, study_.simulate is not None) as client:
         return _run_into(study_, Path(out), client, progress=progress, overwrite=overwrite, figures=figures)
 
 

@@ -16,7 +16,7 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-__all__ = ["background", "cpu_count", "thread_imap", "thread_map"]
+__all__ = ["background", "cpu_count", "loop_lock", "thread_imap", "thread_map"]
 
 
 def cpu_count() -> int:
@@ -84,3 +84,17 @@ def thread_map(fn: Callable, items: Iterable, *, workers: int | None = None) -> 
     if min(len(items), workers or cpu_count()) <= 1:
         return [fn(x) for x in items]
     return list(thread_imap(fn, items, workers=workers))
+
+
+_LOOP_LOCKS: dict = {}  # (event loop, name) -> asyncio.Lock
+
+
+def loop_lock(name: str):
+    """The running event loop's lock named ``name``: coroutines on one loop (a dask worker's, whose
+    tasks share it however many threads the worker has) take turns with it."""
+    import asyncio
+
+    loop = asyncio.get_running_loop()
+    for key in [k for k in _LOOP_LOCKS if k[0].is_closed()]:
+        del _LOOP_LOCKS[key]
+    return _LOOP_LOCKS.setdefault((loop, name), asyncio.Lock())

@@ -540,8 +540,11 @@ async def simulate_async(
     joints_ahead=False)``): a worker runs many simulations, and its cores are busy with workers."""
     import asyncio
 
+    from .._threads import loop_lock
+
     scene, name = await asyncio.to_thread(_scene, model, load, settings, material, foundation, duration_s)
-    async with _blender_lock():  # one Blender per process: two runs on one loop take turns, whole
+    # one Blender per process: two runs on one loop (a dask worker with two threads) take turns, whole
+    async with loop_lock("blender"):
         gen = _scene_steps(scene, name, progress=progress, blend_path=None, joints_ahead=False)
         try:
             while True:
@@ -552,20 +555,6 @@ async def simulate_async(
                 await asyncio.sleep(0)
         finally:
             gen.close()
-
-
-_LOCKS: dict = {}  # the running loop's Blender lock, by loop
-
-
-def _blender_lock():
-    """The lock that lets one :func:`simulate_async` at a time use this process's Blender (a dask
-    worker with two threads runs two tasks at once on its one loop)."""
-    import asyncio
-
-    loop = asyncio.get_running_loop()
-    for other in [k for k in _LOCKS if k.is_closed()]:
-        del _LOCKS[other]
-    return _LOCKS.setdefault(loop, asyncio.Lock())
 
 
 def write_simulation(

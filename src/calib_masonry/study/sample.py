@@ -392,11 +392,15 @@ async def run_sample_async(study: Study, sample: Sample) -> dict:
     worker keeps answering its scheduler. The same row as :func:`run_sample`."""
     import asyncio
 
+    from .._threads import loop_lock
     from ..simulation.run import simulate_async
 
-    with _row(sample) as row:
-        outputs, job = await asyncio.to_thread(_evaluate, study, sample)
-        if job is not None:
-            outputs.update(outcome(await simulate_async(*job, progress=False)))
-        row.update(outputs)
+    # one sample at a time per worker, whatever its threads: a sample's warnings are caught for the
+    # process, and two interleaved catches would mix them up
+    async with loop_lock("sample"):
+        with _row(sample) as row:
+            outputs, job = await asyncio.to_thread(_evaluate, study, sample)
+            if job is not None:
+                outputs.update(outcome(await simulate_async(*job, progress=False)))
+            row.update(outputs)
     return row

@@ -393,9 +393,9 @@ def steps(
     frames: :func:`calib_masonry.simulation.run.simulate_async`). Closing the generator early
     stops the joint model's thread as an error would. ``joints_ahead=False`` runs the joint model
     on this thread, one check before each step, instead of ahead on a thread of its own (the same
-    run, bit for bit): a process that simulates again and again wants that, for each run with the
-    thread kept about 2 MB more of the process's memory (cause not found; the joint model alone on
-    a thread, or Blender alone, keep nothing: ``experiments/sim_memory.py``).
+    run, bit for bit): a process that simulates again and again wants that, because with the
+    thread each run leaves the process about 2 MB larger (cause not found; the joint model alone
+    on a thread, or Blender alone, leave nothing: ``experiments/sim_memory.py``).
 
     The pass: the warm-up under (ramped) gravity with every joint intact
     and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the

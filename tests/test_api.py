@@ -190,6 +190,38 @@ def test_simulate_async_gives_the_same_run_and_hands_the_loop_back(built, monkey
     assert np.array_equal(a.output.positions, c.output.positions)
 
 
+def test_the_joint_thread_frees_its_factors_itself(built, monkeypatch):
+    """The joint model ahead of Bullet drops its LU factors on its own thread as it ends, once a run,
+    early stop or not: scipy frees a SuperLU factor only on the thread that made it (scipy issue
+    15921; dropped on the caller's, each run kept about 2 MB: experiments/sim_memory.py)."""
+    import threading
+
+    from .conftest import need_bpy
+
+    need_bpy()
+    from calib_masonry import Material, Pushover, simulate, synthetic_motion
+    from calib_masonry.simulation.joints import JointModel
+
+    released: list[str] = []
+    drop = JointModel.release_factors
+
+    def record(self) -> None:
+        released.append(threading.current_thread().name)
+        drop(self)
+
+    monkeypatch.setattr(JointModel, "release_factors", record)
+    _, result = built
+    weak = Material(tensile_strength=2e3, shear_strength=3e3)
+    r = simulate(result.structure, synthetic_motion(0.5, 1.0, seed=3, components=2), material=weak, progress=False)
+    assert r.summary["bonds_broken"] > 0  # the joint model factorised
+    assert released == ["calib-masonry-joints"]
+    released.clear()
+    push = simulate(result, Pushover(rate_g_per_s=0.5, max_g=0.5), progress=False)  # may stop early
+    assert push.curve is not None
+    assert released == ["calib-masonry-joints"]
+    assert not [t for t in threading.enumerate() if t.name == "calib-masonry-joints"]
+
+
 @pytest.mark.slow
 def test_a_dask_worker_simulates_on_its_main_thread_as_this_process_does(built):
     """A coroutine task runs on its dask worker's event loop, the worker process's main thread,

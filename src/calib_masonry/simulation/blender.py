@@ -32,18 +32,19 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
 from __future__ import annotations
 
 import contextlib
+import queue
 import re
 import signal
 import sys
+import threading
 import time
-from collections.abc import Generator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
 
 import numpy as np
 
-from .._threads import thread_imap
 from ..errors import BackendMissing, signals_deferred
 from ..progress import progress as _progress
 from .joints import CrackTracker
@@ -364,6 +365,40 @@ def build_scene(scene: Scene):
     return bpy, objects, plate, constraints, fixed
 
 
+def _ahead(fn: Callable[[int], T], items: range, release: Callable[[], None]) -> Iterator[T]:
+    """``fn(k)`` for each of ``items``, computed in order on a thread of its own as far ahead as it
+    gets, yielded in order; ``release()`` runs on that thread as it ends (the joint model's LU
+    factors are freed there, on the thread that made them: see
+    :meth:`~calib_masonry.simulation.joints.JointModel.release_factors`). Leaving early (an
+    error, a stop, ``close()``) stops the thread after the item it is on and waits for it, so
+    nothing runs on after the run; an error of ``fn`` is raised here, in its item's turn."""
+    results: queue.SimpleQueue = queue.SimpleQueue()
+    stop = threading.Event()
+
+    def work() -> None:
+        try:
+            for k in items:
+                if stop.is_set():
+                    return
+                results.put((True, fn(k)))
+        except BaseException as exc:  # noqa: BLE001 - raised by the consumer in its turn
+            results.put((False, exc))
+        finally:
+            release()
+
+    thread = threading.Thread(target=work, name="calib-masonry-joints", daemon=True)
+    thread.start()
+    try:
+        for _ in items:
+            ok, value = results.get()
+            if not ok:
+                raise value
+            yield value
+    finally:
+        stop.set()
+        thread.join()
+
+
 def run(scene: Scene, **options) -> RunOutput:
     """Simulate ``scene`` in one pass: :func:`steps` with the same options, run to its end."""
     return drain(steps(scene, **options))
@@ -393,9 +428,7 @@ def steps(
     frames: :func:`calib_masonry.simulation.run.simulate_async`). Closing the generator early
     stops the joint model's thread as an error would. ``joints_ahead=False`` runs the joint model
     on this thread, one check before each step, instead of ahead on a thread of its own (the same
-    run, bit for bit): a process that simulates again and again wants that, because with the
-    thread each run leaves the process about 2 MB larger (cause not found; the joint model alone
-    on a thread, or Blender alone, leave nothing: ``experiments/sim_memory.py``).
+    run, bit for bit): for a process whose cores are busy anyway (a study's workers).
 
     The pass: the warm-up under (ramped) gravity with every joint intact
     and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
@@ -504,7 +537,7 @@ def steps(
             i = f if record else 0
             if tracker is not None:
                 if joints_ahead and ahead is None and not tracker.reads_poses:
-                    ahead = thread_imap(lambda k, w=i - 1: check(k, w), range(f, frames + 1), workers=1, name="joints")
+                    ahead = _ahead(lambda k, w=i - 1: check(k, w), range(f, frames + 1), tracker.release_factors)
                 p = i - 1
                 release, utilisation[p] = next(ahead) if ahead is not None else check(f, p)
                 if len(release):

@@ -512,9 +512,8 @@ def simulate(
 
     ``joints_ahead`` (where no brick bears on the plate without a joint) runs the joint model ahead
     of Bullet on a thread of its own, on the second core; ``False`` runs it before each step on
-    this thread, with the same poses bit for bit, and is for a process that simulates again and
-    again (a study): each run with the thread left the process about 2 MB larger (measured; the
-    cause is not found)."""
+    this thread, with the same poses bit for bit, for a process whose cores are busy anyway (a
+    study's workers)."""
     scene, name = _scene(model, load, settings, material, foundation, duration_s)
     return _run_scene(scene, name, progress=progress, blend_path=blend_path, joints_ahead=joints_ahead)
 

@@ -9,34 +9,21 @@ loop as unresponsive after 3 s.
     .venv/bin/python experiments/loop_wait.py [--study data_synthetic/studies/stylite_fragility.toml] [--sample 4]
 
 Measured 2026-11-26 (2-core Xeon VM), the defaults (Stylite, 0.6 g, a collapse): 336 stones,
-907 joints, 88 frames, 75-77 ms a frame on average, the longest wait 0.29-0.30 s (two runs).
+907 joints, 88 frames, 75-79 ms a frame on average, the longest wait 0.29-0.31 s (three runs).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import time
-
-import numpy as np
 
 
 async def on_loop(geometry, load) -> None:
+    from sim_determinism import with_loop_waits
+
     import calib_masonry as cm
 
-    turns = [time.perf_counter()]
-
-    async def tick() -> None:
-        while True:
-            turns.append(time.perf_counter())
-            await asyncio.sleep(0)
-
-    ticker = asyncio.create_task(tick())
-    try:
-        r = await cm.simulate_async(geometry, load, progress=False)
-    finally:
-        ticker.cancel()
-    gaps = np.sort(np.diff(turns))[::-1]
+    r, gaps = await with_loop_waits(cm.simulate_async(geometry, load, progress=False))
     print(
         f"{len(r.scene.bodies)} stones, {len(r.scene.bonds)} joints, {len(r.output.time) - 1} frames, "
         f"{r.summary['seconds']['per_frame'] * 1000:.0f} ms a frame on average, moved {r.metrics.moved_fraction[-1]:.2f}"

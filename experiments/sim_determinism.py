@@ -116,16 +116,12 @@ def _cluster():
     return Client(LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None))
 
 
-async def _on_loop(geometry, motion, material):
-    """A dask task's simulation on its worker's event loop (which must be the main thread), and
-    the longest the loop waited for it between two turns, seconds."""
+async def with_loop_waits(coro) -> tuple:
+    """Await ``coro`` beside a task that notes every turn of the running event loop: its value and
+    the waits between two turns, seconds, longest first."""
     import asyncio
-    import threading
     import time
 
-    import calib_masonry as cm
-
-    assert threading.current_thread() is threading.main_thread()
     turns = [time.perf_counter()]
 
     async def tick() -> None:
@@ -135,10 +131,42 @@ async def _on_loop(geometry, motion, material):
 
     ticker = asyncio.create_task(tick())
     try:
-        out = await cm.simulate_async(geometry, motion, material=material, progress=False)
+        value = await coro
     finally:
         ticker.cancel()
-    return out, float(max(b - a for a, b in zip(turns, turns[1:])))
+    return value, np.sort(np.diff(turns))[::-1]
+
+
+async def _on_loop(geometry, motion, material):
+    """A dask task's simulation on its worker's event loop (which must be the main thread), and
+    the longest the loop waited for it between two turns, seconds."""
+    import threading
+
+    import calib_masonry as cm
+
+    assert threading.current_thread() is threading.main_thread()
+    out, waits = await with_loop_waits(cm.simulate_async(geometry, motion, material=material, progress=False))
+    return out, float(waits[0])
+
+
+def scenario(pga: float, duration: float) -> tuple:
+    """The runs' scene: four stretcher walls built in a temporary folder (the BuildResult), a
+    two-component motion (seed 3) at ``pga`` g for ``duration`` s, and the weak mortar."""
+    import calib_masonry as cm
+    from calib_masonry.synthetic.truth import synthesize
+
+    root = Path(tempfile.mkdtemp())
+    walls = [(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)]
+    text = SCENARIO + "".join(
+        f'\n[[wall]]\nname = "w{i}"\nwidth_m = {w}\nheight_m = {h}\ntheta_deg = {t}\n'
+        for i, (w, h, t) in enumerate(walls)
+    )
+    (root / "s.toml").write_text(text)
+    synthesize(cm.load_structure(root / "s.toml", require_sources=False), root / "data", figures=False)
+    result = cm.build(cm.load_structure(root / "data" / "structure.toml"), progress=False)
+    motion = cm.synthetic_motion(pga, duration, seed=3, components=2)
+    weak = cm.Material(tensile_strength=2e3, shear_strength=3e3)
+    return result, motion, weak
 
 
 def main() -> None:
@@ -176,19 +204,8 @@ def main() -> None:
         churn(a.churn)
 
     import calib_masonry as cm
-    from calib_masonry.synthetic.truth import synthesize
 
-    root = Path(tempfile.mkdtemp())
-    walls = [(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)]
-    text = SCENARIO + "".join(
-        f'\n[[wall]]\nname = "w{i}"\nwidth_m = {w}\nheight_m = {h}\ntheta_deg = {t}\n'
-        for i, (w, h, t) in enumerate(walls)
-    )
-    (root / "s.toml").write_text(text)
-    synthesize(cm.load_structure(root / "s.toml", require_sources=False), root / "data", figures=False)
-    result = cm.build(cm.load_structure(root / "data" / "structure.toml"), progress=False)
-    motion = cm.synthetic_motion(a.pga, a.duration, seed=3, components=2)
-    weak = cm.Material(tensile_strength=2e3, shear_strength=3e3)
+    result, motion, weak = scenario(a.pga, a.duration)
     kept, runs = [], []
     client = None
     for k, label in enumerate(a.runs):

@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -39,22 +38,9 @@ def rss_mb(pid: str = "self") -> float:
 
 def _scene():
     sys.path.insert(0, str(HERE))
-    from sim_determinism import SCENARIO
+    from sim_determinism import scenario
 
-    import calib_masonry as cm
-    from calib_masonry.synthetic.truth import synthesize
-
-    root = Path(tempfile.mkdtemp())
-    walls = [(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)]
-    text = SCENARIO + "".join(
-        f'\n[[wall]]\nname = "w{i}"\nwidth_m = {w}\nheight_m = {h}\ntheta_deg = {t}\n'
-        for i, (w, h, t) in enumerate(walls)
-    )
-    (root / "s.toml").write_text(text)
-    synthesize(cm.load_structure(root / "s.toml", require_sources=False), root / "data", figures=False)
-    result = cm.build(cm.load_structure(root / "data" / "structure.toml"), progress=False)
-    motion = cm.synthetic_motion(1.2, 3.0, seed=3, components=2)
-    weak = cm.Material(tensile_strength=2e3, shear_strength=3e3)
+    result, motion, weak = scenario(1.2, 3.0)
     return result.structure, motion, weak
 
 

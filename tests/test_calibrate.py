@@ -38,9 +38,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SIZE = (3000, 2000)
 
 
-def _camera(yaw=0.35, pitch=0.12, roll=0.02, d=9.0, w=5.0, h=6.0, eye=1.65, f=2400.0):
+def _camera(yaw=0.35, pitch=0.12, roll=0.02, d=9.0, w=5.0, h=6.0, eye=1.65, f=2400.0, k1=0.0, k2=0.0):
     x = w / 2 - d * math.sin(yaw)
-    return np.array([f, yaw, pitch, roll, x, -d * math.cos(yaw), eye, w, h])
+    return np.array([f, yaw, pitch, roll, x, -d * math.cos(yaw), eye, w, h, k1, k2])
 
 
 def _observations(params, size=SIZE, *, rng=None, noise=0.0, courses=0.19, stride=0.4):
@@ -79,6 +79,7 @@ def test_rotation_angles_round_trip_and_forward_direction():
 
 
 def test_known_homography_recovered_from_exact_observations():
+    # the focal length and the lens fitted, their priors made flat: exact data give the truth
     truth = _camera()
     corners, bed, head = _observations(truth)
     inp = CalibrationInput(
@@ -89,6 +90,9 @@ def test_known_homography_recovered_from_exact_observations():
         head_segments=head,
         camera_height_m=truth[6],
         camera_height_sigma_m=0.01,
+        focal_prior_log_sigma=1e3,
+        k1_sigma=1e3,
+        k2_sigma=1e3,
     )
     res = calibrate(inp)
     assert res.status is FitStatus.CONVERGED
@@ -119,11 +123,13 @@ def test_residual_gradients_match_central_differences():
     assert np.max(np.abs(jac - fd)) <= 1e-5 * max(1.0, np.max(np.abs(jac)))
 
 
-def test_the_exported_camera_fit_is_the_jitted_one_bit_for_bit(tmp_path, monkeypatch):
+def test_the_exported_camera_fit_is_the_jitted_one(tmp_path, monkeypatch):
     # the camera fit runs exported once for any segment count (and kept on disk, so a new process
     # does not trace it); for two segment buckets, in memory and from the file, it must give the
-    # jitted fit's parameters, status, steps and Jacobian exactly (the residuals it returns are
-    # evaluated by differently fused code: equal to rounding, 1e-16 px measured)
+    # jitted fit's status exactly, the same cost, and its parameters and Jacobian to the solver's
+    # tolerance: the lens model's Newton steps over a segment count XLA knows only symbolically
+    # compile to other instructions than over a fixed one (7e-11 relative measured; bit for bit
+    # before the lens), and the joints' robust loss makes the optimum flat to that
     import jax
     import jax.numpy as jnp
 
@@ -143,8 +149,13 @@ def test_the_exported_camera_fit_is_the_jitted_one_bit_for_bit(tmp_path, monkeyp
             if fresh:  # from the file the first export wrote
                 fit._solver.cache_clear()
             got = [np.asarray(g) for g in fit._solve(u0, data)]
-            assert all(np.array_equal(g, e) for g, e in zip(got[:4], expect[:4]))
-            assert all(np.allclose(g, e, rtol=0, atol=1e-12) for g, e in zip(got[4:], expect[4:]))
+            assert np.array_equal(got[1], expect[1])  # status (the steps to it may differ near the optimum)
+            # parameters (scaled, of order one): the same optimum, where the robust loss leaves the
+            # cost flat to 1e-12 over 1e-6 in the parameters
+            assert np.allclose(got[0], expect[0], rtol=0, atol=1e-5)
+            cost = [float(np.sum(np.asarray(r) ** 2)) for r in (got[4], expect[4])]
+            assert cost[0] == pytest.approx(cost[1], rel=1e-9)
+            assert np.allclose(got[3], expect[3], rtol=1e-4, atol=1e-5 * np.abs(expect[3]).max())  # Jacobian
     assert len(list(tmp_path.glob("camera-fit-*.jaxexport"))) == 1
     fit._solver.cache_clear()
 
@@ -208,8 +219,12 @@ def test_order_corners_any_order_and_degenerate_inputs():
         order_corners(np.zeros(6))
 
 
-def test_corners_alone_without_focal_on_a_fronto_parallel_photo_is_refused(tmp_path):
-    from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
+def test_corners_alone_without_focal_are_not_singular_and_the_scale_says_where_it_comes_from(tmp_path):
+    """A fronto-parallel photo with no EXIF and no joints: the focal length's prior (24-50 mm
+    equivalent) keeps the fit determined (it was refused as singular); without a measured length
+    the scale rests on the eye-height prior, whose spread makes W and H +-30 % and more, which is
+    refused naming the flags that pin it; a known width fits, its scale source named."""
+    from calib_masonry.calibrate.rectify import CalibrateConfig, ScaleSource, calibrate_photo
     from calib_masonry.io import read_photo
 
     truth = _camera(yaw=0.0, pitch=0.0, roll=0.0, eye=3.0, f=900.0, d=12.0)
@@ -220,8 +235,18 @@ def test_corners_alone_without_focal_on_a_fronto_parallel_photo_is_refused(tmp_p
     Image.fromarray(img).save(tmp_path / "flat.png")
     photo = read_photo(tmp_path / "flat.png")
     cfg = CalibrateConfig(corners_px=tuple(corners.ravel()), use_lines=False, snap_corners=False)
-    with pytest.raises(FitFailed, match="focal"):
+    with pytest.raises(FitFailed) as err:
         calibrate_photo(photo, cfg)
+    message = str(err.value)
+    assert "singular" not in message and "eye-height prior" in message
+    assert "--known-width" in message and "--course-height" in message and "--force" in message
+    assert "\n" not in message
+    forced = calibrate_photo(photo, replace(cfg, force=True))
+    assert forced.scale_source == ScaleSource.EYE_HEIGHT_PRIOR and forced.relative_sigma() > 0.25
+    known = calibrate_photo(photo, replace(cfg, known_width_m=5.0))
+    assert known.scale_source == ScaleSource.KNOWN_WIDTH and known.focal_source.startswith("prior")
+    assert known.result.height_m == pytest.approx(6.0, rel=0.01)
+    assert abs(known.result.height_m - 6.0) < 2 * known.result.sigma("height_m") + 1e-9
 
 
 # ----------------------------------------------------------------------------------------------
@@ -362,43 +387,43 @@ def test_a_singular_fit_names_the_flags_that_were_not_given():
     assert fit.width_m == pytest.approx(wall.width_m, rel=1e-3)
 
 
-def test_automatic_mode_refuses_corners_the_joints_contradict():
-    """Tall wall seed 9143: automatic mode puts the left base corner 70 px up the wall. The corners
-    alone fit any quadrilateral, and the RMS over all residuals (2.1 px) hides the corner among
-    hundreds of joint segments, so the fit came out 60 % short and said nothing but the scale's
-    sigma. The corners' own RMS from the joints' outline (20 px) refuses it, naming --corners."""
+@pytest.mark.parametrize("seed", [9143, 9144])
+def test_automatic_mode_outlines_the_tall_walls_the_joints_misled(seed):
+    """Tall walls 9143 (the former detection put a base corner 70 px up the wall) and 9144 (the
+    joints' vanishing points grew its outline into the sky and the ground): the outline from the
+    wall's appearance finds every corner within 1 px, W and H within 0.5 %."""
+    import calib_masonry as cm
+
+    wall, photo, truth = _tall_wall_photo(seed)
+    cal = cm.calibrate_photo(
+        photo, cm.CalibrateConfig(camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02)
+    )
+    assert cal.result.fit.ok
+    assert np.max(np.abs(cal.detection.corners_px - np.array(truth["corners_px"]))) < 1.0
+    assert cal.result.width_m == pytest.approx(wall.width_m, rel=0.005)
+    assert cal.result.height_m == pytest.approx(wall.height_m, rel=0.005)
+
+
+def test_clicked_corners_the_joints_contradict_are_refused():
+    """A base corner clicked 70 px up a tall wall (snapping off): the corners alone fit any
+    quadrilateral, and the RMS over all residuals hides one corner among hundreds of joint
+    segments; the corners' own residual, in units of their sigma, refuses it, naming --corners."""
     import calib_masonry as cm
 
     wall, photo, truth = _tall_wall_photo(9143)
-    cfg = cm.CalibrateConfig(camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02)
+    corners = np.array(truth["corners_px"])
+    corners[0, 1] -= 70.0
+    cfg = cm.CalibrateConfig(
+        corners_px=tuple(corners.ravel()),
+        snap_corners=False,
+        camera_height_m=truth["eye_height_m"],
+        camera_height_sigma_m=0.02,
+    )
     with pytest.raises(cm.FitFailed) as err:
         cm.calibrate_photo(photo, cfg)
     assert "--corners" in str(err.value) and "from the outline the mortar joints fit" in str(err.value)
     forced = cm.calibrate_photo(photo, replace(cfg, force=True))
-    assert forced.result.rms_corner_px > 3.0 and abs(forced.result.width_m / wall.width_m - 1) > 0.1
-
-
-def test_automatic_mode_starts_again_from_the_joints_when_their_vanishing_points_lead_it_off_the_photo(monkeypatch):
-    """Seed 9144 (a tall wall; 9115 and then 9135 were the case before the synthetic walls' free ends
-    and base were set flush with their stones, 2026-11-26): the
-    joints' vanishing points grow the outline far into the sky and the ground. The outline is found
-    again from the wall's colours around the joints, within 2 px of the truth at every corner, and
-    the wall's size within 2 %."""
-    import calib_masonry as cm
-    from calib_masonry.calibrate import lines
-
-    wall, photo, truth = _tall_wall_photo(9144)
-    started_again = []
-    real = lines._joint_box
-    monkeypatch.setattr(lines, "_joint_box", lambda pts: started_again.append(True) or real(pts))
-    cal = cm.calibrate_photo(
-        photo, cm.CalibrateConfig(camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02)
-    )
-    assert started_again  # the case this test is for
-    assert cal.result.fit.ok
-    assert np.max(np.abs(cal.detection.corners_px - np.array(truth["corners_px"]))) < 2.0
-    assert cal.result.width_m == pytest.approx(wall.width_m, rel=0.02)
-    assert cal.result.height_m == pytest.approx(wall.height_m, rel=0.02)
+    assert forced.result.rms_corner_sigma > 3.0
 
 
 def test_clicked_corners_are_snapped_and_beat_raw_clicks(photo_set):

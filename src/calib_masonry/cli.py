@@ -85,10 +85,13 @@ def _print_build(summary: dict, out) -> None:
     )
     for w in summary["walls"]:
         ref = f" (splitting {w['mean_dice_splitting']:.4f})" if "mean_dice_splitting" in w else ""
-        print(
-            f"  {w['name']:>10}: {w['bricks']:5d} bricks, mean Dice {w['mean_dice']:.4f}{ref}, "
-            f"{w['corner_pieces_removed']} corner pieces removed"
-        )
+        if "photo" in w:  # the Dice of a photo wall is against its own segmentation: say so
+            what = f"polygon fit to the segmentation {w['mean_dice']:.4f}{ref}"
+        else:
+            what = f"mean Dice {w['mean_dice']:.4f}{ref}"
+        print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, {what}, {w['corner_pieces_removed']} corner pieces removed")
+        if "pieces" in w:
+            print(f"  {'':>10}  scale from the {w['scale_source']}; {_pieces_line(w['pieces'])}")
 
 
 def _cmd_compare(args) -> int:
@@ -153,20 +156,53 @@ def _cmd_demo(args) -> int:
 
 
 def _calibrate_config(args):
-    from .calibrate.rectify import CalibrateConfig, parse_corners
+    from .calibrate.rectify import CalibrateConfig, parse_corners, parse_numbers
 
     kwargs = {}
     if args.camera_height is not None:
-        kwargs.update(camera_height_m=args.camera_height, camera_height_sigma_m=args.camera_height_sigma or 0.02)
-    elif args.camera_height_sigma is not None:
-        kwargs.update(camera_height_sigma_m=args.camera_height_sigma)
+        kwargs["camera_height_m"] = args.camera_height
+    if args.camera_height_sigma is not None:
+        kwargs["camera_height_sigma_m"] = args.camera_height_sigma
     if args.focal_px is not None:
         kwargs["focal_px"] = args.focal_px
     for flag, key in (("known_width", "known_width_m"), ("known_height", "known_height_m")):
         if getattr(args, flag, None) is not None:
             kwargs[key] = getattr(args, flag)
-    if getattr(args, "corners", None):
-        kwargs["corners_px"] = parse_corners(args.corners)
+    if getattr(args, "known_length", None):
+        kwargs["known_length"] = parse_numbers(
+            args.known_length,
+            "--known-length",
+            5,
+            "x1,y1,x2,y2,METRES: two photo points on the wall and their distance",
+        )
+    if getattr(args, "course_height", None):
+        ch = parse_numbers(
+            args.course_height, "--course-height", (1, 2), "M or M,SIGMA in metres (the mean course height)"
+        )
+        kwargs["course_height_m"] = ch[0]
+        if len(ch) == 2:
+            kwargs["course_height_sigma_m"] = ch[1]
+    corners = getattr(args, "corners", None)
+    occluders = ()
+    if getattr(args, "labelme", None):
+        from .labelme import read_photo_annotation
+
+        ann = read_photo_annotation(args.labelme)
+        if ann.outline is not None and not corners:
+            kwargs["corners_px"] = tuple(float(v) for v in ann.outline.ravel())
+        occluders = ann.occluders
+    if corners:
+        kwargs["corners_px"] = parse_corners(corners)
+    if getattr(args, "occluders", None):
+        from .labelme import read_occluders
+
+        occluders = tuple(occluders) + tuple(read_occluders(args.occluders))
+    if occluders:
+        kwargs["occluders"] = tuple(occluders)
+    if getattr(args, "snap_tolerance", None) is not None:
+        kwargs["snap_tolerance_px"] = args.snap_tolerance
+    if getattr(args, "no_distortion", False):
+        kwargs["fit_distortion"] = False
     return CalibrateConfig(max_rms_px=args.max_rms, force=args.force, **kwargs)
 
 
@@ -183,14 +219,29 @@ def _cmd_rectify(args) -> int:
         overwrite=args.overwrite,
     )
     cam = doc["camera"]
+    snap = ""
+    if doc.get("corner_snap_px"):
+        snap = ", corners snapped by " + "/".join(f"{v:.1f}" for v in doc["corner_snap_px"]) + " px"
     print(
-        f"rectify: {doc['mode']} corners, W = {doc['width_m']:.3f} +- {doc['width_sigma_m']:.3f} m, "
-        f"H = {doc['height_m']:.3f} +- {doc['height_sigma_m']:.3f} m, f = {cam['focal_px']:.0f} px ({doc['focal_source']}), "
-        f"yaw {cam['yaw_deg']:.1f} deg, RMS {doc['rms_residual_px']:.2f} px, {doc['status']} -> {args.out}"
+        f"rectify: {doc['mode']} corners{snap}, W = {doc['width_m']:.3f} +- {doc['width_sigma_m']:.3f} m, "
+        f"H = {doc['height_m']:.3f} +- {doc['height_sigma_m']:.3f} m (scale from the {doc['scale_source']}: "
+        f"{doc['scale_detail']}), f = {cam['focal_px']:.0f} px ({doc['focal_source']}), "
+        f"lens k1 {doc['distortion']['k1']:+.3f}, yaw {cam['yaw_deg']:.1f} deg, RMS {doc['rms_residual_px']:.2f} px, "
+        f"{doc['status']} -> {args.out}"
     )
+    if "pieces" in doc:
+        print(f"  {_pieces_line(doc['pieces'])}")
     if doc.get("advice"):
         print(f"note: {doc['advice']}")
     return 0
+
+
+def _pieces_line(p: dict) -> str:
+    return (
+        f"segmentation: {p['count']} pieces, median {p['median_area_m2'] * 1e4:.0f} cm^2 "
+        f"(largest {p['max_area_m2'] * 1e4:.0f} cm^2), module {p['module_m'][0] * 100:.1f} x {p['module_m'][1] * 100:.1f} cm"
+        + (f"; warning: {p['warning']}" if p.get("warning") else "")
+    )
 
 
 def _cmd_footprint(args) -> int:
@@ -318,16 +369,38 @@ def _parser() -> argparse.ArgumentParser:
             "--camera-height",
             type=float,
             default=None,
-            help="eye height above the wall's base in m (default 1.6 +- 0.1)",
+            help="measured eye height above the wall's base in m (default: a prior of 1.6 +- 0.5 m, which "
+            "alone never pins the scale)",
         )
         q.add_argument(
             "--camera-height-sigma", type=float, default=None, help="its uncertainty in m (default 0.02 if given)"
         )
         q.add_argument(
-            "--focal-px", type=float, default=None, help="focal length in pixels (default: EXIF, else fitted)"
+            "--focal-px",
+            type=float,
+            default=None,
+            help="focal length in pixels (default: EXIF, else fitted from the vanishing points with a 24-50 mm "
+            "equivalent prior)",
         )
-        q.add_argument("--max-rms", type=float, default=3.0, help="refuse a fit above this RMS residual in px")
-        q.add_argument("--force", action="store_true", help="keep a fit above --max-rms or not converged")
+        q.add_argument(
+            "--max-rms",
+            type=float,
+            default=None,
+            help="refuse a fit above this RMS residual in px (default 3 px per 1500 px of the photo's long side, "
+            "at least 3)",
+        )
+        q.add_argument(
+            "--force",
+            action="store_true",
+            help="keep a fit above --max-rms, not converged or with W or H +-25 %% or worse",
+        )
+        q.add_argument(
+            "--occluders",
+            default=None,
+            help="a LabelMe JSON (shapes labelled 'occluder') or a JSON list of polygons [[x, y], ...] in photo "
+            "pixels: a rig, a beam, scaffolding, vegetation or people to leave out",
+        )
+        q.add_argument("--no-distortion", action="store_true", help="hold the lens's k1, k2 at 0 (a pinhole)")
         q.add_argument("--no-figures", action="store_true")
 
     r = sub.add_parser("rectify", help="photo -> calibrated camera, wall size and metric orthophoto")
@@ -335,6 +408,30 @@ def _parser() -> argparse.ArgumentParser:
     calib_flags(r, corners=True)
     r.add_argument("--known-width", type=float, default=None, help="the wall's measured width in m")
     r.add_argument("--known-height", type=float, default=None, help="the wall's measured height in m")
+    r.add_argument(
+        "--known-length",
+        default=None,
+        metavar="X1,Y1,X2,Y2,M",
+        help="two photo points on the wall (px) and their measured distance in m",
+    )
+    r.add_argument(
+        "--course-height",
+        default=None,
+        metavar="M[,SIGMA]",
+        help="the masonry's mean course height in m (sigma default 3 %%): the scale from the courses counted",
+    )
+    r.add_argument(
+        "--labelme",
+        default=None,
+        help="a LabelMe JSON of the photo (as rectify writes it, corrected): its 'wall' polygon gives the corners, "
+        "its 'occluder' shapes the occluders",
+    )
+    r.add_argument(
+        "--snap-tolerance",
+        type=float,
+        default=None,
+        help="how far (px) clicked corners may move onto the outline (default 1 %% of the photo's diagonal)",
+    )
     r.add_argument("--px-per-m", type=float, default=None, help="orthophoto resolution (default: the photo's own)")
     r.add_argument("--mask", default=None, help="a brick mask of the photo to rectify along with it")
     r.add_argument("--out", required=True)

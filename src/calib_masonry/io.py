@@ -142,8 +142,20 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
 
     Grey levels are allowed on edges (anti-aliasing), but if more than ``max_gray_fraction`` of
     the pixels lie between 20 % and 80 % of the intensity range the file is refused as not a mask.
+    A ``.json`` file is read as LabelMe: its pieces' polygons, drawn apart
+    (:func:`calib_masonry.labelme.labelme_mask`).
     """
     path = Path(path)
+    if path.suffix.lower() == ".json":
+        from .labelme import labelme_mask, read_labelme
+
+        doc = read_labelme(path, field_name=field)
+        if not doc.pieces:
+            raise InputError(
+                f"{field} {path}: the LabelMe file has no piece polygons (labels piece, stone or brick); "
+                "draw the masonry units"
+            )
+        return labelme_mask(doc)
     with _opened_image(path, field, "give a PNG or TIFF mask") as im:
         arr = np.asarray(im.convert("RGB") if im.mode in ("P", "PA") else im)
     # computed in the file's own integer type where possible: a few bytes per pixel, not 8-24 bytes
@@ -469,6 +481,7 @@ class Photo:
     rgb: np.ndarray  # (rows, cols, 3) float32
     focal_px: float | None  # from FocalLength x FocalPlaneXResolution, or the 35 mm equivalent
     heading_deg: float | None  # GPSImgDirection
+    lens: dict | None = None  # EXIF Make, Model, LensMake, LensModel, FocalLength (mm), FNumber
 
     def __post_init__(self) -> None:
         rgb = np.asarray(self.rgb)
@@ -523,13 +536,40 @@ def _exif_camera(im) -> tuple[float | None, float | None]:
     return focal, heading
 
 
+def _exif_lens(im) -> dict | None:
+    """The camera and lens EXIF names (Make, Model, LensMake, LensModel) and the focal length in
+    mm and f-number, as far as the photo has them; None without a camera model."""
+    try:
+        exif = im.getexif()
+        sub = exif.get_ifd(0x8769)
+    except Exception:  # noqa: BLE001 - a broken EXIF block only means no EXIF
+        return None
+
+    def text(v):
+        return str(v).strip("\x00 ").strip() if v else ""
+
+    out = {
+        "make": text(exif.get(0x010F)),
+        "model": text(exif.get(0x0110)),
+        "lens_make": text(sub.get(0xA433)),
+        "lens_model": text(sub.get(0xA434)),
+    }
+    for key, tag in (("focal_mm", 0x920A), ("f_number", 0x829D)):
+        try:
+            out[key] = float(sub[tag]) if sub.get(tag) else None
+        except (TypeError, ValueError, ZeroDivisionError):
+            out[key] = None
+    return out if out["model"] else None
+
+
 def read_photo(path: str | Path, *, field: str = "PHOTO") -> Photo:
-    """Read a colour photo (JPEG, PNG, TIFF) and its EXIF focal length and compass heading."""
+    """Read a colour photo (JPEG, PNG, TIFF) and its EXIF focal length, compass heading and lens."""
     path = Path(path)
     with _opened_image(path, field, "give a JPEG, PNG or TIFF photo") as im:
         focal, heading = _exif_camera(im)
+        lens = _exif_lens(im)
         rgb = np.asarray(im if im.mode == "RGB" else im.convert("RGB"), dtype=np.float32)
     rgb /= 255.0  # in place: the same values as a division into a new array, one 6 MP copy fewer
     if min(rgb.shape[:2]) < 32:
         raise InputError(f"{field} {path}: image is only {rgb.shape[1]} x {rgb.shape[0]} px; give the full photo")
-    return Photo(path=path, rgb=rgb, focal_px=focal, heading_deg=heading)
+    return Photo(path=path, rgb=rgb, focal_px=focal, heading_deg=heading, lens=lens)

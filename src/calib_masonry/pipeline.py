@@ -60,13 +60,16 @@ class PhotoWall:
     wall: WallSpec  # with W and H resolved (typed values kept, missing ones fitted)
     photo_size: tuple[int, int] | None = None  # (width, height) of the photo the preview shrinks
     trace: TraceResult | None = None  # the mask traced (resolve_photo_walls with trace=True)
+    segmentation: dict = field(default_factory=dict)  # the pieces found (wall2d.segment.Segmentation.summary)
+    occluders_ortho: tuple = ()  # the occluders in the orthophoto's pixels
 
 
 def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
-    """Calibrate a wall's photo, rectify it onto the wall (W x H) and segment bricks from mortar."""
-    from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify
+    """Calibrate a wall's photo, rectify it onto the wall (W x H) and segment its masonry units
+    (:func:`calib_masonry.wall2d.segment.segment_wall`), leaving out the wall's occluders."""
+    from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify, valid_ortho
     from .errors import CalibMasonryError, raise_if_stopped
-    from .wall2d.segment import PhotoSegmentConfig, segment_photo
+    from .wall2d.segment import segment_wall
 
     kwargs = {}
     if wall.camera_height_m is not None:
@@ -76,9 +79,16 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
         known["known_width_m"] = wall.width_m
     elif not math.isnan(wall.height_m):
         known["known_height_m"] = wall.height_m
-    config = CalibrateConfig(corners_px=wall.corners_px, focal_px=wall.focal_px, **kwargs, **known)
-    raise_if_stopped()
+    occluders = ()
     try:
+        if wall.occluders is not None:
+            from .labelme import read_occluders
+
+            occluders = read_occluders(wall.occluders)
+        config = CalibrateConfig(
+            corners_px=wall.corners_px, focal_px=wall.focal_px, occluders=occluders, **kwargs, **known
+        )
+        raise_if_stopped()
         cal = calibrate_photo(wall.image, config)
     except CalibMasonryError as exc:
         raise type(exc)(f"wall '{wall.name}': {exc}") from None
@@ -89,7 +99,8 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     # the fitted wall's frame stretched onto the typed W x H: the photo's outline maps onto the wall
     rect = rectify(cal, px_per_m=spec.photo_px_per_m, width_m=width, height_m=height)
     raise_if_stopped()
-    mask = segment_photo(rect, PhotoSegmentConfig(window_px=int(round(0.5 * spec.photo_px_per_m))))
+    valid = valid_ortho(cal, spec.photo_px_per_m, width_m=width, height_m=height)
+    seg = segment_wall(rect, spec.photo_px_per_m, valid=valid if not valid.all() else None)
     # keep a preview of the photo for the overlay figure, not the photo: six 6 MP photos held
     # until the figures are drawn were 430 MB of a build's peak
     step = max(1, math.ceil(max(cal.photo.rgb.shape[:2]) / 900))  # what the figure shows
@@ -99,10 +110,18 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
         # 8-bit, as written: a float orthophoto per wall held until the figures are drawn was 4x
         # the memory (37 MB a paper-example wall) for the same PNG
         rectified=to_uint8(rect),
-        mask=mask,
+        mask=seg.mask,
         wall=replace(wall, width_m=width, height_m=height),
         photo_size=cal.photo.size,
+        segmentation=seg.summary(),
+        occluders_ortho=tuple(_ortho_polygon(cal, poly, seg.mask.shape, width, height) for poly in cal.occluders),
     )
+
+
+def _ortho_polygon(cal, poly, shape, width, height) -> np.ndarray:
+    from .calibrate.rectify import ortho_from_photo
+
+    return ortho_from_photo(cal, poly, shape, width_m=width, height_m=height)
 
 
 def _import_photo_stage() -> None:
@@ -295,6 +314,10 @@ def _summary(result: BuildResult, interpenetration) -> dict:
                         "calibration": f"photos/{wall.name}/calibration.json",
                         "fitted_width_m": result.photos[wall.name].calibration.result.width_m,
                         "fitted_height_m": result.photos[wall.name].calibration.result.height_m,
+                        "scale_source": result.photos[wall.name].calibration.scale_source,
+                        "pieces": result.photos[wall.name].segmentation,
+                        "dice_against": "the wall's own segmented mask: how well the polygons fit it, not how "
+                        "well the segmentation follows the stones",
                     }
                     if wall.name in result.photos
                     else {}
@@ -326,10 +349,12 @@ def _summary(result: BuildResult, interpenetration) -> dict:
     }
 
 
-def _write_photo_walls(photos: dict[str, PhotoWall], folder: Path, *, figures: bool) -> None:
-    """Each photo wall's calibration, orthophoto, mask and overlay figure in ``folder/<name>``.
-    The PNGs are encoded on a second thread while this one draws the figures (Pillow encodes
-    without the GIL): 3.1 -> 1.85 s for the paper example's six walls."""
+def _write_photo_walls(
+    photos: dict[str, PhotoWall], folder: Path, *, figures: bool, traces: dict[str, TraceResult] | None = None
+) -> None:
+    """Each photo wall's calibration, orthophoto, mask, LabelMe files and overlay figure in
+    ``folder/<name>``. The PNGs are encoded on a second thread while this one draws the figures
+    (Pillow encodes without the GIL): 3.1 -> 1.85 s for the paper example's six walls."""
     from .calibrate.figures import plot_calibration
 
     def images() -> None:
@@ -341,12 +366,57 @@ def _write_photo_walls(photos: dict[str, PhotoWall], folder: Path, *, figures: b
         (folder / name).mkdir(parents=True)
         doc = pw.calibration.to_json()
         doc.update(used_width_m=pw.wall.width_m, used_height_m=pw.wall.height_m, rectified_shape=list(pw.mask.shape))
+        if pw.segmentation:
+            doc["pieces"] = pw.segmentation
         write_json(folder / name / "calibration.json", doc)
+        trace = (traces or {}).get(name) or pw.trace
+        write_labelme_pair(
+            folder / name,
+            pw.calibration,
+            pw.mask.shape,
+            pieces=[b.vertices_xy for b in trace.bricks] if trace is not None else [],
+            occluders_ortho=pw.occluders_ortho,
+            photo_size=pw.photo_size,
+        )
     with background(images) as job:  # waited for however the figures end
         if figures:
             for name, pw in photos.items():
                 plot_calibration(pw.calibration, pw.rectified, folder / name / "overlay.png", photo_size=pw.photo_size)
     job.result()
+
+
+def write_labelme_pair(folder: Path, calibration, ortho_shape, *, pieces, occluders_ortho, photo_size=None) -> None:
+    """Two LabelMe files in ``folder``: ``rectified.json`` (over rectified.png: the wall's outline,
+    the occluders and every piece, in its pixels) and ``photo.json`` (over the photo: the fitted
+    outline as a 'wall' polygon, the occluders); corrected in LabelMe, the first is a wall's mask
+    for ``build`` (``mask = ".../rectified.json"``), the second goes back to ``rectify --labelme``."""
+    import os
+
+    from .labelme import write_labelme
+
+    rows, cols = ortho_shape
+    outline = np.array([[-0.5, rows - 0.5], [cols - 0.5, rows - 0.5], [cols - 0.5, -0.5], [-0.5, -0.5]])
+    write_labelme(
+        folder / "rectified.json",
+        "rectified.png",
+        (rows, cols),
+        outline=outline,
+        occluders=occluders_ortho,
+        pieces=pieces,
+    )
+    photo = calibration.photo
+    size = photo_size or photo.size
+    try:
+        rel = os.path.relpath(Path(photo.path).resolve(), Path(folder).resolve())
+    except ValueError:  # another drive (Windows): the absolute path
+        rel = str(Path(photo.path).resolve())
+    write_labelme(
+        folder / "photo.json",
+        rel,
+        (size[1], size[0]),
+        outline=calibration.result.corners_px(),
+        occluders=calibration.occluders,
+    )
 
 
 def build_to_folder(
@@ -463,7 +533,12 @@ def write_build(
             result.seconds["figures"] = time.perf_counter() - t0
         if result.photos:
             t0 = time.perf_counter()
-            _write_photo_walls(result.photos, stage / "photos", figures=figures)
+            _write_photo_walls(
+                result.photos,
+                stage / "photos",
+                figures=figures,
+                traces={w.name: tr for w, tr in zip(spec.walls, result.traces)},
+            )
             result.seconds["photo_files"] = time.perf_counter() - t0
         summary = _summary(result, inter)
         if want_geometry:

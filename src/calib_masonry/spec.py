@@ -64,6 +64,7 @@ class WallSpec:
     camera_height_m: float | None = None
     corners_px: tuple[float, ...] | None = None
     focal_px: float | None = None
+    occluders: Path | None = None  # a LabelMe JSON or a JSON list of polygons in the photo's pixels
 
     def __post_init__(self) -> None:
         where = f"wall '{self.name}'"
@@ -137,6 +138,10 @@ class PhotoSpec:
     max_yaw_deg: float = 35.0
     yaw_deg: float | None = None  # a fixed yaw (a truth sweep's value) instead of a draw within max_yaw_deg
     max_roll_deg: float = 2.0
+    # the lens's radial distortion (OpenCV's k1, k2; drawn only when a range is not [0, 0], so
+    # that photos without it are the same as before it existed)
+    k1: tuple[float, float] = (0.0, 0.0)
+    k2: tuple[float, float] = (0.0, 0.0)
     blur_px: tuple[float, float] = (0.4, 0.9)
     noise: float = 0.012
     jpeg_quality: int = 90
@@ -314,6 +319,8 @@ def _photos_from(tbl: dict, where: str) -> PhotoSpec:
         raise InputError(f"{where}: distance_m, eye_height_m and focal_35mm must be positive")
     if not 1 <= spec.jpeg_quality <= 100:
         raise InputError(f"{where}: jpeg_quality must lie in 1..100, got {spec.jpeg_quality}")
+    if not (-0.5 <= spec.k1[0] and spec.k1[1] <= 0.5 and -0.5 <= spec.k2[0] and spec.k2[1] <= 0.5):
+        raise InputError(f"{where}: k1 and k2 must lie within [-0.5, 0.5] (OpenCV's radial distortion)")
     return spec
 
 
@@ -342,6 +349,7 @@ WALL_KEYS = (
     "camera_height_m",
     "focal_px",
     "corners_px",
+    "occluders",
 )
 CORNER_KEYS = ("photo", "walls", "focal_px")
 TABLES = ("structure", "wall", "corner", "synthetic", "photos")
@@ -432,6 +440,14 @@ def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_so
         raise InputError(f"{where}: neither 'mask' nor 'image' (photo) is given; name the wall's mask or photo file")
     if mask is None and image is None and (math.isnan(width) or math.isnan(height)):
         raise InputError(f"{where}: width_m and height_m are missing; give them (metres) or a photo to fit them from")
+    occluders = None
+    if "occluders" in w:
+        if not isinstance(w["occluders"], str):
+            raise InputError(f"{where}: 'occluders' must be a path string (a LabelMe .json), got {w['occluders']!r}")
+        occluders = Path(w["occluders"])
+        occluders = occluders if occluders.is_absolute() else base / occluders
+        if require_sources and not occluders.is_file():
+            raise InputError(f"{where}: occluders file {occluders} not found; fix the path (relative to {path.name})")
     cam_h = _num(w, "camera_height_m", where, default=None)
     if cam_h is not None and not 0.0 < cam_h < 100.0:
         raise InputError(
@@ -463,6 +479,7 @@ def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_so
         camera_height_m=None if cam_h is None else float(cam_h),
         corners_px=corners,
         focal_px=None if focal is None else float(focal),
+        occluders=occluders,
     )
 
 
@@ -574,7 +591,7 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None, i
     walls = []
     for w in spec.walls:
         row: dict[str, Any] = {"name": w.name}
-        for key in ("mask", "image"):
+        for key in ("mask", "image", "occluders"):
             p = getattr(w, key)
             if p is not None:
                 row[key] = Path(p).relative_to(relative_to).as_posix() if relative_to else Path(p).as_posix()

@@ -7,8 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import project
-
 __all__ = ["plot_calibration", "plot_corner", "plot_footprint"]
 
 
@@ -36,10 +34,12 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
     kr = side / max(w_m, h_m)
     ortho_wh = (max(1, round(w_m * kr)), max(1, round(h_m * kr)))
     cam = res.camera_json()
+    k1, k2 = res.distortion
     left_title = (
         f"{cal.photo.path.name} ({width} x {height} px): {cal.mode}, f = {cam['focal_px']:.0f} px "
         f"({cal.focal_source})\nyaw {cam['yaw_deg']:.1f}, pitch {cam['pitch_deg']:.1f}, roll "
-        f"{cam['roll_deg']:.1f} deg\nRMS residual {res.rms_residual_px:.2f} px, {res.status.value}"
+        f"{cam['roll_deg']:.1f} deg, lens k1 {k1:+.3f}, k2 {k2:+.3f}\nscale from the {cal.scale_source}; "
+        f"RMS residual {res.rms_residual_px:.2f} px, {res.status.value}"
     )
     sizes = f"W = {w_m:.3f} +- {res.sigma('width_m'):.3f} m, H = {h_m:.3f} +- {res.sigma('height_m'):.3f} m"
     # each column as wide as its panel or its title (a tall narrow wall's orthophoto is narrow)
@@ -48,16 +48,26 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
     x0 = margin + left_w + gap
     canvas = Canvas(x0 + right_w + margin, top + max(photo_wh[1], ortho_wh[1]) + bottom)
     a = canvas.image_panel(rgb, margin, top, photo_wh, (-0.5, -0.5, width - 0.5, height - 0.5))
-    h = res.image_from_wall
+
+    def through_lens(ends):  # a straight wall line, drawn through the camera and its lens (curved)
+        t = np.linspace(0.0, 1.0, 33)[:, None]
+        return res.photo_from_wall(ends[0] + t * (ends[1] - ends[0]))
+
     # the fitted 1 m grid and outline of the wall, drawn through the camera
-    for x in np.arange(1.0, w_m, 1.0):
-        canvas.polyline(a, project(h, np.array([[x, 0], [x, h_m]])), "white", alpha=0.7)
-    for z in np.arange(1.0, h_m, 1.0):
-        canvas.polyline(a, project(h, np.array([[0, z], [w_m, z]])), "white", alpha=0.7)
-    corners_m = np.array([[0, 0], [w_m, 0], [w_m, h_m], [0, h_m]], dtype=np.float64)
-    canvas.polyline(a, project(h, corners_m), "lime", width=2, closed=True)
+    step_m = nice_step(max(w_m, h_m), 360.0)  # at most eight lines along the longer side (1, 2, 5 x 10^k m)
+    for x in np.arange(step_m, w_m - 1e-9, step_m):
+        canvas.polyline(a, through_lens(np.array([[x, 0], [x, h_m]])), "white", alpha=0.7)
+    for z in np.arange(step_m, h_m - 1e-9, step_m):
+        canvas.polyline(a, through_lens(np.array([[0, z], [w_m, z]])), "white", alpha=0.7)
+    corners_m = np.array([[0, 0], [w_m, 0], [w_m, h_m], [0, h_m], [0, 0]], dtype=np.float64)
+    outline = np.concatenate([through_lens(corners_m[i : i + 2])[:-1] for i in range(4)])
+    canvas.polyline(a, outline, "lime", width=2, closed=True)
+    for poly in cal.occluders:
+        canvas.polyline(a, np.asarray(poly, dtype=float), "magenta", width=2, closed=True)
     det = cal.detection
-    entries = [("line", "lime", "fitted outline"), ("line", "white", "fitted 1 m grid")]
+    entries = [("line", "lime", "fitted outline"), ("line", "white", f"fitted {step_m:g} m grid")]
+    if len(cal.occluders):
+        entries.append(("line", "magenta", f"occluders left out ({len(cal.occluders)})"))
     if det is not None:
         for seg, col, name in ((det.bed_segments, "orange", "bed joints"), (det.head_segments, "cyan", "head joints")):
             if len(seg):
@@ -74,9 +84,9 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
         rect = rect()
     rows, cols = rect.shape[:2]
     b = canvas.image_panel(rect, x0, top, ortho_wh, (0.0, 0.0, w_m, h_m), flip=True)
-    for x in np.arange(1.0, w_m, 1.0):
+    for x in np.arange(step_m, w_m - 1e-9, step_m):
         canvas.polyline(b, [[x, 0], [x, h_m]], "white", alpha=0.7)
-    for z in np.arange(1.0, h_m, 1.0):
+    for z in np.arange(step_m, h_m - 1e-9, step_m):
         canvas.polyline(b, [[0, z], [w_m, z]], "white", alpha=0.7)
     # metre ticks: every 1, 2 or 5 x 10^k m, at least 45 px apart
     for x in np.arange(0.0, w_m + 1e-9, nice_step(w_m, ortho_wh[0])):

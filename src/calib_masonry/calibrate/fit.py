@@ -29,12 +29,16 @@ from .._jax import jax, jnp
 from ..errors import FitFailed, InputError
 from .camera import (
     CORNERS_FLAG,
+    DISTORTION_MODEL,
     PARAM_NAMES,
     angles_from_rotation,
+    distort,
+    focal_px_from_35mm,
     image_from_wall_homography,
     order_corners,
     principal_point,
     project,
+    undistort,
 )
 from .fitresult import FitResult, FitStatus, HasFit, fit_result
 from .lm import least_squares
@@ -51,7 +55,17 @@ __all__ = [
 ]
 
 # Parameter scales: the solver works on params / SCALE so every unknown is of order one.
-SCALE = np.array([1000.0, 0.1, 0.1, 0.1, 1.0, 1.0, 1.0, 1.0, 1.0])
+SCALE = np.array([1000.0, 0.1, 0.1, 0.1, 1.0, 1.0, 1.0, 1.0, 1.0, 0.1, 0.1])
+
+#: Without EXIF or --focal-px, the focal length's prior: log-normal about a 35 mm-equivalent of
+#: 35 mm, sigma 0.3 in log (phones and compacts shoot at about 24-50 mm: -1.3 to +1.2 sigma).
+FOCAL_PRIOR_35MM = 35.0
+FOCAL_PRIOR_LOG_SIGMA = 0.3
+#: The lens's radial distortion without a profile: k1 ~ N(0, 0.15), k2 ~ N(0, 0.05) (OpenCV's
+#: convention; consumer lenses lie within about -0.3..0.15, and most JPEGs are corrected in the
+#: camera; k2 is nearly the same curve as k1 over a photo's radii, so its prior keeps the pair apart)
+K1_PRIOR_SIGMA = 0.15
+K2_PRIOR_SIGMA = 0.05
 # padded segment counts: each is one compilation of the exported fit (a photo with no segments
 # pads to the first; padding has weight 0, so it adds exact zeros to every sum)
 _BUCKETS = (16, 64, 256, 1024)
@@ -60,11 +74,18 @@ MAX_SEGMENTS = _BUCKETS[-1]
 
 @dataclass(frozen=True)
 class CalibrationInput:
-    """What one photo offers the fit. Segments are ``(n, 4)`` arrays of ``x1, y1, x2, y2`` pixels."""
+    """What one photo offers the fit. Segments are ``(n, 4)`` arrays of ``x1, y1, x2, y2`` pixels.
+
+    ``corner_sigma_px``: one value for all four corners or four (LL, LR, UR, UL). Without
+    ``focal_px`` the focal length has a log-normal prior (``focal_prior_px``, default a 35 mm
+    equivalent of :data:`FOCAL_PRIOR_35MM`, log sigma :data:`FOCAL_PRIOR_LOG_SIGMA`). The lens's k1,
+    k2 are fitted about ``k1_prior``, ``k2_prior`` (a lens profile's, or 0) with their sigmas
+    (``fit_distortion=False`` holds them at the prior). ``known_length``: ``(x1, y1, x2, y2, metres)``,
+    the distance on the wall between two photo points."""
 
     image_size: tuple[int, int]  # (width, height) in pixels
     corners_px: np.ndarray  # (4, 2), lower-left, lower-right, upper-right, upper-left
-    corner_sigma_px: float = 1.5
+    corner_sigma_px: float | tuple[float, float, float, float] = 1.5
     bed_segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     head_segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     line_sigma_px: float = 1.0
@@ -75,9 +96,33 @@ class CalibrationInput:
     camera_height_sigma_m: float = 0.1
     focal_px: float | None = None
     focal_sigma_px: float | None = None
+    focal_prior_px: float | None = None
+    focal_prior_log_sigma: float = FOCAL_PRIOR_LOG_SIGMA
     known_width_m: float | None = None
     known_height_m: float | None = None
     known_sigma_m: float = 0.005
+    known_height_sigma_m: float | None = None  # default known_sigma_m (a course-height scale sets its own)
+    known_length: tuple[float, float, float, float, float] | None = None
+    known_length_sigma_m: float = 0.005
+    fit_distortion: bool = True
+    # long straight lines, each a cluster of points that must lie on one straight line once the
+    # lens is undone (the plumb-line constraint): points (n, 2), their cluster (n,) and family
+    # (n,: 0 a bed joint, 1 a head joint, 2 a straight line of the scene; for the record); see
+    # plumb_lines() and calibrate.lines.straight_lines()
+    plumb_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    plumb_cluster: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    plumb_family: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    plumb_sigma_px: float = 1.0
+    k1_prior: float = 0.0
+    k1_sigma: float = K1_PRIOR_SIGMA
+    k2_prior: float = 0.0
+    k2_sigma: float = K2_PRIOR_SIGMA
+
+    def corner_sigmas(self) -> np.ndarray:
+        sig = np.broadcast_to(np.asarray(self.corner_sigma_px, dtype=np.float64), (4,)).copy()
+        if not (np.all(np.isfinite(sig)) and np.all(sig > 0)):
+            raise InputError(f"calibration: corner sigmas {sig.tolist()} must be > 0 (pixels)")
+        return sig
 
 
 @dataclass(frozen=True)
@@ -88,10 +133,13 @@ class CalibrationResult(HasFit):
     fit: FitResult
     rms_residual_px: float  # over corners and joint-line endpoints
     rms_corner_px: float
+    rms_corner_sigma: float  # the corners' residuals in units of their sigmas (RMS)
     rms_line_px: float
     image_size: tuple[int, int]
     n_bed: int
     n_head: int
+    plumb_lines: int = 0  # long joints the lens was straightened on
+    plumb_rms_px: tuple[float, float] = (float("nan"), float("nan"))  # their RMS from straight: photo, lens undone
 
     def value(self, name: str) -> float:
         return self.fit[name]
@@ -116,9 +164,32 @@ class CalibrationResult(HasFit):
         h = np.linalg.inv(self.image_from_wall)
         return h / h[2, 2]
 
+    @property
+    def distortion(self) -> tuple[float, float]:
+        """The lens's (k1, k2), :data:`~calib_masonry.calibrate.camera.DISTORTION_MODEL`."""
+        return self.value("k1"), self.value("k2")
+
+    def distort(self, points: np.ndarray) -> np.ndarray:
+        """Ideal image points ``(..., 2)`` (the homography's) -> the photo's pixels (the lens's)."""
+        k1, k2 = self.distortion
+        return distort(
+            np.asarray(points, dtype=np.float64), self.value("focal_px"), principal_point(self.image_size), k1, k2
+        )
+
+    def undistort(self, points: np.ndarray) -> np.ndarray:
+        """The photo's pixels ``(..., 2)`` -> ideal image points (the homography's)."""
+        k1, k2 = self.distortion
+        return undistort(
+            np.asarray(points, dtype=np.float64), self.value("focal_px"), principal_point(self.image_size), k1, k2
+        )
+
+    def photo_from_wall(self, xz: np.ndarray) -> np.ndarray:
+        """Wall points ``(..., 2)`` (metres) -> the photo's pixels, lens included."""
+        return self.distort(project(self.image_from_wall, np.asarray(xz, dtype=np.float64)))
+
     def corners_px(self) -> np.ndarray:
         w, h = self.width_m, self.height_m
-        return project(self.image_from_wall, np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=np.float64))
+        return self.photo_from_wall(np.array([[0, 0], [w, 0], [w, h], [0, h]], dtype=np.float64))
 
     def camera_json(self) -> dict:
         return {
@@ -140,12 +211,25 @@ class CalibrationResult(HasFit):
             "camera": self.camera_json(),
             "rms_residual_px": self.rms_residual_px,
             "rms_corner_px": self.rms_corner_px,
+            "rms_corner_sigma": self.rms_corner_sigma,
             "rms_line_px": self.rms_line_px,
             **self.fit.to_json(),
             "image_size": list(self.image_size),
             "corners_px": self.corners_px().tolist(),
             "joint_segments": {"bed": self.n_bed, "head": self.n_head},
-            "covariance_units": "px, rad, m",
+            "plumb_lines": {
+                "count": self.plumb_lines,
+                "rms_from_straight_px": self.plumb_rms_px[0],
+                "rms_from_straight_undistorted_px": self.plumb_rms_px[1],
+            },
+            "covariance_units": "px, rad, m, -",
+            "distortion": {
+                "model": DISTORTION_MODEL,
+                "k1": self.value("k1"),
+                "k2": self.value("k2"),
+                "k1_sigma": self.sigma("k1"),
+                "k2_sigma": self.sigma("k2"),
+            },
         }
 
 
@@ -175,11 +259,17 @@ def homography_dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return h / h[2, 2]
 
 
+def _focal_guess(inp: CalibrationInput) -> float:
+    return inp.focal_px or inp.focal_prior_px or focal_px_from_35mm(FOCAL_PRIOR_35MM, inp.image_size)
+
+
 def initial_params(inp: CalibrationInput) -> np.ndarray:
     """Closed-form start from the four corners: homography, focal from the right angle, pose, scale."""
     pp = np.array(principal_point(inp.image_size))
     unit = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64)
-    g = homography_dlt(unit, inp.corners_px - pp)
+    g = homography_dlt(
+        unit, undistort(np.asarray(inp.corners_px, np.float64), _focal_guess(inp), pp, inp.k1_prior, inp.k2_prior) - pp
+    )
     f = inp.focal_px
     if f is None:
         den = g[2, 0] * g[2, 1]
@@ -202,11 +292,17 @@ def initial_params(inp: CalibrationInput) -> np.ndarray:
         lam = a / inp.known_width_m
     elif inp.known_height_m:
         lam = b / inp.known_height_m
+    elif inp.known_length is not None:
+        m_inv = np.linalg.inv(np.diag([1 / f, 1 / f, 1.0]) @ g)  # photo (centred) -> unit wall
+        ends = np.c_[np.asarray(inp.known_length[:4]).reshape(2, 2) - pp, np.ones(2)] @ m_inv.T
+        ends = ends[:, :2] / ends[:, 2:3]
+        unit_len = math.hypot(a * (ends[1, 0] - ends[0, 0]), b * (ends[1, 1] - ends[0, 1]))
+        lam = unit_len / inp.known_length[4] if unit_len > 1e-12 else a / 5.0
     else:
         lam = abs(centre_u[2]) / inp.camera_height_m if abs(centre_u[2]) > 1e-9 else a / 5.0
     yaw, pitch, roll = angles_from_rotation(wall_from_cam)
     c = centre_u / lam
-    return np.array([f, yaw, pitch, roll, c[0], c[1], c[2], a / lam, b / lam])
+    return np.array([f, yaw, pitch, roll, c[0], c[1], c[2], a / lam, b / lam, inp.k1_prior, inp.k2_prior])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -239,6 +335,36 @@ def _pad_segments(seg: np.ndarray, sigma: float, n_eff: int) -> tuple[np.ndarray
     return out, w
 
 
+#: plumb-line clusters: at most this many long joints; each counts as at most PLUMB_EFFECTIVE points
+MAX_PLUMB_LINES = 96
+PLUMB_EFFECTIVE = 12
+_PLUMB_BUCKETS = (32, 256, 1024, 4096)
+
+
+def _pad_plumb(inp: CalibrationInput):
+    """The plumb-line points padded to a bucket: points (n, 2), weights (n,) (1 / sigma, shrunk so
+    that a cluster counts as at most :data:`PLUMB_EFFECTIVE` points; 0 = padding), cluster index
+    (n,) as float (JAX's segment sums take it cast) and family (n,)."""
+    pts = np.asarray(inp.plumb_points, dtype=np.float64).reshape(-1, 2)
+    cl = np.asarray(inp.plumb_cluster, dtype=np.int64).ravel()
+    fam = np.asarray(inp.plumb_family, dtype=np.float64).ravel()
+    keep = cl < MAX_PLUMB_LINES
+    pts, cl, fam = pts[keep], cl[keep], fam[keep]
+    n = next((b for b in _PLUMB_BUCKETS if len(pts) <= b), _PLUMB_BUCKETS[-1])
+    pts, cl, fam = pts[:n], cl[:n], fam[:n]
+    out = np.zeros((n, 2))
+    w = np.zeros(n)
+    c = np.full(n, float(MAX_PLUMB_LINES - 1))
+    f = np.zeros(n)
+    out[: len(pts)] = pts
+    if len(pts):
+        counts = np.bincount(cl, minlength=MAX_PLUMB_LINES).astype(np.float64)
+        w[: len(pts)] = np.sqrt(np.minimum(1.0, PLUMB_EFFECTIVE / counts[cl])) / inp.plumb_sigma_px
+        c[: len(pts)] = cl
+        f[: len(pts)] = fam
+    return out, w, c, f
+
+
 def pack(inp: CalibrationInput) -> dict:
     """The fit's data as fixed-shape float64 arrays (weights = 1 / sigma, 0 = absent)."""
     if inp.corners_px is None or np.shape(inp.corners_px) != (4, 2):
@@ -247,6 +373,11 @@ def pack(inp: CalibrationInput) -> dict:
     head, head_w = _pad_segments(inp.head_segments, inp.line_sigma_px, inp.max_effective_segments)
     f0 = inp.focal_px or 0.0
     f_sigma = inp.focal_sigma_px if inp.focal_sigma_px else (0.002 * f0 if f0 else None)
+    f_prior = inp.focal_prior_px or focal_px_from_35mm(FOCAL_PRIOR_35MM, inp.image_size)
+    # held: a sigma of 1e-3 (a tighter one made J^T J singular by its condition number)
+    k_w = (1.0 / inp.k1_sigma, 1.0 / inp.k2_sigma) if inp.fit_distortion else (1e3, 1e3)
+    length = inp.known_length
+    h_sigma = inp.known_height_sigma_m or inp.known_sigma_m
     prior = np.array(
         [
             inp.camera_height_m,
@@ -256,18 +387,32 @@ def pack(inp: CalibrationInput) -> dict:
             inp.known_width_m or 0.0,
             1.0 / inp.known_sigma_m if inp.known_width_m else 0.0,
             inp.known_height_m or 0.0,
-            1.0 / inp.known_sigma_m if inp.known_height_m else 0.0,
+            1.0 / h_sigma if inp.known_height_m else 0.0,
+            math.log(f_prior),
+            0.0 if inp.focal_px else 1.0 / inp.focal_prior_log_sigma,
+            inp.k1_prior,
+            k_w[0],
+            inp.k2_prior,
+            k_w[1],
+            length[4] if length is not None else 0.0,
+            1.0 / inp.known_length_sigma_m if length is not None else 0.0,
         ]
     )
+    plumb, plumb_w, plumb_c, plumb_f = _pad_plumb(inp)
     return {
         "pp": np.array(principal_point(inp.image_size)),
         "corners": np.asarray(inp.corners_px, dtype=np.float64),
-        "corner_w": np.full(4, 1.0 / inp.corner_sigma_px),
+        "corner_w": 1.0 / inp.corner_sigmas(),
+        "plumb": plumb,
+        "plumb_w": plumb_w,
+        "plumb_cluster": plumb_c,
+        "plumb_family": plumb_f,
         "bed": bed,
         "bed_w": bed_w,
         "head": head,
         "head_w": head_w,
         "prior": prior,
+        "length_px": np.asarray(length[:4] if length is not None else (0.0, 0.0, 1.0, 0.0), dtype=np.float64),
     }
 
 
@@ -281,21 +426,97 @@ def _line_distances(vp, seg, xp=jnp):
     return xp.sum(line * p1, axis=1) / norm
 
 
-def _parts(params, data):
+def _ideal_points(params, data):
+    """Every observed photo point the fit uses -> ideal pinhole points, by the fitted lens (k1,
+    k2), in one call (one lens model in the fit's code, not six): the corners ``(4, 2)``, the bed
+    and head segments ``(n, 4)`` and the known length's two ends ``(2, 2)``."""
+    nb, nh = data["bed"].shape[0], data["head"].shape[0]
+    pts = jnp.concatenate(
+        [
+            data["corners"],
+            data["bed"][:, :2],
+            data["bed"][:, 2:],
+            data["head"][:, :2],
+            data["head"][:, 2:],
+            data["length_px"].reshape(2, 2),
+            data["plumb"],
+        ]
+    )
+    ideal = undistort(pts, params[0], data["pp"], params[9], params[10], jnp)
+    corners, ideal = ideal[:4], ideal[4:]
+    bed = jnp.concatenate([ideal[:nb], ideal[nb : 2 * nb]], axis=1)
+    ideal = ideal[2 * nb :]
+    head = jnp.concatenate([ideal[:nh], ideal[nh : 2 * nh]], axis=1)
+    ideal = ideal[2 * nh :]
+    return corners, bed, head, ideal[:2], ideal[2:]
+
+
+def _plumb_residuals(params, data, ideal):
+    """Each plumb-line point's distance (px, times its weight) from the straight line fitted to its
+    cluster (through the weighted centroid along the principal axis), all in ideal (lens undone)
+    coordinates: a long joint's or a beam's curvature in the photo is what k1, k2 must explain.
+    Only straightness: the direction is each line's own, so that the clusters, made of the same
+    joints as the segments, do not count the vanishing points a second time (lines forced through
+    them pulled a tall wall's fit to a camera 33 km away, measured)."""
+    w = data["plumb_w"]
+    cl = data["plumb_cluster"].astype(jnp.int32)
+    tot = jax.ops.segment_sum(w, cl, num_segments=MAX_PLUMB_LINES)
+    cen = jax.ops.segment_sum(ideal * w[:, None], cl, num_segments=MAX_PLUMB_LINES) / jnp.maximum(tot, 1e-12)[:, None]
+    d = ideal - cen[cl]
+    sxx = jax.ops.segment_sum(w * d[:, 0] ** 2, cl, num_segments=MAX_PLUMB_LINES)
+    syy = jax.ops.segment_sum(w * d[:, 1] ** 2, cl, num_segments=MAX_PLUMB_LINES)
+    sxy = jax.ops.segment_sum(w * d[:, 0] * d[:, 1], cl, num_segments=MAX_PLUMB_LINES)
+    # an empty cluster (the padding's) gets a fixed direction, so that no 0/0 reaches a derivative
+    used = tot > 0
+    angle = 0.5 * jnp.arctan2(jnp.where(used, 2.0 * sxy, 0.0), jnp.where(used, sxx - syy, 1.0))
+    return (-d[:, 0] * jnp.sin(angle)[cl] + d[:, 1] * jnp.cos(angle)[cl]) * w
+
+
+def _parts(params, data, ideal=None):
+    corners_obs, bed_obs, head_obs, _, _ = _ideal_points(params, data) if ideal is None else ideal
     h = image_from_wall_homography(params, data["pp"], jnp)
     w, ht = params[7], params[8]
     zero = jnp.zeros(())
     corners = jnp.stack([jnp.stack([zero, zero]), jnp.stack([w, zero]), jnp.stack([w, ht]), jnp.stack([zero, ht])])
-    corner_px = project(h, corners, jnp) - data["corners"]
-    bed = _line_distances(h[:, 0], data["bed"])
-    head = _line_distances(h[:, 1], data["head"])
+    corner_px = project(h, corners, jnp) - corners_obs
+    bed = _line_distances(h[:, 0], bed_obs)
+    head = _line_distances(h[:, 1], head_obs)
     return corner_px, bed, head
 
 
+def _known_length(params, data, ends):
+    """The wall distance between the two (ideal) photo points ``ends`` ``(2, 2)`` (metres)."""
+    h = image_from_wall_homography(params, data["pp"], jnp)
+    # the inverse map up to scale: the adjugate (elementwise, so the exported and the jitted
+    # fit compile it alike, where a LAPACK inverse did not, to 1e-10)
+    adj = jnp.stack([jnp.cross(h[:, 1], h[:, 2]), jnp.cross(h[:, 2], h[:, 0]), jnp.cross(h[:, 0], h[:, 1])])
+    wall = project(adj, ends, jnp)
+    return jnp.sqrt(jnp.sum((wall[1] - wall[0]) ** 2) + 1e-30)
+
+
+#: the joint segments' residuals count by Cauchy's loss beyond this many sigmas: a stone's slanted
+#: edge, a crack or a beam's edge taken for a joint weighs little instead of bending the camera
+#: (on the laboratory photos, irregular joints and cracks drove the focal length to 200 px)
+ROBUST_SCALE = 2.0
+
+
+def _cauchy(r, c=ROBUST_SCALE):
+    """Residuals ``r`` (in sigmas) mapped so that their squares sum to Cauchy's loss
+    ``c^2 log(1 + (r / c)^2)``: ``r`` itself near zero, growing as ``sqrt(log)`` far out; smooth at
+    zero (a padded segment's exact zero too)."""
+    q = (r / c) ** 2
+    small = q < 1e-8
+    safe = jnp.where(small, 1.0, q)
+    ratio = jnp.where(small, 1.0 - 0.5 * q, jnp.log1p(safe) / safe)
+    return r * jnp.sqrt(ratio)
+
+
 def residual_vector(u, data):
-    """All residuals, in units of their noise, at scaled parameters ``u = params / SCALE``."""
+    """All residuals, in units of their noise, at scaled parameters ``u = params / SCALE`` (the joint
+    segments' through :func:`_cauchy`)."""
     params = u * SCALE
-    corner_px, bed, head = _parts(params, data)
+    ideal = _ideal_points(params, data)
+    corner_px, bed, head = _parts(params, data, ideal)
     pr = data["prior"]
     priors = jnp.stack(
         [
@@ -303,10 +524,20 @@ def residual_vector(u, data):
             (params[0] - pr[2]) * pr[3],
             (params[7] - pr[4]) * pr[5],
             (params[8] - pr[6]) * pr[7],
+            (jnp.log(jnp.maximum(params[0], 1.0)) - pr[8]) * pr[9],
+            (params[9] - pr[10]) * pr[11],
+            (params[10] - pr[12]) * pr[13],
+            (_known_length(params, data, ideal[3]) - pr[14]) * pr[15],
         ]
     )
     return jnp.concatenate(
-        [(corner_px * data["corner_w"][:, None]).ravel(), bed * data["bed_w"], head * data["head_w"], priors]
+        [
+            (corner_px * data["corner_w"][:, None]).ravel(),
+            _cauchy(bed * data["bed_w"]),
+            _cauchy(head * data["head_w"]),
+            _cauchy(_plumb_residuals(params, data, ideal[4])),
+            priors,
+        ]
     )
 
 
@@ -330,7 +561,7 @@ def _solver():
     from .. import _jax
     from . import camera, lm
 
-    nb, nh = export.symbolic_shape("nb, nh")
+    nb, nh, npl = export.symbolic_shape("nb, nh, npl")
 
     def spec(*shape):
         return jax.ShapeDtypeStruct(shape, jnp.float64)
@@ -343,7 +574,12 @@ def _solver():
         "bed_w": spec(nb),
         "head": spec(nh, 4),
         "head_w": spec(nh),
-        "prior": spec(8),
+        "prior": spec(16),
+        "length_px": spec(4),
+        "plumb": spec(npl, 2),
+        "plumb_w": spec(npl),
+        "plumb_cluster": spec(npl),
+        "plumb_family": spec(npl),
     }
     sources = [Path(__file__), Path(camera.__file__), Path(lm.__file__)]
     return _jax.exported("camera-fit", _solve_fn, (spec(len(SCALE)), data), sources=sources)
@@ -372,6 +608,103 @@ def _singular_advice(inp: CalibrationInput) -> str:
     return f"pass --known-width or --known-height, or click the wall's corners with {CORNERS_FLAG}"
 
 
+def _wiggle(points: np.ndarray) -> float:
+    """RMS distance (px) of points ``(n, 2)`` from the parabola fitted along their principal
+    direction: a lens bends a straight joint into (nearly) a parabola, an irregular course wiggles."""
+    d = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(d, full_matrices=False)
+    t, y = d @ vt[0], d @ vt[1]
+    if len(t) < 4:
+        return 0.0
+    a = np.c_[np.ones_like(t), t, t * t]
+    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    return float(np.sqrt(np.mean((y - a @ coef) ** 2)))
+
+
+def plumb_lines(
+    first: "CalibrationResult",
+    bed: np.ndarray,
+    head: np.ndarray,
+    *,
+    tol_px: float = 4.0,
+    min_span: float = 0.3,
+    max_wiggle_px: float = 1.5,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Long joints for the plumb-line constraint: the bed segments (``(n, 4)`` photo pixels) that lie
+    on one course's joint (their middles within ``tol_px`` of each other across the wall, in the
+    wall's frame of a first fit ``first``) and together span ``min_span`` of the wall's width, and
+    the head segments likewise along its height; a cluster that wiggles more than
+    ``max_wiggle_px`` about a parabola (:func:`_wiggle`: irregular stones, a crack) is left out.
+    Returns the points (each segment's ends and middle, photo pixels), their cluster and family
+    (0 bed, 1 head)."""
+    from .camera import px_per_m as local_px_per_m
+
+    pts_out, cl_out, fam_out = [], [], []
+    k = 0
+    wall_from_image = first.wall_from_image
+    span_of = (first.width_m, first.height_m)
+    for fam, seg in ((0, bed), (1, head)):
+        seg = np.asarray(seg, dtype=np.float64).reshape(-1, 4)
+        if len(seg) < 3:
+            continue
+        ends = first.undistort(seg.reshape(-1, 2))
+        xz = project(wall_from_image, ends).reshape(-1, 2, 2)
+        across = xz[:, :, 1 - fam].mean(axis=1)  # z of a bed joint, x of a head joint
+        along = xz[:, :, fam]
+        scale = local_px_per_m(first.image_from_wall, xz.mean(axis=1))
+        tol = tol_px / np.maximum(scale, 1e-9)
+        # a joint's pieces chain: two segments are of one joint when they lie side by side along
+        # it (their gap within a tenth of the wall) and within tol_px of each other across it, so
+        # a joint a lens bows (20 px and more from end to end) still forms one chain
+        lo, hi = along.min(axis=1), along.max(axis=1)
+        gap = np.maximum(lo[:, None], lo[None, :]) - np.minimum(hi[:, None], hi[None, :])
+        # and only edges of one polarity (LSD keeps the dark side on one hand of a segment's
+        # direction): the two edges of a thin joint, a few pixels apart, stay two lines
+        run = seg[:, 2 + fam] - seg[:, fam]  # along x for a bed segment, y for a head one
+        polarity = np.sign(run)
+        near = (
+            (np.abs(across[:, None] - across[None, :]) <= np.maximum(tol[:, None], tol[None, :]))
+            & (gap <= 0.1 * span_of[fam])
+            & (polarity[:, None] == polarity[None, :])
+        )
+        from scipy.sparse.csgraph import connected_components
+
+        _, label = connected_components(near, directed=False)
+        groups = [np.nonzero(label == c)[0] for c in range(label.max() + 1)]
+        for g in groups:
+            g = np.array(g)
+            extent = float(along[g].max() - along[g].min())
+            if len(g) < 3 or extent < min_span * span_of[fam] or k >= MAX_PLUMB_LINES - 1:
+                continue
+            s_ = seg[g]
+            mids = (s_[:, :2] + s_[:, 2:]) / 2
+            p = np.concatenate([s_[:, :2], mids, s_[:, 2:]])
+            if _wiggle(p) > max_wiggle_px:
+                continue  # an irregular stone course or a crack: not a straight joint
+            pts_out.append(p)
+            cl_out.append(np.full(len(p), k))
+            fam_out.append(np.full(len(p), float(fam)))
+            k += 1
+    if not pts_out:
+        return np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros(0)
+    return np.concatenate(pts_out), np.concatenate(cl_out), np.concatenate(fam_out)
+
+
+def straightness_rms(points: np.ndarray, cluster: np.ndarray) -> float:
+    """The RMS distance (px) of ``points`` from the straight line fitted (total least squares) to
+    each of their ``cluster``'s points: how far the long joints are from straight lines."""
+    sq, n = 0.0, 0
+    for c in np.unique(cluster):
+        p = points[cluster == c]
+        if len(p) < 3:
+            continue
+        d = p - p.mean(axis=0)
+        _, sv, _ = np.linalg.svd(d, full_matrices=False)
+        sq += float(sv[-1] ** 2)
+        n += len(p)
+    return math.sqrt(sq / n) if n else float("nan")
+
+
 def calibrate(
     inp: CalibrationInput, *, start: np.ndarray | None = None, reject_outliers: bool = True
 ) -> CalibrationResult:
@@ -382,11 +715,34 @@ def calibrate(
     the background) are dropped before the second."""
     if reject_outliers and (len(inp.bed_segments) or len(inp.head_segments)):
         first = calibrate(inp, start=start, reject_outliers=False)
-        h = first.image_from_wall
         bed, head = _capped(inp.bed_segments), _capped(inp.head_segments)
-        d_bed = _line_distances(h[:, 0], bed, np) if len(bed) else np.zeros(0)
-        d_head = _line_distances(h[:, 1], head, np) if len(head) else np.zeros(0)
-        inp = replace(inp, bed_segments=_inliers(bed, d_bed), head_segments=_inliers(head, d_head))
+        own_plumb = inp.fit_distortion
+        given = (inp.plumb_points, inp.plumb_cluster, inp.plumb_family)
+        # with the lens fitted, twice: a strong lens bends the far joints off the first fit's
+        # vanishing lines, so the first cut drops what tells the lens; the second, from a fit that
+        # has straightened the long joints, keeps them
+        for last in (False, True) if own_plumb else (True,):
+            h = first.image_from_wall
+
+            def ideal(seg, fit=first):
+                return fit.undistort(seg.reshape(-1, 2)).reshape(-1, 4)
+
+            d_bed = _line_distances(h[:, 0], ideal(bed), np) if len(bed) else np.zeros(0)
+            d_head = _line_distances(h[:, 1], ideal(head), np) if len(head) else np.zeros(0)
+            step = replace(inp, bed_segments=_inliers(bed, d_bed), head_segments=_inliers(head, d_head))
+            if own_plumb:
+                pts, cl, fam = plumb_lines(first, step.bed_segments, step.head_segments)
+                base = int(np.max(given[1])) + 1 if len(given[1]) else 0
+                step = replace(
+                    step,
+                    plumb_points=np.concatenate([np.reshape(given[0], (-1, 2)), pts]),
+                    plumb_cluster=np.concatenate([np.asarray(given[1], dtype=np.int64), cl + base]),
+                    plumb_family=np.concatenate([np.asarray(given[2], dtype=np.float64), fam]),
+                )
+            if last:
+                inp = step
+                break
+            first = calibrate(step, start=first.params, reject_outliers=False)
         start = first.params
     data = pack(inp)
     p0 = initial_params(inp) if start is None else np.asarray(start, dtype=np.float64)
@@ -408,12 +764,21 @@ def calibrate(
     lines = np.concatenate([np.asarray(bed)[:nb], np.asarray(head)[:nh]])
     sq = np.concatenate([np.sum(corner_px**2, axis=1), np.repeat(lines**2, 2)])
     rms_line = float(np.sqrt(np.mean(lines**2))) if len(lines) else 0.0
-    return CalibrationResult(
+    result = CalibrationResult(
         fit=fit,
         rms_residual_px=float(np.sqrt(np.mean(sq))),
         rms_corner_px=float(np.sqrt(np.mean(np.sum(corner_px**2, axis=1)))),
+        rms_corner_sigma=float(np.sqrt(np.mean(np.sum(corner_px**2, axis=1) / inp.corner_sigmas() ** 2 / 2))),
         rms_line_px=rms_line,
         image_size=tuple(int(v) for v in inp.image_size),
         n_bed=nb,
         n_head=nh,
     )
+    if len(inp.plumb_points):
+        pts, cl = np.asarray(inp.plumb_points), np.asarray(inp.plumb_cluster)
+        result = replace(
+            result,
+            plumb_lines=int(len(np.unique(cl))),
+            plumb_rms_px=(straightness_rms(pts, cl), straightness_rms(result.undistort(pts), cl)),
+        )
+    return result

@@ -20,7 +20,7 @@ The result gives the fit its four corners and every joint segment inside the wal
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
@@ -28,6 +28,7 @@ from scipy import ndimage
 from .._threads import background
 from ..errors import CalibMasonryError, FitFailed
 from .camera import CORNERS_FLAG, order_corners
+from .outline import OutlineConfig
 
 __all__ = ["DetectConfig", "Detection", "detect_wall", "refine_quad", "segments_in_quad"]
 
@@ -46,6 +47,12 @@ class DetectConfig:
     ridge_sigma_px: float = 0.0  # > 0: segments of joint centre lines (Hessian ridges at this scale) instead of edges
     refine_halfwidth_px: float | None = None  # full-size px of the coarse pass; default 6 working px
     seed: int = 0
+    segments: str = "lsd"  # the fit's joint segments: "hough" (Canny + Hough, refitted) or "lsd"
+    outline: OutlineConfig = field(default_factory=OutlineConfig)
+
+    def __post_init__(self) -> None:
+        if self.segments not in ("hough", "lsd"):
+            raise ValueError(f"DetectConfig.segments = {self.segments!r}: choose 'hough' or 'lsd'")
 
 
 @dataclass(frozen=True)
@@ -56,6 +63,7 @@ class Detection:
     vp_bed: np.ndarray  # homogeneous, full-size pixels
     vp_head: np.ndarray
     n_segments: int
+    corner_sigma_px: np.ndarray | None = None  # (4,) from the edge evidence of the sides
 
 
 def _edge_points(gray: np.ndarray, cfg: DetectConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -291,8 +299,13 @@ def _blurred_samples(rgb: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.
     return np.stack([ndimage.map_coordinates(crop[..., k], coords, order=1, mode="nearest") for k in range(3)], -1)
 
 
-def _refine_side(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray] | None:
-    """Sub-pixel line (point, direction) of the strongest colour edge along the side a-b."""
+def _refine_side(
+    rgb: np.ndarray, a: np.ndarray, b: np.ndarray, half: float, *, points: list | None = None, to_photo=None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Sub-pixel line (point, direction) of the strongest colour edge along the side a-b (the edge
+    points it was fitted to appended to ``points``, when given). ``to_photo``: a map of ideal image
+    points ``(..., 2)`` to the photo's (a lens): the side is then straight in ideal coordinates and
+    the photo is sampled where the lens put each of its points."""
     d = b - a
     length = float(np.linalg.norm(d))
     if length < 10:
@@ -302,6 +315,8 @@ def _refine_side(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, half: float) -> 
     ts = np.linspace(0.08, 0.92, max(20, int(length / 6)))
     offs = np.arange(-half, half + 0.25, 0.5)
     pts = a[None, None, :] + ts[:, None, None] * (b - a)[None, None, :] + offs[None, :, None] * n[None, None, :]
+    if to_photo is not None:
+        pts = to_photo(pts.reshape(-1, 2)).reshape(pts.shape)
     prof = _blurred_samples(rgb, pts[..., 1].ravel(), pts[..., 0].ravel()).reshape(len(ts), len(offs), 3)
     grad = np.linalg.norm(np.diff(prof, axis=1), axis=-1)  # between samples
     # the outermost strong edge (the sides run LL, LR, UR, UL, so +n points out of the wall): a
@@ -317,7 +332,56 @@ def _refine_side(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, half: float) -> 
     frac = np.where(np.abs(den) > 1e-12, 0.5 * (g0 - g2) / np.where(np.abs(den) > 1e-12, den, 1.0), 0.0)
     off = offs[0] + 0.5 * (kk + np.clip(frac, -0.5, 0.5)) + 0.25
     edge = a[None, :] + ts[:, None] * (b - a)[None, :] + off[:, None] * n[None, :]
+    if points is not None:
+        points.append(edge)
     return _robust_fit(edge, pad=0.05)
+
+
+def _bowed(edge: np.ndarray, line: tuple[np.ndarray, np.ndarray], a: np.ndarray, b: np.ndarray):
+    """A side whose edge points bow (a lens bends a straight edge into nearly a parabola): the
+    tangents of the parabola fitted to them (robustly) at the side's two ends ``a`` and ``b``, as
+    ``((point, direction) at a, (point, direction) at b)``; None where the bow is not significant
+    (three sigmas, and half a pixel at the middle), so that a straight side stays a line."""
+    c, d = line
+    nrm = np.array([-d[1], d[0]])
+    t = (edge - c) @ d
+    r = (edge - c) @ nrm
+    keep = np.ones(len(t), dtype=bool)
+    coef, cov = None, None
+    for _ in range(3):
+        if keep.sum() < 8:
+            return None
+        m = np.c_[np.ones(keep.sum()), t[keep], t[keep] ** 2]
+        coef, *_ = np.linalg.lstsq(m, r[keep], rcond=None)
+        res = r - np.c_[np.ones_like(t), t, t * t] @ coef
+        sd = 1.4826 * float(np.median(np.abs(res[keep]))) + 1e-6
+        keep = np.abs(res) < max(1.0, 3.0 * sd)
+        cov = np.linalg.pinv(m.T @ m) * sd**2
+    half = 0.5 * float(np.ptp(t))
+    gamma = float(coef[2])
+    if abs(gamma) < 3.0 * math.sqrt(max(cov[2, 2], 0.0)) or abs(gamma) * half**2 < 0.5:
+        return None
+
+    def tangent(p):
+        tp = float((p - c) @ d)
+        point = c + tp * d + (coef[0] + coef[1] * tp + gamma * tp * tp) * nrm
+        direction = d + (coef[1] + 2.0 * gamma * tp) * nrm
+        return point, direction / np.linalg.norm(direction)
+
+    return tangent(a), tangent(b)
+
+
+def _side_sigma(edge: np.ndarray, line: tuple[np.ndarray, np.ndarray], length: float) -> float:
+    """How well a side's edge points ``(n, 2)`` pin its line at the side's ends (px): the line's
+    offset and angle from the points' robust scatter about it, and a quarter of that scatter again
+    for where along a ragged edge (stones' ends, a broken plaster) the wall's edge is meant to be,
+    and 0.3 px for the photo's blur. A clean synthetic edge gives 0.3-0.4 px, a rubble wall's end
+    several pixels."""
+    c, d = line
+    r = (edge - c) @ np.array([-d[1], d[0]])
+    sd = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    n_eff = max(1.0, min(len(edge), length / max(4.0 * sd, 2.0)))  # neighbours share a stone's edge
+    return math.sqrt((2.0 * sd) ** 2 / n_eff + (0.25 * sd) ** 2 + 0.3**2)
 
 
 def _robust_fit(pts: np.ndarray, *, pad: float = 0.0, floor: float = 0.0) -> tuple[np.ndarray, np.ndarray] | None:
@@ -537,25 +601,52 @@ def _quad_of_mask(mask: np.ndarray, min_solidity: float = 0.95, min_fill: float 
         return None
 
 
-def refine_quad(rgb: np.ndarray, quad: np.ndarray, halfwidths: tuple[float, ...] = (5.0, 2.5)) -> np.ndarray:
+def refine_quad(
+    rgb: np.ndarray,
+    quad: np.ndarray,
+    halfwidths: tuple[float, ...] = (5.0, 2.5),
+    *,
+    with_sigma: bool = False,
+    to_photo=None,
+    curved: bool = False,
+):
     """Snap a quadrilateral (LL, LR, UR, UL) to the wall's outline edges in the full photo.
 
     Each pass fits every side to the strongest colour edge within ``halfwidth`` pixels of it
     (sub-pixel profile maxima, robust line fit) and intersects adjacent sides. A pass that fails or
     moves a corner by more than four half-widths is discarded, so a quadrilateral with no clear
-    edge nearby comes back unchanged."""
+    edge nearby comes back unchanged. With ``with_sigma``, also each corner's uncertainty (px,
+    ``(4,)``) from its two sides' edge evidence (:func:`_side_sigma`; 2 px for a corner whose sides
+    found no edge). ``to_photo``: ``quad`` is in ideal image coordinates of a lens that maps them to
+    the photo's so (:func:`_refine_side`); the result is too. ``curved``: a side whose edge bows
+    significantly (an unknown lens) meets its neighbours along its tangents at the ends
+    (:func:`_bowed`), not along its chord, which put the corners of a barrel-distorted wall 10-15 px
+    off (measured at k1 = -0.15)."""
+    sigma = np.full(4, 2.0)
     for half in halfwidths:
-        sides = [_refine_side(rgb, quad[i], quad[(i + 1) % 4], half) for i in range(4)]
+        pts: list = []
+        sides = [_refine_side(rgb, quad[i], quad[(i + 1) % 4], half, points=pts, to_photo=to_photo) for i in range(4)]
         if any(sd is None for sd in sides):
             break
+        ends = [(sd, sd) for sd in sides]  # each side's line at its start and at its end
+        if curved:
+            for i in range(4):
+                bow = _bowed(pts[i], sides[i], quad[i], quad[(i + 1) % 4])
+                if bow is not None:
+                    ends[i] = bow
         try:
-            refined = np.array([_intersect(sides[(i - 1) % 4], sides[i]) for i in range(4)])
+            refined = np.array([_intersect(ends[(i - 1) % 4][1], ends[i][0]) for i in range(4)])
         except np.linalg.LinAlgError:
             break
         if not np.all(np.isfinite(refined)) or np.max(np.linalg.norm(refined - quad, axis=1)) > 4 * half:
             break
+        side_sigma = [
+            _side_sigma(pts[i], sides[i], float(np.linalg.norm(quad[(i + 1) % 4] - quad[i]))) for i in range(4)
+        ]
+        # the corner i is where sides i - 1 and i meet; isotropic, from the two sides' normals
+        sigma = np.array([math.sqrt((side_sigma[(i - 1) % 4] ** 2 + side_sigma[i] ** 2) / 2) for i in range(4)])
         quad = order_corners(refined, where="outline refinement")
-    return quad
+    return (quad, sigma) if with_sigma else quad
 
 
 def _in_convex(points: np.ndarray, quad: np.ndarray) -> np.ndarray:
@@ -628,8 +719,8 @@ def _shrunk_colour(rgb: np.ndarray, s: float) -> np.ndarray:
     return np.stack([shrink(rgb[..., k], s) for k in range(3)], -1)
 
 
-def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detection:
-    """Find the wall's corners and joint segments in an RGB photo ``(rows, cols, 3)`` in [0, 1]."""
+def _detect_wall_joints(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detection:
+    """The former detection (joints' extent, then the wall's colours), kept for comparison."""
 
     s = _work_scale(rgb.shape, config.work_long_side_px)
     # the shrunk colour photo (for the wall's colours, below) on a second core while this one
@@ -771,3 +862,203 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> Detec
         vp_head=unscale @ vp_h,
         n_segments=len(seg),
     )
+
+
+def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occluders=()) -> Detection:
+    """Find the wall's corners (with their uncertainty) and joint segments in an RGB photo
+    ``(rows, cols, 3)`` in [0, 1]: the outline from the wall's appearance and the joints'
+    directions (:func:`~calib_masonry.calibrate.outline.detect_outline`), each side then snapped to
+    the photo's edge at sub-pixel (:func:`refine_quad`); the joint segments inside it for the fit.
+    ``occluders``: polygons (photo pixels) left out of everything."""
+    from .outline import detect_outline, occluded_mask, segments_outside
+
+    outline = detect_outline(rgb, occluders=occluders, config=config.outline)
+    s = _work_scale(rgb.shape, config.work_long_side_px)
+    quad, sigma = refine_quad(
+        rgb, outline.corners_px, (config.refine_halfwidth_px or 6.0 / s, 2.5 / s), with_sigma=True, curved=True
+    )
+    rows, cols = rgb.shape[:2]
+    slack = 0.02 * max(rows, cols)
+    if np.any(quad < -slack) or np.any(quad[:, 0] > cols - 1 + slack) or np.any(quad[:, 1] > rows - 1 + slack):
+        raise FitFailed(
+            "automatic mode: the outline found runs outside the photo; click the wall's corners with " + CORNERS_FLAG
+        )
+    seg = joint_segments(rgb, config)
+    seg = segments_outside(seg, occluded_mask((rows, cols), occluders))
+    seg = segments_in_quad(seg, quad)
+    ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
+    from_h = np.minimum(ang, 180.0 - ang)
+    bed, head = seg[from_h < config.horizontal_max_deg], seg[np.abs(ang - 90.0) < config.vertical_max_deg]
+    vp_bed = outline.vp_bed if outline.vp_bed is not None else np.array([1.0, 0.0, 0.0])
+    vp_head = outline.vp_head if outline.vp_head is not None else np.array([0.0, 1.0, 0.0])
+    # a first cut on the outline's vanishing points (the fit rejects outliers of its own after)
+    tol = max(3.0, 0.004 * max(rows, cols))
+    bed = bed[_dist_to_vp(bed, vp_bed) < tol] if len(bed) else bed
+    head = head[_dist_to_vp(head, vp_head) < tol] if len(head) else head
+    return Detection(
+        corners_px=quad,
+        bed_segments=bed,
+        head_segments=head,
+        vp_bed=vp_bed,
+        vp_head=vp_head,
+        n_segments=len(seg),
+        corner_sigma_px=sigma,
+    )
+
+
+def joint_segments(rgb: np.ndarray, config: DetectConfig = DetectConfig()) -> np.ndarray:
+    """Joint-line segments ``(n, 4)`` of the whole photo in its pixels: Hough segments of Canny edges
+    refitted to sub-pixel edge points (``segments = "hough"``) or OpenCV's LSD (``"lsd"``), on the
+    photo shrunk to ``work_long_side_px``."""
+    small, s = working_gray(rgb, config.work_long_side_px)
+    if config.segments == "lsd":
+        from .outline import lsd_segments
+
+        seg = lsd_segments(small, min_length_px=config.min_length_px)
+    else:
+        seg = _hough_segments(small, config)
+    return np.c_[(seg[:, :2] + 0.5) / s - 0.5, (seg[:, 2:] + 0.5) / s - 0.5] if len(seg) else seg.reshape(-1, 4)
+
+
+#: a side is soft when the step across it (4 px) is less than this share of the fall to where its
+#: ramp of lightness ends; crisp outlines (a wall against the sky or the ground) step at once
+SOFT_STEP_SHARE = 0.7
+#: how far out a soft side is carried at most, of the wall's extent across it
+SOFT_REACH = 0.06
+#: the least fall of lightness (of 1) that is a ramp: a wall against a background of its own
+#: lightness (a red brick wall over a grey-green ground, 0.28 against 0.30-0.33) drifts by a few
+#: hundredths; the laboratory walls' shadowed rims fall by 0.25-0.45
+SOFT_MIN_FALL = 0.1
+
+
+def _ramp_end(prof: np.ndarray, offs: np.ndarray) -> float:
+    """Where a soft side's ramp ends on one lightness profile across it (0.0 when the side is
+    crisp there): see :func:`carry_soft_sides`."""
+    i0 = int(np.argmin(np.abs(offs)))
+    inside = float(prof[max(0, i0 - 2)])
+    sign = 1.0 if inside > prof[min(len(prof) - 1, i0 + 2)] else -1.0  # the fall's direction, outward
+    fall = sign * (inside - prof)  # grows outward while lightness falls away from the wall's
+    k = i0
+    run_max = fall[i0]
+    for j in range(i0 + 1, len(fall)):
+        if fall[j] < run_max - 0.1 * max(run_max, 1e-6):
+            break  # the profile turns back: the ramp has ended before
+        run_max = max(run_max, fall[j])
+        k = j
+    total = float(fall[i0 : k + 1].max())
+    step = float(fall[min(len(fall) - 1, i0 + 2)])
+    end = float(offs[int(np.argmax(fall[i0 : k + 1] >= 0.9 * total)) + i0]) if total > 0 else 0.0
+    if end >= offs[-1] - 3.0:
+        return 0.0  # still falling at the reach: the background's own gradient (a sky), not a rim
+    return end if total > SOFT_MIN_FALL and step < SOFT_STEP_SHARE * total and end > 2.0 else 0.0
+
+
+def carry_soft_sides(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> tuple[np.ndarray, np.ndarray]:
+    """Carry each soft side of the outline ``quad`` (LL, LR, UR, UL) outward to where its ramp of
+    lightness ends; returns the quadrilateral and, per corner, how far it moved (px, the sides'
+    root sum square), which the corner's sigma takes on: where a wall ends inside a shadow, the
+    outline is uncertain by about that much.
+
+    The appearance of a wall's face ends where its plaster or its stones end; the masonry goes on
+    where lightness fades gradually beyond: a mortar bed under a loading beam, a shadowed base on
+    its footing (measured on the laboratory photos: 10-20 px ramps at the top and the base, which
+    the database's height includes). Across a side, the lightness profile (the photo blurred by a
+    pixel, averaged over each quarter of the side's middle 70 %) is followed outward from the side
+    while it keeps falling (or rising) towards its extreme within :data:`SOFT_REACH` of the wall's
+    extent; a quarter is soft when its own step (2 px either side) is less than
+    :data:`SOFT_STEP_SHARE` of the whole fall. A side soft in at least three quarters moves to
+    where their falls end (the profile within 10 % of its extreme; the median of the quarters). A
+    crisp side stays, also one that a lens bends (each quarter steps at once, at its own offset,
+    where the side's average profile looked like a ramp). ``to_photo``: as :func:`refine_quad`'s
+    (``quad`` in ideal coordinates of that lens)."""
+    gray = np.asarray(rgb, dtype=np.float32).mean(axis=-1)
+    gray3 = None
+    moved = np.zeros(4)
+    lines = []
+    centre = quad.mean(axis=0)
+    for i in range(4):
+        a, b = quad[i], quad[(i + 1) % 4]
+        d = b - a
+        length = float(np.linalg.norm(d))
+        d = d / max(length, 1e-9)
+        n = np.array([d[1], -d[0]])
+        if ((a + b) / 2 - centre) @ n < 0:
+            n = -n
+        across = float(np.linalg.norm(((quad[(i + 2) % 4] + quad[(i + 3) % 4]) - (a + b)) / 2))
+        reach = max(3.0, SOFT_REACH * across)
+        offs = np.arange(-4.0, reach + 0.5, 1.0)
+        ts = np.linspace(0.15, 0.85, 4 * max(4, min(16, int(length / 32))))
+        pts = a[None, None, :] + ts[None, :, None] * (b - a)[None, None, :] + offs[:, None, None] * n[None, None, :]
+        if to_photo is not None:
+            pts = to_photo(pts.reshape(-1, 2)).reshape(pts.shape)
+        if gray3 is None:
+            gray3 = np.repeat(gray[..., None], 3, -1)
+        prof = _blurred_samples(gray3, pts[..., 1].ravel(), pts[..., 0].ravel())
+        prof = prof[:, 0].reshape(len(offs), len(ts))
+        ends = [_ramp_end(q.mean(axis=1), offs) for q in np.array_split(prof, 4, axis=1)]
+        soft = [e for e in ends if e > 0]
+        shift = float(np.median(soft)) if len(soft) >= 3 else 0.0
+        moved[i] = shift
+        lines.append((a + shift * n, d))
+    corners = []
+    for i in range(4):
+        try:
+            corners.append(_intersect(lines[(i - 1) % 4], lines[i]))
+        except np.linalg.LinAlgError:
+            return quad, np.zeros(4)
+    carried = np.array([math.hypot(moved[(i - 1) % 4], moved[i]) for i in range(4)])
+    return order_corners(np.array(corners), where="outline refinement"), carried
+
+
+def straight_lines(rgb: np.ndarray, *, min_fraction: float = 0.15, max_wiggle_px: float = 0.8) -> list[np.ndarray]:
+    """Long straight lines of the whole photo (a loading beam's edges, a frame, a building's
+    edge, the wall's own sides), as point sets ``(n, 2)`` in its pixels, for the lens's plumb-line
+    fit: OpenCV's LSD segments on the photo shrunk to 1400 px, chained where one continues
+    another (the same direction within 3 degrees and polarity, the same line within 2 px and 2 % of
+    their distance, a gap under 10 % of the photo), kept when a chain spans ``min_fraction`` of the
+    photo's diagonal and
+    its points lie on a smooth curve (:func:`calib_masonry.calibrate.fit._wiggle` below
+    ``max_wiggle_px``, so that a lens may bow it but nothing else does). A stone's edge or a
+    crack does not span that far straight."""
+    from scipy.sparse.csgraph import connected_components
+
+    from .fit import _wiggle
+    from .outline import lsd_segments
+
+    small, s = working_gray(rgb, 1400)
+    diag = math.hypot(*small.shape[:2])
+    seg = lsd_segments(small, min_length_px=0.02 * diag)
+    if len(seg) < 2:
+        return []
+    d = seg[:, 2:] - seg[:, :2]
+    length = np.hypot(d[:, 0], d[:, 1])
+    u = d / length[:, None]
+    # undirected angle for the "same direction" test, but the direction's sign kept for polarity
+    same_dir = (u @ u.T) > math.cos(math.radians(3.0))
+    nrm = np.c_[-u[:, 1], u[:, 0]]
+    # each segment's middle's distance from the other's line, allowed to grow by 2 % of the
+    # distance between them (a short segment's direction is known to a degree or so)
+    mid = (seg[:, :2] + seg[:, 2:]) / 2
+    rel = mid[None, :, :] - seg[:, None, :2]
+    dist = np.abs((rel * nrm[:, None, :]).sum(-1))
+    apart = np.linalg.norm(mid[None, :, :] - mid[:, None, :], axis=-1)
+    along1 = ((seg[None, :, :2] - seg[:, None, :2]) * u[:, None, :]).sum(-1)
+    along2 = ((seg[None, :, 2:] - seg[:, None, :2]) * u[:, None, :]).sum(-1)
+    gap = np.maximum(np.minimum(along1, along2) - length[:, None], -np.maximum(along1, along2))
+    near = same_dir & (np.maximum(dist, dist.T) <= 2.0 + 0.02 * apart) & (np.minimum(gap, gap.T) <= 0.1 * diag)
+    _, label = connected_components(near, directed=False)
+    out = []
+    for c in range(label.max() + 1):
+        idx = np.nonzero(label == c)[0]
+        pts = np.concatenate([seg[idx, :2], (seg[idx, :2] + seg[idx, 2:]) / 2, seg[idx, 2:]])
+        span = float(np.max(np.linalg.norm(pts - pts[0], axis=1)))
+        if span < min_fraction * diag or len(idx) < 2 and span < 2 * min_fraction * diag:
+            continue
+        if _wiggle(pts) > max_wiggle_px:
+            continue
+        # a single long segment is a line too (two of its points and its middle)
+        if len(idx) == 1:
+            t = np.linspace(0.0, 1.0, 9)[:, None]
+            pts = seg[idx[0], :2] + t * (seg[idx[0], 2:] - seg[idx[0], :2])
+        out.append((pts + 0.5) / s - 0.5)
+    return out

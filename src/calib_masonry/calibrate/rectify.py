@@ -8,7 +8,7 @@ structure files that name photos. ``rectify_image`` resamples the photo by the f
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -18,7 +18,15 @@ from .._threads import background, thread_map
 from ..errors import FitFailed, InputError
 from ..io import Photo, check_output, read_photo, staged_output, write_json, write_mask, write_rgb
 from .camera import CORNERS_FLAG, order_corners, px_per_m
-from .lines import DetectConfig, Detection, detect_wall, refine_quad, segments_in_quad
+from .lines import (
+    DetectConfig,
+    Detection,
+    carry_soft_sides,
+    detect_wall,
+    joint_segments,
+    refine_quad,
+    segments_in_quad,
+)
 
 if TYPE_CHECKING:
     from .fit import CalibrationResult
@@ -36,44 +44,184 @@ __all__ = [
 ]
 
 
+#: Without a measured camera height, the eye height above the wall's base is this prior: a
+#: standing photographer's eye (1.5-1.75 m), a ground that is not level with the wall's base, a
+#: step, a tripod at the wall's mid-height in a laboratory (0.45 m measured on the laboratory
+#: photos). Its spread makes the scale it gives uncertain by about a third, which
+#: :data:`MAX_RELATIVE_SIGMA` refuses: the prior alone never passes as a measurement.
+EYE_HEIGHT_PRIOR_M = 1.6
+EYE_HEIGHT_PRIOR_SIGMA_M = 0.5
+#: a measured camera height's default sigma (tape or laser to the wall's base)
+MEASURED_HEIGHT_SIGMA_M = 0.02
+#: a fit whose W or H is less certain than this (1 sigma, relative) is refused without --force
+MAX_RELATIVE_SIGMA = 0.25
+#: corners further than this many of their sigmas (RMS) from the outline the joints fit are refused
+MAX_CORNER_SIGMAS = 3.0
+#: the lens is kept fitted when the photo narrows k1's sigma below this share of its prior's, and
+#: undoing it takes the long joints' RMS distance from straight lines below this share of what it
+#: was (a quarter less squared distance): a lens bends every straight joint alike, and undoing it
+#: straightens them (0.39 -> 0.27 px on a synthetic brick wall at k1 = -0.05, 2-5 times at
+#: 0.1-0.2, down to the segments' own noise), where irregular stone courses, whose joints no lens
+#: made crooked, gain little (0.59 -> 0.58 px) and gave a spurious k1 of 0.1 +- 0.026
+LENS_DETERMINED = 0.5
+LENS_STRAIGHTENS = 0.85
+#: a clicked corner's sigma where no edge pins it (px)
+CLICKED_SIGMA_PX = 2.0
+#: a course height's default relative sigma (the mean course of a brick wall: units to 2-3 %,
+#: joints to a couple of millimetres)
+COURSE_HEIGHT_RELATIVE_SIGMA = 0.03
+
+#: the flags that pin the scale, best first (named by every message about the scale)
+SCALE_FLAGS = "--known-width, --known-height or --known-length x1,y1,x2,y2,M (a tape measurement), --course-height M, or a measured --camera-height"
+
+
+class ScaleSource:
+    """Where a calibration's scale (metres per wall unit) comes from, best first."""
+
+    KNOWN_WIDTH = "known width"
+    KNOWN_HEIGHT = "known height"
+    KNOWN_LENGTH = "known length"
+    COURSE_HEIGHT = "course height"
+    CAMERA_HEIGHT = "measured camera height"
+    EYE_HEIGHT_PRIOR = "eye-height prior"
+
+
+def parse_numbers(text: str, flag: str, count: int | tuple[int, ...], what: str) -> tuple[float, ...]:
+    """A comma-separated list of numbers for ``flag`` (negative ones included), of ``count`` items."""
+    counts = (count,) if isinstance(count, int) else count
+    try:
+        values = tuple(float(v) for v in str(text).replace(" ", "").split(","))
+    except ValueError:
+        raise InputError(f"{flag} {text!r}: not a list of numbers; give {what}") from None
+    if len(values) not in counts or not all(math.isfinite(v) for v in values):
+        raise InputError(f"{flag}: got {len(values)} numbers ({text!r}); give {what}")
+    return values
+
+
 @dataclass(frozen=True)
 class CalibrateConfig:
-    """What the user tells the calibration (the flags of ``rectify``)."""
+    """What the user tells the calibration (the flags of ``rectify``).
+
+    Scale, best first: ``known_width_m`` / ``known_height_m`` / ``known_length`` (``(x1, y1, x2, y2,
+    metres)``, two photo points on the wall), ``course_height_m`` (the masonry's mean course
+    height, with ``course_height_sigma_m``; the number of courses is found from the bed joints'
+    spacing), a measured ``camera_height_m`` (eye height above the wall's base; sigma
+    ``camera_height_sigma_m``, default :data:`MEASURED_HEIGHT_SIGMA_M`), else the eye-height prior
+    (:data:`EYE_HEIGHT_PRIOR_M` +- :data:`EYE_HEIGHT_PRIOR_SIGMA_M`). A fit whose W or H sigma
+    exceeds ``max_relative_sigma`` is refused unless ``force``.
+
+    ``corner_sigma_px``: default from each corner's edge evidence (detected or snapped), else
+    :data:`CLICKED_SIGMA_PX`. ``snap_tolerance_px``: how far a clicked corner may move onto the
+    outline (default 1 % of the photo's diagonal, at least 3 px). ``max_rms_px``: the largest RMS
+    residual kept (default 3 px per 1500 px of the photo's long side, at least 3). ``occluders``:
+    polygons ``((x, y), ...)`` in photo pixels (a rig, a beam, scaffolding, vegetation, people) left
+    out of the detection, the fit and the segmentation. ``lens_profile``: take k1, k2's prior from
+    lensfun when the EXIF names a known camera and lens."""
 
     corners_px: tuple[float, ...] | None = None  # 8 numbers x1, y1, ..., x4, y4 in any order; None = automatic
-    camera_height_m: float = 1.6
-    camera_height_sigma_m: float = 0.1
+    camera_height_m: float | None = None
+    camera_height_sigma_m: float | None = None
     focal_px: float | None = None  # overrides EXIF
     focal_sigma_px: float | None = None
     known_width_m: float | None = None
     known_height_m: float | None = None
-    corner_sigma_px: float | None = None  # default 1.5 clicked, 1.0 detected
+    known_length: tuple[float, float, float, float, float] | None = None
+    known_sigma_m: float = 0.005
+    course_height_m: float | None = None
+    course_height_sigma_m: float | None = None
+    corner_sigma_px: float | None = None
     line_sigma_px: float = 1.0
     max_effective_segments: int = 16
     use_lines: bool = True
     snap_corners: bool = True  # refine clicked corners onto the wall's outline edges
-    max_rms_px: float = 3.0
+    snap_tolerance_px: float | None = None
+    max_rms_px: float | None = None
+    max_relative_sigma: float = MAX_RELATIVE_SIGMA
     force: bool = False
+    occluders: tuple = ()
+    fit_distortion: bool = True
+    lens_profile: bool = True
     detect: DetectConfig = field(default_factory=DetectConfig)
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.camera_height_m) and 0 < self.camera_height_m < 100):
+        if self.camera_height_m is not None and not (
+            math.isfinite(self.camera_height_m) and 0 < self.camera_height_m < 100
+        ):
             raise InputError(
                 f"--camera-height {self.camera_height_m}: give the eye height above the wall's base in metres"
             )
-        if not (math.isfinite(self.camera_height_sigma_m) and self.camera_height_sigma_m > 0):
+        if self.camera_height_sigma_m is not None and not (
+            math.isfinite(self.camera_height_sigma_m) and self.camera_height_sigma_m > 0
+        ):
             raise InputError(f"--camera-height-sigma {self.camera_height_sigma_m}: must be > 0 (metres)")
         if self.focal_px is not None and not (math.isfinite(self.focal_px) and self.focal_px > 0):
             raise InputError(f"--focal-px {self.focal_px}: must be > 0 (pixels)")
-        for flag, value in (("--known-width", self.known_width_m), ("--known-height", self.known_height_m)):
+        for flag, value in (
+            ("--known-width", self.known_width_m),
+            ("--known-height", self.known_height_m),
+            ("--course-height", self.course_height_m),
+        ):
+            if value is not None and not (math.isfinite(value) and 0 < value < 1000):
+                raise InputError(f"{flag} {value}: must be a length > 0 (metres)")
+        if self.course_height_sigma_m is not None and not (
+            math.isfinite(self.course_height_sigma_m) and self.course_height_sigma_m > 0
+        ):
+            raise InputError(f"--course-height: its sigma {self.course_height_sigma_m} must be > 0 (metres)")
+        given = [
+            f
+            for f, v in (
+                ("--known-width", self.known_width_m),
+                ("--known-height", self.known_height_m),
+                ("--known-length", self.known_length),
+                ("--course-height", self.course_height_m),
+            )
+            if v is not None
+        ]
+        if len(given) > 1:
+            raise InputError(f"rectify: give one measured length, not {' and '.join(given)}")
+        if self.known_length is not None:
+            kl = tuple(self.known_length)
+            if len(kl) != 5 or not all(math.isfinite(v) for v in kl):
+                raise InputError("--known-length: give x1,y1,x2,y2,METRES (two photo points and their distance)")
+            if not kl[4] > 0:
+                raise InputError(f"--known-length: the distance {kl[4]} must be > 0 (metres)")
+            if math.hypot(kl[2] - kl[0], kl[3] - kl[1]) < 5:
+                raise InputError("--known-length: the two points are less than 5 px apart; click two points far apart")
+        if not (math.isfinite(self.known_sigma_m) and self.known_sigma_m > 0):
+            raise InputError(f"known_sigma_m = {self.known_sigma_m}: must be > 0 (metres)")
+        for flag, value in (("--max-rms", self.max_rms_px), ("--snap-tolerance", self.snap_tolerance_px)):
             if value is not None and not (math.isfinite(value) and value > 0):
-                raise InputError(f"{flag} {value}: must be > 0 (metres)")
-        if self.known_width_m is not None and self.known_height_m is not None:
-            raise InputError("rectify: give --known-width or --known-height, not both")
-        if not (math.isfinite(self.max_rms_px) and self.max_rms_px > 0):
-            raise InputError(f"--max-rms {self.max_rms_px}: must be > 0 (pixels)")
+                raise InputError(f"{flag} {value}: must be > 0 (pixels)")
+        if not (math.isfinite(self.max_relative_sigma) and self.max_relative_sigma > 0):
+            raise InputError(f"max_relative_sigma = {self.max_relative_sigma}: must be > 0")
+        if self.corner_sigma_px is not None and not (math.isfinite(self.corner_sigma_px) and self.corner_sigma_px > 0):
+            raise InputError(f"corner_sigma_px = {self.corner_sigma_px}: must be > 0 (pixels)")
         if self.corners_px is not None and len(self.corners_px) != 8:
             raise InputError(f"--corners: got {len(self.corners_px)} numbers; give exactly 8 (x1,y1,...,x4,y4)")
+        for i, poly in enumerate(self.occluders):
+            pts = np.asarray(poly, dtype=np.float64)
+            if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.all(np.isfinite(pts)):
+                raise InputError(f"occluder {i + 1}: give a polygon of at least 3 points (x, y) in photo pixels")
+
+    @property
+    def scale_source(self) -> str:
+        if self.known_width_m is not None:
+            return ScaleSource.KNOWN_WIDTH
+        if self.known_height_m is not None:
+            return ScaleSource.KNOWN_HEIGHT
+        if self.known_length is not None:
+            return ScaleSource.KNOWN_LENGTH
+        if self.course_height_m is not None:
+            return ScaleSource.COURSE_HEIGHT
+        if self.camera_height_m is not None:
+            return ScaleSource.CAMERA_HEIGHT
+        return ScaleSource.EYE_HEIGHT_PRIOR
+
+    def eye_height(self) -> tuple[float, float]:
+        """The camera height's value and sigma the fit uses (measured or the prior)."""
+        if self.camera_height_m is None:
+            return EYE_HEIGHT_PRIOR_M, self.camera_height_sigma_m or EYE_HEIGHT_PRIOR_SIGMA_M
+        return self.camera_height_m, self.camera_height_sigma_m or MEASURED_HEIGHT_SIGMA_M
 
 
 #: above this relative 1-sigma uncertainty of W or H a calibration says how to pin the scale
@@ -85,27 +233,49 @@ class PhotoCalibration:
     photo: Photo
     result: CalibrationResult
     detection: Detection | None
-    mode: str  # "clicked" or "automatic"
+    mode: str  # "clicked", "clicked, snapped to the outline" or "automatic"
     focal_source: str
+    scale_source: str = ScaleSource.EYE_HEIGHT_PRIOR
+    scale_detail: str = ""  # the prior's or the measurement's value, for the printed line
+    lens_source: str = "fitted (no profile)"
+    corner_sigma_px: tuple[float, ...] = ()
+    corner_snap_px: tuple[float, ...] | None = None  # clicked -> snapped, per corner
+    occluders: tuple = ()
+    courses: dict | None = None  # the course-height scale's measurement
+
+    def relative_sigma(self) -> float:
+        return max(
+            self.result.sigma("width_m") / self.result.width_m, self.result.sigma("height_m") / self.result.height_m
+        )
 
     def advice(self) -> str:
         """What to add when the photo fixes W and H only loosely ("" when both are known to within
-        :data:`SCALE_ADVICE_RELATIVE_SIGMA`): the scale rests on the camera height and the wall's
-        convergence, and for a tall wall seen from its foot one pixel on a corner moves it by
-        2-6 % (measured, experiments/bench_tall_walls.py)."""
-        rel = max(
-            self.result.sigma("width_m") / self.result.width_m, self.result.sigma("height_m") / self.result.height_m
-        )
+        :data:`SCALE_ADVICE_RELATIVE_SIGMA`)."""
+        rel = self.relative_sigma()
         if not rel > SCALE_ADVICE_RELATIVE_SIGMA:
             return ""
         return (
-            f"W and H are known only to +-{rel:.1%} (1 sigma) from this photo; measure one side and pass "
-            "--known-width or --known-height, or measure your eye height above the wall's base for --camera-height"
+            f"W and H are known only to +-{rel:.1%} (1 sigma) from this photo (scale from the {self.scale_source}); "
+            f"pin the scale with {SCALE_FLAGS}"
         )
 
     def to_json(self) -> dict:
         doc = self.result.to_json()
-        doc.update(photo=str(self.photo.path), mode=self.mode, focal_source=self.focal_source)
+        doc.update(
+            photo=str(self.photo.path),
+            mode=self.mode,
+            focal_source=self.focal_source,
+            scale_source=self.scale_source,
+            scale_detail=self.scale_detail,
+            lens_source=self.lens_source,
+            corner_sigma_px=list(self.corner_sigma_px),
+        )
+        if self.corner_snap_px is not None:
+            doc["corner_snap_px"] = list(self.corner_snap_px)
+        if self.occluders:
+            doc["occluders_px"] = [np.asarray(p, dtype=float).tolist() for p in self.occluders]
+        if self.courses is not None:
+            doc["courses"] = self.courses
         advice = self.advice()
         if advice:
             doc["advice"] = advice
@@ -120,31 +290,42 @@ class PhotoCalibration:
 
 
 def parse_corners(text: str) -> tuple[float, ...]:
-    try:
-        values = tuple(float(v) for v in text.replace(" ", "").split(","))
-    except ValueError:
-        raise InputError(f"--corners {text!r}: not a list of numbers; give x1,y1,x2,y2,x3,y3,x4,y4 in pixels") from None
-    if len(values) != 8:
-        raise InputError(f"--corners: got {len(values)} numbers; give exactly 8 (x1,y1,...,x4,y4)")
-    return values
+    return parse_numbers(text, "--corners", 8, "exactly 8 numbers x1,y1,...,x4,y4 in pixels")
+
+
+def _refine_clicked(rgb: np.ndarray, corners: np.ndarray, tolerance: float):
+    """Snap clicked corners onto the wall's outline edges within ``tolerance`` px: (corners, sigma per
+    corner, snapped?)."""
+    snapped, sigma = refine_quad(rgb, corners, (tolerance, max(2.0, tolerance / 3)), with_sigma=True, curved=True)
+    if np.array_equal(snapped, corners):
+        return corners, np.full(4, CLICKED_SIGMA_PX), False
+    moved = np.linalg.norm(snapped - corners, axis=1)
+    if np.max(moved) > tolerance:
+        return corners, np.full(4, CLICKED_SIGMA_PX), False
+    return snapped, np.maximum(sigma, 0.5), True
 
 
 def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = CalibrateConfig()) -> PhotoCalibration:
-    """Fit the camera and the wall to one photo; refuse a fit whose residual is above ``max_rms_px``."""
+    """Fit the camera, the lens and the wall to one photo; refuse a fit whose residual is above
+    ``max_rms_px`` or whose W or H sigma is above ``max_relative_sigma`` (unless ``force``)."""
     if not isinstance(photo, Photo):
         photo = read_photo(photo)
     w, h = photo.size
+    diag = math.hypot(w, h)
     focal, focal_source = config.focal_px, "--focal-px"
     if focal is None and photo.focal_px is not None:
         focal, focal_source = photo.focal_px, "EXIF"
-    if focal is None:
-        focal_source = "fitted"
     if focal is not None and not 0.1 * max(w, h) < focal < 20 * max(w, h):
         raise InputError(
             f"{photo.path}: focal length {focal:.0f} px is implausible for a {w} x {h} photo; "
             "pass --focal-px with the right value"
         )
+    for i, poly in enumerate(config.occluders):
+        pts = np.asarray(poly, dtype=np.float64)
+        if np.all((pts[:, 0] < -0.5) | (pts[:, 0] > w - 0.5) | (pts[:, 1] < -0.5) | (pts[:, 1] > h - 0.5)):
+            raise InputError(f"occluder {i + 1}: it lies wholly outside the {w} x {h} photo {photo.path.name}")
     detection = None
+    snap = None
     if config.corners_px is not None:
         corners = order_corners(np.array(config.corners_px).reshape(4, 2))
         if np.any(corners < -0.5) or np.any(corners[:, 0] > w - 0.5) or np.any(corners[:, 1] > h - 0.5):
@@ -152,80 +333,273 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
                 f"--corners: a corner lies outside the {w} x {h} photo {photo.path.name}; click inside the image"
             )
         mode = "clicked"
-        sigma = config.corner_sigma_px or 1.5
+        sigma = np.full(4, config.corner_sigma_px or CLICKED_SIGMA_PX)
         if config.snap_corners:
-            snapped = refine_quad(photo.rgb, corners, (3.0 * sigma + 1.0, 2.0))
-            if not np.array_equal(snapped, corners):
-                corners, sigma, mode = snapped, min(sigma, 0.5), "clicked, snapped to the outline"
+            tol = config.snap_tolerance_px or max(3.0, 0.01 * diag)
+            snapped, snap_sigma, moved = _refine_clicked(photo.rgb, corners, tol)
+            if moved:
+                snap = tuple(float(v) for v in np.linalg.norm(snapped - corners, axis=1))
+                corners, mode = snapped, "clicked, snapped to the outline"
+                sigma = snap_sigma if config.corner_sigma_px is None else np.full(4, config.corner_sigma_px)
         bed = head = np.zeros((0, 4))
         if config.use_lines:
-            try:
-                found = detect_wall(photo.rgb, config.detect)
-                bed = segments_in_quad(found.bed_segments, corners)
-                head = segments_in_quad(found.head_segments, corners)
-            except FitFailed:
-                pass  # no joint lines: the corners alone (plus priors) still determine the fit
+            from .outline import occluded_mask, segments_outside
+
+            seg = joint_segments(photo.rgb, config.detect)
+            seg = segments_outside(seg, occluded_mask((h, w), config.occluders))
+            seg = segments_in_quad(seg, corners)
+            ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
+            from_h = np.minimum(ang, 180.0 - ang)
+            bed = seg[from_h < config.detect.horizontal_max_deg]
+            head = seg[np.abs(ang - 90.0) < config.detect.vertical_max_deg]
     else:
         try:
-            detection = detect_wall(photo.rgb, config.detect)
+            detection = detect_wall(photo.rgb, config.detect, occluders=config.occluders)
         except FitFailed as exc:
             raise FitFailed(f"{photo.path}: {exc}") from None
         corners, bed, head = detection.corners_px, detection.bed_segments, detection.head_segments
         if not config.use_lines:
             bed = head = np.zeros((0, 4))
         mode = "automatic"
-        sigma = config.corner_sigma_px or 1.0
+        if config.corner_sigma_px is not None:
+            sigma = np.full(4, config.corner_sigma_px)
+        elif detection.corner_sigma_px is not None:
+            sigma = np.asarray(detection.corner_sigma_px, dtype=np.float64)
+        else:
+            sigma = np.full(4, 1.0)
     from .fit import CalibrationInput, calibrate  # JAX loads here (or on import_early's thread)
 
+    lens = None
+    lens_source = "fitted (no profile)" if config.fit_distortion else "none (held at 0)"
+    if config.lens_profile and photo.lens and config.fit_distortion:
+        from .camera import focal_px_from_35mm
+        from .lens import lensfun_profile
+
+        lens = lensfun_profile(photo.lens, (w, h), focal or focal_px_from_35mm(35.0, (w, h)))
+        if lens is not None:
+            lens_source = lens.source
+    height_m, height_sigma = config.eye_height()
+    known_length = tuple(config.known_length) if config.known_length is not None else None
+    # the first fit's corners were found along straight sides, which a lens bows: looser (by 0.3 %
+    # of the photo's diagonal) until the lens is known and they are found again through it
+    first_sigma = np.sqrt(np.asarray(sigma, dtype=np.float64) ** 2 + (0.003 * diag) ** 2)
+    if not (config.fit_distortion and (config.snap_corners or config.corners_px is None)):
+        first_sigma = np.asarray(sigma, dtype=np.float64)
+    plumb = scene_plumb(photo.rgb, corners, config.occluders) if config.fit_distortion else {}
     inp = CalibrationInput(
         image_size=(w, h),
         corners_px=corners,
-        corner_sigma_px=sigma,
+        **plumb,
+        corner_sigma_px=tuple(float(v) for v in first_sigma),
         bed_segments=bed,
         head_segments=head,
         line_sigma_px=config.line_sigma_px,
         max_effective_segments=config.max_effective_segments,
-        camera_height_m=config.camera_height_m,
-        camera_height_sigma_m=config.camera_height_sigma_m,
+        camera_height_m=height_m,
+        camera_height_sigma_m=height_sigma,
         focal_px=focal,
         focal_sigma_px=config.focal_sigma_px,
         known_width_m=config.known_width_m,
         known_height_m=config.known_height_m,
+        known_sigma_m=config.known_sigma_m,
+        known_length=known_length,
+        known_length_sigma_m=config.known_sigma_m,
+        fit_distortion=config.fit_distortion,
+        **(
+            {"k1_prior": lens.k1, "k1_sigma": lens.k1_sigma, "k2_prior": lens.k2, "k2_sigma": lens.k2_sigma}
+            if lens is not None
+            else {}
+        ),
     )
     try:
         result = calibrate(inp)
     except FitFailed as exc:
         raise FitFailed(f"{photo.path}: {exc}") from None
-    if focal is None and result.sigma("focal_px") > 0.2 * result.value("focal_px"):
-        raise FitFailed(
-            f"{photo.path}: no focal length in EXIF and too few constraints to fit one "
-            f"(+-{result.sigma('focal_px'):.0f} px); pass --focal-px F"
+    # the lens only where the photo tells it: a fit that narrows k1 to less than half its prior
+    # sigma keeps it; otherwise the lens is held at the prior (0, or the profile's), as crooked
+    # stone joints and cracks moved k1 by 0.1-0.3 (on the laboratory photos) without knowing it
+    before, after = result.plumb_rms_px
+    straightened = result.plumb_lines >= 2 and after <= LENS_STRAIGHTENS * before
+    if inp.fit_distortion and (result.sigma("k1") > LENS_DETERMINED * inp.k1_sigma or not straightened):
+        lens_source = (
+            f"held at {'the profile' if lens is not None else '0'}: this photo's joints do not determine it "
+            f"(k1 {result.value('k1'):+.3f} +- {result.sigma('k1'):.3f} when fitted, straightening "
+            f"{result.plumb_lines} long joints from {before:.2f} to {after:.2f} px RMS)"
         )
+        inp = replace(inp, fit_distortion=False)
+        try:
+            result = calibrate(inp, start=np.r_[result.params[:9], inp.k1_prior, inp.k2_prior])
+        except FitFailed as exc:
+            raise FitFailed(f"{photo.path}: {exc}") from None
+    # the outline again with the first fit's lens: each side snapped along a line straight in the
+    # ideal image (a barrel lens bows a wall's base by tens of pixels, and a straight side through
+    # the bow put the corners 10-40 px off, measured), then a soft side carried across its ramp
+    if config.snap_corners or config.corners_px is None:
+        corners, sigma, again = _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mode)
+        if again:
+            inp = replace(inp, corners_px=corners, corner_sigma_px=tuple(float(v) for v in sigma))
+            if detection is not None:
+                detection = replace(detection, corners_px=corners, corner_sigma_px=np.asarray(sigma))
+            try:
+                result = calibrate(inp, start=result.params)
+            except FitFailed as exc:
+                raise FitFailed(f"{photo.path}: {exc}") from None
+    courses = None
+    if config.course_height_m is not None:
+        from .courses import course_scale
+
+        try:
+            courses = course_scale(photo, result, config)
+        except FitFailed as exc:
+            raise FitFailed(f"{photo.path}: {exc}") from None
+        inp = replace(inp, known_height_m=courses["height_m"], known_height_sigma_m=courses["height_sigma_m"])
+        result = calibrate(inp, start=result.params)
+    if focal is None:
+        from .camera import focal_px_from_35mm
+
+        prior = focal_px_from_35mm(35.0, (w, h))
+        rel = result.sigma("focal_px") / result.value("focal_px")
+        focal_source = (
+            "vanishing points"
+            if rel < 0.5 * inp.focal_prior_log_sigma
+            else f"prior (35 mm equivalent, {prior:.0f} px, x/: 1.35)"
+        )
+    scale_source = config.scale_source
+    if scale_source == ScaleSource.KNOWN_WIDTH:
+        detail = f"W = {config.known_width_m:g} m"
+    elif scale_source == ScaleSource.KNOWN_HEIGHT:
+        detail = f"H = {config.known_height_m:g} m"
+    elif scale_source == ScaleSource.KNOWN_LENGTH:
+        detail = f"{known_length[4]:g} m between two points"
+    elif scale_source == ScaleSource.COURSE_HEIGHT:
+        detail = f"{courses['courses']:.2f} courses of {config.course_height_m:g} m"
+    elif scale_source == ScaleSource.CAMERA_HEIGHT:
+        detail = f"{height_m:g} +- {height_sigma:g} m"
+    else:
+        detail = f"prior: eye {height_m:g} +- {height_sigma:g} m above the wall's base, not measured"
+    cal = PhotoCalibration(
+        photo=photo,
+        result=result,
+        detection=detection,
+        mode=mode,
+        focal_source=focal_source,
+        scale_source=scale_source,
+        scale_detail=detail,
+        lens_source=lens_source,
+        corner_sigma_px=tuple(float(v) for v in sigma),
+        corner_snap_px=snap,
+        occluders=tuple(np.asarray(p, dtype=float) for p in config.occluders),
+        courses=courses,
+    )
     if not config.force:
-        if not result.fit.ok:
-            raise FitFailed(f"{photo.path}: the calibration {result.status.message}; or use --force to keep it anyway")
-        if result.rms_residual_px > config.max_rms_px:
-            raise FitFailed(
-                f"{photo.path}: RMS residual {result.rms_residual_px:.2f} px exceeds {config.max_rms_px:g} px "
-                "(corners or joints do not fit one wall plane); click the corners with --corners, "
-                "or use --force to keep it anyway"
-            )
-        if result.rms_corner_px > config.max_rms_px:
-            # the joints' lines contradict the corners: a corner found (or clicked) on something
-            # else. The RMS over all residuals hides it among hundreds of joint segments (tall wall
-            # seed 9143: a base corner 70 px up the wall, corners' RMS 20 px, all residuals' 2.1 px,
-            # W 60 % short)
-            raise FitFailed(
-                f"{photo.path}: the corners are {result.rms_corner_px:.1f} px (RMS) from the outline the mortar "
-                f"joints fit (more than {config.max_rms_px:g} px), so one is not on the wall's corner; click the "
-                f"wall's corners with {CORNERS_FLAG}, or use --force to keep it anyway"
-            )
-        if not (0.2 < result.width_m < 500 and 0.2 < result.height_m < 500):
-            raise FitFailed(
-                f"{photo.path}: fitted wall {result.width_m:.2f} x {result.height_m:.2f} m is implausible; "
-                "check --camera-height and the corners"
-            )
-    return PhotoCalibration(photo=photo, result=result, detection=detection, mode=mode, focal_source=focal_source)
+        _check(cal, config)
+    return cal
+
+
+def scene_plumb(rgb: np.ndarray, corners: np.ndarray, occluders=()) -> dict:
+    """The photo's long straight lines off the wall (:func:`~calib_masonry.calibrate.lines.straight_lines`:
+    a beam's edges, a frame, a building's edge; those mostly within the outline are joints, which
+    the fit's own plumb lines already hold, or the wall's own sides) as plumb lines of any
+    direction (family 2) for
+    :class:`~calib_masonry.calibrate.fit.CalibrationInput`; none where they cross an occluder."""
+    from .lines import _in_convex, straight_lines
+    from .outline import occluded_mask
+
+    occ = occluded_mask(rgb.shape[:2], occluders)
+    c = corners.mean(axis=0)
+    # off the wall: not mostly within its outline grown by 2.5 % (the joints, and the wall's own
+    # sides, whose edge jumps between a course's half units and its mortar: biased as plumb lines)
+    outer = c + (corners - c) * 1.05
+    pts, cl, fam = [], [], []
+    for line in straight_lines(rgb):
+        if _in_convex(line, outer).mean() > 0.5:
+            continue
+        if occ is not None:
+            r = np.clip(np.round(line[:, 1]).astype(int), 0, occ.shape[0] - 1)
+            q = np.clip(np.round(line[:, 0]).astype(int), 0, occ.shape[1] - 1)
+            if occ[r, q].any():
+                continue
+        pts.append(line)
+        cl.append(np.full(len(line), len(cl), dtype=np.int64))
+        fam.append(np.full(len(line), 2.0))
+    if not pts:
+        return {}
+    return {
+        "plumb_points": np.concatenate(pts),
+        "plumb_cluster": np.concatenate(cl),
+        "plumb_family": np.concatenate(fam),
+    }
+
+
+def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mode):
+    """Corners snapped again (and soft sides carried, :func:`carry_soft_sides`) along sides
+    straight in the ideal image of a first fit's lens; returns the corners, their sigmas and
+    whether they changed. A corner that moves more than twice its first sigma from where the
+    first fit put it has snapped onto another edge (seen under a strong lens: a brick's edge
+    34 px off): the first fit's corner is kept there, with that sigma."""
+    w, h = photo.size
+    s = min(1.0, config.detect.work_long_side_px / max(w, h))
+    ideal = result.undistort(corners)
+    lens = result.distort if np.max(np.linalg.norm(ideal - corners, axis=1)) > 0.05 else None
+    if lens is not None:
+        snapped, snap_sigma = refine_quad(
+            photo.rgb, ideal, (6.0 / s, 2.5 / s), with_sigma=True, to_photo=lens, curved=True
+        )
+    else:
+        snapped, snap_sigma = ideal, np.asarray(sigma, dtype=np.float64)
+    if mode != "automatic":  # a click's own uncertainty stays the floor
+        snap_sigma = np.maximum(snap_sigma, sigma)
+    carried, shift = carry_soft_sides(photo.rgb, snapped, to_photo=lens)
+    new = result.distort(carried) if lens is not None else carried
+    if np.array_equal(new, corners):
+        return corners, sigma, False
+    new_sigma = np.sqrt(np.asarray(snap_sigma) ** 2 + shift**2)
+    predicted = result.corners_px()
+    astray = np.linalg.norm(new - predicted, axis=1) > 2.0 * np.asarray(first_sigma) + shift
+    new = np.where(astray[:, None], predicted, new)
+    new_sigma = np.where(astray, first_sigma, new_sigma)
+    if config.corner_sigma_px is not None:
+        new_sigma = np.full(4, config.corner_sigma_px)
+    return new, new_sigma, True
+
+
+def default_max_rms_px(image_size: tuple[int, int]) -> float:
+    """The largest RMS residual a fit keeps without --force: 3 px per 1500 px of the long side, at
+    least 3 px (a clicked corner off by 3.2 px on a 6000 px photo is a good click)."""
+    return max(3.0, 3.0 * max(image_size) / 1500.0)
+
+
+def _check(cal: PhotoCalibration, config: CalibrateConfig) -> None:
+    """Refuse what should not pass without --force, in one line that says what to do."""
+    result, photo = cal.result, cal.photo
+    max_rms = config.max_rms_px or default_max_rms_px(photo.size)
+    if not result.fit.ok:
+        raise FitFailed(f"{photo.path}: the calibration {result.status.message}; or use --force to keep it anyway")
+    if result.rms_residual_px > max_rms:
+        raise FitFailed(
+            f"{photo.path}: RMS residual {result.rms_residual_px:.2f} px exceeds {max_rms:g} px "
+            "(corners or joints do not fit one wall plane); click the corners with --corners, "
+            "or use --force to keep it anyway"
+        )
+    if result.rms_corner_px > max_rms and result.rms_corner_sigma > MAX_CORNER_SIGMAS:
+        # the joints' lines contradict the corners: a corner found (or clicked) on something else
+        raise FitFailed(
+            f"{photo.path}: the corners are {result.rms_corner_px:.1f} px (RMS) from the outline the mortar "
+            f"joints fit (more than {max_rms:g} px and {result.rms_corner_sigma:.1f} times their sigmas), so one "
+            f"is not on the wall's corner; click the wall's corners with {CORNERS_FLAG}, or use --force to keep it anyway"
+        )
+    if not (0.05 < result.width_m < 500 and 0.05 < result.height_m < 500):
+        raise FitFailed(
+            f"{photo.path}: fitted wall {result.width_m:.2f} x {result.height_m:.2f} m is implausible; "
+            f"pin the scale with {SCALE_FLAGS}, or check the corners"
+        )
+    rel = cal.relative_sigma()
+    if rel > config.max_relative_sigma:
+        raise FitFailed(
+            f"{photo.path}: W = {result.width_m:.3g} m and H = {result.height_m:.3g} m are uncertain by "
+            f"+-{rel:.0%} (1 sigma; more than {config.max_relative_sigma:.0%}), the scale resting on the "
+            f"{cal.scale_source} ({cal.scale_detail}); pin it with {SCALE_FLAGS}, or use --force to keep it anyway"
+        )
 
 
 def rectify(
@@ -248,7 +622,53 @@ def rectify(
     if not (math.isfinite(ppm) and ppm > 0):
         raise InputError(f"rectify: px_per_m = {ppm} must be > 0")
     stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
-    return rectify_image(calibration.photo.rgb, stretch @ res.wall_from_image, width, height, ppm)
+    return rectify_image(calibration.photo.rgb, stretch @ res.wall_from_image, width, height, ppm, lens=lens_of(res))
+
+
+def ortho_from_photo(
+    calibration: PhotoCalibration, points: np.ndarray, shape: tuple[int, int], *, width_m=None, height_m=None
+) -> np.ndarray:
+    """Photo pixels ``(n, 2)`` -> the pixels of the orthophoto :func:`rectify` makes of shape
+    ``shape`` (rows, cols) (lens undone, stretched onto ``width_m`` x ``height_m`` as there)."""
+    from .camera import project
+
+    res = calibration.result
+    width = res.width_m if width_m is None else float(width_m)
+    height = res.height_m if height_m is None else float(height_m)
+    stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
+    ideal = res.undistort(np.asarray(points, dtype=np.float64).reshape(-1, 2))
+    return project(rect_from_wall(width, height, shape) @ stretch @ res.wall_from_image, ideal)
+
+
+def valid_ortho(calibration: PhotoCalibration, px_per_m: float, *, width_m=None, height_m=None) -> np.ndarray:
+    """``(rows, cols)`` True where :func:`rectify`'s orthophoto (same arguments) shows the wall:
+    inside the photo and outside every occluder the calibration was given."""
+    from .outline import polygon_mask
+
+    res = calibration.result
+    width = res.width_m if width_m is None else float(width_m)
+    height = res.height_m if height_m is None else float(height_m)
+    stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
+    rows, cols = calibration.photo.rgb.shape[:2]
+    ones = np.ones((rows, cols), dtype=np.float32)
+    valid = rectify_image(ones, stretch @ res.wall_from_image, width, height, px_per_m, nearest=True, lens=lens_of(res))
+    valid = valid > 0.5
+    for poly in calibration.occluders:
+        valid &= ~polygon_mask(
+            valid.shape, ortho_from_photo(calibration, poly, valid.shape, width_m=width, height_m=height)
+        )
+    return valid
+
+
+def lens_of(res: CalibrationResult) -> tuple[float, tuple[float, float], float, float] | None:
+    """``(focal_px, principal point, k1, k2)`` of a calibration, for :func:`rectify_image`; None
+    when the lens is a pinhole (k1 = k2 = 0)."""
+    from .camera import principal_point
+
+    k1, k2 = res.distortion
+    if k1 == 0.0 and k2 == 0.0:
+        return None
+    return res.value("focal_px"), principal_point(res.image_size), k1, k2
 
 
 def rect_from_wall(width_m: float, height_m: float, shape: tuple[int, int]) -> np.ndarray:
@@ -306,6 +726,7 @@ def rectify_image(
     px_per_m: float,
     *,
     nearest: bool = False,
+    lens: tuple[float, tuple[float, float], float, float] | None = None,
 ) -> np.ndarray:
     """Resample a photo ``(rows, cols[, C])`` into the wall's orthophoto ``(R, C'[, C])`` at
     ``px_per_m`` (``R = round(H px_per_m)``, ``C' = round(W px_per_m)``), in float32.
@@ -316,7 +737,9 @@ def rectify_image(
     within half a pixel of them, as kornia's ``warp_perspective`` with zero padding does). Where
     the wall is shrunk by more than 1.25 photo pixels per orthophoto pixel, the photo is first
     blurred by a Gaussian of 0.45 times that factor (truncated at 3 sigma, mirrored at the
-    edges), so the orthophoto does not alias.
+    edges), so the orthophoto does not alias. ``lens``: ``(focal_px, principal point, k1, k2)``;
+    the ideal point the homography gives is then moved where the lens put it
+    (:func:`~calib_masonry.calibrate.camera.distort`), so the orthophoto is undistorted.
 
     This is the bilinear homography warp of kornia's ``warp_perspective`` (which this function
     used until it was measured: importing torch took 1 s of every 3-7 s ``rectify``, and torch's
@@ -357,7 +780,12 @@ def rectify_image(
                 np.ones((len(ys), len(xs))),
             ]
         ).reshape(3, -1)
-        coords = np.stack([q[1] / q[2], q[0] / q[2]])
+        xy = np.stack([q[0] / q[2], q[1] / q[2]], axis=-1)
+        if lens is not None:
+            from .camera import distort
+
+            xy = distort(xy, lens[0], lens[1], lens[2], lens[3])
+        coords = np.stack([xy[:, 1], xy[:, 0]])
         for c, plane in enumerate(planes):
             out[r0 : r0 + len(ys), :, c] = ndimage.map_coordinates(
                 plane, coords, order=0 if nearest else 1, mode="grid-constant", cval=0.0
@@ -378,8 +806,12 @@ def rectify_to_folder(
     mask_path: str | Path | None = None,
     figure: bool = True,
     overwrite: bool = False,
+    pieces: bool = True,
 ) -> dict:
-    """``calib-masonry rectify``: calibration.json, rectified.png (and rectified_mask.png), overlay.png."""
+    """``calib-masonry rectify``: calibration.json, rectified.png (and rectified_mask.png),
+    overlay.png; with ``pieces``, the masonry units segmented (pieces_mask.png) and the LabelMe
+    files rectified.json (outline, occluders, pieces over rectified.png) and photo.json (the fitted
+    outline and the occluders over the photo)."""
 
     from .figures import plot_calibration
 
@@ -418,12 +850,54 @@ def rectify_to_folder(
             if figure:
                 plot_calibration(cal, job.result, stage / "overlay.png")
             if mask is not None:
-                rm = rectify_image(mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m)
+                rm = rectify_image(
+                    mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m, lens=lens_of(res)
+                )
                 write_mask(stage / "rectified_mask.png", rm >= 0.5)
         rect = job.result()
         doc["rectified_shape"] = list(rect.shape[:2])
+        if pieces:
+            seg, polygons, occ = segment_orthophoto(cal, rect, px_per_m)
+            doc["pieces"] = seg.summary()
+            from ..pipeline import write_labelme_pair
+
+            write_labelme_pair(stage, cal, rect.shape[:2], pieces=polygons, occluders_ortho=occ)
+            write_mask(stage / "pieces_mask.png", _upsampled_mask(seg.mask, rect.shape[:2]))
         write_json(stage / "calibration.json", doc)
     return doc
+
+
+#: the orthophoto's resolution the pieces are segmented at, at most (px per metre of wall)
+SEGMENT_PX_PER_M = 300.0
+
+
+def segment_orthophoto(cal: PhotoCalibration, rect: np.ndarray, px_per_m: float):
+    """The masonry units of a calibrated photo's orthophoto ``rect`` (at ``px_per_m``), segmented at
+    no more than :data:`SEGMENT_PX_PER_M` (a finer orthophoto is shrunk first): the
+    :class:`~calib_masonry.wall2d.segment.Segmentation`, the pieces' polygons and the occluders in
+    ``rect``'s pixels."""
+    from ..wall2d.segment import segment_wall
+    from ..wall2d.trace import TraceConfig, trace_mask
+    from .lines import shrink
+
+    f = min(1.0, SEGMENT_PX_PER_M / px_per_m)
+    small = rect if f >= 1.0 else np.stack([shrink(np.ascontiguousarray(rect[..., k]), f) for k in range(3)], -1)
+    ppm = px_per_m * small.shape[1] / rect.shape[1]
+    valid = valid_ortho(cal, ppm)[: small.shape[0], : small.shape[1]]
+    seg = segment_wall(small, ppm, valid=valid if not valid.all() else None)
+    traced = trace_mask(seg.mask, TraceConfig(target_dice=0.97, max_vertices=16), progress=False)
+    up = np.array([rect.shape[1] / small.shape[1], rect.shape[0] / small.shape[0]])
+    polygons = [(b.vertices_xy + 0.5) * up - 0.5 for b in traced.bricks]
+    occluders = [ortho_from_photo(cal, poly, rect.shape[:2]) for poly in cal.occluders]
+    return seg, polygons, occluders
+
+
+def _upsampled_mask(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    if mask.shape == tuple(shape):
+        return mask
+    rows = np.minimum((np.arange(shape[0]) + 0.5) * mask.shape[0] / shape[0], mask.shape[0] - 1).astype(int)
+    cols = np.minimum((np.arange(shape[1]) + 0.5) * mask.shape[1] / shape[1], mask.shape[1] - 1).astype(int)
+    return mask[np.ix_(rows, cols)]
 
 
 def native_px_per_m(res: CalibrationResult) -> float:

@@ -19,6 +19,7 @@ from scipy import ndimage
 
 from ..build3d.scale import image_from_wall
 from ..calibrate.camera import (
+    distort,
     focal_px_from_35mm,
     heading_from_theta,
     image_from_wall_homography,
@@ -131,7 +132,17 @@ def sample_camera(wall: WallSpec, spec: PhotoSpec, rng: np.random.Generator) -> 
         params = _aimed(wall, aim, d)
         if not _in_frame(params, size, wall, spec.margin):
             d, params = d_fit, _aimed(wall, aim, d_fit)
-        return {"params": params, "image_size": size, "focal_35mm": f35, "distance_m": d, "eye_height_m": eye}
+        k1 = float(rng.uniform(*spec.k1)) if spec.k1 != (0.0, 0.0) else 0.0
+        k2 = float(rng.uniform(*spec.k2)) if spec.k2 != (0.0, 0.0) else 0.0
+        return {
+            "params": params,
+            "image_size": size,
+            "focal_35mm": f35,
+            "distance_m": d,
+            "eye_height_m": eye,
+            "k1": k1,
+            "k2": k2,
+        }
     raise InputError(
         f"wall '{wall.name}': no standing-height camera {spec.distance_m[0]:g}-{spec.distance_m[1]:g} m "
         f"away frames a {wall.width_m:g} x {wall.height_m:g} m wall; widen [photos] distance_m or focal_35mm"
@@ -147,14 +158,27 @@ def _scale_px_per_m(params, size, wall) -> np.ndarray:
     return _scale_of(image_from_wall_homography(params, principal_point(size)), wall)
 
 
-def _background(params, size, rng) -> np.ndarray:
+def _ideal_grid(params, size, lens) -> tuple[np.ndarray, np.ndarray]:
+    """Each photo pixel's ideal (pinhole) position, ``(h, w)`` x and y: the lens ``(k1, k2)`` undone."""
+    from ..calibrate.camera import undistort
+
+    w, h = size
+    xs, ys = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    ideal = undistort(np.stack([xs, ys], -1), params[0], principal_point(size), lens[0], lens[1])
+    return ideal[..., 0], ideal[..., 1]
+
+
+def _background(params, size, rng, ideal=None) -> np.ndarray:
     """Sky above the horizon, a ground plane (z = 0) below it, by casting each pixel's ray. The
     sky in float32; the ground's rays in float64 (near the horizon a ray's height is a difference
-    of nearly equal terms, and where it meets the ground is far), but only below the horizon."""
+    of nearly equal terms, and where it meets the ground is far), but only below the horizon.
+    ``ideal``: each pixel's ideal position (a lens with distortion), else the pixel itself."""
     w, h = size
     m = wall_from_camera_rotation(params[1], params[2], params[3]) @ np.linalg.inv(
         intrinsics(params[0], principal_point(size))
     )
+    if ideal is not None:
+        return _background_ideal(m, params, ideal, rng)
     xs, ys = np.arange(w, dtype=np.float64)[None, :], np.arange(h, dtype=np.float64)[:, None]
     rz = m[2, 0] * xs + m[2, 1] * ys + m[2, 2]
     m32 = m.astype(np.float32)
@@ -177,6 +201,52 @@ def _background(params, size, rng) -> np.ndarray:
     img[below] = ground * (1 - haze) + haze * horizon
     img += rng.normal(0, 0.01, img.shape)
     return img
+
+
+def _background_ideal(m, params, ideal, rng) -> np.ndarray:
+    """:func:`_background` at given ideal pixel positions ``(xs, ys)`` ``(h, w)`` each (float64 throughout)."""
+    xs, ys = ideal
+    r = [m[k, 0] * xs + m[k, 1] * ys + m[k, 2] for k in range(3)]
+    norm = np.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+    elev = (r[2] / norm).astype(np.float32)
+    sky_top, horizon = np.array([0.30, 0.48, 0.82], np.float32), np.array([0.62, 0.74, 0.90], np.float32)
+    img = horizon + np.clip(elev, 0, 1)[..., None] * (sky_top - horizon)
+    below = elev < -1e-6
+    t = -params[6] / np.minimum(r[2][below] / norm[below], -1e-6)
+    gx = params[4] + t * (r[0][below] / norm[below])
+    gy = params[5] + t * (r[1][below] / norm[below])
+    pattern = 0.5 + 0.25 * np.sin(2.3 * gx) * np.sin(1.7 * gy) + 0.25 * np.sin(7.1 * gx + 3.3 * gy)
+    ground = np.array([0.36, 0.37, 0.26], np.float32) * (0.8 + 0.3 * pattern.astype(np.float32))[:, None]
+    haze = np.clip(t / 200.0, 0, 0.6).astype(np.float32)[:, None]
+    img[below] = ground * (1 - haze) + haze * horizon
+    img += rng.normal(0, 0.01, img.shape)
+    return img
+
+
+def _warp_layer_ideal(texture, wall, image_from_wall, ideal):
+    """:func:`_warp_layer` through a lens: each photo pixel samples the texture where its ideal
+    position ``ideal`` ``(xs, ys)`` falls (bilinear, zero outside, antialiased as there)."""
+    rows, cols = texture.shape[:2]
+    wall_from_tex = np.array(
+        [
+            [wall.width_m / cols, 0, 0.5 * wall.width_m / cols],
+            [0, -wall.height_m / rows, wall.height_m - 0.5 * wall.height_m / rows],
+            [0, 0, 1.0],
+        ]
+    )
+    tex_from_photo = np.linalg.inv(image_from_wall @ wall_from_tex)
+    src = np.concatenate([texture, np.ones((rows, cols, 1), np.float32)], axis=-1)
+    tex_per_photo = (cols / wall.width_m) / float(np.min(_scale_of(image_from_wall, wall)))
+    if tex_per_photo > 1.2:
+        s = 0.45 * tex_per_photo
+        src = ndimage.gaussian_filter(src, (s, s, 0), mode="mirror", truncate=math.ceil(3 * s) / s)
+    xs, ys = ideal
+    q = [tex_from_photo[k, 0] * xs + tex_from_photo[k, 1] * ys + tex_from_photo[k, 2] for k in range(3)]
+    u, v = q[0] / q[2], q[1] / q[2]
+    out = np.stack(
+        [ndimage.map_coordinates(src[..., c], [v, u], order=1, mode="constant", cval=0.0) for c in range(4)], -1
+    ).astype(np.float32)
+    return out[..., :3], np.clip(out[..., 3:4], 0, 1)
 
 
 def import_renderer() -> None:
@@ -237,13 +307,19 @@ def render_photo(
     size: tuple[int, int],
     spec: PhotoSpec,
     rng: np.random.Generator,
+    lens: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """The photo (h, w, 3) uint8 of textured walls ``(texture, wall, image_from_wall)`` seen by the
-    camera ``params`` (which also places the sky and the ground), with blur and noise."""
-    img = _background(params, size, rng)
+    camera ``params`` (which also places the sky and the ground), through a lens of radial
+    distortion ``(k1, k2)`` (OpenCV's; None or zeros: a pinhole), with blur and noise."""
+    ideal = _ideal_grid(params, size, lens) if lens is not None and any(lens) else None
+    img = _background(params, size, rng, ideal)
     for texture, wall, h in layers:
         raise_if_stopped()  # photos render on worker threads: a stop request ends them here
-        rgb, alpha = _warp_layer(texture, wall, h, size)
+        if ideal is None:
+            rgb, alpha = _warp_layer(texture, wall, h, size)
+        else:
+            rgb, alpha = _warp_layer_ideal(texture, wall, h, ideal)
         img = rgb + (1 - alpha) * img
     blur = rng.uniform(*spec.blur_px)
     img = ndimage.gaussian_filter(img, (blur, blur, 0))
@@ -299,7 +375,8 @@ def photograph_wall(wall: WallSpec, pieces: list[Piece], spec: PhotoSpec, rng: n
     tex_res = float(np.clip(1.25 * np.max(_scale_px_per_m(params, size, wall)), 100.0, 700.0))
     texture = wall_texture(wall, pieces, tex_res, rng)
     h = image_from_wall_homography(params, principal_point(size))
-    img = render_photo([(texture, wall, h)], params, size, spec, rng)
+    lens = (cam["k1"], cam["k2"])
+    img = render_photo([(texture, wall, h)], params, size, spec, rng, lens)
     true_heading = math.degrees(heading_from_theta(wall.theta_rad, params[1]))
     exif_heading = (true_heading + rng.normal(0, spec.heading_sigma_deg)) % 360.0
     return {
@@ -320,7 +397,13 @@ def photograph_wall(wall: WallSpec, pieces: list[Piece], spec: PhotoSpec, rng: n
             "eye_height_m": cam["eye_height_m"],
             "image_from_wall": (h / h[2, 2]).tolist(),
             "image_to_wall": (np.linalg.inv(h) / np.linalg.inv(h)[2, 2]).tolist(),
-            "corners_px": project(h, _corners_m(wall)).tolist(),
+            "corners_px": (
+                distort(project(h, _corners_m(wall)), params[0], principal_point(size), *lens)
+                if any(lens)
+                else project(h, _corners_m(wall))
+            ).tolist(),
+            "k1": lens[0],
+            "k2": lens[1],
             "width_m": wall.width_m,
             "height_m": wall.height_m,
             "theta_deg": wall.theta_deg,

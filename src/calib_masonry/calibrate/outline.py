@@ -1,0 +1,603 @@
+"""The wall's outline in a real photo: where the masonry's appearance ends, along its joints' directions.
+
+A real photo holds more than the wall: a test rig, a loading beam, a roof, windows, the ground,
+people. Lines alone cannot tell the wall's edges from theirs (a beam's edge is as straight and as
+horizontal as a bed joint), and texture (stone grain, painted speckle, stains) gives thousands of
+short edges. The outline is found from two cues that do not depend on the scene:
+
+1. **Appearance.** The wall is the one large region whose colour and texture are the masonry's.
+   Its appearance is learnt from the photo's centre (a photo of a wall is framed on it) against the
+   photo's border strip, as per-feature histograms (naive Bayes over CIELAB lightness and colour,
+   both smoothed, and the local contrast, which tells a speckled or jointed wall from a smooth beam),
+   and relearnt twice from the regions that result. The wall is the component of likely-wall pixels
+   that holds the seed.
+2. **Directions.** Long line segments (OpenCV's LSD, an a-contrario detector that does not fire on
+   texture, run on the photo shrunk so that specks vanish) give the bed and head joints' vanishing
+   points (RANSAC, as :mod:`.lines`); a projective map sends both to infinity, where the wall is an
+   upright rectangle. The rectangle is the one that holds the most likely-wall pixels net of the
+   unlikely ones (an integral image, coordinate ascent), then each side is let turn onto the region's
+   boundary (a robust line), so a wrong vanishing point cannot tilt it.
+
+What is not the wall is refused rather than taken: a side that runs along the photo's border (the
+wall fills the frame and goes on beyond it) and a region whose appearance is not distinct from its
+surroundings end in :class:`~calib_masonry.errors.FitFailed` naming ``--corners``. Occluders (a rig,
+a beam, scaffolding, vegetation, people), given as polygons in photo pixels, take no part: they teach
+the appearance model nothing and count as neither wall nor not-wall.
+
+Convention: image points ``(x = column, y = row)``, pixel centres at integers, origin top-left.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from ..errors import FitFailed
+from .camera import CORNERS_FLAG, order_corners
+
+__all__ = [
+    "OutlineConfig",
+    "Outline",
+    "detect_outline",
+    "lsd_segments",
+    "occluded_mask",
+    "polygon_mask",
+    "segments_outside",
+    "wall_probability",
+]
+
+
+@dataclass(frozen=True)
+class OutlineConfig:
+    """``appearance_long_side_px``: the size the appearance model works at; ``lsd_long_side_px``:
+    the size the long segments are found at (texture smaller than a few pixels there vanishes);
+    ``min_segment_fraction``: a segment's least length, of the photo's long side; ``seed_fraction``:
+    the side of the central square the wall's appearance is first learnt from, of the photo's short
+    side (small enough to lie on a tall, narrow wall); ``border_fraction``: the strip along
+    the photo's edges the surroundings' appearance is first learnt from; ``border_touch_fraction``:
+    a side closer than this (of the long side) to the photo's edge, over most of its length, lies on
+    the photo's border, not on the wall's edge."""
+
+    appearance_long_side_px: int = 600
+    lsd_long_side_px: int = 700
+    min_segment_fraction: float = 0.025
+    seed_fraction: float = 0.15
+    border_fraction: float = 0.06
+    border_touch_fraction: float = 0.012
+    bins: int = 32
+    grid: int = 300  # the rectified grid the rectangle is sought on
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Outline:
+    """The outline found: ``corners_px`` (4, 2) LL, LR, UR, UL in the photo's pixels; the vanishing
+    points of the bed and head families (homogeneous, photo pixels; None when a family had too few
+    segments and the image axis was assumed); the wall's probability map at ``scale`` (photo
+    pixels times ``scale``); its mean inside the outline and in a band around it."""
+
+    corners_px: np.ndarray
+    vp_bed: np.ndarray | None
+    vp_head: np.ndarray | None
+    probability: np.ndarray
+    scale: float
+    inside: float
+    around: float
+
+
+def lsd_segments(gray: np.ndarray, *, long_side_px: int | None = None, min_length_px: float = 0.0) -> np.ndarray:
+    """Line segments ``(n, 4)`` ``x1, y1, x2, y2`` (pixels of ``gray``) by OpenCV's Line Segment
+    Detector, run at ``long_side_px`` (LSD's own Gaussian shrink; default: as given), no shorter
+    than ``min_length_px``."""
+    import cv2
+
+    g8 = np.ascontiguousarray((np.clip(gray, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
+    scale = 1.0 if long_side_px is None else min(1.0, long_side_px / max(gray.shape[:2]))
+    lsd = cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD, scale)
+    found = lsd.detect(g8)[0]
+    if found is None:
+        return np.zeros((0, 4))
+    seg = found.reshape(-1, 4).astype(np.float64)
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    return seg[length >= min_length_px]
+
+
+def polygon_mask(shape: tuple[int, int], polygon: np.ndarray) -> np.ndarray:
+    """``(rows, cols)`` True at the pixel centres inside ``polygon`` ``(n, 2)`` (x, y pixels)."""
+    from skimage.draw import polygon as fill
+
+    poly = np.asarray(polygon, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(shape, dtype=bool)
+    rr, cc = fill(poly[:, 1], poly[:, 0], shape)
+    out[rr, cc] = True
+    return out
+
+
+def occluded_mask(shape: tuple[int, int], occluders, scale: float = 1.0) -> np.ndarray | None:
+    """The union of the occluder polygons (photo pixels) at ``scale``, or None without any."""
+    if not occluders:
+        return None
+    out = np.zeros(shape, dtype=bool)
+    for poly in occluders:
+        p = (np.asarray(poly, dtype=np.float64).reshape(-1, 2) + 0.5) * scale - 0.5
+        out |= polygon_mask(shape, p)
+    return out
+
+
+def segments_outside(seg: np.ndarray, occluded: np.ndarray | None, scale: float = 1.0) -> np.ndarray:
+    """The segments none of whose three points (ends and middle) lies in ``occluded`` (at ``scale``
+    of the segments' pixels)."""
+    if occluded is None or len(seg) == 0:
+        return seg
+    rows, cols = occluded.shape
+    keep = np.ones(len(seg), dtype=bool)
+    for t in (0.0, 0.5, 1.0):
+        p = (seg[:, :2] * (1 - t) + seg[:, 2:] * t + 0.5) * scale - 0.5
+        r = np.clip(np.round(p[:, 1]).astype(int), 0, rows - 1)
+        c = np.clip(np.round(p[:, 0]).astype(int), 0, cols - 1)
+        keep &= ~occluded[r, c]
+    return seg[keep]
+
+
+LIGHT_WEIGHT = 1.0
+
+
+def _features(rgb_small: np.ndarray) -> list[np.ndarray]:
+    """Per-pixel appearance of a (shrunk) photo: CIELAB lightness (and, in a colour photo, a* and
+    b*) smoothed by 2 px; the log of the local contrast (the lightness's standard deviation in a
+    Gaussian window of 3 px); and the relative contrast (that deviation over the mean, in a window
+    of 0.7 % of the long side), which a wall's grain, speckle or joints keep in its shadowed parts
+    while its lightness falls (measured on the laboratory photos: 0.11-0.18 on the wall, lit or
+    not, 0.34-0.53 on the steel beams and the concrete footing)."""
+    from skimage.color import rgb2lab
+
+    lab = rgb2lab(np.clip(rgb_small, 0.0, 1.0).astype(np.float32))
+    light = lab[..., 0]
+    smooth = ndimage.gaussian_filter(lab, (2.0, 2.0, 0.0))
+    mean = ndimage.gaussian_filter(light, 3.0)
+    mean_sq = ndimage.gaussian_filter(light * light, 3.0)
+    contrast = np.log1p(np.sqrt(np.maximum(mean_sq - mean * mean, 0.0)))
+    w = max(2.0, 0.007 * max(light.shape))
+    mean_w = ndimage.gaussian_filter(light, w)
+    sd_w = np.sqrt(np.maximum(ndimage.gaussian_filter(light * light, w) - mean_w * mean_w, 0.0))
+    relative = sd_w / np.maximum(mean_w, 1.0)
+    feats = [(smooth[..., 0], LIGHT_WEIGHT), (contrast, 1.0), (relative, 1.0)]
+    if float(np.percentile(np.hypot(lab[..., 1], lab[..., 2]), 99)) > 3.0:  # a colour photo
+        feats += [(smooth[..., 1], 1.0), (smooth[..., 2], 1.0)]
+    return feats
+
+
+def _log_ratio(feats: list[np.ndarray], inner: np.ndarray, outer: np.ndarray, bins: int) -> np.ndarray:
+    """Naive Bayes: the sum over features of log p(f | wall) - log p(f | surroundings), from
+    ``bins``-bin histograms (one count added to every bin) of the pixels ``inner`` and ``outer``."""
+    score = np.zeros(feats[0][0].shape, dtype=np.float64)
+    for f, weight in feats:
+        lo, hi = np.percentile(f, [0.5, 99.5])
+        if hi - lo < 1e-6:
+            continue
+        idx = np.clip(((f - lo) / (hi - lo) * bins).astype(np.intp), 0, bins - 1)
+        h_in = np.bincount(idx[inner], minlength=bins) + 1.0
+        h_out = np.bincount(idx[outer], minlength=bins) + 1.0
+        ratio = np.log(h_in / h_in.sum()) - np.log(h_out / h_out.sum())
+        score += weight * ratio[idx]
+    return score
+
+
+def wall_probability(
+    rgb_small: np.ndarray,
+    seed: np.ndarray,
+    *,
+    occluded: np.ndarray | None = None,
+    config: OutlineConfig = OutlineConfig(),
+) -> np.ndarray:
+    """The probability ``(rows, cols)`` that each pixel of a (shrunk) photo ``(rows, cols, 3)`` is
+    the wall's, learnt from the pixels ``seed`` (the wall's) against the photo's border strip, then
+    twice from the regions that result (eroded and dilated by 5 px). ``occluded`` pixels teach
+    nothing and are given 0.5 (neither)."""
+    rows, cols = seed.shape
+    feats = _features(rgb_small)
+    m = max(2, round(config.border_fraction * max(rows, cols)))
+    outer = np.zeros((rows, cols), dtype=bool)
+    outer[:m] = outer[-m:] = True
+    outer[:, :m] = outer[:, -m:] = True
+    inner = seed & ~outer
+    free = np.ones((rows, cols), dtype=bool) if occluded is None else ~occluded
+    prob = np.full((rows, cols), 0.5)
+    for _ in range(3):
+        a, b = inner & free, outer & free
+        if a.sum() < 50 or b.sum() < 50:
+            break
+        score = ndimage.gaussian_filter(_log_ratio(feats, a, b, config.bins), 2.0)
+        prob = 1.0 / (1.0 + np.exp(-np.clip(score, -30.0, 30.0)))
+        likely = prob > 0.5
+        inner = ndimage.binary_erosion(likely, iterations=5) & _component_of(likely, seed)
+        outer = ~ndimage.binary_dilation(likely, iterations=5)
+    if occluded is not None:
+        prob = np.where(occluded, 0.5, prob)
+    return prob
+
+
+def _component_of(mask: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """The connected components of ``mask`` that overlap ``seed`` most (the largest overlap)."""
+    lab, n = ndimage.label(mask)
+    if n == 0:
+        return mask
+    counts = np.bincount(lab[seed], minlength=n + 1)
+    counts[0] = 0
+    if counts.max() == 0:
+        return np.zeros_like(mask)
+    return lab == int(np.argmax(counts))
+
+
+def _rectifying_map(vp_bed: np.ndarray, vp_head: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """A projective map of photo pixels that sends the bed vanishing point to infinity along +u and
+    the head one along +v, fixing the photo's ``centre`` (homogeneous points in, ``(u, v, 1)`` out)."""
+    o = np.array([centre[0], centre[1], 1.0])
+    line = np.cross(vp_bed, vp_head)
+    p = np.stack([np.cross(vp_head, o), np.cross(vp_bed, o), line])
+    if (p @ o)[2] < 0:
+        p = -p
+    # scale u and v (each on its own, so that the axes stay the families' directions) so that a
+    # pixel's step along x moves u, and one along y moves v, by one at the centre
+    q0 = p @ o
+    ex, ey = p @ (o + [1.0, 0, 0]), p @ (o + [0, 1.0, 0])
+    du = ex[0] / ex[2] - q0[0] / q0[2]
+    dv = ey[1] / ey[2] - q0[1] / q0[2]
+    ku = 1.0 / du if abs(du) > 1e-12 else 1.0
+    kv = 1.0 / dv if abs(dv) > 1e-12 else 1.0
+    u0, v0 = q0[0] / q0[2], q0[1] / q0[2]
+    t = np.array([[ku, 0.0, centre[0] - ku * u0], [0.0, kv, centre[1] - kv * v0], [0.0, 0.0, 1.0]])
+    return t @ p
+
+
+def _project(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    q = np.c_[pts, np.ones(len(pts))] @ h.T
+    return q[:, :2] / q[:, 2:3]
+
+
+def _fit_rectangle(
+    prob: np.ndarray, rect_from_px: np.ndarray, region: np.ndarray, n: int, reach: float = 0.04
+) -> np.ndarray | None:
+    """The quadrilateral that holds the most of ``prob - 0.5`` (likely-wall pixels net of unlikely
+    ones), sought on an ``n x n`` grid over the ``region``'s extent in the rectified frame (grown by
+    a third), where the wall is about an upright rectangle.
+
+    First the upright rectangle, by coordinate ascent from the extent's 2-98 % box (an integral
+    image gives each candidate's sum at once); then each side, in turn, is let tilt: its two ends
+    move independently by up to ``reach`` of the grid, so that a side follows the region where the
+    vanishing point was off (column or row sums of the grid give each candidate's sum). Returns the
+    corners in pixels (any order), or None."""
+    ys, xs = np.nonzero(region[::2, ::2])
+    if len(xs) < 50:
+        return None
+    q = np.c_[2.0 * xs, 2.0 * ys, np.ones(len(xs))] @ rect_from_px.T
+    if not (np.all(q[:, 2] > 0) or np.all(q[:, 2] < 0)):
+        return None  # the region crosses the vanishing line: the directions cannot be right
+    uv = q[:, :2] / q[:, 2:3]
+    lo, hi = np.percentile(uv, 2, axis=0), np.percentile(uv, 98, axis=0)
+    c, half = (lo + hi) / 2, np.maximum((hi - lo) / 2 * 1.33, 1.0)
+    us = np.linspace(c[0] - half[0], c[0] + half[0], n)
+    vs = np.linspace(c[1] - half[1], c[1] + half[1], n)
+    uu, vv = np.meshgrid(us, vs)
+    px_from_rect = np.linalg.inv(rect_from_px)
+    back = px_from_rect @ np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x, y = back[0] / back[2], back[1] / back[2]
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = np.where(ok, x, -10.0), np.where(ok, y, -10.0)
+    w = ndimage.map_coordinates(prob, [y, x], order=1, mode="constant", cval=0.0).reshape(n, n) - 0.5
+    s = np.zeros((n + 1, n + 1))
+    s[1:, 1:] = np.cumsum(np.cumsum(w, axis=0), axis=1)
+
+    def energy(r0, r1, c0, c1):
+        return s[r1, c1] - s[r0, c1] - s[r1, c0] + s[r0, c0]
+
+    k = np.arange(n + 1)
+    box = [round(0.125 * n), round(0.875 * n), round(0.125 * n), round(0.875 * n)]
+    for _ in range(20):
+        old = list(box)
+        r0, r1, c0, c1 = box
+        box[0] = r0 = int(np.argmax(energy(k[:r1], r1, c0, c1)))
+        box[1] = r1 = r0 + 1 + int(np.argmax(energy(r0, k[r0 + 1 :], c0, c1)))
+        box[2] = c0 = int(np.argmax(energy(r0, r1, k[:c1], c1)))
+        box[3] = c0 + 1 + int(np.argmax(energy(r0, r1, c0, k[c0 + 1 :])))
+        if box == old:
+            break
+    r0, r1, c0, c1 = box
+    if r1 - r0 < 4 or c1 - c0 < 4:
+        return None
+    # the sides as lines of the grid: top and base rows as functions of the column, the ends'
+    # columns as functions of the row, each given by its value at the two ends of its span
+    sides = {"top": [r0, r0], "base": [r1, r1], "left": [c0, c0], "right": [c1, c1]}
+    col_cum = np.vstack([np.zeros((1, n)), np.cumsum(w, axis=0)])  # (n + 1, n): rows above r in column j
+    row_cum = np.hstack([np.zeros((n, 1)), np.cumsum(w, axis=1)])  # (n, n + 1)
+    span = 2.0 * max(1, round(reach * n / 2))
+
+    def interp(cum, pos, idx, along_rows):
+        pos = np.clip(pos, 0, n)
+        i0 = np.clip(np.floor(pos).astype(int), 0, n - 1)
+        f = pos - i0
+        if along_rows:  # cum (n + 1, n): value at row pos of column idx
+            return cum[i0, idx] * (1 - f) + cum[i0 + 1, idx] * f
+        return cum[idx, i0] * (1 - f) + cum[idx, i0 + 1] * f
+
+    for _ in range(3):
+        for name in ("top", "base", "left", "right"):
+            horizontal = name in ("top", "base")
+            if horizontal:
+                a0, a1 = (sides["left"][0] + sides["left"][1]) / 2, (sides["right"][0] + sides["right"][1]) / 2
+            else:
+                a0, a1 = (sides["top"][0] + sides["top"][1]) / 2, (sides["base"][0] + sides["base"][1]) / 2
+            idx = np.arange(max(0, math.ceil(a0)), min(n, math.floor(a1)))
+            if len(idx) < 4:
+                continue
+            t = (idx - a0) / max(a1 - a0, 1e-9)
+            other = {"top": "base", "base": "top", "left": "right", "right": "left"}[name]
+            o0, o1 = sides[other]
+            other_pos = o0 + (o1 - o0) * t
+            cum = col_cum if horizontal else row_cum
+            far = interp(cum, other_pos, idx, horizontal)
+            sign = 1.0 if name in ("base", "right") else -1.0
+            # coarse steps over the whole reach, then half-pixel steps about the best
+            for steps in (np.arange(-span, span + 1e-9, 2.0), np.arange(-2.0, 2.0 + 1e-9, 0.5)):
+                e0, e1 = sides[name]
+                ca = e0 + steps[:, None, None]
+                cb = e1 + steps[None, :, None]
+                pos = ca + (cb - ca) * t[None, None, :]  # (k, k, len(idx))
+                near = interp(cum, pos, idx[None, None, :], horizontal)
+                total = (sign * (near - far[None, None, :])).sum(axis=-1)
+                i, j = np.unravel_index(int(np.argmax(total)), total.shape)
+                sides[name] = [e0 + steps[i], e1 + steps[j]]
+
+    def grid_to_px(points):  # (row, col) grid positions -> photo pixels
+        rr, cc = points[:, 0], points[:, 1]
+        u = us[0] + (cc - 0.5) * (us[1] - us[0])
+        v = vs[0] + (rr - 0.5) * (vs[1] - vs[0])
+        return _project(px_from_rect, np.c_[u, v])
+
+    a0, a1 = (sides["left"][0] + sides["left"][1]) / 2, (sides["right"][0] + sides["right"][1]) / 2
+    b0, b1 = (sides["top"][0] + sides["top"][1]) / 2, (sides["base"][0] + sides["base"][1]) / 2
+    lines = []
+    for name in ("base", "right", "top", "left"):
+        e0, e1 = sides[name]
+        if name in ("top", "base"):
+            pts = np.array([[e0, a0], [e1, a1]])
+        else:
+            pts = np.array([[b0, e0], [b1, e1]])
+        p = grid_to_px(pts)
+        lines.append(np.cross(np.r_[p[0], 1.0], np.r_[p[1], 1.0]))
+    corners = []
+    for i in range(4):
+        c_ = np.cross(lines[(i - 1) % 4], lines[i])
+        if abs(c_[2]) < 1e-12:
+            return None
+        corners.append(c_[:2] / c_[2])
+    corners = np.array(corners)
+    return corners if np.all(np.isfinite(corners)) else None
+
+
+def _families(seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
+    from_h = np.minimum(ang, 180.0 - ang)
+    return seg[from_h < 35.0], seg[np.abs(ang - 90.0) < 30.0]
+
+
+def _vp(seg: np.ndarray, shape: tuple[int, int], axis: np.ndarray, rng: np.random.Generator, tol_px: float):
+    """A family's vanishing point (homogeneous, pixels) by RANSAC and least squares, or the image
+    axis's point at infinity when fewer than four segments support one."""
+    from .lines import DetectConfig, _vanishing_point
+
+    if len(seg) < 4:
+        return axis, None
+    centre = np.array([shape[1] - 1, shape[0] - 1]) / 2.0
+    scale = float(max(shape))
+    norm = np.c_[(seg[:, :2] - centre) / scale, (seg[:, 2:] - centre) / scale]
+    try:
+        vp, inl = _vanishing_point(norm, tol_px / scale, DetectConfig(ransac_iterations=300), rng)
+    except FitFailed:
+        return axis, None
+    if inl.sum() < 3:
+        return axis, None
+    unscale = np.array([[scale, 0, centre[0]], [0, scale, centre[1]], [0, 0, 1.0]])
+    return unscale @ vp, inl
+
+
+def _inside_convex_mask(shape, quad, factor):
+    from .lines import _inside_convex
+
+    c = quad.mean(axis=0)
+    return _inside_convex(shape, c + (quad - c) * factor)
+
+
+def _band_means(prob: np.ndarray, quad: np.ndarray) -> tuple[float, float]:
+    """The mean probability inside ``quad`` and in the band around it (out to 1.15 times its size)."""
+    from .lines import _inside_convex
+
+    c = quad.mean(axis=0)
+    inside = _inside_convex(prob.shape, quad)
+    outer = _inside_convex(prob.shape, c + (quad - c) * 1.15) & ~inside
+    a = float(prob[inside].mean()) if inside.any() else 0.0
+    b = float(prob[outer].mean()) if outer.any() else 1.0
+    return a, b
+
+
+#: GrabCut runs on the photo shrunk to this long side (its cost grows with the pixels: 1.3 s at
+#: 891 px, measured)
+GRABCUT_LONG_SIDE_PX = 400
+
+
+def _grab_cut(small: np.ndarray, quad: np.ndarray, occluded: np.ndarray | None, iterations: int = 3) -> np.ndarray:
+    """The wall's pixels (at ``small``'s size) by OpenCV's GrabCut (colour mixtures of the wall and
+    of the rest, and a graph cut whose cost follows the photo's edges), on the photo shrunk to
+    :data:`GRABCUT_LONG_SIDE_PX`, started from a first outline ``quad`` (``small``'s pixels): its
+    core (60 %) is the wall, the outline itself probably the wall, a ring out to 1.35 times its size
+    probably not, the rest not. The graph cut carries the wall through its shadowed parts (a darker
+    course at the base) and stops at the beam or footing against it, where the per-pixel model
+    alone did not (measured on the laboratory photos)."""
+    import cv2
+
+    from .lines import _inside_convex, shrink
+
+    rows, cols = small.shape[:2]
+    f = min(1.0, GRABCUT_LONG_SIDE_PX / max(rows, cols))
+    img = small
+    if f < 1.0:
+        img = np.stack([shrink(np.ascontiguousarray(small[..., k]), f) for k in range(3)], -1)
+    img = np.ascontiguousarray((np.clip(img, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
+    shape = img.shape[:2]
+    fy, fx = shape[0] / rows, shape[1] / cols
+    q = (quad + 0.5) * [fx, fy] - 0.5
+    c = q.mean(axis=0)
+    mask = np.full(shape, cv2.GC_BGD, np.uint8)
+    mask[_inside_convex(shape, c + (q - c) * 1.35)] = cv2.GC_PR_BGD
+    mask[_inside_convex(shape, q)] = cv2.GC_PR_FGD
+    mask[_inside_convex(shape, c + (q - c) * 0.6)] = cv2.GC_FGD
+    if occluded is not None:
+        occ = ndimage.zoom(occluded.astype(np.float32), (fy, fx), order=1, grid_mode=True, mode="grid-constant")
+        mask[(occ[: shape[0], : shape[1]] > 0.5) & (mask != cv2.GC_BGD)] = cv2.GC_PR_BGD
+    if (mask == cv2.GC_FGD).any() and (mask == cv2.GC_BGD).any():
+        cv2.setRNGSeed(0)
+        cv2.grabCut(img, mask, None, np.zeros((1, 65)), np.zeros((1, 65)), iterations, cv2.GC_INIT_WITH_MASK)
+    wall = ((mask == cv2.GC_FGD) | (mask == cv2.GC_PR_FGD)).astype(np.float32)
+    if f < 1.0:  # back to small's pixels (pixel centres matched as shrink matches them)
+        ys = (np.arange(rows) + 0.5) * fy - 0.5
+        xs = (np.arange(cols) + 0.5) * fx - 0.5
+        wall = ndimage.map_coordinates(wall, np.meshgrid(ys, xs, indexing="ij"), order=1, mode="nearest")
+    return wall > 0.5
+
+
+def detect_outline(
+    rgb: np.ndarray,
+    *,
+    occluders=(),
+    config: OutlineConfig = OutlineConfig(),
+) -> Outline:
+    """The wall's outline in a photo ``(rows, cols, 3)`` in [0, 1]: see the module's docstring.
+    ``occluders``: polygons ``(n, 2)`` in photo pixels to leave out. Raises FitFailed (naming
+    ``--corners``) when the wall is not distinct from its surroundings or runs out of the photo."""
+    from .lines import shrink
+
+    rows, cols = rgb.shape[:2]
+    s = min(1.0, config.appearance_long_side_px / max(rows, cols))
+    small = np.stack([shrink(np.ascontiguousarray(rgb[..., k], dtype=np.float32), s) for k in range(3)], -1)
+    srows, scols = small.shape[:2]
+    scale_s = scols / cols  # the shrunk photo's pixels per photo pixel (x); rows likewise
+    occluded = occluded_mask((srows, scols), occluders, scale_s)
+    yy, xx = np.mgrid[0:srows, 0:scols]
+    half = config.seed_fraction / 2 * min(srows, scols)
+    seed = (np.abs(xx - (scols - 1) / 2) < half) & (np.abs(yy - (srows - 1) / 2) < half)
+    prob = wall_probability(small, seed, occluded=occluded, config=config)
+    region = _component_of(prob > 0.5, seed)
+    if region.sum() < 0.02 * region.size:
+        raise FitFailed(
+            "automatic mode: no wall found (no region at the photo's centre looks unlike its surroundings); "
+            f"click the wall's corners with {CORNERS_FLAG}"
+        )
+    # long segments of the whole photo at LSD's coarse size, in the shrunk photo's pixels
+    gray = small.mean(axis=-1)
+    seg = lsd_segments(
+        gray,
+        long_side_px=min(config.lsd_long_side_px, max(srows, scols)),
+        min_length_px=config.min_segment_fraction * max(srows, scols),
+    )
+    seg = segments_outside(seg, occluded)
+    # the wall's own: segments whose middle lies in the region grown by a tenth of its size
+    grow = max(2, round(0.05 * math.sqrt(region.sum())))
+    near = ndimage.binary_dilation(region, iterations=grow)
+    mid = np.clip(np.round((seg[:, :2] + seg[:, 2:]) / 2).astype(int), 0, [scols - 1, srows - 1])
+    seg = seg[near[mid[:, 1], mid[:, 0]]] if len(seg) else seg
+    horiz, vert = _families(seg)
+    rng = np.random.default_rng(config.seed)
+    vp_head, inl_h = _vp(vert, (srows, scols), np.array([0.0, 1.0, 0.0]), rng, 1.5)
+    if inl_h is not None and len(vert) >= 4:
+        from .lines import _near_heads
+
+        centre = np.array([scols - 1, srows - 1]) / 2.0
+        sc = float(max(srows, scols))
+        hn = np.c_[(horiz[:, :2] - centre) / sc, (horiz[:, 2:] - centre) / sc]
+        vn = np.c_[(vert[:, :2] - centre) / sc, (vert[:, 2:] - centre) / sc]
+        near_h = _near_heads(hn, vn[inl_h]) * sc
+        horiz_use = np.c_[near_h[:, :2] + centre, near_h[:, 2:] + centre]
+    else:
+        horiz_use = horiz
+    vp_bed, inl_b = _vp(horiz_use, (srows, scols), np.array([1.0, 0.0, 0.0]), rng, 1.5)
+    centre = np.array([(scols - 1) / 2, (srows - 1) / 2])
+    quad = None
+    for vb, vh in ((vp_bed, vp_head), (np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))):
+        try:
+            rect_from_px = _rectifying_map(vb, vh, centre)
+        except np.linalg.LinAlgError:
+            continue
+        quad = _fit_rectangle(prob, rect_from_px, region, config.grid)
+        if quad is not None:
+            break
+    if quad is None:
+        raise FitFailed(
+            f"automatic mode: no wall outline found (the wall's region has no clear sides); click the wall's corners "
+            f"with {CORNERS_FLAG}"
+        )
+    try:
+        quad = order_corners(quad, where="automatic mode")
+    except Exception:  # noqa: BLE001 - a degenerate rectangle: reported below as no outline
+        raise FitFailed(
+            f"automatic mode: no wall outline found (the wall's region is degenerate); click the wall's corners "
+            f"with {CORNERS_FLAG}"
+        ) from None
+    # second pass: GrabCut from that outline, and the quadrilateral again on its wall
+    cut = _component_of(_grab_cut(small, quad, occluded), _inside_convex_mask((srows, scols), quad, 0.5))
+    if cut.sum() > 0.25 * _inside_convex_mask((srows, scols), quad, 1.0).sum():
+        prob2 = ndimage.gaussian_filter(cut.astype(np.float64), 1.0)
+        if occluded is not None:
+            prob2 = np.where(occluded, 0.5, prob2)
+        quad2 = _fit_rectangle(prob2, rect_from_px, cut, config.grid)
+        if quad2 is not None:
+            try:
+                quad = order_corners(quad2, where="automatic mode")
+                prob = prob2
+            except Exception:  # noqa: BLE001 - keep the first pass's outline
+                pass
+    inside, around = _band_means(prob, quad)
+    full = (quad + 0.5) / scale_s - 0.5
+    touch = config.border_touch_fraction * max(rows, cols)
+    _check_border(full, (rows, cols), touch)
+    if inside < 0.6 or around > 0.45 or inside - around < 0.3:
+        raise FitFailed(
+            f"automatic mode: no clear wall outline (the masonry's appearance inside the outline, {inside:.2f}, is "
+            f"not distinct from around it, {around:.2f}); click the wall's corners with {CORNERS_FLAG}"
+        )
+    unscale = np.array([[1 / scale_s, 0, 0.5 / scale_s - 0.5], [0, 1 / scale_s, 0.5 / scale_s - 0.5], [0, 0, 1.0]])
+    return Outline(
+        corners_px=full,
+        vp_bed=None if inl_b is None else unscale @ vp_bed,
+        vp_head=None if inl_h is None else unscale @ vp_head,
+        probability=prob,
+        scale=scale_s,
+        inside=inside,
+        around=around,
+    )
+
+
+_SIDE_NAMES = ("base", "right end", "top", "left end")
+_EDGE_NAMES = {0: "left", 1: "top", 2: "right", 3: "bottom"}
+
+
+def _check_border(quad: np.ndarray, shape: tuple[int, int], touch: float) -> None:
+    """Refuse a side that runs along the photo's border: the wall goes on beyond the photo there,
+    so its corner is not in it."""
+    rows, cols = shape
+    for i in range(4):
+        a, b = quad[i], quad[(i + 1) % 4]
+        t = np.linspace(0.1, 0.9, 9)[:, None]
+        pts = a + t * (b - a)
+        dist = np.stack([pts[:, 0], pts[:, 1], cols - 1 - pts[:, 0], rows - 1 - pts[:, 1]], axis=1)
+        near = dist < touch
+        for e in range(4):
+            if near[:, e].mean() > 0.6:
+                raise FitFailed(
+                    f"automatic mode: the wall's {_SIDE_NAMES[i]} lies on the photo's {_EDGE_NAMES[e]} edge, so the wall "
+                    f"goes on beyond the photo there and its corners are not in it; photograph the whole wall, or "
+                    f"click the wall's corners with {CORNERS_FLAG}"
+                )

@@ -1,0 +1,226 @@
+"""LabelMe JSON, the annotation format engineers already correct images in: read and write.
+
+``rectify`` and ``build`` write, beside each orthophoto, a LabelMe file whose polygons are the wall
+(label ``wall``: the orthophoto's outline), the occluders (``occluder``) and every piece the
+segmentation found (``piece``). Opened in LabelMe, a wrong stone is fixed by dragging its vertices,
+a missing one drawn, a false one deleted; ``build`` reads the corrected file as the wall's mask
+(``mask = "wall1.json"`` in structure.toml, or any command that takes a mask). Beside each photo it
+also writes one whose ``wall`` polygon is the fitted outline and whose ``occluder`` polygons are
+those given: corrected, it goes back to ``rectify --labelme``.
+
+The format (LabelMe 5): ``{"version", "flags", "shapes": [{"label", "points": [[x, y], ...],
+"group_id", "description", "shape_type", "flags", "mask"}], "imagePath", "imageData",
+"imageHeight", "imageWidth"}``; points are pixels, x along a row, y down, LabelMe's pixel-corner
+convention (the image spans 0..width): this module converts to and from this project's
+pixel-centre convention (x - 0.5). Polygons and rectangles are read; labels ``piece``, ``stone``,
+``brick`` and ``unit`` are pieces, ``occluder`` occluders, ``wall`` or ``outline`` the outline;
+other labels are named in the error. Reading needs no GUI (plain JSON).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = [
+    "LabelMe",
+    "PIECE_LABELS",
+    "labelme_labels",
+    "labelme_mask",
+    "read_labelme",
+    "read_occluders",
+    "read_photo_annotation",
+    "write_labelme",
+]
+
+LABELME_VERSION = "5.4.1"
+PIECE_LABELS = ("piece", "stone", "brick", "unit")
+OCCLUDER_LABELS = ("occluder",)
+OUTLINE_LABELS = ("wall", "outline")
+
+
+@dataclass(frozen=True)
+class LabelMe:
+    """A LabelMe annotation in this project's pixel-centre convention: the image's ``shape``
+    ``(rows, cols)``, its path as written, and the polygons ``(n, 2)`` (x, y) by role."""
+
+    shape: tuple[int, int]
+    image_path: str
+    pieces: tuple[np.ndarray, ...] = ()
+    occluders: tuple[np.ndarray, ...] = ()
+    outline: np.ndarray | None = None
+    source: Path | None = field(default=None, compare=False)
+
+
+def _shape(label: str, points: np.ndarray) -> dict:
+    return {
+        "label": label,
+        "points": [[round(float(x) + 0.5, 3), round(float(y) + 0.5, 3)] for x, y in points],
+        "group_id": None,
+        "description": "",
+        "shape_type": "polygon",
+        "flags": {},
+        "mask": None,
+    }
+
+
+def write_labelme(
+    path: str | Path,
+    image_path: str,
+    shape: tuple[int, int],
+    *,
+    pieces=(),
+    occluders=(),
+    outline: np.ndarray | None = None,
+) -> dict:
+    """Write a LabelMe file for the image ``image_path`` (relative to the file, as LabelMe wants it)
+    of ``shape`` ``(rows, cols)``: the outline, occluders and pieces (polygons ``(n, 2)`` in
+    pixel-centre coordinates). Returns the document."""
+    from .io import write_json
+
+    shapes = []
+    if outline is not None:
+        shapes.append(_shape("wall", np.asarray(outline, dtype=float)))
+    shapes += [_shape("occluder", np.asarray(p, dtype=float)) for p in occluders]
+    shapes += [_shape("piece", np.asarray(p, dtype=float)) for p in pieces]
+    doc = {
+        "version": LABELME_VERSION,
+        "flags": {},
+        "shapes": shapes,
+        "imagePath": str(image_path),
+        "imageData": None,
+        "imageHeight": int(shape[0]),
+        "imageWidth": int(shape[1]),
+    }
+    write_json(Path(path), doc)
+    return doc
+
+
+def read_labelme(path: str | Path, *, field_name: str = "LabelMe file") -> LabelMe:
+    """Read a LabelMe JSON file (InputError naming the file and what is wrong in it)."""
+    path = Path(path)
+    where = f"{field_name} {path}"
+    if not path.is_file():
+        raise InputError(f"{where}: not found; give the path of a LabelMe .json file")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{where}: not readable as JSON ({exc}); save it again from LabelMe") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("shapes"), list):
+        raise InputError(f"{where}: no 'shapes' list; this is not a LabelMe file")
+    try:
+        rows, cols = int(doc["imageHeight"]), int(doc["imageWidth"])
+    except (KeyError, TypeError, ValueError):
+        raise InputError(
+            f"{where}: 'imageHeight' and 'imageWidth' (pixels) are missing; save it again from LabelMe"
+        ) from None
+    if not (0 < rows <= 200_000 and 0 < cols <= 200_000):
+        raise InputError(f"{where}: image size {cols} x {rows} px is impossible")
+    pieces, occluders, outline = [], [], None
+    for i, sh in enumerate(doc["shapes"]):
+        label = str(sh.get("label", "")).strip().lower() if isinstance(sh, dict) else ""
+        kind = sh.get("shape_type", "polygon") if isinstance(sh, dict) else None
+        try:
+            pts = np.asarray(sh["points"], dtype=np.float64).reshape(-1, 2) - 0.5
+        except (KeyError, TypeError, ValueError):
+            raise InputError(f"{where}: shape {i + 1} ('{label}') has no list of [x, y] points") from None
+        if not np.all(np.isfinite(pts)):
+            raise InputError(f"{where}: shape {i + 1} ('{label}') has a point that is not a number")
+        if kind == "rectangle" and len(pts) == 2:
+            (x0, y0), (x1, y1) = pts
+            pts = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+        elif kind not in ("polygon", None):
+            raise InputError(
+                f"{where}: shape {i + 1} ('{label}') is a {kind}; draw stones, occluders and the wall as polygons "
+                "or rectangles"
+            )
+        if len(pts) < 3:
+            raise InputError(f"{where}: shape {i + 1} ('{label}') has {len(pts)} points; a polygon needs at least 3")
+        if label in PIECE_LABELS:
+            pieces.append(pts)
+        elif label in OCCLUDER_LABELS:
+            occluders.append(pts)
+        elif label in OUTLINE_LABELS:
+            if outline is not None:
+                raise InputError(f"{where}: more than one '{label}' polygon; keep one outline of the wall")
+            outline = pts
+        else:
+            raise InputError(
+                f"{where}: shape {i + 1} has the label '{sh.get('label')}'; use 'piece' (or stone, brick) for "
+                "masonry units, 'occluder' for what hides the wall, 'wall' for its outline"
+            )
+    return LabelMe(
+        shape=(rows, cols),
+        image_path=str(doc.get("imagePath", "")),
+        pieces=tuple(pieces),
+        occluders=tuple(occluders),
+        outline=outline,
+        source=path,
+    )
+
+
+def labelme_labels(doc: LabelMe) -> np.ndarray:
+    """An int32 label image ``(rows, cols)`` of the pieces (1..n in the file's order, a later
+    polygon over an earlier one where they overlap), 0 elsewhere."""
+    from .calibrate.outline import polygon_mask
+
+    labels = np.zeros(doc.shape, dtype=np.int32)
+    for k, poly in enumerate(doc.pieces, start=1):
+        labels[polygon_mask(doc.shape, poly)] = k
+    return labels
+
+
+def labelme_mask(doc: LabelMe) -> np.ndarray:
+    """The pieces as a brick mask ``(rows, cols)`` (bricks True): every piece's pixels, less those
+    that touch another piece (4-neighbours), so that two pieces drawn edge to edge stay two."""
+    labels = labelme_labels(doc)
+    edge = np.zeros(labels.shape, dtype=bool)
+    below, above = labels[1:], labels[:-1]
+    edge[1:] |= (below != above) & (below > 0) & (above > 0)  # the lower of two pieces one above the other
+    right, left = labels[:, 1:], labels[:, :-1]
+    edge[:, 1:] |= (right != left) & (right > 0) & (left > 0)  # the right one of two side by side
+    return (labels > 0) & ~edge
+
+
+def read_photo_annotation(path: str | Path) -> LabelMe:
+    """A LabelMe file of a photo: its ``wall`` polygon must have 4 points (the corners), when given."""
+    doc = read_labelme(path, field_name="--labelme")
+    if doc.outline is not None and len(doc.outline) != 4:
+        raise InputError(
+            f"--labelme {path}: the 'wall' polygon has {len(doc.outline)} points; give the wall's four corners"
+        )
+    return doc
+
+
+def read_occluders(path: str | Path) -> tuple[np.ndarray, ...]:
+    """Occluder polygons (photo pixels) from a LabelMe file (its ``occluder`` shapes) or a JSON list
+    of polygons ``[[[x, y], ...], ...]`` (pixel centres)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"--occluders {path}: not found; give a LabelMe .json or a JSON list of polygons")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"--occluders {path}: not readable as JSON ({exc})") from None
+    if isinstance(doc, dict):
+        ann = read_labelme(path, field_name="--occluders")
+        if not ann.occluders:
+            raise InputError(f"--occluders {path}: no shape labelled 'occluder'")
+        return ann.occluders
+    if not isinstance(doc, list) or not doc:
+        raise InputError(f"--occluders {path}: give a list of polygons [[[x, y], ...], ...]")
+    out = []
+    for i, poly in enumerate(doc):
+        try:
+            pts = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
+        except (TypeError, ValueError):
+            raise InputError(f"--occluders {path}: polygon {i + 1} is not a list of [x, y] points") from None
+        if len(pts) < 3 or not np.all(np.isfinite(pts)):
+            raise InputError(f"--occluders {path}: polygon {i + 1} needs at least 3 finite points")
+        out.append(pts)
+    return tuple(out)

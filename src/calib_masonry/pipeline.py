@@ -61,6 +61,7 @@ class PhotoWall:
     photo_size: tuple[int, int] | None = None  # (width, height) of the photo the preview shrinks
     trace: TraceResult | None = None  # the mask traced (resolve_photo_walls with trace=True)
     segmentation: dict = field(default_factory=dict)  # the pieces found (wall2d.segment.Segmentation.summary)
+    labels: np.ndarray | None = None  # the pieces labelled, where they touch (the joints' partition)
     occluders_ortho: tuple = ()  # the occluders in the orthophoto's pixels
 
 
@@ -111,6 +112,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
         # the memory (37 MB a paper-example wall) for the same PNG
         rectified=to_uint8(rect),
         mask=seg.mask,
+        labels=seg.labels if seg.pieces is not None else None,
         wall=replace(wall, width_m=width, height_m=height),
         photo_size=cal.photo.size,
         segmentation=seg.summary(),
@@ -131,12 +133,22 @@ def _import_photo_stage() -> None:
     everything loaded (tests/test_thread_imports.py checks that they import nothing)."""
     import jax
     from skimage.color import rgb2lab  # noqa: F401 - loads scikit-image's submodule (lazy_loader)
-    from skimage.filters import threshold_otsu  # noqa: F401
-    from skimage.measure import find_contours  # noqa: F401
-    from skimage.morphology import disk  # noqa: F401
+    from skimage.filters import (
+        frangi,  # noqa: F401 - the joints' segmentation
+        threshold_otsu,  # noqa: F401
+    )
+    from skimage.measure import (
+        approximate_polygon,  # noqa: F401
+        find_contours,  # noqa: F401
+    )
+    from skimage.morphology import (
+        disk,  # noqa: F401
+        h_maxima,  # noqa: F401
+    )
+    from skimage.segmentation import watershed  # noqa: F401
 
     from .calibrate import fit, rectify
-    from .wall2d import segment  # noqa: F401
+    from .wall2d import pieces, segment, trace  # noqa: F401
 
     rectify.import_detection()
     jax.devices()  # JAX's backends are set up on first use, looking for plugins (imports)
@@ -167,7 +179,7 @@ def resolve_photo_walls(
     def one(wall: WallSpec) -> PhotoWall:
         pw = photo_wall(wall, spec)
         if trace and not wall.refine:
-            pw = replace(pw, trace=trace_wall(pw.wall, spec, pw.mask, progress=False))
+            pw = replace(pw, trace=trace_wall(pw.wall, spec, pw.mask, progress=False, labels=pw.labels))
         return pw
 
     done = thread_imap(one, todo, workers=min(2, cpu_count()), name="photo")
@@ -179,9 +191,15 @@ def resolve_photo_walls(
 
 
 def trace_wall(
-    wall: WallSpec, spec: StructureSpec, mask: np.ndarray | None = None, *, progress: bool | None = None
+    wall: WallSpec,
+    spec: StructureSpec,
+    mask: np.ndarray | None = None,
+    *,
+    progress: bool | None = None,
+    labels: np.ndarray | None = None,
 ) -> TraceResult:
-    """Read, check and trace one wall's mask (or the mask segmented from its photo)."""
+    """Read, check and trace one wall's mask (or the mask segmented from its photo; ``labels``,
+    its pieces labelled where they touch, when the segmentation made a partition)."""
     if mask is None:
         if wall.mask is None:
             raise InputError(f"wall '{wall.name}': no mask given; add mask = 'PATH' to its [[wall]] table")
@@ -202,7 +220,12 @@ def trace_wall(
     config = TraceConfig(
         vertices=wall.vertices, target_dice=wall.target_dice if wall.vertices is None else None, refine=refine
     )
-    result = trace_mask(mask, config, progress=progress)
+    if labels is not None:
+        from .wall2d.trace import trace_labels
+
+        result = trace_labels(labels, config, progress=progress)
+    else:
+        result = trace_mask(mask, config, progress=progress)
     if not result.bricks:
         source = f"mask {wall.mask}" if wall.mask is not None else f"photo {wall.image}"
         raise InputError(
@@ -257,7 +280,8 @@ def build(
         if wall.name in traces_given:
             traces.append(traces_given[wall.name])
         else:
-            traces.append(trace_wall(wall, spec, photos[wall.name].mask if wall.name in photos else None))
+            pw = photos.get(wall.name)
+            traces.append(trace_wall(wall, spec, pw.mask if pw else None, labels=pw.labels if pw is not None else None))
     seconds["trace"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

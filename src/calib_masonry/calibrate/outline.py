@@ -191,18 +191,22 @@ def wall_probability(
     seed: np.ndarray,
     *,
     occluded: np.ndarray | None = None,
+    fill: np.ndarray | None = None,
     config: OutlineConfig = OutlineConfig(),
 ) -> np.ndarray:
     """The probability ``(rows, cols)`` that each pixel of a (shrunk) photo ``(rows, cols, 3)`` is
-    the wall's, learnt from the pixels ``seed`` (the wall's) against the photo's border strip, then
-    twice from the regions that result (eroded and dilated by 5 px). ``occluded`` pixels teach
-    nothing and are given 0.5 (neither)."""
+    the wall's, learnt from the pixels ``seed`` (the wall's) against the photo's border strip (and
+    the strip along a filled margin ``fill``, which is itself no one's surroundings), then twice
+    from the regions that result (eroded and dilated by 5 px). ``occluded`` pixels teach nothing
+    and are given 0.5 (neither)."""
     rows, cols = seed.shape
     feats = _features(rgb_small)
     m = max(2, round(config.border_fraction * max(rows, cols)))
     outer = np.zeros((rows, cols), dtype=bool)
     outer[:m] = outer[-m:] = True
     outer[:, :m] = outer[:, -m:] = True
+    if fill is not None:  # a filled margin's edge is where the photo's own border is
+        outer |= ndimage.binary_dilation(fill, iterations=m)
     inner = seed & ~outer
     free = np.ones((rows, cols), dtype=bool) if occluded is None else ~occluded
     prob = np.full((rows, cols), 0.5)
@@ -218,6 +222,30 @@ def wall_probability(
     if occluded is not None:
         prob = np.where(occluded, 0.5, prob)
     return prob
+
+
+def _border_fill(rgb_small: np.ndarray) -> np.ndarray | None:
+    """Where a photo was filled, not photographed: flat regions (the colour constant to half a
+    grey level over 5 x 5 pixels) that touch the photo's border and cover at least 0.5 % of it, as
+    a rotated or perspective-corrected photo's black or white margins. They are no one's
+    surroundings: the appearance model learnt the surroundings from them alone and took the dark
+    laboratory for wall (measured on a rotated view of a laboratory photo). None without any."""
+    g = np.asarray(rgb_small, dtype=np.float32).mean(axis=-1)
+    mean = ndimage.uniform_filter(g, 5)
+    var = ndimage.uniform_filter(g * g, 5) - mean * mean
+    flat = var < (0.5 / 255.0) ** 2
+    lab, n = ndimage.label(flat)
+    if n == 0:
+        return None
+    border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    border = border[border > 0]
+    if len(border) == 0:
+        return None
+    sizes = np.bincount(lab.ravel())
+    keep = border[sizes[border] >= 0.005 * g.size]
+    if len(keep) == 0:
+        return None
+    return ndimage.binary_dilation(np.isin(lab, keep), iterations=2)
 
 
 def _component_of(mask: np.ndarray, seed: np.ndarray) -> np.ndarray:
@@ -486,10 +514,13 @@ def detect_outline(
     srows, scols = small.shape[:2]
     scale_s = scols / cols  # the shrunk photo's pixels per photo pixel (x); rows likewise
     occluded = occluded_mask((srows, scols), occluders, scale_s)
+    fill = _border_fill(small)
+    if fill is not None:
+        occluded = fill if occluded is None else occluded | fill
     yy, xx = np.mgrid[0:srows, 0:scols]
     half = config.seed_fraction / 2 * min(srows, scols)
     seed = (np.abs(xx - (scols - 1) / 2) < half) & (np.abs(yy - (srows - 1) / 2) < half)
-    prob = wall_probability(small, seed, occluded=occluded, config=config)
+    prob = wall_probability(small, seed, occluded=occluded, fill=fill, config=config)
     region = _component_of(prob > 0.5, seed)
     if region.sum() < 0.02 * region.size:
         raise FitFailed(

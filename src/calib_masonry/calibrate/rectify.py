@@ -682,14 +682,26 @@ def import_detection() -> None:
     threads importing one package at once can see it half initialised (seen with matplotlib)."""
     import encodings.ascii  # noqa: F401 - EXIF text
 
+    import cv2  # noqa: F401 - the line segment detector and GrabCut
     import scipy.spatial  # noqa: F401
     from PIL import Image, ImageOps, TiffImagePlugin  # noqa: F401 - the photo's reader and its EXIF
+    from scipy.sparse.csgraph import connected_components  # noqa: F401 - plumb-line chains
+    from skimage.color import rgb2lab  # noqa: F401 - the outline's appearance model
+    from skimage.draw import polygon  # noqa: F401 - occluders
 
     # scikit-image loads a submodule when one of its names is first asked for (lazy_loader):
     # the names the detection asks for, asked for here
     from skimage.feature import canny, hessian_matrix, hessian_matrix_eigvals  # noqa: F401
     from skimage.measure import label  # noqa: F401
     from skimage.transform import probabilistic_hough_line  # noqa: F401
+
+    from .. import labelme  # noqa: F401
+    from . import courses, lens, outline  # noqa: F401
+
+    try:
+        import lensfunpy  # noqa: F401 - lens profiles, where installed
+    except ImportError:
+        pass
 
     Image.preinit()  # Pillow's common formats' plugins (JPEG, PNG, ...), loaded on the first open
 
@@ -877,7 +889,6 @@ def segment_orthophoto(cal: PhotoCalibration, rect: np.ndarray, px_per_m: float)
     :class:`~calib_masonry.wall2d.segment.Segmentation`, the pieces' polygons and the occluders in
     ``rect``'s pixels."""
     from ..wall2d.segment import segment_wall
-    from ..wall2d.trace import TraceConfig, trace_mask
     from .lines import shrink
 
     f = min(1.0, SEGMENT_PX_PER_M / px_per_m)
@@ -885,11 +896,36 @@ def segment_orthophoto(cal: PhotoCalibration, rect: np.ndarray, px_per_m: float)
     ppm = px_per_m * small.shape[1] / rect.shape[1]
     valid = valid_ortho(cal, ppm)[: small.shape[0], : small.shape[1]]
     seg = segment_wall(small, ppm, valid=valid if not valid.all() else None)
-    traced = trace_mask(seg.mask, TraceConfig(target_dice=0.97, max_vertices=16), progress=False)
+    polygons = piece_polygons(seg.labels, tolerance_px=1.5)
     up = np.array([rect.shape[1] / small.shape[1], rect.shape[0] / small.shape[0]])
-    polygons = [(b.vertices_xy + 0.5) * up - 0.5 for b in traced.bricks]
+    polygons = [(p + 0.5) * up - 0.5 for p in polygons]
     occluders = [ortho_from_photo(cal, poly, rect.shape[:2]) for poly in cal.occluders]
     return seg, polygons, occluders
+
+
+def piece_polygons(labels: np.ndarray, *, tolerance_px: float = 1.5) -> list[np.ndarray]:
+    """Each labelled piece ``(rows, cols)`` (0 mortar) as a polygon for a LabelMe file: the traced
+    outline of its largest part (along pixel edges,
+    :func:`~calib_masonry.wall2d.trace.trace_outline`) simplified to within ``tolerance_px``
+    (Douglas-Peucker), so that an engineer drags a few vertices, not hundreds."""
+    from scipy import ndimage
+    from skimage.measure import approximate_polygon
+
+    from ..wall2d.trace import trace_outline
+
+    out = []
+    for k, sl in enumerate(ndimage.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        region = labels[sl] == k
+        parts, n = ndimage.label(region)
+        if n > 1:
+            region = parts == 1 + int(np.argmax(np.bincount(parts.ravel())[1:]))
+        outline = trace_outline(region)
+        poly = approximate_polygon(np.vstack([outline, outline[:1]]), tolerance_px)[:-1]
+        if len(poly) >= 3:
+            out.append(poly + [sl[1].start, sl[0].start])
+    return out
 
 
 def _upsampled_mask(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

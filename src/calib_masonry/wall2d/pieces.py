@@ -57,7 +57,7 @@ class PieceConfig:
 
     joint_width_m: float = 0.008
     joint_length_m: float = 0.05
-    merge_threshold: float = 0.35
+    merge_threshold: float = 0.3
     min_piece_fraction: float = 0.25
     max_piece_modules: float = 4.0
     module_m: tuple[float, float] | None = None
@@ -264,6 +264,29 @@ def merge_regions(labels: np.ndarray, strength: np.ndarray, threshold: float, mi
     return out.astype(np.int32)[lab]
 
 
+def smooth_partition(labels: np.ndarray, sigma: float) -> np.ndarray:
+    """Each pixel given the label that dominates around it (each label's indicator blurred by a
+    Gaussian of ``sigma`` px, the largest wins): a merged region's thin arms along a joint and its
+    ragged boundary through texture go to its neighbours; the labels are then renumbered 1..m
+    (a label left with no pixels disappears)."""
+    n = int(labels.max())
+    best = np.full(labels.shape, -1.0, dtype=np.float32)
+    out = np.zeros_like(labels)
+    for k in range(1, n + 1):
+        sl = ndimage.find_objects((labels == k).astype(np.int8))
+        if not sl or sl[0] is None:
+            continue
+        pad = int(math.ceil(4 * sigma))
+        r0, r1 = max(0, sl[0][0].start - pad), min(labels.shape[0], sl[0][0].stop + pad)
+        c0, c1 = max(0, sl[0][1].start - pad), min(labels.shape[1], sl[0][1].stop + pad)
+        w = ndimage.gaussian_filter((labels[r0:r1, c0:c1] == k).astype(np.float32), sigma)
+        win = w > best[r0:r1, c0:c1]
+        best[r0:r1, c0:c1] = np.where(win, w, best[r0:r1, c0:c1])
+        out[r0:r1, c0:c1] = np.where(win, k, out[r0:r1, c0:c1])
+    _, renum = np.unique(out, return_inverse=True)
+    return renum.reshape(out.shape).astype(np.int32) + (0 if (out == 0).any() else 1)
+
+
 def segment_pieces(
     rgb: np.ndarray,
     px_per_m: float,
@@ -285,13 +308,16 @@ def segment_pieces(
     else:
         module, source = module_from_joints(joints, px_per_m), "measured from the joints"
     a0 = module[0] * module[1] * px_per_m**2
-    smooth = ndimage.gaussian_filter(joints, 1.0)
+    # lengths on the wall, not in pixels, so that the pieces do not change with the orthophoto's
+    # resolution: a 2 mm smoothing, and a new region for every 4 mm of distance from the joints
+    smooth = ndimage.gaussian_filter(joints, max(0.5, 0.002 * px_per_m))
     dist = ndimage.distance_transform_edt(joints < np.percentile(joints, 80))
-    markers, _ = ndimage.label(h_maxima(dist, 2.0))
+    markers, _ = ndimage.label(h_maxima(dist, max(1.0, 0.004 * px_per_m)))
     labels = watershed(smooth, markers).astype(np.int32)
     labels = merge_regions(
         labels, smooth, config.merge_threshold, config.min_piece_fraction * a0, config.max_piece_modules * a0
     )
+    labels = smooth_partition(labels, max(1.0, 0.01 * px_per_m))
     if valid is not None:
         labels = np.where(valid, labels, 0).astype(np.int32)
     return Pieces(labels=labels, joints=joints, module_m=module, px_per_m=float(px_per_m), module_source=source)

@@ -30,6 +30,7 @@ __all__ = [
     "TraceConfig",
     "TracedBrick",
     "TraceResult",
+    "trace_labels",
     "trace_mask",
     "refine_trace",
     "trace_to_file",
@@ -188,15 +189,30 @@ def trace_mask(mask: np.ndarray, config: TraceConfig = TraceConfig(), *, progres
     refined polygon reaches the target. ``progress``: as :func:`calib_masonry.progress.progress`'s
     ``enabled`` (False on a worker thread, whose bar would cut through the main thread's).
     """
+    return trace_labels(label_bricks(mask, config.segment), config, progress=progress, connected=True)
+
+
+def trace_labels(
+    labels: np.ndarray, config: TraceConfig = TraceConfig(), *, progress: bool | None = None, connected: bool = False
+) -> TraceResult:
+    """:func:`trace_mask` of bricks already labelled: ``labels`` ``(rows, cols)`` int, 0 mortar,
+    1..K the bricks (each traced as its largest 4-connected part). Pieces that touch one another
+    (a partition, as :mod:`calib_masonry.wall2d.pieces` makes) stay apart, where a mask would
+    merge them or fill the one-pixel line between them as a hole. ``connected``: every label is
+    one 4-connected region already (a labelled mask's), so none is split."""
     from ..progress import progress as _progress
 
-    labels = label_bricks(mask, config.segment)
+    labels = np.asarray(labels)
     slices = ndimage.find_objects(labels)
     items = []
     for k, slc in enumerate(_progress(slices, desc="trace outlines", unit="brick", enabled=progress), start=1):
         if slc is None:
             continue
         region = labels[slc] == k
+        if not connected:
+            parts, n_parts = ndimage.label(region, structure=ndimage.generate_binary_structure(2, 1))
+            if n_parts > 1:  # a label in several pieces: its largest
+                region = parts == 1 + int(np.argmax(np.bincount(parts.ravel())[1:]))
         outline = trace_outline(region)
         offset = np.array([slc[1].start, slc[0].start], dtype=np.float64)
         items.append((k, region, outline, offset))
@@ -215,7 +231,7 @@ def trace_mask(mask: np.ndarray, config: TraceConfig = TraceConfig(), *, progres
                     area_px=int(region.sum()),
                 )
             )
-    return TraceResult(image_shape=tuple(int(s) for s in mask.shape), bricks=tuple(bricks))
+    return TraceResult(image_shape=tuple(int(s) for s in labels.shape), bricks=tuple(bricks))
 
 
 def _refined(labels: np.ndarray, items: list, config: TraceConfig) -> list[TracedBrick]:

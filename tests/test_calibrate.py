@@ -761,18 +761,6 @@ def test_the_wide_gaussian_is_the_direct_one_within_half_a_percent(shape, sigma)
     assert np.abs(coarse - direct).max() < 5e-3 * np.ptp(direct)  # half a percent of what the blur spans
 
 
-def test_fill_holes_is_scipys_binary_fill_holes():
-    from scipy import ndimage
-
-    from calib_masonry.calibrate.lines import fill_holes
-
-    rng = np.random.default_rng(7)
-    for _ in range(40):
-        shape = (int(rng.integers(1, 90)), int(rng.integers(1, 90)))
-        m = ndimage.gaussian_filter(rng.normal(size=shape), rng.uniform(0.5, 3.0)) > rng.normal(0.0, 0.05)
-        assert np.array_equal(fill_holes(m), ndimage.binary_fill_holes(m))
-
-
 def test_distances_to_many_vanishing_points_are_those_to_each_bit_for_bit():
     from calib_masonry.calibrate.lines import _dist_to_vp, _dist_to_vps
 
@@ -786,7 +774,7 @@ def test_distances_to_many_vanishing_points_are_those_to_each_bit_for_bit():
 @pytest.mark.parametrize("shape", [(3000, 2000), (2999, 2001), (1201, 4000)])
 @pytest.mark.parametrize("s", [0.2333, 0.35, 0.4667, 0.7])
 def test_shrink_samples_rescales_grid(shape, s):
-    """The block-mean shrink puts its samples where scikit-image's rescale does (a linear ramp
+    """The area-average shrink puts its samples where scikit-image's rescale does (a linear ramp
     comes out the same, edges aside), with its output shape and float32 kept; on a photo-like
     image it differs from rescale only by the antialiasing kernel's shape."""
     from scipy.ndimage import gaussian_filter

@@ -48,6 +48,10 @@ class _Background:
             raise self._error
         return self._value
 
+    def wait(self) -> None:
+        """Wait for the function to end, without raising its exception."""
+        self._thread.join()
+
     def __enter__(self) -> _Background:
         return self
 

@@ -224,3 +224,35 @@ def read_occluders(path: str | Path) -> tuple[np.ndarray, ...]:
             raise InputError(f"--occluders {path}: polygon {i + 1} needs at least 3 finite points")
         out.append(pts)
     return tuple(out)
+
+
+def write_labelme_pair(folder: Path, calibration, ortho_shape, *, pieces, occluders_ortho, photo_size=None) -> None:
+    """Two LabelMe files in ``folder``: ``rectified.json`` (over rectified.png: the wall's outline,
+    the occluders and every piece, in its pixels) and ``photo.json`` (over the photo: the fitted
+    outline as a 'wall' polygon, the occluders); corrected in LabelMe, the first is a wall's mask
+    for ``build`` (``mask = ".../rectified.json"``), the second goes back to ``rectify --labelme``."""
+    import os
+
+    rows, cols = ortho_shape
+    outline = np.array([[-0.5, rows - 0.5], [cols - 0.5, rows - 0.5], [cols - 0.5, -0.5], [-0.5, -0.5]])
+    write_labelme(
+        folder / "rectified.json",
+        "rectified.png",
+        (rows, cols),
+        outline=outline,
+        occluders=occluders_ortho,
+        pieces=pieces,
+    )
+    photo = calibration.photo
+    size = photo_size or photo.size
+    try:
+        rel = os.path.relpath(Path(photo.path).resolve(), Path(folder).resolve())
+    except ValueError:  # another drive (Windows): the absolute path
+        rel = str(Path(photo.path).resolve())
+    write_labelme(
+        folder / "photo.json",
+        rel,
+        (size[1], size[0]),
+        outline=calibration.result.corners_px(),
+        occluders=calibration.occluders,
+    )

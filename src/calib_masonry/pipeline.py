@@ -19,6 +19,7 @@ from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
 from .io import check_output, read_mask, staged_output, to_uint8, warn, write_json, write_mask, write_rgb
+from .labelme import write_labelme_pair
 from .progress import progress as _progress
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
@@ -407,40 +408,6 @@ def _write_photo_walls(
             for name, pw in photos.items():
                 plot_calibration(pw.calibration, pw.rectified, folder / name / "overlay.png", photo_size=pw.photo_size)
     job.result()
-
-
-def write_labelme_pair(folder: Path, calibration, ortho_shape, *, pieces, occluders_ortho, photo_size=None) -> None:
-    """Two LabelMe files in ``folder``: ``rectified.json`` (over rectified.png: the wall's outline,
-    the occluders and every piece, in its pixels) and ``photo.json`` (over the photo: the fitted
-    outline as a 'wall' polygon, the occluders); corrected in LabelMe, the first is a wall's mask
-    for ``build`` (``mask = ".../rectified.json"``), the second goes back to ``rectify --labelme``."""
-    import os
-
-    from .labelme import write_labelme
-
-    rows, cols = ortho_shape
-    outline = np.array([[-0.5, rows - 0.5], [cols - 0.5, rows - 0.5], [cols - 0.5, -0.5], [-0.5, -0.5]])
-    write_labelme(
-        folder / "rectified.json",
-        "rectified.png",
-        (rows, cols),
-        outline=outline,
-        occluders=occluders_ortho,
-        pieces=pieces,
-    )
-    photo = calibration.photo
-    size = photo_size or photo.size
-    try:
-        rel = os.path.relpath(Path(photo.path).resolve(), Path(folder).resolve())
-    except ValueError:  # another drive (Windows): the absolute path
-        rel = str(Path(photo.path).resolve())
-    write_labelme(
-        folder / "photo.json",
-        rel,
-        (size[1], size[0]),
-        outline=calibration.result.corners_px(),
-        occluders=calibration.occluders,
-    )
 
 
 def build_to_folder(

@@ -66,10 +66,13 @@ FOCAL_PRIOR_LOG_SIGMA = 0.3
 #: camera; k2 is nearly the same curve as k1 over a photo's radii, so its prior keeps the pair apart)
 K1_PRIOR_SIGMA = 0.15
 K2_PRIOR_SIGMA = 0.05
-# padded segment counts: each is one compilation of the exported fit (a photo with no segments
-# pads to the first; padding has weight 0, so it adds exact zeros to every sum)
-_BUCKETS = (16, 64, 256, 1024)
-MAX_SEGMENTS = _BUCKETS[-1]
+# every fit pads its bed and head segments to MAX_SEGMENTS and its plumb points to
+# MAX_PLUMB_POINTS (padding has weight 0: exact zeros in every sum), so that the exported fit has
+# one shape: each further shape cost a process 0.6 s of lowering and 0.8 s of loading its compiled
+# code; the largest segments' count a photo gives (about 800 a family on a 6 m brick wall) costs
+# 9 ms a Levenberg-Marquardt step, so the longest 512 are kept, which count as
+# ``max_effective_segments`` all the same
+MAX_SEGMENTS = 512
 
 
 @dataclass(frozen=True)
@@ -140,6 +143,9 @@ class CalibrationResult(HasFit):
     n_head: int
     plumb_lines: int = 0  # long joints the lens was straightened on
     plumb_rms_px: tuple[float, float] = (float("nan"), float("nan"))  # their RMS from straight: photo, lens undone
+    # what the last solve used (the inlier segments and the plumb lines), for a refit that changes
+    # one thing (the corners, the lens held) without choosing them again
+    used: CalibrationInput | None = field(default=None, repr=False, compare=False)
 
     def value(self, name: str) -> float:
         return self.fit[name]
@@ -309,13 +315,6 @@ def initial_params(inp: CalibrationInput) -> np.ndarray:
 # residuals (JAX)
 
 
-def _bucket(n: int) -> int:
-    for b in _BUCKETS:
-        if n <= b:
-            return b
-    return _BUCKETS[-1]
-
-
 def _capped(seg) -> np.ndarray:
     """At most MAX_SEGMENTS segments, the longest."""
     seg = np.asarray(seg, dtype=np.float64).reshape(-1, 4)
@@ -327,7 +326,7 @@ def _capped(seg) -> np.ndarray:
 
 def _pad_segments(seg: np.ndarray, sigma: float, n_eff: int) -> tuple[np.ndarray, np.ndarray]:
     seg = _capped(seg)
-    n = _bucket(len(seg))
+    n = MAX_SEGMENTS
     out = np.zeros((n, 4))
     w = np.zeros(n)
     out[: len(seg)] = seg
@@ -335,22 +334,29 @@ def _pad_segments(seg: np.ndarray, sigma: float, n_eff: int) -> tuple[np.ndarray
     return out, w
 
 
-#: plumb-line clusters: at most this many long joints; each counts as at most PLUMB_EFFECTIVE points
+#: plumb-line clusters: at most this many long joints, each of at most PLUMB_POINTS_PER_LINE points
+#: (evenly spaced: a line's straightness needs no more) counting as at most PLUMB_EFFECTIVE points
 MAX_PLUMB_LINES = 96
 PLUMB_EFFECTIVE = 12
-_PLUMB_BUCKETS = (32, 256, 1024, 4096)
+PLUMB_POINTS_PER_LINE = 16
+MAX_PLUMB_POINTS = MAX_PLUMB_LINES * PLUMB_POINTS_PER_LINE
 
 
 def _pad_plumb(inp: CalibrationInput):
-    """The plumb-line points padded to a bucket: points (n, 2), weights (n,) (1 / sigma, shrunk so
-    that a cluster counts as at most :data:`PLUMB_EFFECTIVE` points; 0 = padding), cluster index
-    (n,) as float (JAX's segment sums take it cast) and family (n,)."""
+    """The plumb-line points padded to :data:`MAX_PLUMB_POINTS`: points (n, 2), weights (n,)
+    (1 / sigma, shrunk so that a cluster counts as at most :data:`PLUMB_EFFECTIVE` points; 0 =
+    padding), cluster index (n,) as float (JAX's segment sums take it cast) and family (n,)."""
     pts = np.asarray(inp.plumb_points, dtype=np.float64).reshape(-1, 2)
     cl = np.asarray(inp.plumb_cluster, dtype=np.int64).ravel()
     fam = np.asarray(inp.plumb_family, dtype=np.float64).ravel()
     keep = cl < MAX_PLUMB_LINES
+    for k in np.unique(cl[keep]):  # each cluster thinned to PLUMB_POINTS_PER_LINE, evenly
+        idx = np.flatnonzero(cl == k)
+        if len(idx) > PLUMB_POINTS_PER_LINE:
+            chosen = idx[np.round(np.linspace(0, len(idx) - 1, PLUMB_POINTS_PER_LINE)).astype(int)]
+            keep[np.setdiff1d(idx, chosen)] = False
     pts, cl, fam = pts[keep], cl[keep], fam[keep]
-    n = next((b for b in _PLUMB_BUCKETS if len(pts) <= b), _PLUMB_BUCKETS[-1])
+    n = MAX_PLUMB_POINTS
     pts, cl, fam = pts[:n], cl[:n], fam[:n]
     out = np.zeros((n, 2))
     w = np.zeros(n)
@@ -549,19 +555,18 @@ def _solve_fn(u0, data):
 
 @cache
 def _solver():
-    """:func:`_solve_fn` exported once for any number of bed and head segments and kept on disk
+    """:func:`_solve_fn` exported once for the padded shapes and kept on disk
     (:func:`calib_masonry._jax.exported`): tracing optimistix's Levenberg-Marquardt and its
     Jacobian took 1-2 s of every process that fitted a photo (the solve itself takes
     milliseconds). It returns the jitted function's parameters, status and Jacobian bit for bit,
     and its residuals to rounding (test)."""
     from pathlib import Path
 
-    from jax import export
-
     from .. import _jax
     from . import camera, lm
 
-    nb, nh, npl = export.symbolic_shape("nb, nh, npl")
+    nb = nh = MAX_SEGMENTS
+    npl = MAX_PLUMB_POINTS
 
     def spec(*shape):
         return jax.ShapeDtypeStruct(shape, jnp.float64)
@@ -705,6 +710,21 @@ def straightness_rms(points: np.ndarray, cluster: np.ndarray) -> float:
     return math.sqrt(sq / n) if n else float("nan")
 
 
+def warm_up() -> None:
+    """Load the exported fit and run it once on a made-up photo (a square wall seen head-on), so
+    that its one-off cost (0.6 s of loading its compiled code, measured) is paid here, on a thread
+    that runs while the photo is searched, not by the first fit."""
+    inp = CalibrationInput(
+        image_size=(400, 300),
+        corners_px=np.array([[150.0, 250.0], [250.0, 250.0], [250.0, 150.0], [150.0, 150.0]]),
+        camera_height_m=1.0,
+        focal_px=400.0,
+    )
+    data = pack(inp)
+    out = _solve(jnp.asarray(initial_params(inp) / SCALE), {k: jnp.asarray(v) for k, v in data.items()})
+    jax.block_until_ready(out)
+
+
 def calibrate(
     inp: CalibrationInput, *, start: np.ndarray | None = None, reject_outliers: bool = True
 ) -> CalibrationResult:
@@ -773,6 +793,7 @@ def calibrate(
         image_size=tuple(int(v) for v in inp.image_size),
         n_bed=nb,
         n_head=nh,
+        used=inp,
     )
     if len(inp.plumb_points):
         pts, cl = np.asarray(inp.plumb_points), np.asarray(inp.plumb_cluster)

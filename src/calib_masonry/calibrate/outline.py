@@ -287,14 +287,21 @@ def _project(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 
 def _fit_rectangle(
-    prob: np.ndarray, rect_from_px: np.ndarray, region: np.ndarray, n: int, reach: float = 0.04
+    prob: np.ndarray,
+    rect_from_px: np.ndarray,
+    region: np.ndarray,
+    n: int,
+    reach: float = 0.04,
+    core: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """The quadrilateral that holds the most of ``prob - 0.5`` (likely-wall pixels net of unlikely
     ones), sought on an ``n x n`` grid over the ``region``'s extent in the rectified frame (grown by
     a third), where the wall is about an upright rectangle.
 
-    First the upright rectangle, by coordinate ascent from the extent's 2-98 % box (an integral
-    image gives each candidate's sum at once); then each side, in turn, is let tilt: its two ends
+    First the upright rectangle, by coordinate ascent from the extent's 2-98 % box and from the
+    ``core``'s (the region without its thin bands, as a horizon's soft edge that joins the wall's
+    foot: from the extent alone the ascent settled on the horizon), the better of the two (an
+    integral image gives each candidate's sum at once); then each side, in turn, is let tilt: its two ends
     move independently by up to ``reach`` of the grid, so that a side follows the region where the
     vanishing point was off (column or row sums of the grid give each candidate's sum). Returns the
     corners in pixels (any order), or None."""
@@ -324,17 +331,31 @@ def _fit_rectangle(
         return s[r1, c1] - s[r0, c1] - s[r1, c0] + s[r0, c0]
 
     k = np.arange(n + 1)
-    box = [round(0.125 * n), round(0.875 * n), round(0.125 * n), round(0.875 * n)]
-    for _ in range(20):
-        old = list(box)
-        r0, r1, c0, c1 = box
-        box[0] = r0 = int(np.argmax(energy(k[:r1], r1, c0, c1)))
-        box[1] = r1 = r0 + 1 + int(np.argmax(energy(r0, k[r0 + 1 :], c0, c1)))
-        box[2] = c0 = int(np.argmax(energy(r0, r1, k[:c1], c1)))
-        box[3] = c0 + 1 + int(np.argmax(energy(r0, r1, c0, k[c0 + 1 :])))
-        if box == old:
-            break
-    r0, r1, c0, c1 = box
+    starts = [[round(0.125 * n), round(0.875 * n), round(0.125 * n), round(0.875 * n)]]
+    if core is not None:
+        cy, cx = np.nonzero(core[::2, ::2])
+        if len(cx) >= 20:
+            cq = np.c_[2.0 * cx, 2.0 * cy, np.ones(len(cx))] @ rect_from_px.T
+            cuv = cq[:, :2] / cq[:, 2:3]
+            clo, chi = np.percentile(cuv, 2, axis=0), np.percentile(cuv, 98, axis=0)
+            gc0, gc1 = np.clip(np.round((np.array([clo[0], chi[0]]) - us[0]) / (us[1] - us[0])), 0, n)
+            gr0, gr1 = np.clip(np.round((np.array([clo[1], chi[1]]) - vs[0]) / (vs[1] - vs[0])), 0, n)
+            if gr1 - gr0 >= 2 and gc1 - gc0 >= 2:
+                starts.append([int(gr0), int(gr1), int(gc0), int(gc1)])
+    best = None
+    for box in starts:
+        for _ in range(20):
+            old = list(box)
+            r0, r1, c0, c1 = box
+            box[0] = r0 = int(np.argmax(energy(k[:r1], r1, c0, c1)))
+            box[1] = r1 = r0 + 1 + int(np.argmax(energy(r0, k[r0 + 1 :], c0, c1)))
+            box[2] = c0 = int(np.argmax(energy(r0, r1, k[:c1], c1)))
+            box[3] = c0 + 1 + int(np.argmax(energy(r0, r1, c0, k[c0 + 1 :])))
+            if box == old:
+                break
+        if best is None or energy(*box) > energy(*best):
+            best = box
+    r0, r1, c0, c1 = best
     if r1 - r0 < 4 or c1 - c0 < 4:
         return None
     # the sides as lines of the grid: top and base rows as functions of the column, the ends'
@@ -527,6 +548,10 @@ def detect_outline(
             "automatic mode: no wall found (no region at the photo's centre looks unlike its surroundings); "
             f"click the wall's corners with {CORNERS_FLAG}"
         )
+    # the region without its thin bands (a soft horizon joined to the wall's foot)
+    r_open = max(2, round(0.015 * max(srows, scols)))
+    disk = np.hypot(*np.mgrid[-r_open : r_open + 1, -r_open : r_open + 1]) <= r_open
+    core = _component_of(ndimage.binary_opening(region, structure=disk), seed)
     # long segments of the whole photo at LSD's coarse size, in the shrunk photo's pixels
     gray = small.mean(axis=-1)
     seg = lsd_segments(
@@ -562,7 +587,7 @@ def detect_outline(
             rect_from_px = _rectifying_map(vb, vh, centre)
         except np.linalg.LinAlgError:
             continue
-        quad = _fit_rectangle(prob, rect_from_px, region, config.grid)
+        quad = _fit_rectangle(prob, rect_from_px, region, config.grid, core=core)
         if quad is not None:
             break
     if quad is None:

@@ -427,8 +427,12 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             f"{result.plumb_lines} long joints from {before:.2f} to {after:.2f} px RMS)"
         )
         inp = replace(inp, fit_distortion=False)
-        try:
-            result = calibrate(inp, start=np.r_[result.params[:9], inp.k1_prior, inp.k2_prior])
+        try:  # on the segments and plumb lines the first fit kept (choosing them again cost 2 solves)
+            result = calibrate(
+                replace(result.used, fit_distortion=False),
+                start=np.r_[result.params[:9], inp.k1_prior, inp.k2_prior],
+                reject_outliers=False,
+            )
         except FitFailed as exc:
             raise FitFailed(f"{photo.path}: {exc}") from None
     # the outline again with the first fit's lens: each side snapped along a line straight in the
@@ -440,8 +444,12 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             inp = replace(inp, corners_px=corners, corner_sigma_px=tuple(float(v) for v in sigma))
             if detection is not None:
                 detection = replace(detection, corners_px=corners, corner_sigma_px=np.asarray(sigma))
-            try:
-                result = calibrate(inp, start=result.params)
+            try:  # on the segments and plumb lines the first fit kept
+                result = calibrate(
+                    replace(result.used, corners_px=corners, corner_sigma_px=inp.corner_sigma_px),
+                    start=result.params,
+                    reject_outliers=False,
+                )
             except FitFailed as exc:
                 raise FitFailed(f"{photo.path}: {exc}") from None
     courses = None
@@ -707,8 +715,9 @@ def import_detection() -> None:
 
 
 def import_early(figures: bool = True) -> None:
-    """Start importing JAX with the camera fit (0.3 s) and, with ``figures``, Pillow's drawing on a
-    second thread, so that it runs while this one reads and searches the photo (mostly in scipy,
+    """Start importing JAX with the camera fit (0.3 s) and loading the fit's compiled code
+    (:func:`~calib_masonry.calibrate.fit.warm_up`, 0.6 s) and, with ``figures``, Pillow's drawing
+    on a second thread, so that it runs while this one reads and searches the photo (mostly in scipy,
     which releases the GIL). numpy and scipy, which both sides import, are loaded before the
     thread starts, and so are the detection's modules (:func:`import_detection`); an import that
     fails there fails again, with its message, where it is needed."""
@@ -718,8 +727,9 @@ def import_early(figures: bool = True) -> None:
 
     def load() -> None:
         try:
-            from . import fit  # noqa: F401
+            from . import fit
 
+            fit.warm_up()
             if figures:
                 from .. import _raster
 
@@ -851,30 +861,44 @@ def rectify_to_folder(
     doc = cal.to_json()
     doc["px_per_m"] = px_per_m
     with staged_output(out, "rectify", overwrite=overwrite, keep=[photo_path, mask_path]) as stage:
-        # resampling (scipy) and the PNG's encoding (zlib) release the GIL: they run on the other
-        # core while the overlay draws
+        # resampling (scipy), then the segmentation of the pieces (mostly scipy and numpy, which
+        # release the GIL), run on the other core while this one draws the overlay and encodes the
+        # PNGs; the segmentation starts as soon as the orthophoto is there
+        jobs = []
+
         def orthophoto() -> np.ndarray:
             rect = rectify(cal, px_per_m=px_per_m)
-            write_rgb(stage / "rectified.png", rect)
+            if pieces:
+                jobs.append(background(segment_orthophoto, cal, rect, px_per_m))
             return rect
 
-        with background(orthophoto) as job:  # waited for on the way out of an error too
-            if figure:
-                plot_calibration(cal, job.result, stage / "overlay.png")
-            if mask is not None:
-                rm = rectify_image(
-                    mask.astype(np.float32), res.wall_from_image, res.width_m, res.height_m, px_per_m, lens=lens_of(res)
-                )
-                write_mask(stage / "rectified_mask.png", rm >= 0.5)
-        rect = job.result()
-        doc["rectified_shape"] = list(rect.shape[:2])
-        if pieces:
-            seg, polygons, occ = segment_orthophoto(cal, rect, px_per_m)
-            doc["pieces"] = seg.summary()
-            from ..pipeline import write_labelme_pair
+        try:
+            with background(orthophoto) as job:  # waited for on the way out of an error too
+                if figure:
+                    plot_calibration(cal, job.result, stage / "overlay.png")
+                if mask is not None:
+                    rm = rectify_image(
+                        mask.astype(np.float32),
+                        res.wall_from_image,
+                        res.width_m,
+                        res.height_m,
+                        px_per_m,
+                        lens=lens_of(res),
+                    )
+                    write_mask(stage / "rectified_mask.png", rm >= 0.5)
+                rect = job.result()
+                write_rgb(stage / "rectified.png", rect)
+            doc["rectified_shape"] = list(rect.shape[:2])
+            if pieces:
+                seg, polygons, occ = jobs[0].result()
+                doc["pieces"] = seg.summary()
+                from ..labelme import write_labelme_pair
 
-            write_labelme_pair(stage, cal, rect.shape[:2], pieces=polygons, occluders_ortho=occ)
-            write_mask(stage / "pieces_mask.png", _upsampled_mask(seg.mask, rect.shape[:2]))
+                write_labelme_pair(stage, cal, rect.shape[:2], pieces=polygons, occluders_ortho=occ)
+                write_mask(stage / "pieces_mask.png", _upsampled_mask(seg.mask, rect.shape[:2]))
+        finally:  # nothing runs on after this function, however it ends
+            for j in jobs:
+                j.wait()
         write_json(stage / "calibration.json", doc)
     return doc
 
@@ -908,8 +932,8 @@ def piece_polygons(labels: np.ndarray, *, tolerance_px: float = 1.5) -> list[np.
     outline of its largest part (along pixel edges,
     :func:`~calib_masonry.wall2d.trace.trace_outline`) simplified to within ``tolerance_px``
     (Douglas-Peucker), so that an engineer drags a few vertices, not hundreds."""
+    import cv2
     from scipy import ndimage
-    from skimage.measure import approximate_polygon
 
     from ..wall2d.trace import trace_outline
 
@@ -922,7 +946,9 @@ def piece_polygons(labels: np.ndarray, *, tolerance_px: float = 1.5) -> list[np.
         if n > 1:
             region = parts == 1 + int(np.argmax(np.bincount(parts.ravel())[1:]))
         outline = trace_outline(region)
-        poly = approximate_polygon(np.vstack([outline, outline[:1]]), tolerance_px)[:-1]
+        # OpenCV's Douglas-Peucker on the closed outline (scikit-image's took 2 ms a piece)
+        poly = cv2.approxPolyDP(outline.astype(np.float32).reshape(-1, 1, 2), tolerance_px, True)
+        poly = poly.reshape(-1, 2).astype(np.float64)
         if len(poly) >= 3:
             out.append(poly + [sl[1].start, sl[0].start])
     return out

@@ -89,7 +89,16 @@ def main() -> None:
                 # the eye height measured (since 2026-11-26 the prior alone is refused: +-31 %)
                 runs.setdefault("rectify (each photo)", []).append(
                     timed(
-                        [*CLI, "rectify", f"photos/{w}.jpg", "--camera-height", f"{eye[w]:.2f}", "--out", str(tmp / "r"), "--overwrite"],
+                        [
+                            *CLI,
+                            "rectify",
+                            f"photos/{w}.jpg",
+                            "--camera-height",
+                            f"{eye[w]:.2f}",
+                            "--out",
+                            str(tmp / "r"),
+                            "--overwrite",
+                        ],
                         data,
                     )
                 )

@@ -335,3 +335,51 @@ def test_silently_accepted_values_are_one_line_errors(tmp_path, args, expect):
     lines = [line for line in r.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: ") and expect in lines[0], r.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_no_command_writes_over_its_input(tmp_path):
+    """`trace MASK --out MASK`, `trace M --figure M`, a polygons file whose figure would be the mask,
+    and `compare RUN TRUTH --out TRUTH/truth.json` are refused before any work, the input intact."""
+    import shutil
+
+    mask = tmp_path / "m.png"
+    shutil.copy(SWAT, mask)
+    before = mask.read_bytes()
+    for extra in (["--out", mask], ["--out", tmp_path / "p.json", "--figure", mask], ["--out", tmp_path / "m.json"]):
+        r = _run("trace", mask, "--vertices", "6", *extra)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+        assert "inputs" in r.stderr and mask.read_bytes() == before
+    truth = tmp_path / "truth"
+    shutil.copytree(DATA / "paper_example" / "truth", truth)
+    doc = (truth / "truth.json").read_bytes()
+    r = _run("compare", tmp_path, truth, "--out", truth / "truth.json")
+    assert r.returncode == 2 and "inputs" in r.stderr and (truth / "truth.json").read_bytes() == doc
+
+
+def test_contradictory_and_out_of_range_motion_inputs_are_refused(tmp_path):
+    """--pushover with a quake's flags is refused; a record whose peak is above any recorded motion
+    (cm/s2 read as g) is refused naming --units, where it ran at 267 g and 'collapsed'."""
+    for extra in (["--pga", "0.3"], ["--accelerogram", tmp_path / "a.csv"]):
+        r = _run("simulate", DATA, "--pushover", *extra, "--out", tmp_path / "o")
+        assert r.returncode == 2 and "--pushover with" in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    t = np.arange(0, 4, 0.01)
+    rec = tmp_path / "cms2.csv"
+    rec.write_text("".join(f"{a:.4f},{b:.4f}\n" for a, b in zip(t, 250 * np.sin(2 * np.pi * t), strict=True)))
+    from calib_masonry.errors import InputError
+    from calib_masonry.simulation.ground_motion import read_accelerogram
+
+    with pytest.raises(InputError, match=r"cms2.csv.*peak is 250 g.*--units m/s2"):
+        read_accelerogram(rec)
+    ms2 = tmp_path / "ms2.csv"  # the same record in m/s2, as the message advises
+    ms2.write_text("".join(f"{a:.4f},{b:.6f}\n" for a, b in zip(t, 2.5 * np.sin(2 * np.pi * t), strict=True)))
+    assert read_accelerogram(ms2, units="m/s2").source == "ms2.csv"
+
+
+def test_negative_corner_lists_are_values_not_options():
+    """`--corners -5000,0,...` (a corner left of the photo) is read as the list, not as a flag."""
+    from calib_masonry.cli import _parser
+
+    args = _parser().parse_args(["rectify", "p.jpg", "--corners", "-5000,0,10,0,10,10,0,10", "--out", "o"])
+    assert args.corners == "-5000,0,10,0,10,10,0,10"
+    args = _parser().parse_args(["rectify", "p.jpg", "--known-length", "-1.5e2,3,40,3,0.9", "--out", "o"])
+    assert args.known_length.startswith("-1.5e2")

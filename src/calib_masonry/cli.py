@@ -15,7 +15,7 @@ import warnings
 from pathlib import Path
 from typing import NoReturn
 
-from .errors import CalibMasonryError, Terminated, on_signal
+from .errors import CalibMasonryError, InputError, Terminated, on_signal
 
 __all__ = ["main"]
 
@@ -274,6 +274,12 @@ def _cmd_simulate(args) -> int:
     from .simulation.run import SimulationConfig, simulate_to_folder
     from .simulation.scene import Pushover, SolverSettings
 
+    if args.pushover and (args.accelerogram or args.pga is not None):
+        given = "--accelerogram" if args.accelerogram else "--pga"
+        raise InputError(
+            f"--pushover with {given}: a pushover ramps its own lateral acceleration (--pushover-rate, "
+            f"--pushover-max) and applies no ground motion; drop {given}, or drop --pushover for a quake"
+        )
     d = SolverSettings()
     solver = replace(
         d,
@@ -326,7 +332,8 @@ def _overwrite_flag(q) -> None:
 
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (``error: ...``, exit 2, like every other mistake) and numbers
-    such as ``-1e+16`` or ``-inf`` read as values rather than as unknown options."""
+    such as ``-1e+16``, ``-inf`` or the list ``-12,40,...`` read as values rather than as unknown
+    options."""
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
@@ -337,7 +344,9 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"error: {self.prog}: {message}; see `{self.prog} --help`\n")
 
 
-_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE)
+_NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
+# a negative number, or a comma-separated list that starts with one (--corners -12,40,...)
+_NEGATIVE_NUMBER = re.compile(rf"^-{_NUMBER}(\s*,\s*[-+]?{_NUMBER})*$|^-(inf|infinity|nan)$", re.IGNORECASE)
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -303,6 +303,21 @@ def output_command(folder: str | Path) -> str | None:
         return None
 
 
+def check_not_input(path: str | Path, inputs, *, flag: str = "--out") -> None:
+    """Refuse, before any work, an output ``path`` that is one of the command's ``inputs`` (files,
+    or folders whose every file is an input): writing it would destroy what the run reads."""
+    target = Path(path).resolve()
+    for item in inputs:
+        if item is None:
+            continue
+        src = Path(item).resolve()
+        if target == src or (src.is_dir() and src in target.parents and target.exists()):
+            raise InputError(
+                f"{flag} {path}: it is one of this command's inputs ({item}), which writing it would destroy; "
+                "choose another path"
+            )
+
+
 def check_output(
     path: str | Path,
     *,

@@ -323,6 +323,11 @@ def _parse_csv(path: Path, lines: list[str]) -> tuple[np.ndarray, float]:
 RECORD_UNITS = {"g": G, "m/s2": 1.0, "cm/s2": 0.01}
 
 
+#: the largest peak ground acceleration a run accepts (g): above any recorded ground motion (the
+#: strongest reach about 3 g)
+MAX_PGA_G = 5.0
+
+
 def read_accelerogram(path: str | Path, *, units: str | None = None, highpass_hz: float = 0.1) -> GroundMotion:
     """A recorded ground motion: a CSV of ``time, acceleration[, acceleration_y]`` (a header allowed;
     ``units`` "g" by default, or "m/s2") or a PEER NGA ``.AT2`` file (units from its header). NaN,
@@ -345,6 +350,15 @@ def read_accelerogram(path: str | Path, *, units: str | None = None, highpass_hz
         acc, dt = _parse_csv(path, lines)
         units = units or "g"
     acc = acc * RECORD_UNITS[units]
+    peak_g = float(np.max(np.abs(acc))) / G
+    if peak_g > MAX_PGA_G:
+        other = "m/s2" if units == "g" else "g"
+        raise _record_error(
+            path,
+            f"its peak is {peak_g:.3g} g read in {units}, above any recorded ground motion (the bound is "
+            f"{MAX_PGA_G:g} g); if the record is in {other} (or cm/s2: divide by 100 for m/s2), pass --units "
+            f"{other}, or remove the row that is out of range",
+        )
     if acc.shape[1] == 1:  # one horizontal component, along X
         acc = np.column_stack([acc[:, 0], np.zeros(len(acc))])
     return motion_from_acceleration(acc, dt, highpass_hz=highpass_hz, source=path.name)

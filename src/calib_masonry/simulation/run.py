@@ -29,7 +29,7 @@ from ..build3d.export import bricks_from_json, bricks_json_bytes
 from ..build3d.place import Footprint, WallGeometry, corners, wall_frames
 from ..errors import InputError
 from ..io import check_output, read_json, staged_output, write_json
-from .ground_motion import G, GroundMotion, read_accelerogram, synthetic_motion
+from .ground_motion import MAX_PGA_G, G, GroundMotion, read_accelerogram, synthetic_motion
 from .joints import joint_stiffness
 from .scene import (
     MASONRY,
@@ -66,7 +66,6 @@ __all__ = [
 
 
 DEFAULT_PGA_G = 0.3  # of a synthetic motion when no PGA is given
-MAX_PGA_G = 5.0  # above any recorded ground motion (the strongest reach about 3 g)
 MAX_FRAMES = 100_000  # about an hour of simulated time at 25 fps: far beyond any record or pushover
 MAX_FRAMES_PNG = 1000
 

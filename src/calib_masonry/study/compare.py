@@ -167,9 +167,13 @@ def compare(model: Structure3D, truth: Structure3D, *, where: str = "model") -> 
 
 def compare_to_file(run_dir: str | Path, truth_dir: str | Path, out: str | Path | None = None) -> tuple[dict, Path]:
     """``calib-masonry compare``: :func:`compare_dirs` written to ``out`` (default RUN_DIR/compare.json)."""
-    from ..io import check_output, staged_file, write_json
+    from ..io import check_not_input, check_output, staged_file, write_json
 
     out = check_output(Path(out) if out else Path(run_dir) / "compare.json", folder=False)
+    # every file of the truth is an input; of the run's folder, everything but an earlier compare.json
+    check_not_input(out, [truth_dir])
+    if Path(out).resolve() != (Path(run_dir) / "compare.json").resolve():
+        check_not_input(out, [run_dir])
     metrics = compare_dirs(run_dir, truth_dir)
     with staged_file(out) as tmp:
         write_json(tmp, metrics)

@@ -342,10 +342,13 @@ def trace_to_file(
     beside it unless ``figure`` names another path). Returns the trace, its seconds and the figure."""
     import time
 
-    from ..io import check_output, read_mask, staged_file, write_json
+    from ..io import check_not_input, check_output, read_mask, staged_file, write_json
 
     out = check_output(out, folder=False)
-    figure = check_output(Path(figure) if figure else out.with_suffix(".png"), folder=False, flag="--figure")
+    check_not_input(out, [mask_path])
+    given = figure is not None
+    figure = check_output(Path(figure) if given else out.with_suffix(".png"), folder=False, flag="--figure")
+    check_not_input(figure, [mask_path], flag="--figure" if given else f"--out's figure {figure.name}")
     mask = read_mask(mask_path, field="MASK")
     t0 = time.perf_counter()
     result = trace_mask(mask, config)

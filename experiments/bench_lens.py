@@ -51,7 +51,9 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[601, 602, 603, 604, 605, 606, 607])
     ap.add_argument("--k1", type=float, nargs="+", default=[-0.2, -0.15, -0.1, -0.05, 0.0, 0.05, 0.1])
     a = ap.parse_args()
-    print(f"{'seed':>5} {'k1 true':>8} {'k1 fit':>8} {'sigma':>6} {'lens':>5} {'plumb px':>13} {'W err':>7} {'H err':>7}  aim")
+    print(
+        f"{'seed':>5} {'k1 true':>8} {'k1 fit':>8} {'sigma':>6} {'lens':>5} {'plumb px':>13} {'W err':>7} {'H err':>7}  aim"
+    )
     met = 0
     for seed, k1 in zip(a.seeds, a.k1, strict=False):
         wall, photo, t = photo_through_lens(seed, k1)
@@ -74,7 +76,9 @@ def main() -> None:
             f"{ew:+7.2%} {eh:+7.2%}  {'met' if ok else 'NOT met'} ({time.perf_counter() - t0:.1f} s)",
             flush=True,
         )
-    print(f"k1 within 10 % (0.01 where |k1| < 0.1), W and H within 0.5 % at k1 = -0.15: {met} of {min(len(a.seeds), len(a.k1))}")
+    print(
+        f"k1 within 10 % (0.01 where |k1| < 0.1), W and H within 0.5 % at k1 = -0.15: {met} of {min(len(a.seeds), len(a.k1))}"
+    )
 
 
 if __name__ == "__main__":

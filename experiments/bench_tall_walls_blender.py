@@ -223,7 +223,9 @@ def main() -> None:
     ok = flagged = 0
     for seed, wall, cam, path in cases:
         photo = read_photo(path)
-        config = cm.CalibrateConfig(camera_height_m=float(cam["eye"][2]), camera_height_sigma_m=0.02, focal_px=cam["f_px"])
+        config = cm.CalibrateConfig(
+            camera_height_m=float(cam["eye"][2]), camera_height_sigma_m=0.02, focal_px=cam["f_px"]
+        )
         t0 = time.perf_counter()
         try:
             cal = cm.calibrate_photo(photo, config)

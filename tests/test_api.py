@@ -294,6 +294,11 @@ def test_build_writes_the_simulation_geometry_without_reading_what_it_wrote(buil
     assert sum(g.volume for g in glb.geometry.values()) == pytest.approx(
         sum(b.volume for b in result.structure.bricks), rel=1e-6
     )
+    # glTF is Y-up: the model stands along the file's Y (its height there), not lying along Z
+    pts = np.vstack([b.solid.vertices for b in result.structure.bricks])
+    lo, hi = glb.bounds
+    assert hi[1] == pytest.approx(pts[:, 2].max()) and lo[1] == pytest.approx(pts[:, 2].min(), abs=1e-9)
+    assert hi[2] == pytest.approx(-pts[:, 1].min()) and lo[0] == pytest.approx(pts[:, 0].min())
     _check_model_blend(out / "model.blend", result.structure)
     geometry, stored = geometry_for_model(out)
     assert stored  # the copy build stored matches the bricks.json it wrote, byte for byte

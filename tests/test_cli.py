@@ -383,3 +383,23 @@ def test_negative_corner_lists_are_values_not_options():
     assert args.corners == "-5000,0,10,0,10,10,0,10"
     args = _parser().parse_args(["rectify", "p.jpg", "--known-length", "-1.5e2,3,40,3,0.9", "--out", "o"])
     assert args.known_length.startswith("-1.5e2")
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="Linux's /proc")
+@pytest.mark.parametrize("command", ["build", "trace", "simulate", "study", "rectify"])
+def test_out_where_nothing_can_be_written_is_refused_before_any_work(tmp_path, command):
+    """--out under /proc (as on a read-only file system) is one line and exit 2 up front, where it
+    was a traceback after the work (a study's after 15 s)."""
+    from .conftest import ROOT
+
+    first = {
+        "build": [ROOT / "data_synthetic" / "paper_example" / "structure.toml"],
+        "trace": [SWAT, "--vertices", "6"],
+        "simulate": [DATA],
+        "study": [next((ROOT / "data_synthetic" / "studies").glob("*.toml"))],
+        "rectify": [SWAT],
+    }[command]
+    out = "/proc/calib-masonry-out.json" if command == "trace" else "/proc/calib-masonry-out"
+    r = _run(command, *first, "--out", out, timeout=120)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "nothing can be written in /proc" in r.stderr

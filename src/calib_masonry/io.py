@@ -318,6 +318,21 @@ def check_not_input(path: str | Path, inputs, *, flag: str = "--out") -> None:
             )
 
 
+def _check_writable(folder: Path, path: Path, flag: str) -> None:
+    """Refuse, before any work, an output under a folder where nothing can be made (a read-only
+    file system, /proc, a folder without write permission): a run would fail only when it writes,
+    after its work. Tried for real (a folder made and removed), since permissions alone do not tell
+    a read-only mount or /proc."""
+    import tempfile
+
+    try:
+        probe = tempfile.mkdtemp(prefix=".calib-masonry-probe-", dir=folder)
+        os.rmdir(probe)
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise InputError(f"{flag} {path}: nothing can be written in {folder} ({reason}); choose another path") from None
+
+
 def check_output(
     path: str | Path,
     *,
@@ -344,6 +359,7 @@ def check_output(
                 raise InputError(
                     f"{flag} {path}: {up} is a file, so no {what} can be made under it; choose another path"
                 )
+            _check_writable(up, path, flag)
             break
     if folder and command and path.is_dir():
         entries = sorted(e.name for e in path.iterdir())
@@ -360,8 +376,8 @@ def check_output(
                 shown = ", ".join(repr(e) for e in entries[:3]) + (", ..." if len(entries) > 3 else "")
                 raise InputError(
                     f"{flag} {path}: the folder holds {shown} and is {whose}; a `{command}` run replaces its "
-                    "output folder as a whole, so choose a new or empty folder, or add --overwrite "
-                    "(overwrite=True) to replace this one"
+                    "output folder as a whole, so choose a new or empty folder, or add --overwrite to replace "
+                    "this one"
                 )
     return path
 

@@ -49,6 +49,10 @@ def export_mesh(structure: Structure3D, path: Path) -> None:
         # colour in model.png (a material per wall, not colours per face: 0.25 s against 0.7 s for
         # the paper example's 1,587 bricks, and a wall's bricks share a material in Blender)
         scene = trimesh.Scene()
+        # glTF is Y-up: a root node turns the model's Z-up frame (x, y, z) into (x, z, -y), so that
+        # Blender's importer and every glTF viewer show it standing, not lying on its side
+        y_up = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, -1.0, 0, 0], [0, 0, 0, 1.0]])
+        scene.graph.update(frame_from=scene.graph.base_frame, frame_to="model", matrix=y_up)
         materials = {}
         for wall, name, m in _brick_meshes(structure):
             if wall not in materials:
@@ -59,7 +63,7 @@ def export_mesh(structure: Structure3D, path: Path) -> None:
                     roughnessFactor=1.0,
                 )
             m.visual = trimesh.visual.TextureVisuals(material=materials[wall])
-            scene.add_geometry(m, node_name=name, geom_name=name)
+            scene.add_geometry(m, node_name=name, geom_name=name, parent_node_name="model")
         data = scene.export(file_type="glb")
     else:
         data = mesh.export(file_type=kind)

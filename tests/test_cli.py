@@ -403,3 +403,17 @@ def test_out_where_nothing_can_be_written_is_refused_before_any_work(tmp_path, c
     r = _run(command, *first, "--out", out, timeout=120)
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert "nothing can be written in /proc" in r.stderr
+
+
+@pytest.mark.parametrize("width", ["1e300", "5000"])
+def test_an_impossible_dimension_is_a_short_line(tmp_path, width):
+    """`width_m = 1e300` printed a 270-digit number; a wall larger than any masonry (a unit error)
+    is refused in one short line that names the field and the unit."""
+    import shutil
+
+    shutil.copy(SWAT, tmp_path / "m.png")
+    p = _structure(tmp_path)
+    p.write_text(p.read_text().replace("width_m = 2.0", f"width_m = {width}"))
+    r = _run("build", p, "--out", tmp_path / "out")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "width_m" in r.stderr and "metres" in r.stderr and len(r.stderr) < 200

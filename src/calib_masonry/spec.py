@@ -46,6 +46,10 @@ __all__ = [
 LAYOUTS = ("stretcher", "stones")
 
 
+#: the largest wall dimension accepted (m): above any masonry wall; a value beyond it is a unit error
+MAX_WALL_M = 1000.0
+
+
 @dataclass(frozen=True)
 class WallSpec:
     """One wall: its photo or mask and the method's input row (W, H, theta, t, N)."""
@@ -73,9 +77,18 @@ class WallSpec:
         for key in ("width_m", "height_m"):
             value = getattr(self, key)
             if not (value > 0 or (math.isnan(value) and self.image is not None)):
-                raise InputError(f"{where}: {key} = {value} must be > 0 (metres); leave it out only for a photo wall")
-        if not (math.isfinite(self.thickness_m) and self.thickness_m > 0):
-            raise InputError(f"{where}: thickness_m = {self.thickness_m} must be > 0 (metres)")
+                raise InputError(
+                    f"{where}: {key} = {value:.6g} must be > 0 (metres); leave it out only for a photo wall"
+                )
+            if value > MAX_WALL_M:
+                raise InputError(
+                    f"{where}: {key} = {value:.6g} m is larger than any masonry wall (at most {MAX_WALL_M:g} m); "
+                    "give it in metres"
+                )
+        if not (math.isfinite(self.thickness_m) and 0 < self.thickness_m <= MAX_WALL_M):
+            raise InputError(
+                f"{where}: thickness_m = {self.thickness_m:.6g} must be > 0 and at most {MAX_WALL_M:g} (metres)"
+            )
         if not math.isfinite(self.theta_rad):
             raise InputError(f"{where}: theta = {self.theta_rad} must be a finite angle")
         if self.vertices is not None and (
@@ -411,15 +424,15 @@ def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_so
     theta_deg = _num(w, "theta_deg", where, default=0.0)
     t = _num(w, "thickness_m", where, default=t_default)
     if width <= 0:
-        raise InputError(f"{where}: width_m = {width} must be > 0 (metres)")
+        raise InputError(f"{where}: width_m = {width:.6g} must be > 0 (metres)")
     if height <= 0:
-        raise InputError(f"{where}: height_m = {height} must be > 0 (metres)")
+        raise InputError(f"{where}: height_m = {height:.6g} must be > 0 (metres)")
     if t is None:
         raise InputError(f"{where}: no thickness; set thickness_m here or in [structure]")
     if t <= 0:
-        raise InputError(f"{where}: thickness_m = {t} must be > 0 (metres)")
+        raise InputError(f"{where}: thickness_m = {t:.6g} must be > 0 (metres)")
     if t >= width and not math.isnan(width):
-        raise InputError(f"{where}: thickness_m = {t} is not smaller than width_m = {width}; check both")
+        raise InputError(f"{where}: thickness_m = {t:.6g} is not smaller than width_m = {width:.6g}; check both")
     n, d = _vertices_or_dice(w, where, n_default, d_default)
     mask = image = None
     if "photo" in w and "image" not in w:

@@ -417,3 +417,22 @@ def test_an_impossible_dimension_is_a_short_line(tmp_path, width):
     r = _run("build", p, "--out", tmp_path / "out")
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert "width_m" in r.stderr and "metres" in r.stderr and len(r.stderr) < 200
+
+
+def test_every_argument_has_help_and_shows_its_default():
+    """`simulate --help` showed --duration, --seed, --out and model_dir without help or default."""
+    import argparse
+
+    from calib_masonry.cli import _parser
+
+    p = _parser()
+    assert not p.description.startswith("``")  # a sentence, not a docstring fragment
+    sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
+    missing, hidden = [], []
+    for name, parser in sub.choices.items():
+        for a in parser._actions:
+            if not a.help:
+                missing.append((name, a.dest))
+            elif a.default not in (None, False, True, argparse.SUPPRESS) and "default" not in a.help:
+                hidden.append((name, a.dest))
+    assert missing == [] and hidden == []

@@ -350,7 +350,11 @@ _NEGATIVE_NUMBER = re.compile(rf"^-{_NUMBER}(\s*,\s*[-+]?{_NUMBER})*$|^-(inf|inf
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="calib-masonry", description=__doc__.splitlines()[0])
+    p = _Parser(
+        prog="calib-masonry",
+        description="Photos of masonry walls -> calibrated 3D model of every brick -> earthquake simulation. "
+        "Each command below has its own --help.",
+    )
     p.add_argument(
         "--trust-large-images",
         action="store_true",
@@ -483,7 +487,7 @@ def _parser() -> argparse.ArgumentParser:
     c.set_defaults(func=_cmd_compare)
 
     m = sub.add_parser("simulate", help="Bullet (bpy) earthquake simulation of a built model")
-    m.add_argument("model_dir")
+    m.add_argument("model_dir", help="a folder `calib-masonry build` wrote (bricks.json, sim_geometry.npz)")
     m.add_argument(
         "--pga",
         type=float,
@@ -491,8 +495,8 @@ def _parser() -> argparse.ArgumentParser:
         help="peak ground acceleration in g: of the synthetic motion (default 0.3), or the peak an "
         "--accelerogram is scaled to (default: the record as recorded)",
     )
-    m.add_argument("--duration", type=float, default=10.0, help="seconds of ground motion")
-    m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--duration", type=float, default=10.0, help="seconds of ground motion (default 10)")
+    m.add_argument("--seed", type=int, default=0, help="the synthetic motion's random seed (default 0)")
     m.add_argument(
         "--components",
         type=int,
@@ -517,10 +521,14 @@ def _parser() -> argparse.ArgumentParser:
         help="quasi-static collapse analysis: ramp a uniform lateral acceleration until the structure "
         "runs away; writes collapse_multiplier_g and pushover.png",
     )
-    m.add_argument("--direction", type=float, default=0.0, help="pushover direction in degrees from global X")
+    m.add_argument(
+        "--direction", type=float, default=0.0, help="pushover direction in degrees from global X (default 0)"
+    )
     m.add_argument("--pushover-rate", type=float, default=0.01, help="pushover ramp in g per second (default 0.01)")
-    m.add_argument("--pushover-max", type=float, default=1.0, help="pushover's largest lateral acceleration in g")
-    m.add_argument("--frames", type=int, default=6, help="collapse frames to render as PNG")
+    m.add_argument(
+        "--pushover-max", type=float, default=1.0, help="pushover's largest lateral acceleration in g (default 1)"
+    )
+    m.add_argument("--frames", type=int, default=6, help="collapse frames to render as PNG (default 6)")
     m.add_argument("--gif-frames", type=int, default=24, help="views in collapse.gif, played in real time (0: none)")
     m.add_argument(
         "--foundation",
@@ -529,7 +537,7 @@ def _parser() -> argparse.ArgumentParser:
         help="bond the bottom course to the ground, a footing (default; --no-foundation: friction only)",
     )
     m.add_argument("--no-figures", action="store_true")
-    m.add_argument("--out", default="out/simulate")
+    m.add_argument("--out", default="out/simulate", help="the folder to write (default out/simulate)")
     _overwrite_flag(m)
     m.set_defaults(func=_cmd_simulate)
 
@@ -559,7 +567,35 @@ def _parser() -> argparse.ArgumentParser:
     )
     _overwrite_flag(d)
     d.set_defaults(func=_cmd_demo)
+    _fill_help(sub)
     return p
+
+
+#: help for the arguments many commands share, where a command gives none of its own
+_COMMON_HELP = {
+    "out": "the folder to write (replaced as a whole; see --overwrite)",
+    "no_figures": "write no PNG figures (faster)",
+    "scenario": "a scenario TOML (as data_synthetic/*/scenario.toml)",
+    "photo": "the wall's photo (JPEG or PNG)",
+    "mask": "a brick mask (PNG, bricks white on black) or a LabelMe JSON",
+    "structure": "a structure TOML (see the README's 'Structure files')",
+    "run_dir": "a folder `calib-masonry build` wrote",
+    "truth_dir": "a truth folder `calib-masonry synth` wrote (truth.json, bricks.json)",
+}
+
+
+def _fill_help(sub) -> None:
+    """Every argument of every command with a help line (trace's --out is a file) that shows its
+    default."""
+    for name, parser in sub.choices.items():
+        for action in parser._actions:
+            if action.help is None and action.dest in _COMMON_HELP:
+                action.help = _COMMON_HELP[action.dest]
+                if name == "trace" and action.dest == "out":
+                    action.help = "the polygons JSON to write (its figure beside it, .png)"
+            shown = action.default not in (None, False, True, argparse.SUPPRESS)
+            if shown and action.help and "default" not in action.help:
+                action.help += f" (default {action.default})"
 
 
 def _tune_malloc(keep_freed: bool = False) -> None:

@@ -85,7 +85,7 @@ def test_accelerogram_errors(tmp_path, text, msg):
 
 def test_two_column_record_shakes_along_x_and_three_columns_along_both(tmp_path):
     t = np.arange(0, 4, 0.005)
-    a = 0.2 * np.sin(2 * np.pi * 1.5 * t)
+    a = 0.2 * np.sin(np.pi * t / t[-1]) ** 2 * np.sin(2 * np.pi * 1.5 * t)  # starts and ends at rest
     two = tmp_path / "two.csv"
     two.write_text("\n".join(f"{x:.3f},{y:.6f}" for x, y in zip(t, a)))
     three = tmp_path / "three.csv"
@@ -108,7 +108,8 @@ def test_peer_at2_record(tmp_path):
             "PEER NGA STRONG MOTION DATABASE RECORD\nTest event, station, comp 000\n"
             f"ACCELERATION TIME SERIES IN UNITS OF G\n{header}\n{body}\n"
         )
-        m = read_accelerogram(p)
+        with pytest.warns(UserWarning, match="does not start and end at rest"):  # white noise does not
+            m = read_accelerogram(p)
         assert m.dt == pytest.approx(0.01) and len(m.displacement) == 203
         assert m.source == "RSN0_TEST.AT2"
     p.write_text(p.read_text().replace("  203    .0100", "  204    .0100"))
@@ -121,7 +122,8 @@ def test_pga_scales_a_record_and_without_it_the_record_runs_as_recorded(tmp_path
 
     t = np.arange(0, 4, 0.005)
     p = tmp_path / "rec.csv"
-    p.write_text("\n".join(f"{x:.3f},{0.2 * np.sin(2 * np.pi * 1.5 * x):.6f}" for x in t))
+    env = np.sin(np.pi * t / t[-1]) ** 2  # a record that starts and ends at rest
+    p.write_text("\n".join(f"{x:.3f},{0.2 * e * np.sin(2 * np.pi * 1.5 * x):.6f}" for x, e in zip(t, env)))
     recorded = motion_for(SimulationConfig(accelerogram=p))
     assert recorded.pga == pytest.approx(read_accelerogram(p).pga)
     scaled = motion_for(SimulationConfig(accelerogram=p, pga_g=0.5))
@@ -172,3 +174,28 @@ def test_a_record_starts_from_rest():
         assert np.abs(a[0]).max() < 0.02 * np.abs(a).max()
         # after the taper the record is the record: its peak is where the strong phase is
         assert t[np.abs(a).max(axis=1).argmax()] > TAPER_S
+
+
+def test_a_record_not_at_rest_at_its_ends_is_warned_about_and_its_own_peak_kept(tmp_path):
+    """A 0.05 g sine at 0.4 Hz stopped at full amplitude: starting it from rest raised its peak by
+    more than 5 % without a word, and the summary called the processed peak the record's. Now a
+    warning says why, and the record's own peak is kept (record_peak_g)."""
+    t = np.arange(0.0, 8.0 + 0.625 + 1e-9, 0.01)  # ends at a crest of the 0.4 Hz sine
+    p = tmp_path / "sine.csv"
+    p.write_text("".join(f"{a:.4f},{0.05 * np.sin(2 * np.pi * 0.4 * a):.6f}\n" for a in t))
+    with pytest.warns(UserWarning, match=r"sine.csv: starting the record from rest .* changes its peak"):
+        m = read_accelerogram(p)
+    assert m.recorded_peak == pytest.approx(0.05 * G, rel=1e-3)
+    assert abs(m.pga / m.recorded_peak - 1) > 0.05
+    assert m.scaled(2.0).recorded_peak == pytest.approx(0.1 * G, rel=1e-3)
+    # a record that starts and ends at rest passes without a warning
+    q = tmp_path / "rest.csv"
+    env = np.sin(np.pi * t / t[-1]) ** 2
+    q.write_text(
+        "".join(f"{a:.4f},{0.05 * e * np.sin(2 * np.pi * 2.0 * a):.6f}\n" for a, e in zip(t, env, strict=True))
+    )
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_accelerogram(q)

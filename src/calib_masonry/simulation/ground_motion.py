@@ -15,7 +15,7 @@ Units: seconds, metres, m/s^2; ``pga_g`` is in g at the edges only.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +58,9 @@ class GroundMotion:
     displacement: np.ndarray
     acceleration: np.ndarray
     source: str = "synthetic"
+    # a record's own peak (m/s^2) as recorded, before integration from rest and high-pass; None
+    # for a synthetic motion, whose samples are the motion itself
+    recorded_peak: float | None = None
 
     @property
     def time(self) -> np.ndarray:
@@ -104,6 +107,7 @@ class GroundMotion:
             displacement=self.displacement * factor,
             acceleration=self.acceleration * factor,
             source=self.source if source is None else source,
+            recorded_peak=None if self.recorded_peak is None else self.recorded_peak * factor,
         )
 
     def displacement_at(self, t: np.ndarray) -> np.ndarray:
@@ -323,6 +327,8 @@ def _parse_csv(path: Path, lines: list[str]) -> tuple[np.ndarray, float]:
 RECORD_UNITS = {"g": G, "m/s2": 1.0, "cm/s2": 0.01}
 
 
+#: a record whose processing changes its peak by more than this fraction is warned about
+PEAK_CHANGE_WARN = 0.05
 #: the largest peak ground acceleration a run accepts (g): above any recorded ground motion (the
 #: strongest reach about 3 g)
 MAX_PGA_G = 5.0
@@ -361,4 +367,17 @@ def read_accelerogram(path: str | Path, *, units: str | None = None, highpass_hz
         )
     if acc.shape[1] == 1:  # one horizontal component, along X
         acc = np.column_stack([acc[:, 0], np.zeros(len(acc))])
-    return motion_from_acceleration(acc, dt, highpass_hz=highpass_hz, source=path.name)
+    motion = motion_from_acceleration(acc, dt, highpass_hz=highpass_hz, source=path.name)
+    recorded = float(np.abs(acc).max())
+    processed = motion.pga
+    if recorded > 0 and abs(processed / recorded - 1.0) > PEAK_CHANGE_WARN:
+        import warnings
+
+        warnings.warn(
+            f"{path.name}: starting the record from rest and high-passing it at {highpass_hz:g} Hz changes its "
+            f"peak from {recorded / G:.3g} g to {processed / G:.3g} g ({processed / recorded - 1.0:+.0%}): the "
+            "record does not start and end at rest (a velocity or displacement left at its ends); summary.json "
+            "gives both, record_peak_g as recorded",
+            stacklevel=2,
+        )
+    return replace(motion, recorded_peak=recorded)

@@ -360,11 +360,18 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
         "model": name,
         "bricks": len(scene.bodies),
         "bonds": len(scene.bonds),
-        # pga_g: the peak of the acceleration the run applies (frame means); record_peak_g: of the samples
+        # pga_g: the peak of the acceleration the run applies (frame means); samples_peak_g: of the
+        # motion's samples; record_peak_g: a record's own peak as recorded (for a synthetic motion,
+        # its samples'), before it was started from rest and high-passed
         "ground_motion": {
             "source": scene.motion.source if scene.motion else None,
             "pga_g": scene.motion.applied_peak(s.fps) / G if scene.motion else 0.0,
-            "record_peak_g": scene.motion.pga / G if scene.motion else 0.0,
+            "samples_peak_g": scene.motion.pga / G if scene.motion else 0.0,
+            "record_peak_g": (
+                (scene.motion.pga if scene.motion.recorded_peak is None else scene.motion.recorded_peak) / G
+                if scene.motion
+                else 0.0
+            ),
             "duration_s": scene.motion.duration if scene.motion else 0.0,
         },
         "solver": {

@@ -436,3 +436,35 @@ def test_every_argument_has_help_and_shows_its_default():
             elif a.default not in (None, False, True, argparse.SUPPRESS) and "default" not in a.help:
                 hidden.append((name, a.dest))
     assert missing == [] and hidden == []
+
+
+@pytest.mark.parametrize("n", ["1000000000", "1e9"])
+def test_a_study_too_large_is_refused_before_it_is_drawn(tmp_path, n):
+    """n = 1e9 (an int or a float) ran out of memory drawing the design; it is one line, at once."""
+    from .conftest import ROOT
+
+    src = ROOT / "data_synthetic" / "studies" / "paper_example_geometry.toml"
+    text = (
+        src.read_text()
+        .replace("n = 64", f"n = {n}")
+        .replace("../paper_example", str(ROOT / "data_synthetic" / "paper_example"))
+    )
+    study = tmp_path / "big.toml"
+    study.write_text(text)
+    r = _run("study", study, "--out", tmp_path / "out", timeout=120)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "[sampling] n = 1e+09" in r.stderr, r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_scenario_too_fine_for_memory_is_refused_before_any_work(tmp_path):
+    """px_per_m = 1e6 ran out of memory drawing the masks; it is one line naming the largest value."""
+    from .conftest import ROOT
+
+    text = (ROOT / "data_synthetic" / "paper_example" / "scenario.toml").read_text()
+    import re
+
+    text = re.sub(r"px_per_m = [0-9.]+", "px_per_m = 1e6", text, count=1)
+    p = tmp_path / "scenario.toml"
+    p.write_text(text)
+    r = _run("synth", p, "--out", tmp_path / "out", timeout=120)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "lower px_per_m to at most" in r.stderr, r.stderr

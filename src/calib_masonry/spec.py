@@ -46,6 +46,8 @@ __all__ = [
 LAYOUTS = ("stretcher", "stones")
 
 
+#: the largest mask a synth run draws per wall (pixels): 8 bytes a pixel to trace it, 1.6 GB
+MAX_SYNTH_PIXELS = 2e8
 #: the largest wall dimension accepted (m): above any masonry wall; a value beyond it is a unit error
 MAX_WALL_M = 1000.0
 
@@ -554,6 +556,16 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
             raise InputError(f"{where}: duplicate wall name; give every wall its own name")
         names.add(wname)
         walls.append(_wall_from(w, where, wname, defaults, path, require_sources))
+    if synthetic is not None:
+        for w in walls:  # the masks a synth run would draw, bounded before any work (1e6 px/m ran out of memory)
+            pixels = w.width_m * w.height_m * synthetic.px_per_m**2
+            if pixels > MAX_SYNTH_PIXELS:
+                most = math.sqrt(MAX_SYNTH_PIXELS / (w.width_m * w.height_m))
+                raise InputError(
+                    f"{_where(path, '[synthetic]')}: px_per_m = {synthetic.px_per_m:.6g} makes wall '{w.name}' a "
+                    f"{w.width_m * synthetic.px_per_m:.3g} x {w.height_m * synthetic.px_per_m:.3g} px mask, above "
+                    f"{MAX_SYNTH_PIXELS:.0e} px; lower px_per_m to at most {math.floor(most)}"
+                )
     corners = [
         _corner_from(c, i, names, path, require_sources) for i, c in enumerate(data.get("corner", []) or [], start=1)
     ]

@@ -403,6 +403,8 @@ def parse_study(data: dict, path: Path) -> Study:
     if method == "grid" and inputs:
         raise InputError(f"{path}: [sampling] method = 'grid' takes no [inputs]; use mc, lhs or sobol to draw them")
     n = _number(path, "[sampling] n", samp.get("n", 1), positive=True, integer=True)
+    if n > MAX_SAMPLES:  # before the design is drawn (n = 1e9 ran out of memory drawing it)
+        raise InputError(f"{path}: [sampling] n = {n:.6g}: at most {MAX_SAMPLES} samples; lower n")
     seed = _number(path, "[sampling] seed", samp.get("seed", 0), nonneg=True, integer=True)
     if method == "sobol":
         if n & (n - 1):

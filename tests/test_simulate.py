@@ -788,3 +788,24 @@ def test_sigterm_during_blender_start_up_is_raised_after_it_not_inside_it():
     )
     p = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, timeout=120)
     assert p.returncode == 3 and "raised after start-up: True" in p.stdout, p.stderr[-2000:]
+
+
+def test_collapse_time_agrees_with_the_verdict():
+    """A run whose bricks half moved and came back ended 'standing' with collapse_time_s 2.24: the
+    time is now when half the bricks stay moved, and None unless the run ends collapsed."""
+    from types import SimpleNamespace
+
+    from calib_masonry.simulation.results import metrics, outcome
+
+    scene = SimpleNamespace(solver=SimpleNamespace(warmup_frames=0, moved_threshold_m=0.05), bonds=())
+    t = np.arange(6) * 0.5
+    pos = np.zeros((6, 4, 3))
+    pos[:, :, 2] = np.arange(4) * 0.1
+    away = pos.copy()
+    away[1:3, :2, 0] = 0.2  # two of four bricks out at 0.5-1.0 s, then back
+    out = SimpleNamespace(time=t, positions=away, plate=np.zeros((6, 3)), bond_break_time_s=None)
+    m = metrics(scene, out)
+    assert outcome(m.moved_fraction[-1]) == "standing" and m.collapse_time_s is None
+    away[4:, :3, 0] = 0.3  # then three of four leave for good at 2.0 s
+    m = metrics(scene, out)
+    assert outcome(m.moved_fraction[-1]) == "collapsed" and m.collapse_time_s == pytest.approx(2.0)

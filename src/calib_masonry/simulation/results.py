@@ -67,7 +67,7 @@ class Metrics:
     max_displacement_m: np.ndarray  # (B,) over the whole run
     bond_break_time_s: np.ndarray  # (n_bonds,) NaN where intact
     broken_fraction: np.ndarray  # (F,)
-    collapse_time_s: float | None  # first time half the bricks have moved
+    collapse_time_s: float | None  # from when half the bricks stay moved (None: the run ends not collapsed)
 
 
 def outcome(moved_fraction: float) -> str:
@@ -91,8 +91,13 @@ def metrics(scene: Scene, out: RunOutput) -> Metrics:
     broken = (
         (np.array([(breaks <= t).sum() for t in t_rel]) / max(1, len(breaks))) if len(breaks) else np.zeros(len(t_rel))
     )
-    idx = np.flatnonzero(moved >= 0.5)
-    collapse = float(t_rel[idx[0]]) if idx.size else None
+    # the time from which half the bricks stay moved to the end: None unless the run ends collapsed,
+    # so that it agrees with the verdict (the first frame with half moved gave 2.24 s to a run whose
+    # bricks came back to rest within the threshold: outcome "standing")
+    collapse = None
+    if len(moved) and moved[-1] >= 0.5:
+        below = np.flatnonzero(moved < 0.5)
+        collapse = float(t_rel[below[-1] + 1]) if below.size else float(t_rel[0])
     return Metrics(
         start_frame=start,
         moved_fraction=moved,

@@ -311,7 +311,7 @@ def outcome(result) -> dict:
         "max_displacement_m": float(m.max_displacement_m.max()) if len(m.max_displacement_m) else 0.0,
         "outcome": verdict(moved),
         "collapsed": int(verdict(moved) == "collapsed"),
-        "collapse_time_s": m.collapse_time_s,  # None: half the bricks never moved
+        "collapse_time_s": m.collapse_time_s,  # None unless the outcome is collapsed
     }
     if result.curve is not None:
         cm = result.collapse_multiplier_g

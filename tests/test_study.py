@@ -344,3 +344,23 @@ def test_from_calibration_draws_a_photo_walls_size_around_its_fit(tmp_path, make
     assert len(set(w)) == 6 and np.all(np.abs(w - 4.0) < 0.1) and np.all(np.abs(h - 3.0) < 0.1)
     vols = np.array([r["total_volume_m3"] for r in rows])
     assert np.allclose(vols / (w * h), vols[0] / (w[0] * h[0]), rtol=1e-6)  # the model follows each draw
+
+
+def test_a_fragility_from_few_runs_carries_a_caveat():
+    """Six runs gave p5 = p95 at every PGA and a median printed without caveat; a curve from too
+    few runs now says so, and one from many does not."""
+    from types import SimpleNamespace
+
+    from scipy.stats import norm
+
+    from calib_masonry.study.analysis import MIN_FRAGILITY_RUNS, _fragility
+
+    study = SimpleNamespace(simulate=SimpleNamespace(pushover=False), seed=1)
+    few = [{"pga_g": a, "collapsed": c} for a, c in ((0.1, 0), (0.1, 0), (0.2, 1), (0.2, 0), (0.3, 1), (0.3, 1))]
+    out = _fragility(study, few)
+    assert out["median_g"] is not None and f"at least {MIN_FRAGILITY_RUNS} runs" in out["caveat"]
+    rng = np.random.default_rng(2)
+    pga = np.repeat([0.1, 0.2, 0.3, 0.4, 0.5], 40)
+    many = [{"pga_g": a, "collapsed": int(rng.random() < norm.cdf(np.log(a / 0.3) / 0.4))} for a in pga]
+    out = _fragility(study, many)
+    assert out["median_g"] == pytest.approx(0.3, rel=0.25) and "caveat" not in out

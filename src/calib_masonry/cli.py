@@ -130,12 +130,22 @@ def _cmd_study(args) -> int:
         f"study: {study.name}: {summary['samples']} samples ({ran} run now, {summary['samples'] - ran} kept from "
         f"before), {summary['failed']} failed, {time.perf_counter() - t0:.1f} s -> {args.out}"
     )
-    for key, st in list(summary["outputs"].items())[:8]:
-        if st.get("n"):
-            print(f"  {key:>28}: mean {st['mean']:.6g}, std {st['std']:.3g}, 5-95 % {st['p5']:.6g} .. {st['p95']:.6g}")
+    # the outputs that vary first (a geometry study's constant outputs said nothing), at most eight
+    stats = [(k, st) for k, st in summary["outputs"].items() if st.get("n")]
+    varying = [(k, st) for k, st in stats if st.get("std")]
+    for key, st in varying[:8]:
+        print(f"  {key:>28}: mean {st['mean']:.6g}, std {st['std']:.3g}, 5-95 % {st['p5']:.6g} .. {st['p95']:.6g}")
+    rest = len(varying) - 8 if len(varying) > 8 else 0
+    if rest or len(stats) > len(varying):
+        print(
+            f"  ({rest} more outputs vary and {len(stats) - len(varying)} are the same in every sample: "
+            "see summary.json)"
+        )
     frag = summary.get("fragility")
     if frag and frag.get("median_g"):
         print(f"  fragility: median {frag['median_g']:.3f} g, beta {frag['beta']:.3f}")
+    if frag and frag.get("caveat"):
+        print(f"  caveat: {frag['caveat']}")
     return 0
 
 

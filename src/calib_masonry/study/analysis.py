@@ -97,6 +97,10 @@ def fit_fragility(pga: np.ndarray, collapsed: np.ndarray) -> tuple[float, float]
     return math.exp(mu), beta
 
 
+#: fewer simulated runs than this give a fragility curve with a caveat
+MIN_FRAGILITY_RUNS = 20
+
+
 def _fragility(study: Study, ok: list[dict]) -> dict | None:
     from scipy.stats import norm
 
@@ -133,8 +137,10 @@ def _fragility(study: Study, ok: list[dict]) -> dict | None:
         f = fit_fragility(pga[idx], col[idx])
         if f is not None:
             curves.append(norm.cdf(np.log(grid / f[0]) / f[1]))
+    degenerate = True
     if curves:
         lo, hi = np.percentile(np.array(curves), [5, 95], axis=0)
+        degenerate = bool(np.allclose(lo, hi, atol=1e-9))
         out["band"] = {
             "pga_g": grid.tolist(),
             "p5": lo.tolist(),
@@ -142,6 +148,12 @@ def _fragility(study: Study, ok: list[dict]) -> dict | None:
             "bootstrap_fits": len(curves),
             "bootstrap_resamples": BOOTSTRAP,
         }
+    if len(pga) < MIN_FRAGILITY_RUNS or degenerate:
+        why = "its bootstrap band is a single line (p5 = p95 at every PGA)" if degenerate else "its band is wide"
+        out["caveat"] = (
+            f"from {len(pga)} runs at {len(levels)} PGA levels the median and beta are only indicative: {why}; "
+            f"use at least {MIN_FRAGILITY_RUNS} runs (more records at each PGA)"
+        )
     return out
 
 

@@ -12,8 +12,22 @@ def test_log_lines_when_not_on_a_terminal(monkeypatch):
     monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)  # a line per step here; 10 s in a real run
     assert list(progress(range(4), desc="simulate", unit="frame")) == [0, 1, 2, 3]
     lines = stream.getvalue().splitlines()
-    assert lines[0].startswith("simulate: 1/4 frames (25%)") and "s left" in lines[0]
+    # one item's time says nothing of the rest (it said "about 4771 s left" of a run done 1 s later)
+    assert lines[0].startswith("simulate: 1/4 frames (25%)") and "time left not known yet" in lines[0]
+    assert "about" in lines[2] and "s left" in lines[2]
     assert lines[-1].startswith("simulate: 4/4 frames (100%)") and lines[-1].endswith(", done")
+
+
+def test_an_interrupted_step_is_not_called_done(monkeypatch):
+    stream = io.StringIO()
+    monkeypatch.setattr(progress_module.sys, "stderr", stream)
+    monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)
+    bar = progress(total=10, desc="study", unit="sample")
+    bar.update()
+    bar.update()
+    bar.close()  # as a stopped run's finally block does
+    last = stream.getvalue().splitlines()[-1]
+    assert last.startswith("study: 2/10") and last.endswith("stopped before the end") and "done" not in last
 
 
 def test_quiet_when_disabled_and_no_line_for_a_short_step(monkeypatch):

@@ -18,6 +18,8 @@ from .errors import raise_if_stopped
 __all__ = ["LOG_EVERY_S", "progress"]
 
 LOG_EVERY_S = 10.0
+#: the time left is extrapolated only from at least this many items done (or all of them)
+MIN_ITEMS_FOR_ETA = 3
 
 
 class _LogLines:
@@ -41,11 +43,11 @@ class _LogLines:
         elapsed = now - self.t0
         if self.total:
             done = self.n / self.total
-            left = elapsed / done - elapsed if done > 0 else float("nan")
-            return (
-                f"{self.desc}: {self.n}/{self.total} {self.unit}s ({done:.0%}), {elapsed:.0f} s elapsed, "
-                f"about {left:.0f} s left"
-            )
+            if self.n >= min(MIN_ITEMS_FOR_ETA, self.total):
+                left = f"about {elapsed / done - elapsed:.0f} s left"
+            else:  # one item's time said "about 4771 s left" of a run done a second later
+                left = "time left not known yet"
+            return f"{self.desc}: {self.n}/{self.total} {self.unit}s ({done:.0%}), {elapsed:.0f} s elapsed, {left}"
         return f"{self.desc}: {self.n} {self.unit}s, {elapsed:.0f} s elapsed"
 
     def update(self, n: int = 1) -> None:
@@ -58,7 +60,8 @@ class _LogLines:
 
     def close(self) -> None:
         if self.logged:
-            print(self._line(time.monotonic()) + ", done", file=self.stream, flush=True)
+            ended = ", done" if self.total is None or self.n >= self.total else ", stopped before the end"
+            print(self._line(time.monotonic()) + ended, file=self.stream, flush=True)
             self.logged = False
 
 

@@ -178,6 +178,7 @@ def test_a_build_into_an_earlier_output_replaces_it_whole(tmp_path):
     (out / "photos").mkdir()  # as a build from photos leaves it
     r = _run("build", s, "--out", out, "--no-figures")
     assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("build: ") and "Info:" not in r.stdout  # no Blender line among the results
     names = {p.name for p in out.iterdir()}
     assert "compare.json" not in names and "photos" not in names and "walls.png" not in names
     assert {"bricks.json", "model.stl", "model.glb", "summary.json"} <= names

@@ -111,6 +111,35 @@ def _signals_held():
         signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
+@contextlib.contextmanager
+def _stdout_quiet():
+    """Blender's own lines to stdout (``Info: Saved as "model.blend"``) go nowhere: the command's
+    stdout is its result lines. The file descriptor is redirected (Blender writes from C), and C's
+    buffer flushed before it is restored."""
+    import ctypes
+    import os
+
+    try:
+        sys.stdout.flush()
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # no real stdout (a notebook, a worker): nothing to hide
+        yield
+        return
+    saved = os.dup(fd)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    try:
+        yield
+    finally:
+        try:
+            ctypes.CDLL(None).fflush(None)
+        except (OSError, AttributeError):
+            pass
+        os.dup2(saved, fd)
+        os.close(saved)
+        os.close(devnull)
+
+
 @dataclass(frozen=True)
 class RunOutput:
     """Poses at every frame (frame 0 is the initial state), in the frame that moves with the ground:
@@ -167,7 +196,7 @@ def write_model_blend(walls, path: str | Path) -> None:
             ob = _mesh_object(bpy, brick_name, np.asarray(vertices) - centre, np.asarray(faces), centre, col)
             ob.data.materials.append(mat)
             ob.color = tuple(float(x) for x in rgba)  # the viewport's object colour
-    with _signals_held():
+    with _signals_held(), _stdout_quiet():
         bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
     _reset(bpy)
 
@@ -576,7 +605,7 @@ def steps(
             rb.keyframe_insert("kinematic", frame=int(freed_at[j]) + 1)  # our frame f is Blender's f + 1
         sc.frame_end = len(mats)
         sc.frame_set(1)
-        with _signals_held():
+        with _signals_held(), _stdout_quiet():
             bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), check_existing=False, compress=True)
     return RunOutput(
         time=np.arange(n) / s.fps,

@@ -203,3 +203,19 @@ def test_least_width_of_convex_polygons_is_their_narrowest_extent():
         least = _least_widths(hulls)
         assert np.all(least <= across.min(axis=1) + 1e-12)  # no direction is narrower
         assert np.allclose(least, brute, rtol=0, atol=1e-7)  # and it is attained (to the search's tolerance)
+
+
+def test_walls_figure_has_a_colour_bar_for_dice(make_scenario, tmp_path, monkeypatch):
+    """walls.png coloured the bricks by Dice without a scale (the colours were unreadable)."""
+    import calib_masonry as cm
+    from calib_masonry import _figure
+    from calib_masonry.build3d.export import plot_walls
+
+    data = make_scenario([(1.6, 0.8, 0), (1.2, 0.8, 90)], closed=False)
+    result = cm.build(cm.load_structure(data / "structure.toml"))
+    saved = []
+    monkeypatch.setattr(_figure, "save", lambda fig, path, dpi=110: saved.append(fig))
+    plot_walls(result.structure, tmp_path / "walls.png")
+    (fig,) = saved
+    labels = [ax.get_ylabel() for ax in fig.axes]
+    assert len(fig.axes) == 3 and any(label.startswith("Dice") for label in labels)

@@ -147,19 +147,16 @@ def plot_walls(
     structure: Structure3D, path: Path, *, removed_polygons: list[list[np.ndarray]] | None = None, title: str = ""
 ) -> None:
     """The outer wall surfaces side by side (the method's Fig. 8), bricks coloured by Dice."""
+    from matplotlib.cm import ScalarMappable
     from matplotlib.collections import PolyCollection
+    from matplotlib.colors import Normalize
 
     from .. import _figure as plt
 
     spec = structure.footprint
     widths = [w.width_m for w in spec.walls]
-    fig, axes = plt.subplots(
-        1,
-        len(spec.walls),
-        figsize=(min(24, 2.2 + 1.6 * sum(widths)), 6),
-        gridspec_kw={"width_ratios": widths},
-        squeeze=False,
-    )
+    fig = plt.figure(figsize=(min(24, 3.0 + 1.6 * sum(widths)), 6), layout="constrained")
+    axes = fig.subplots(1, len(spec.walls), gridspec_kw={"width_ratios": widths}, squeeze=False)
     cmap = plt.get_cmap("viridis")
     for w, ax in enumerate(axes[0]):
         own = structure.bricks_of(w)
@@ -178,11 +175,15 @@ def plot_walls(
         ax.set_aspect("equal")
         ax.set_title(f"{wall.name}\n{wall.width_m:g} x {wall.height_m:g} m, {wall.theta_deg:g} deg", fontsize=8)
         ax.tick_params(labelsize=6)
+    bar = fig.colorbar(
+        ScalarMappable(norm=Normalize(0.9, 1.0), cmap=cmap), ax=axes[0].tolist(), extend="min", shrink=0.8, pad=0.01
+    )
+    bar.set_label("Dice of each brick's polygon with its mask region (below 0.9: darkest)", fontsize=7)
+    bar.ax.tick_params(labelsize=6)
     fig.suptitle(
-        title or f"{structure.name}: outer wall surfaces (colour: Dice 0.9-1; red hatched: corner end faces removed)",
+        title or f"{structure.name}: outer wall surfaces (colour: Dice; red hatched: corner end faces removed)",
         fontsize=9,
     )
-    fig.tight_layout()
     plt.save(fig, path, dpi=110)
     plt.close(fig)
 

@@ -364,3 +364,26 @@ def test_a_fragility_from_few_runs_carries_a_caveat():
     many = [{"pga_g": a, "collapsed": int(rng.random() < norm.cdf(np.log(a / 0.3) / 0.4))} for a in pga]
     out = _fragility(study, many)
     assert out["median_g"] == pytest.approx(0.3, rel=0.25) and "caveat" not in out
+
+
+def test_output_against_inputs_is_a_grid_of_the_inputs_that_vary(tmp_path):
+    """output_vs_inputs.png was one 2640 x 308 px row of the first eight inputs, constant ones too."""
+    from types import SimpleNamespace
+
+    from PIL import Image
+
+    from calib_masonry.study.analysis import plot_study
+
+    rng = np.random.default_rng(0)
+    names = [f"w{k}.width_m" for k in range(9)] + ["w9.thickness_m"]
+    rows = []
+    for _ in range(20):
+        row = {n: float(rng.normal(2.0, 0.02)) for n in names[:9]}
+        row.update({"w9.thickness_m": 0.18, "status": "ok", "total_volume_m3": float(rng.normal(5, 0.1))})
+        rows.append(row)
+    summary = {"outputs": {"total_volume_m3": {"n": 20, "mean": 5.0, "std": 0.1}}, "inputs": names, "failed": 0}
+    written = plot_study(SimpleNamespace(name="s"), rows, summary, tmp_path)
+    assert tmp_path / "output_vs_inputs.png" in written
+    with Image.open(tmp_path / "output_vs_inputs.png") as im:
+        w, h = im.size
+    assert w <= 1500 and h >= 900  # nine varying inputs in three rows of at most four

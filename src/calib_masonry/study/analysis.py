@@ -53,6 +53,14 @@ def _numeric(rows: list[dict], key: str) -> np.ndarray | None:
     return np.array([np.nan if v is None else float(v) for v in vals])
 
 
+def _varies(v: np.ndarray | None) -> bool:
+    """Numbers with at least two different finite values."""
+    if v is None:
+        return False
+    v = v[np.isfinite(v)]
+    return bool(v.size) and bool(v.max() > v.min())
+
+
 def _stats(v: np.ndarray) -> dict:
     v = v[np.isfinite(v)]
     if not len(v):
@@ -290,15 +298,22 @@ def plot_study(study: Study, rows: list[dict], summary: dict, folder: Path) -> l
         fig.suptitle(f"{study.name}: outputs over {len(ok)} samples ({summary['failed']} failed)", fontsize=10)
         save(fig, "histograms.png")
     main = _main_output(stats)
-    inputs = [k for k in summary["inputs"] if _numeric(ok, k) is not None][:8]
+    # the inputs that vary, at most twelve, in rows of four (one row of eight was 2640 x 308 px)
+    inputs = [k for k in summary["inputs"] if _varies(_numeric(ok, k))][:12]
     if main and inputs:
-        fig, axes = plt.subplots(1, len(inputs), figsize=(3.0 * len(inputs), 2.8), squeeze=False)
+        cols = min(4, len(inputs))
+        rows = -(-len(inputs) // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.9 * rows + 0.4), squeeze=False)
         y = _numeric(ok, main)
         for ax, k in zip(axes.flat, inputs):
             ax.scatter(_numeric(ok, k), y, s=8, color="#b0504a")
             ax.set_xlabel(k, fontsize=8)
             ax.tick_params(labelsize=7)
-        axes.flat[0].set_ylabel(main, fontsize=8)
+        for row in axes:
+            row[0].set_ylabel(main, fontsize=8)
+        for ax in list(axes.flat)[len(inputs) :]:
+            ax.axis("off")
+        fig.suptitle(f"{study.name}: {main} against each input that varies ({len(ok)} samples)", fontsize=10)
         save(fig, "output_vs_inputs.png")
     sob = summary.get("sobol", {})
     if main and isinstance(sob.get(main), dict) and "note" not in sob[main]:

@@ -35,6 +35,7 @@ RES = (1334, 2000)  # portrait, px
 SENSOR_MM = 36.0  # along the long side
 THICKNESS_M = 0.4
 TEXTURE_PX_PER_M = 200.0
+OVERHEAD_SUN = False  # --overhead-sun
 
 
 def wall_and_texture(seed: int):
@@ -173,6 +174,8 @@ def render(width: float, height: float, texture: np.ndarray, cam: dict, rng: np.
     sun_obj = bpy.data.objects.new("sun", sun)
     # from the camera's side of the wall (its light travels along -z turned by x towards +y)
     sun_obj.rotation_euler = (math.radians(-rng.uniform(30, 60)), 0.0, math.radians(rng.uniform(-60, 60)))
+    if OVERHEAD_SUN:  # the sun straight above: no shadow beside the wall's foot
+        sun_obj.rotation_euler = (0.0, 0.0, 0.0)
     sc.collection.objects.link(sun_obj)
 
     cam_data = bpy.data.cameras.new("camera")
@@ -198,7 +201,10 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=12001)
     ap.add_argument("--count", type=int, default=20)
     ap.add_argument("--keep", default=None, help="a folder to keep the rendered photos in")
+    ap.add_argument("--overhead-sun", action="store_true", help="the sun straight above (no shadow at the foot)")
     a = ap.parse_args()
+    global OVERHEAD_SUN
+    OVERHEAD_SUN = a.overhead_sun
     seeds = list(range(a.first, a.first + a.count))
     folder = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="tall-blender-"))
     folder.mkdir(parents=True, exist_ok=True)

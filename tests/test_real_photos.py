@@ -330,3 +330,25 @@ def test_rectify_cli_on_a_real_photo_writes_labelme_and_names_the_scale(tmp_path
     assert main(["rectify", str(photo), "--out", str(tmp_path / "refused")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "eye-height prior" in err and not (tmp_path / "refused").exists()
+
+
+def test_a_coarse_orthophoto_is_segmented_at_its_own_resolution(monkeypatch):
+    """A 20 px/m orthophoto of a fit that came out 14 x 75 m was taken to 300 px/m for the joints'
+    partition (96 Mpx, 10 GB): the partition is made at the orthophoto's own resolution when that
+    is coarser, and on at most MAX_PIECES_PIXELS pixels."""
+    from calib_masonry.wall2d import pieces, segment
+
+    seen = []
+    real = pieces.segment_pieces
+
+    def spy(rgb, px_per_m, *args, **kwargs):
+        seen.append((rgb.shape[:2], px_per_m))
+        return real(rgb, px_per_m, *args, **kwargs)
+
+    monkeypatch.setattr(pieces, "segment_pieces", spy)
+    monkeypatch.setattr(segment, "mortar_plausible", lambda mask: "no mortar (forced)")
+    rng = np.random.default_rng(0)
+    rgb = np.clip(0.5 + 0.1 * rng.standard_normal((300, 60, 3)), 0, 1).astype(np.float32)
+    seg = segment.segment_wall(rgb, 20.0)
+    assert seg.method == "joints" and seen == [((300, 60), pytest.approx(20.0))]
+    assert seg.mask.shape == rgb.shape[:2]

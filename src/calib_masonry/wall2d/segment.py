@@ -7,6 +7,7 @@ that touch only diagonally stay apart.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -335,8 +336,10 @@ def mortar_plausible(mask: np.ndarray) -> str:
     return ""
 
 
-#: the joints' partition is made at this resolution (px per metre of wall)
+#: the joints' partition is made at this resolution (px per metre of wall), or the orthophoto's
+#: own where that is coarser, on at most MAX_PIECES_PIXELS pixels
 PIECES_PX_PER_M = 300.0
+MAX_PIECES_PIXELS = 2.0e7
 
 
 def _resampled(img: np.ndarray, shape: tuple[int, int], *, order: int) -> np.ndarray:
@@ -381,7 +384,9 @@ def segment_wall(
         return Segmentation(mask=mortar_mask, method="mortar", px_per_m=float(px_per_m), note="the mortar top-hat")
     # the joints' partition at one resolution, whatever the orthophoto's (its pieces changed by a
     # third between 300 and 550 px/m, measured), then back to the orthophoto's pixels
-    f = PIECES_PX_PER_M / px_per_m
+    # never finer than the orthophoto (a 20 px/m orthophoto of a 14 x 75 m fit was taken to 300 px/m:
+    # 96 Mpx, 10 GB, for detail that is not there) and never above MAX_PIECES_PIXELS
+    f = min(PIECES_PX_PER_M / px_per_m, 1.0, math.sqrt(MAX_PIECES_PIXELS / max(1, rgb.shape[0] * rgb.shape[1])))
     work, work_valid = rgb, valid
     if abs(f - 1.0) > 0.05:
         shape = (max(8, round(rgb.shape[0] * f)), max(8, round(rgb.shape[1] * f)))

@@ -252,13 +252,18 @@ def closure_warning(spec: StructureSpec, gap_xy: np.ndarray) -> str | None:
 
 
 def build(
-    spec: StructureSpec, *, traces: dict[str, TraceResult] | None = None, progress: bool | None = None
+    spec: StructureSpec,
+    *,
+    traces: dict[str, TraceResult] | None = None,
+    progress: bool | None = None,
+    warn_closure: bool = True,
 ) -> BuildResult:
     """Calibrate and segment every photo wall, trace every wall's mask, scale to metres (Eq. 1),
     place, bond and extrude (Eqs. 2-4); in memory, writing nothing.
 
     ``traces`` (by wall name) gives walls already traced in memory (:func:`calib_masonry.trace`);
-    their mask or photo is then not read."""
+    their mask or photo is then not read. ``warn_closure`` False: no warning that the footprint
+    does not close (a study's perturbed geometry never closes; its gap is an output there)."""
     traces_given = dict(traces or {})
     unknown = sorted(set(traces_given) - {w.name for w in spec.walls})
     if unknown:
@@ -303,7 +308,7 @@ def build(
     t0 = time.perf_counter()
     structure = assemble(spec.footprint, walls, name=spec.name)
     seconds["assemble"] = time.perf_counter() - t0
-    message = closure_warning(spec, structure.closure_gap_xy)
+    message = closure_warning(spec, structure.closure_gap_xy) if warn_closure else None
     if message:
         warn(message)
     return BuildResult(structure=structure, traces=tuple(traces), seconds=seconds, photos=photos, spec=spec)

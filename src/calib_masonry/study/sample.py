@@ -227,7 +227,7 @@ def _sweep(study: Study, sample: Sample) -> tuple[dict, object]:
             traces = {n: _trace(*k) for n, k in keys.items()} if not study.photos else None
         else:
             traces = None
-        result = build(built_spec, traces=traces, progress=False)
+        result = build(built_spec, traces=traces, progress=False, warn_closure=False)  # its gap is an output
         _trace.cache_clear()  # the masks lived in the temporary folder
         _mask.cache_clear()
     _, true = truth_structure(spec)
@@ -259,7 +259,7 @@ def _evaluate(study: Study, sample: Sample) -> tuple[dict, tuple | None]:
         outputs, result = _sweep(study, sample)
     else:
         spec, keys, drawn = _varied(_structure(study.structure), study, sample.values, study.structure)
-        result = build(spec, traces={n: _trace(*k) for n, k in keys.items()}, progress=False)
+        result = build(spec, traces={n: _trace(*k) for n, k in keys.items()}, progress=False, warn_closure=False)
         outputs = {**drawn, **_build_outputs(result)}
     job = _simulation(study, sample, result.structure) if study.simulate is not None else None
     return outputs, job

@@ -809,3 +809,31 @@ def test_collapse_time_agrees_with_the_verdict():
     away[4:, :3, 0] = 0.3  # then three of four leave for good at 2.0 s
     m = metrics(scene, out)
     assert outcome(m.moved_fraction[-1]) == "collapsed" and m.collapse_time_s == pytest.approx(2.0)
+
+
+def test_a_flat_history_is_drawn_flat_not_magnified(tmp_path, monkeypatch):
+    """histories.png drew a standing run's zero drift on a +-0.04 % axis; each panel now spans at
+    least 1 mm or 1 % and says when it stayed at zero."""
+    from types import SimpleNamespace
+
+    from calib_masonry import _figure
+    from calib_masonry.simulation.results import Metrics, plot_histories
+
+    n = 50
+    m = Metrics(
+        start_frame=0,
+        moved_fraction=np.zeros(n),
+        roof_drift_m=np.full(n, 2e-6),
+        max_displacement_m=np.zeros(3),
+        bond_break_time_s=np.full(4, np.nan),
+        broken_fraction=np.zeros(n),
+        collapse_time_s=None,
+    )
+    scene = SimpleNamespace(solver=SimpleNamespace(moved_threshold_m=0.05))
+    out = SimpleNamespace(time=np.arange(n) * 0.04)
+    saved = []
+    monkeypatch.setattr(_figure, "save", lambda fig, path, dpi=110: saved.append(fig))
+    plot_histories(scene, out, m, tmp_path / "h.png")
+    axes = saved[0].axes
+    assert all(a.get_ylim()[1] - a.get_ylim()[0] >= 1.0 for a in axes)
+    assert sum("zero throughout" in t.get_text() for a in axes for t in a.texts) == 2

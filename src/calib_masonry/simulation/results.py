@@ -218,6 +218,20 @@ def plot_histories(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> None
     ax[2].plot(t, m.broken_fraction * 100, color="C2")
     ax[2].set_ylabel("bonds broken (%)")
     ax[2].set_xlabel("time since the ground started moving (s)")
+    # a flat history on its own autoscaled axis (+-0.04 %) looked like motion: each panel spans at
+    # least a floor (1 mm, 1 %), and one that stays at zero says so
+    for a, values, floor in (
+        (ax[0], m.roof_drift_m * 1000, 1.0),
+        (ax[1], m.moved_fraction * 100, 1.0),
+        (ax[2], m.broken_fraction * 100, 1.0),
+    ):
+        v = np.asarray(values, dtype=np.float64)
+        v = v[np.isfinite(v)]
+        lo = min(0.0, float(v.min())) if v.size else 0.0
+        hi = max(floor, float(v.max()) if v.size else 0.0)
+        a.set_ylim(lo, hi * 1.05)
+        if not v.size or not np.any(v != 0):
+            a.text(0.5, 0.5, "zero throughout the run", transform=a.transAxes, ha="center", va="center", color="0.4")
     for a in ax:
         a.axvline(0.0, color="k", lw=0.5, ls=":")
     fig.tight_layout()

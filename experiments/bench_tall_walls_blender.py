@@ -200,7 +200,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--first", type=int, default=12001)
     ap.add_argument("--count", type=int, default=20)
-    ap.add_argument("--keep", default=None, help="a folder to keep the rendered photos in")
+    ap.add_argument(
+        "--keep", default=None, help="a folder to keep the rendered photos in (photos already there are reused)"
+    )
     ap.add_argument("--overhead-sun", action="store_true", help="the sun straight above (no shadow at the foot)")
     a = ap.parse_args()
     global OVERHEAD_SUN
@@ -214,9 +216,12 @@ def main() -> None:
         rng = np.random.default_rng(seed + 1_000_000)
         cam = camera(wall.width_m, wall.height_m, rng)
         path = folder / f"tall{seed}.jpg"
-        t0 = time.perf_counter()
-        render(wall.width_m, wall.height_m, texture, cam, rng, path)
-        print(f"rendered {path.name} in {time.perf_counter() - t0:.1f} s", flush=True)
+        if a.keep and path.is_file():  # rendered before into --keep: the same scene, not drawn again
+            print(f"reusing {path}", flush=True)
+        else:
+            t0 = time.perf_counter()
+            render(wall.width_m, wall.height_m, texture, cam, rng, path)
+            print(f"rendered {path.name} in {time.perf_counter() - t0:.1f} s", flush=True)
         cases.append((seed, wall, cam, path))
 
     import calib_masonry as cm

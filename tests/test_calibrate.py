@@ -791,3 +791,57 @@ def test_shrink_samples_rescales_grid(shape, s):
     noise = gaussian_filter(rng.random(shape, dtype=np.float32), 3.0)
     diff = np.abs(shrink(noise, s) - rescale(noise, s, anti_aliasing=True))[3:-3, 3:-3]
     assert diff.mean() < 0.1 * noise.std()
+
+
+def test_an_end_face_in_the_outline_is_cut_at_the_crease():
+    """A wall seen from beyond its left end shows its end face; an outline on the end face's far
+    edge made W 2.3-7.9 % wide (Blender renders). The end face's courses point at the vanishing
+    point of the wall's normal and end on the crease, which front_face_ends maps back to its x on
+    the wall: the left side moves there, the right stays, and a camera in front of the wall (which
+    sees no end face) moves nothing."""
+    from types import SimpleNamespace
+
+    from calib_masonry.calibrate.camera import (
+        image_from_wall_homography,
+        intrinsics,
+        principal_point,
+        project,
+        wall_from_camera_rotation,
+    )
+    from calib_masonry.calibrate.rectify import front_face_ends
+
+    size = (1400, 2000)
+    crease, w, h, t = 0.15, 2.2, 10.0, 0.4  # the fit's frame: x = 0 on the end face's far edge
+
+    def result(cx):
+        params = np.array([1500.0, np.radians(-25.0), np.radians(25.0), 0.0, cx, -9.0, 1.6, w, h, 0.0, 0.0])
+        hom = image_from_wall_homography(params, principal_point(size))
+        return SimpleNamespace(
+            params=params,
+            image_size=size,
+            width_m=w,
+            height_m=h,
+            image_from_wall=hom,
+            undistort=lambda p: np.asarray(p, dtype=float),
+            photo_from_wall=lambda xz, hom=hom: project(hom, np.asarray(xz, dtype=float)),
+        )
+
+    def camera_points(res, xyz):  # wall metres (x, y, z) -> pixels
+        rot = wall_from_camera_rotation(*res.params[1:4]).T
+        q = (np.asarray(xyz) - res.params[4:7]) @ rot.T @ intrinsics(res.params[0], principal_point(size)).T
+        return q[:, :2] / q[:, 2:3]
+
+    res = result(-3.0)
+    courses = []
+    for z in np.linspace(0.5, 9.5, 12):  # the end face's courses, from the crease (y = 0) back
+        courses.append(camera_points(res, [[crease, 0.0, z], [crease, t, z]]).ravel())
+    bed = [project(res.image_from_wall, np.array([[0.5, z], [1.9, z]])).ravel() for z in np.linspace(0.3, 9.7, 20)]
+    head = [project(res.image_from_wall, np.array([[x, 2.0], [x, 2.3]])).ravel() for x in np.linspace(0.4, 2.0, 9)]
+    segments = np.array(courses + bed + head)
+    found = front_face_ends(res, segments)
+    assert found is not None and found[1] == ["left"]
+    corners = found[0]
+    back = np.c_[corners, np.ones(4)] @ np.linalg.inv(res.image_from_wall).T
+    xz = back[:, :2] / back[:, 2:3]
+    assert xz[[0, 3], 0] == pytest.approx(crease, abs=1e-6) and xz[[1, 2], 0] == pytest.approx(w, abs=1e-6)
+    assert front_face_ends(result(1.0), segments) is None  # in front of the wall: no end face to see

@@ -63,6 +63,8 @@ class Detection:
     vp_head: np.ndarray
     n_segments: int
     corner_sigma_px: np.ndarray | None = None  # (4,) from the edge evidence of the sides
+    # every segment inside the outline, whatever its direction (an end face's courses among them)
+    segments: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 def _edge_points(gray: np.ndarray, cfg: DetectConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -567,6 +569,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
         vp_head=vp_head,
         n_segments=len(seg),
         corner_sigma_px=sigma,
+        segments=seg,
     )
 
 

@@ -371,8 +371,9 @@ def test_contradictory_and_out_of_range_motion_inputs_are_refused(tmp_path):
 
     with pytest.raises(InputError, match=r"cms2.csv.*peak is 250 g.*--units m/s2"):
         read_accelerogram(rec)
-    ms2 = tmp_path / "ms2.csv"  # the same record in m/s2, as the message advises
-    ms2.write_text("".join(f"{a:.4f},{b:.6f}\n" for a, b in zip(t, 2.5 * np.sin(2 * np.pi * t), strict=True)))
+    ms2 = tmp_path / "ms2.csv"  # a record in m/s2, as the message advises, starting and ending at rest
+    env = np.sin(np.pi * t / t[-1]) ** 2
+    ms2.write_text("".join(f"{a:.4f},{b:.6f}\n" for a, b in zip(t, 2.5 * env * np.sin(2 * np.pi * t), strict=True)))
     assert read_accelerogram(ms2, units="m/s2").source == "ms2.csv"
 
 

@@ -140,3 +140,26 @@ def test_grey_morphology_is_scipys_erosion_and_dilation(seed):
             a = rng.random(shape).astype(np.float32)
             assert np.array_equal(grey_morphology(a, fp, np.minimum), ndimage.grey_erosion(a, footprint=fp))
             assert np.array_equal(grey_morphology(a, fp, np.maximum), ndimage.grey_dilation(a, footprint=fp))
+
+
+def test_the_trace_figures_title_stays_inside_the_figure(tmp_path, monkeypatch):
+    """The refine figure's title (the splitting and refined Dice beside the counts) was clipped on
+    both sides of a narrow mask's figure: it is wrapped to the figure's width."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from calib_masonry import _figure
+    from calib_masonry.wall2d.figures import plot_trace
+    from calib_masonry.wall2d.trace import trace_mask
+
+    mask = np.zeros((400, 120), dtype=bool)
+    for top in range(10, 390, 60):
+        mask[top : top + 50, 10:110] = True
+    result = trace_mask(mask)
+    saved = []
+    monkeypatch.setattr(_figure, "save", lambda fig, path, dpi=110: saved.append(fig))
+    plot_trace(mask, result, tmp_path / "t.png", title="a narrow wall's mask, traced and refined: " * 3)
+    fig = saved[0]
+    FigureCanvasAgg(fig).draw()
+    box = fig.axes[0].title.get_window_extent()
+    width = fig.get_size_inches()[0] * fig.dpi
+    assert box.x0 >= 0 and box.x1 <= width

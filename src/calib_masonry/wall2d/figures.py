@@ -60,7 +60,13 @@ def plot_trace(mask: np.ndarray, result: TraceResult, path: Path, *, title: str 
     fig.colorbar(sm, ax=ax, fraction=0.046, pad=0.02, label="Dice")
     ax.set_xlim(-0.5, cols - 0.5)
     ax.set_ylim(rows - 0.5, -0.5)
-    ax.set_title(f"{title}  {len(result.bricks)} bricks, mean Dice {result.mean_dice:.4f}", fontsize=9)
+    # wrapped to the figure's width (about 8 characters of 9 pt text an inch): a refined trace's
+    # title ran out of a narrow mask's figure on both sides
+    import textwrap
+
+    width_chars = max(20, int(fig.get_size_inches()[0] * 8))
+    text = f"{title}  {len(result.bricks)} bricks, mean Dice {result.mean_dice:.4f}".strip()
+    ax.set_title("\n".join(textwrap.wrap(text, width_chars)), fontsize=9)
     fig.tight_layout()
     plt.save(fig, path, dpi=110)
     plt.close(fig)

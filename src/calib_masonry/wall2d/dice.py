@@ -43,8 +43,11 @@ def polygon_pixels(r: np.ndarray, c: np.ndarray, shape: tuple[int, int] | None =
         y0 = (r - y)[:, :, None]  # (rows, edges, 1)
         y1 = np.roll(y0, 1, axis=1)
         vertex = ((-eps < x0) & (x0 < eps) & (-eps < y0) & (y0 < eps)).any(axis=1) if on_grid else False
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cross = (x0 * y1 - x1 * y0) / (y1 - y0)
+        # no division where the edge is horizontal (y1 == y0: its crossing tests below are False
+        # whatever cross is); errstate alone let a RuntimeWarning through once under threads (CI)
+        den = np.broadcast_to(y1 - y0, np.broadcast_shapes(y1.shape, x0.shape))
+        num = x0 * y1 - x1 * y0
+        cross = np.divide(num, den, out=np.full(num.shape, np.nan), where=den != 0)
         right = (((y0 > 0) != (y1 > 0)) & (cross > 0)).sum(axis=1) & 1
         left = (((y0 < 0) != (y1 < 0)) & (cross < 0)).sum(axis=1) & 1
         rr, cc = np.nonzero(vertex | (right != left) | (right == 1))

@@ -542,11 +542,13 @@ def write_build(
 
             t0 = time.perf_counter()
             computed, seconds = geometry.result()
-            # its own time on its thread (about 2 s on the Stylite tower, 4 s on the paper
+            # its own time on its thread (about 5 s on the Stylite tower, 10 s on the paper
             # example), and how long the build waited for it
             summary["seconds"]["simulation_geometry"] = round(seconds, 4)
             summary["seconds"]["simulation_geometry_wait"] = round(time.perf_counter() - t0, 4)
             store_geometry(s, stage, bricks_json=raw, geometry=computed)
+            # joint area over the boundary neighbouring bricks share (simulation/scene.py: joint_coverage)
+            summary["joint_coverage"] = computed.coverage_summary()
         write_json(stage / "summary.json", summary)
     return summary
 

@@ -303,6 +303,33 @@ def _plane_bases(normal: np.ndarray) -> np.ndarray:
     return np.stack([u, _cross(normal, u)], axis=1)
 
 
+def _claim_once(
+    order: np.ndarray, pair: np.ndarray, inter: np.ndarray, area: np.ndarray, basis, offset, normal
+) -> None:
+    """Cut from each candidate patch (``order``: grouped by ``pair``, largest first) what the same
+    pair's earlier patches cover, projected on its plane; ``inter`` and ``area`` are updated in
+    place. Patches on faces more than 60 degrees apart cannot cover each other: they are kept whole."""
+    if len(order) < 2:
+        return
+    group = pair[order]
+    starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1], True])
+    for s0, s1 in zip(starts[:-1], starts[1:]):
+        if s1 - s0 < 2:
+            continue
+        kept: list[int] = []
+        for k in order[s0:s1]:
+            near = [j for j in kept if normal[j] @ normal[k] > 0.5]
+            if near:
+                covered = []
+                for j in near:
+                    xy = shapely.get_coordinates(inter[j])
+                    p3 = xy @ basis[j] + offset[j] * normal[j]
+                    covered.append(shapely.transform(inter[j], lambda _, p3=p3, k=k: p3 @ basis[k].T))
+                inter[k] = shapely.difference(inter[k], shapely.union_all(covered))
+                area[k] = shapely.area(inter[k])
+            kept.append(k)
+
+
 def contact_patches(
     bricks: Sequence[Brick],
     *,
@@ -315,8 +342,9 @@ def contact_patches(
     """Patches where two bricks' faces face each other across at most ``max_gap_m``.
 
     Any orientation: faces are matched by anti-parallel normals (within ``angle_deg``) and plane
-    distance, and the patch is the exact overlap of the two faces projected on a common plane (of
-    the pair's face pairs that qualify, the one with the largest overlap). Faces that overlap by
+    distance, and a patch is the exact overlap of the two faces projected on a common plane. A pair
+    of bricks gets a patch for every pair of their faces that qualifies (a bent joint has several),
+    each less what the pair's larger patches already cover, so no area is counted twice. Faces that overlap by
     more than ``-min_gap_m`` are not a joint. ``progress``: see
     :func:`calib_masonry.progress.progress` (None: a bar on a terminal, log lines otherwise).
     """
@@ -350,10 +378,14 @@ def contact_patches(
     inter = shapely.intersection(f.poly[fa], projected)
     area = shapely.area(inter)
     bar.update()
-    # per pair, the largest overlap of at least min_area_m2 (the first of equals)
+    # per pair, every face pair whose overlap is at least min_area_m2 (a stone's joint with its
+    # neighbour bends: its faces meet several of the neighbour's), largest first, each less what the
+    # pair's larger patches already cover
     big = np.flatnonzero(area >= min_area_m2)
     best = big[np.lexsort((big, -area[big], pair[big]))]
-    best = best[np.concatenate([[True], pair[best][1:] != pair[best][:-1]])] if len(best) else best
+    inter, area = inter.copy(), area.copy()
+    _claim_once(best, pair, inter, area, f.basis[fa], f.offset[fa], f.normal[fa])
+    best = best[area[best] >= min_area_m2]
     normal, basis = f.normal[fa[best]], f.basis[fa[best]]
     c2, moments, outlines, _, widths = patch_sections(inter[best], basis, normal)
     centroid = np.einsum("pj,pjk->pk", c2, basis) + (f.offset[fa[best]] + 0.5 * gap[best])[:, None] * normal

@@ -781,7 +781,10 @@ class JointModel:
         state, _ = self.solve(g, intact, closed)
         kept = state
         for rounds in range(self.settings.max_rounds + 1):
-            if runaway_m is not None and self._motion(self._last[2])[self._linked(intact, closed)].max() > runaway_m:
+            if (
+                runaway_m is not None
+                and self._motion(self._last[2])[self._linked(intact, closed)].max(initial=0.0) > runaway_m
+            ):
                 break  # a mechanism: no equilibrium to crack more joints from (module docstring)
             kept = state
             util = np.where(intact, state.utilisation, 0.0)

@@ -409,6 +409,7 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
             "max_hull_volume_change": scene.notes.get("max_hull_volume_change"),
             "bricks_without_fill": scene.notes.get("bricks_without_fill", 0),
         },
+        "joint_coverage": scene.notes.get("joint_coverage"),
         "moved_fraction_final": float(m.moved_fraction[-1]),
         "moved_threshold_m": s.moved_threshold_m,
         "max_roof_drift_m": float(m.roof_drift_m.max()),

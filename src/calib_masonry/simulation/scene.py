@@ -25,19 +25,27 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import shapely
 
 from ..build3d.assemble import Brick, brick_solid
-from ..build3d.contacts import OUTLINE_POINTS, ContactPatch, box_pairs, contact_patches, joint_axes, patch_section
+from ..build3d.contacts import (
+    OUTLINE_POINTS,
+    ContactPatch,
+    box_pairs,
+    contact_patches,
+    joint_axes,
+    patch_section,
+    patch_sections,
+)
 from ..build3d.extrude import Polyhedron
 from ..build3d.place import Corner, WallFrame
 from ..errors import InputError, raise_if_stopped
 from .ground_motion import G, GroundMotion
-from .mortar import mortar_cells
+from .mortar import mortar_cells, nearest_labels, shared_boundary_lengths, wall_joints
 
 __all__ = [
     "Material",
@@ -495,6 +503,153 @@ class SceneGeometry:
     bricks_without_fill: int
     max_gap_m: float
     mortar_fill: bool
+    # joint area over the area of the boundary neighbouring bricks of a wall share (within the
+    # reach): median and 10th percentile over the pairs, the total, the pairs, those without a joint
+    coverage: np.ndarray = field(default_factory=lambda: np.full(5, np.nan))
+
+    def coverage_summary(self) -> dict:
+        """The coverage as summary.json reports it (see :func:`joint_coverage`)."""
+        median, p10, total, pairs, missing = (float(x) for x in self.coverage)
+        clean = lambda x: None if not np.isfinite(x) else round(x, 4)  # noqa: E731
+        return {
+            "median": clean(median),
+            "p10": clean(p10),
+            "total": clean(total),
+            "pairs": int(pairs) if np.isfinite(pairs) else 0,
+            "pairs_without_joint": int(missing) if np.isfinite(missing) else 0,
+            "reach_m": round(0.5 * self.max_gap_m, 6),
+        }
+
+
+#: Pairs sharing less boundary than this (m) touch at a corner: left out of the coverage's median.
+MIN_SHARED_M = 0.01
+
+
+def wall_segments(bricks: Sequence[Brick], reach: float) -> list[tuple]:
+    """The straight pieces of every wall's joints (:func:`~calib_masonry.simulation.mortar.wall_joints`)
+    as ``(a, b, P0, P1, n, wall)``: brick indices a < b, the piece's ends in wall metres (x, z)
+    and its unit normal there, from a toward b."""
+    rows = []
+    for w in sorted({b.wall for b in bricks}):
+        members = [i for i, b in enumerate(bricks) if b.wall == w]
+        polys = [bricks[i].polygon_m for i in members]
+        found = wall_joints(polys, reach)
+        if not found:
+            continue
+        seg = np.concatenate([sg for _, _, sg in found])
+        ij = np.repeat(np.array([(i, j) for i, j, _ in found]), [len(sg) for _, _, sg in found], axis=0)
+        mid = seg.mean(axis=1)
+        d = seg[:, 1] - seg[:, 0]
+        n = np.stack([-d[:, 1], d[:, 0]], axis=1) / np.linalg.norm(d, axis=1, keepdims=True)
+        shapes = np.array([shapely.Polygon(p) for p in polys], dtype=object)
+        far = shapes[ij[:, 1]]
+        eps = 1e-4  # the normal points to b: a step along it nears b
+        toward = shapely.distance(shapely.points(mid + eps * n), far) <= shapely.distance(
+            shapely.points(mid - eps * n), far
+        )
+        n = np.where(toward[:, None], n, -n)
+        rows += [(members[i], members[j], s0, s1, nn, w) for (i, j), (s0, s1), nn in zip(ij.tolist(), seg, n)]
+    return rows
+
+
+def wall_patches(
+    bricks: Sequence[Brick], bodies: Sequence[Body], frames: Sequence[WallFrame], reach: float, segments=None
+) -> list[ContactPatch]:
+    """The joints between the bricks of each wall over their whole shared boundary
+    (:func:`~calib_masonry.simulation.mortar.wall_joints`: the middle of the mortar, no farther than
+    ``reach`` from either brick), one planar patch per straight piece, through the wall's thickness
+    and within both bodies (their outlines seen along the joint's normal: a body cut at a corner
+    carries no joint beyond its cut). ``a``, ``b`` are body indices (a < b), the normal from a to b.
+    ``segments``: :func:`wall_segments` of the bricks, if already found."""
+    rows = wall_segments(bricks, reach) if segments is None else segments
+    if not rows:
+        return []
+    a_idx = np.array([r[0] for r in rows])
+    b_idx = np.array([r[1] for r in rows])
+    p0 = np.array([r[2] for r in rows])
+    p1 = np.array([r[3] for r in rows])
+    n2 = np.array([r[4] for r in rows])
+    wall = np.array([r[5] for r in rows])
+    along = np.array([[*frames[w].direction, 0.0] for w in range(len(frames))])[wall]
+    inward = np.array([[*frames[w].inward, 0.0] for w in range(len(frames))])[wall]
+    origin = np.array([[*frames[w].origin_xy, 0.0] for w in range(len(frames))])[wall]
+    thick = np.array([frames[w].thickness_m for w in range(len(frames))])[wall]
+    up = np.array([0.0, 0.0, 1.0])
+    d = (p1 - p0) / np.linalg.norm(p1 - p0, axis=1, keepdims=True)
+    e_s = d[:, :1] * along + d[:, 1:] * up
+    normals_a = n2[:, :1] * along + n2[:, 1:] * up
+    bases_a = np.stack([e_s, inward], axis=1)  # (R, 2, 3): along the piece, through the wall
+    # the piece's rectangle through the thickness, global, and in its plane's 2D basis
+    ends = [origin + q[:, :1] * along + q[:, 1:] * up for q in (p0, p1)]
+    corners = np.stack([ends[0], ends[1], ends[1] + thick[:, None] * inward, ends[0] + thick[:, None] * inward], axis=1)
+    patch = shapely.polygons(np.einsum("rck,rjk->rcj", corners, bases_a))
+    # cut to both bodies as seen along the normal (convex: the hull of their corners)
+    counts = np.array([len(bd.vertices) for bd in bodies])
+    starts = np.r_[0, np.cumsum(counts)]
+    every = np.concatenate([bd.vertices + bd.location for bd in bodies])
+    for idx in (a_idx, b_idx):
+        cnt = counts[idx]
+        row = np.repeat(np.arange(len(idx)), cnt)
+        vid = np.repeat(starts[idx], cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        seen = np.einsum("vk,vjk->vj", every[vid], bases_a[row])
+        patch = shapely.intersection(patch, shapely.convex_hull(shapely.multipoints(seen, indices=row)))
+    offsets = np.einsum("rk,rk->r", corners[:, 0], normals_a)
+    keep = list(zip(a_idx.tolist(), b_idx.tolist()))
+    c2, moments, outlines, areas, widths = patch_sections(patch, bases_a, normals_a)
+    centroids = np.einsum("pj,pjk->pk", c2, bases_a) + offsets[:, None] * normals_a
+    return [
+        ContactPatch(
+            a=a,
+            b=b,
+            normal=normals_a[k],
+            centroid=centroids[k],
+            area_m2=float(areas[k]),
+            gap_m=0.0,
+            min_width_m=float(widths[k]),
+            moments=moments[k],
+            outline=outlines[k],
+        )
+        for k, (a, b) in enumerate(keep)
+        if areas[k] >= 1e-4
+    ]
+
+
+def joint_coverage(
+    bricks: Sequence[Brick],
+    frames: Sequence[WallFrame],
+    patches: Sequence[ContactPatch],
+    reach: float,
+    pixel: float = 0.005,
+    labels: dict | None = None,
+) -> np.ndarray:
+    """The joints' area over the boundary neighbouring bricks of one wall share, per pair: the
+    shared boundary measured on a raster (:func:`~calib_masonry.simulation.mortar.shared_boundary_lengths`,
+    within ``reach`` less one pixel: a boundary at the reach's very edge is not counted on either
+    side) times the wall's thickness. ``patches`` name bricks by index. Returns (median, 10th
+    percentile, total, pairs, pairs without any joint) over the pairs sharing at least
+    :data:`MIN_SHARED_M`. ``labels``: each wall's :func:`~calib_masonry.simulation.mortar.nearest_labels`
+    at this reach and pixel, if already found."""
+    area: dict[tuple[int, int], float] = {}
+    for p in patches:
+        key = (min(p.a, p.b), max(p.a, p.b))
+        area[key] = area.get(key, 0.0) + p.area_m2
+    ratios, shared_total, joint_total = [], 0.0, 0.0
+    for w in sorted({b.wall for b in bricks}):
+        members = [i for i, b in enumerate(bricks) if b.wall == w]
+        t = frames[w].thickness_m
+        polys = [bricks[i].polygon_m for i in members]
+        lengths = shared_boundary_lengths(polys, reach, pixel=pixel, labels=(labels or {}).get(w))
+        for (i, j), length in lengths.items():
+            if length < MIN_SHARED_M:
+                continue
+            a = area.get((members[i], members[j]), 0.0)
+            ratios.append(a / (length * t))
+            shared_total += length * t
+            joint_total += a
+    if not ratios:
+        return np.array([np.nan, np.nan, np.nan, 0.0, 0.0])
+    r = np.array(ratios)
+    return np.array([np.median(r), np.percentile(r, 10), joint_total / shared_total, len(r), float(np.sum(r == 0))])
 
 
 def scene_geometry(
@@ -508,14 +663,36 @@ def scene_geometry(
     """Bodies and contact patches of a built structure (see the module docstring for the mortar model)."""
     if not bricks:
         raise InputError("model: it has no bricks; build it first with `calib-masonry build`")
-    patches: list[ContactPatch] = contact_patches(bricks, max_gap_m=max_gap_m, angle_deg=15.0)
+    reach = 0.5 * max_gap_m
     index = {b.id: i for i, b in enumerate(bricks)}
+    wall_of = np.array([b.wall for b in bricks])
+
+    def across(found: list[ContactPatch], ids: bool) -> list[ContactPatch]:
+        """The patches between bricks of different walls (corners), named by body index."""
+        out = []
+        for p in found:
+            a, b = (index[p.a], index[p.b]) if ids else (p.a, p.b)
+            if wall_of[a] != wall_of[b]:
+                out.append(replace(p, a=a, b=b))
+        return out
+
+    # within a wall, the joints are the middle of the mortar between neighbours, whole
+    # (:func:`wall_patches`); where walls meet, the bricks' facing faces
+    segments = wall_segments(bricks, reach)
+    raise_if_stopped()
+    corner_patches = across(contact_patches(bricks, max_gap_m=max_gap_m, angle_deg=15.0), ids=True)
+    bonded = {(int(r[0]), int(r[1])) for r in segments} | {(min(p.a, p.b), max(p.a, p.b)) for p in corner_patches}
     outlines: list[np.ndarray | None] = [None] * len(bricks)
-    if mortar_fill:
-        for w in sorted({b.wall for b in bricks}):
-            raise_if_stopped()  # a stop request (SIGTERM) ends the work here, wall by wall and brick by brick
-            members = [i for i, b in enumerate(bricks) if b.wall == w]
-            for i, cell in zip(members, mortar_cells([bricks[i].polygon_m for i in members], 0.5 * max_gap_m)):
+    labels = {}  # each wall's nearest-brick raster: the mortar cells' and the coverage's
+    for w in sorted({b.wall for b in bricks}):
+        raise_if_stopped()  # a stop request (SIGTERM) ends the work here, wall by wall and brick by brick
+        members = [i for i, b in enumerate(bricks) if b.wall == w]
+        polys = [bricks[i].polygon_m for i in members]
+        if len(polys) < 2:
+            continue
+        labels[w] = nearest_labels(polys, reach, 0.005)
+        if mortar_fill:
+            for i, cell in zip(members, mortar_cells(polys, reach, pixel=0.005, labels=labels[w])):
                 outlines[i] = cell
 
     def make_body(i: int, outline: np.ndarray | None) -> Body:
@@ -526,39 +703,35 @@ def scene_geometry(
         )
 
     bodies = [make_body(i, o) for i, o in enumerate(outlines)]
-    pairs = np.array([(index[p.a], index[p.b]) for p in patches], dtype=np.int64).reshape(-1, 2)
     ungrown: set[int] = set()
     if mortar_fill:
-        ungrown = _overlapping_unbonded(bodies, {(int(min(a, b)), int(max(a, b))) for a, b in pairs})
+        ungrown = _overlapping_unbonded(bodies, bonded)
         for i in ungrown:
             bodies[i] = make_body(i, None)
-        # the joints are the faces the filled bodies share: the mortar between two stones is split
-        # along its middle, so every stone is bedded on what lies below it (the bare stones' facing
-        # faces miss joints wider than the reach or bent by more than the angle: 42 Stylite stones
-        # had nothing below them and hung from their neighbours in the joint model)
-        cells = [_Solid(id=i, solid=Polyhedron(bd.vertices + bd.location, bd.faces)) for i, bd in enumerate(bodies)]
-        # the hulls of two neighbouring cells overlap where a cell is not convex (an irregular
-        # stone's): their shared face is a joint even so (overlap up to a joint's reach)
-        patches = contact_patches(cells, max_gap_m=0.5 * max_gap_m, angle_deg=10.0, min_gap_m=-max_gap_m)
-        if ungrown:
-            # a stone left bare (its cell's hull would overlap a neighbour) faces its neighbours across
-            # its whole mortar joint, not half of it, and its faces are the stone's own (not parallel
-            # cell faces); at a corner, the other wall's cells, grown without knowing it, reach into
-            # it by up to half a joint. Found with the full reach, the bare bricks' angle and that
-            # overlap, it keeps the bed it lies on (31 Stylite stones had none and hung from their
-            # head joints in the joint model)
-            have = {(p.a, p.b) for p in patches}
-            near = sorted(ungrown | {j for i, j in pairs if i in ungrown} | {i for i, j in pairs if j in ungrown})
-            extra = contact_patches(
-                [cells[k] for k in near],
-                max_gap_m=max_gap_m,
-                angle_deg=15.0,
-                min_gap_m=-max_gap_m,  # a cell grown into the corner stone of the other wall
-                progress=False,
+        if len(set(wall_of.tolist())) > 1:
+            # where walls meet, the joints are the faces the filled bodies share (the hulls of two
+            # neighbouring cells overlap where a cell is not convex: their shared face is a joint even
+            # so, overlap up to a joint's reach)
+            cells = [_Solid(id=i, solid=Polyhedron(bd.vertices + bd.location, bd.faces)) for i, bd in enumerate(bodies)]
+            corner_patches = across(
+                contact_patches(cells, max_gap_m=reach, angle_deg=10.0, min_gap_m=-max_gap_m), ids=False
             )
-            patches += [p for p in extra if (p.a in ungrown or p.b in ungrown) and (p.a, p.b) not in have]
-            patches.sort(key=lambda c: (c.a, c.b))
-        pairs = np.array([(p.a, p.b) for p in patches], dtype=np.int64).reshape(-1, 2)
+            if ungrown:
+                # a stone left bare (its cell's hull would overlap a neighbour) faces its neighbours
+                # across its whole mortar joint, not half of it, and its faces are the stone's own
+                have = {(p.a, p.b) for p in corner_patches}
+                near = sorted(ungrown | {j for i, j in bonded if i in ungrown} | {i for i, j in bonded if j in ungrown})
+                extra = contact_patches(
+                    [cells[k] for k in near], max_gap_m=max_gap_m, angle_deg=15.0, min_gap_m=-max_gap_m, progress=False
+                )
+                corner_patches += [
+                    p for p in across(extra, ids=False) if (p.a in ungrown or p.b in ungrown) and (p.a, p.b) not in have
+                ]
+    raise_if_stopped()
+    within = wall_patches(bricks, bodies, frames, reach, segments=segments)
+    patches = sorted(within + corner_patches, key=lambda c: (c.a, c.b))
+    coverage = joint_coverage(bricks, frames, within, reach, pixel=0.005, labels=labels)
+    pairs = np.array([(p.a, p.b) for p in patches], dtype=np.int64).reshape(-1, 2)
     from scipy.spatial import ConvexHull
 
     fill = sum(ConvexHull(bd.vertices).volume for bd in bodies) / max(1e-12, sum(b.volume for b in bricks)) - 1.0
@@ -580,6 +753,7 @@ def scene_geometry(
         bricks_without_fill=len(ungrown),
         max_gap_m=float(max_gap_m),
         mortar_fill=bool(mortar_fill),
+        coverage=coverage,
     )
 
 
@@ -624,6 +798,7 @@ def save_geometry(geometry: SceneGeometry, path: Path, key: str) -> None:
             patch_moments=g.patch_moments,
             patch_outlines=g.patch_outlines,
             scalars=np.array([g.mortar_fill_volume, g.bricks_without_fill, g.max_gap_m, float(g.mortar_fill)]),
+            coverage=g.coverage,
         )
 
 
@@ -657,6 +832,7 @@ def load_geometry(path: Path, key: str) -> SceneGeometry | None:
         bricks_without_fill=int(without),
         max_gap_m=gap,
         mortar_fill=bool(filled),
+        coverage=d["coverage"],
     )
 
 
@@ -704,6 +880,7 @@ def scene_from_geometry(
         "bonds": len(bonds),
         "foundation_bonds": sum(bd.b < 0 for bd in bonds),
         "max_hull_volume_change": float(g.hull_volume_change.max(initial=0.0)),
+        "joint_coverage": g.coverage_summary(),
     }
     return Scene(
         bodies=tuple(bodies),

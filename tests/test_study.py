@@ -258,6 +258,8 @@ BAD = {
     "nothing varies": ("", "nothing varies"),
     "two laws": ("[inputs.w0]\nwidth_m = { sigma = 0.01, range = [1, 2] }\n", "exactly one of"),
     "pga units": ("[simulate]\npga_g = [300]\n", "not an earthquake"),
+    "material key": ("[inputs.material]\nfricton = { range = [0.5, 0.8] }\n", "did you mean friction"),
+    "material range": ("[inputs.material]\nfriction = { range = [-0.5, 0.8] }\n", "friction = -0.5: must be >= 0"),
 }
 
 

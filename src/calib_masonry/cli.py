@@ -299,7 +299,13 @@ def _cmd_simulate(args) -> int:
             if v is not None
         },
     )
+    material = None
+    if args.material:
+        from .simulation.scene import read_material
+
+        material = read_material(args.material)
     config = SimulationConfig(
+        material=material,
         pga_g=args.pga,
         duration_s=args.duration,
         seed=args.seed,
@@ -534,9 +540,21 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument(
         "--direction", type=float, default=0.0, help="pushover direction in degrees from global X (default 0)"
     )
+    m.add_argument(
+        "--material",
+        default=None,
+        metavar="FILE.toml",
+        help="the masonry's material: a TOML file with a [material] table (density_kg_m3, friction, "
+        "tensile_strength_mpa, cohesion_mpa, ...; see the README). Default: the model's material.toml (its "
+        "structure file's [material]), else the built-in mortar",
+    )
     m.add_argument("--pushover-rate", type=float, default=0.01, help="pushover ramp in g per second (default 0.01)")
     m.add_argument(
-        "--pushover-max", type=float, default=1.0, help="pushover's largest lateral acceleration in g (default 1)"
+        "--pushover-max",
+        type=float,
+        default=5.0,
+        help="pushover's largest lateral acceleration in g (default 5: walls with mortar need 3-4.5 g; the run "
+        "ends once the structure runs away, and summary.json says when the ramp reached this without a collapse)",
     )
     m.add_argument("--frames", type=int, default=6, help="collapse frames to render as PNG (default 6)")
     m.add_argument("--gif-frames", type=int, default=24, help="views in collapse.gif, played in real time (0: none)")

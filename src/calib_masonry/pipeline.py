@@ -37,6 +37,7 @@ __all__ = [
 
 #: A declared or detected closed footprint whose gap exceeds this gets a warning.
 CLOSURE_WARN_M = 1e-3
+MATERIAL_FILE = "material.toml"  # a model's [material] (from its structure file), read by `simulate`
 
 
 @dataclass(frozen=True)
@@ -480,7 +481,8 @@ def write_build(
     """Write a build into the folder ``out`` (all or nothing, replacing ``out`` as a whole: an
     existing ``out`` must be an earlier build or empty, unless ``overwrite``; the structure's own
     files inside it are kept): ``model.stl``, ``model.glb``, ``model.blend`` (with bpy; ``blend``), ``bricks.json``,
-    ``summary.json``, figures, the photo walls' calibrations and (with ``simulation_geometry``) the
+    ``summary.json``, ``material.toml`` (the structure's [material], if it has one), figures, the
+    photo walls' calibrations and (with ``simulation_geometry``) the
     bodies and contact patches ``simulate`` starts from (``sim_geometry.npz``), computed from the
     structure in memory. Returns the summary."""
     spec = result.spec
@@ -507,6 +509,10 @@ def write_build(
         export_mesh(s, stage / "model.stl")
         export_mesh(s, stage / "model.glb")  # one node per brick: opens in Blender, three.js, any glTF viewer
         raw = write_bricks_json(s, stage / "bricks.json")
+        if spec.material:  # the structure's [material]: what `simulate` runs the model with
+            import tomli_w
+
+            (stage / MATERIAL_FILE).write_text(tomli_w.dumps({"material": dict(spec.material)}))
         result.seconds["export"] = time.perf_counter() - t0
         if blend and s.bricks:
             t0 = time.perf_counter()

@@ -189,6 +189,9 @@ class StructureSpec:
     synthetic: SyntheticSpec | None = None
     photos: PhotoSpec | None = None
     corners: tuple[CornerSpec, ...] = ()
+    # the [material] table as given (key, value) (calib_masonry.simulation.scene.MATERIAL_KEYS):
+    # build stores it in the model folder (material.toml), where simulate reads it
+    material: tuple[tuple[str, float], ...] = ()
     source: Path | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
@@ -367,7 +370,7 @@ WALL_KEYS = (
     "occluders",
 )
 CORNER_KEYS = ("photo", "walls", "focal_px")
-TABLES = ("structure", "wall", "corner", "synthetic", "photos")
+TABLES = ("structure", "wall", "corner", "synthetic", "photos", "material")
 
 
 def _check_keys(tbl: dict, allowed, where: str, what: str = "field") -> None:
@@ -569,6 +572,12 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
     corners = [
         _corner_from(c, i, names, path, require_sources) for i, c in enumerate(data.get("corner", []) or [], start=1)
     ]
+    material: tuple[tuple[str, float], ...] = ()
+    if "material" in data:
+        from .simulation.scene import material_from_table
+
+        material_from_table(data["material"], str(path))  # checked here, before any work
+        material = tuple((str(k), float(v)) for k, v in data["material"].items())
     t_default = defaults["thickness_m"]
     return StructureSpec(
         name=defaults["name"],
@@ -583,6 +592,7 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         synthetic=synthetic,
         photos=photos,
         corners=tuple(corners),
+        material=material,
         source=path,
     )
 
@@ -649,4 +659,6 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None, i
             }
             for c in spec.corners
         ]
+    if spec.material:
+        doc["material"] = dict(spec.material)
     return tomli_w.dumps(doc)

@@ -17,6 +17,7 @@ grows as the square of the time since, so the reading lags by a little (about 1 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -167,6 +168,69 @@ def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float
         calm = np.flatnonzero(speed[: run_away[0]] <= ONSET_DRIFT * height)
         value = float(lam[calm[-1]]) if calm.size else 0.0
     return value, lam, m.roof_drift_m[start:]
+
+
+#: Joints whose relative motion at the onset is at least this fraction of the largest take part in
+#: the mechanism (and at least 1 mm).
+MECHANISM_SHARE = 0.25
+
+
+def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
+    """How the structure failed, from its joints' relative motion where the collapse has begun: the
+    first frame after the warm-up at which a brick has moved by the run-away displacement
+    (:func:`_runaway_m`). The joints taking part are those whose two sides moved apart by at least
+    :data:`MECHANISM_SHARE` of the largest such motion (and 1 mm); each opened (its motion mostly
+    along its normal) or slid (mostly across it), and is a bed joint (normal within 45 degrees of
+    vertical, footings included) or a head joint. "stepped (diagonal) cracking": at least a third
+    of them are head joints and the bed joints among them lie at two levels or more; otherwise
+    "rocking" where most opened, "sliding" where most slid. None if nothing ran away."""
+    if not scene.bonds:
+        return None
+    start = m.start_frame
+    rel = out.positions[start:] - out.positions[start] - (out.plate[start:] - out.plate[start])[:, None, :]
+    moved = np.flatnonzero(np.linalg.norm(rel, axis=2).max(axis=1) > _runaway_m(scene))
+    if moved.size == 0:
+        return None
+    f = start + int(moved[0])
+    R = rotations(out.quaternions[[start, f]])  # (2, B, 3, 3)
+    turn = R[1] @ np.transpose(R[0], (0, 2, 1))  # each body's rotation since the start
+    a = np.array([b.a for b in scene.bonds])
+    b = np.array([b.b for b in scene.bonds])
+    p = np.array([bd.location for bd in scene.bonds])
+    n = np.array([bd.normal for bd in scene.bonds])
+
+    def moved_to(body: np.ndarray) -> np.ndarray:
+        plate = p + (out.plate[f] - out.plate[start])
+        k = np.maximum(body, 0)
+        here = out.positions[f][k] + np.einsum("kij,kj->ki", turn[k], p - out.positions[start][k])
+        return np.where((body < 0)[:, None], plate, here)
+
+    d = moved_to(b) - moved_to(a)
+    opening = np.einsum("ki,ki->k", d, n)
+    slip = np.linalg.norm(d - opening[:, None] * n, axis=1)
+    size = np.linalg.norm(d, axis=1)
+    active = size >= max(1e-3, MECHANISM_SHARE * float(size.max()))
+    if not active.any():
+        return None
+    bed = np.abs(n[:, 2]) >= math.cos(math.radians(45.0))
+    opened = active & (opening > slip)
+    head = active & ~bed
+    levels = np.unique(np.round(p[active & bed, 2] / 0.05)).size  # bed joints 5 cm apart in height
+    if head.sum() >= active.sum() / 3 and levels >= 2:
+        kind = "stepped (diagonal) cracking"
+    elif opened.sum() >= active.sum() / 2:
+        kind = "rocking"
+    else:
+        kind = "sliding"
+    return {
+        "mechanism": kind,
+        "at_time_s": float(out.time[f] - out.time[start]),
+        "joints": int(active.sum()),
+        "opened": int(opened.sum()),
+        "slid": int((active & ~opened).sum()),
+        "head_joints": int(head.sum()),
+        "bed_joint_levels": int(levels),
+    }
 
 
 def plot_ground_motion(scene: Scene, path: Path) -> None:

@@ -39,6 +39,7 @@ from .scene import (
     SceneGeometry,
     SolverSettings,
     load_geometry,
+    material_table,
     save_geometry,
     scene_from_geometry,
     scene_geometry,
@@ -89,7 +90,8 @@ class SimulationConfig:
     components: int = 2
     direction_deg: float = 0.0  # of a one-component motion, from global X
     solver: SolverSettings = SolverSettings()
-    material: Material = MASONRY
+    # None: the model folder's material.toml (its structure's [material]) or, without one, MASONRY
+    material: Material | None = None
     frames_png: int = 6
     gif_frames: int = 24  # views in collapse.gif (0: none)
     figures: bool = True
@@ -345,13 +347,29 @@ def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
     """The scene ``simulate_to_folder`` runs for a model folder and a configuration."""
     geometry, stored = geometry_for_model(model_dir)
     load = config.pushover if config.pushover is not None else motion_for(config)
-    scene = scene_for(geometry, load, solver=config.solver, material=config.material, foundation=config.foundation)
+    material, source = model_material(model_dir, config.material)
+    scene = scene_for(geometry, load, solver=config.solver, material=material, foundation=config.foundation)
     scene.notes["geometry_stored"] = stored
+    scene.notes["material_source"] = source
     return scene
 
 
+def model_material(model_dir: str | Path, given: Material | None = None) -> tuple[Material, str]:
+    """The material a run of the model uses and where it comes from: ``given`` (``--material``),
+    else the model folder's material.toml (its structure's [material] table), else the defaults."""
+    from ..pipeline import MATERIAL_FILE
+    from .scene import read_material
+
+    if given is not None:
+        return given, "given"
+    path = Path(model_dir) / MATERIAL_FILE
+    if path.is_file():
+        return read_material(path), str(path)
+    return MASONRY, "defaults (calib_masonry.simulation.scene.Material)"
+
+
 def _summary(scene: Scene, out, m, curve, name: str) -> dict:
-    from .results import ONSET_DRIFT, failure_mode_counts, outcome
+    from .results import ONSET_DRIFT, failure_mode_counts, mechanism, outcome
 
     s = scene.solver
     k = joint_stiffness(scene.material)
@@ -399,6 +417,8 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
             else None,
             "seconds": round(out.seconds_joints, 3),
         },
+        # the material of the run, as a [material] table (its units in its keys), and where it came from
+        "material": {**material_table(mat), "source": scene.notes.get("material_source", "given")},
         "frame": "ground: the plate stays put and the ground motion acts on every brick as an inertial force",
         "foundation_bonds": int(scene.notes.get("foundation_bonds", 0)),
         # the bodies and contact patches: read from the model folder's sim_geometry.npz (stored
@@ -420,6 +440,9 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
         "bonds_released": int(np.isfinite(out.bond_release_time_s).sum()) if out.bond_release_time_s is not None else 0,
         "max_brick_displacement_m": float(m.max_displacement_m.max()),
         "outcome": outcome(float(m.moved_fraction[-1])),
+        # rocking, sliding or stepped (diagonal) cracking, from the joints' motion where the
+        # collapse began (None: nothing ran away); see calib_masonry.simulation.results.mechanism
+        "mechanism": mechanism(scene, out, m),
         "seconds": {
             "blender_build": round(out.seconds_build, 3),
             "stepping": round(out.seconds_stepping, 3),
@@ -432,7 +455,14 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
             "direction_deg": scene.pushover.direction_deg,
             "max_g": scene.pushover.max_g,
             "onset_drift": ONSET_DRIFT,
+            # the ramp reached its largest acceleration and the structure still stood: no multiplier
+            "reached_max": curve[0] is None,
         }
+        if curve[0] is None:
+            summary["pushover"]["note"] = (
+                f"no collapse up to {scene.pushover.max_g:g} g: the collapse multiplier is above it; "
+                "raise --pushover-max to find it"
+            )
         summary["collapse_multiplier_g"] = curve[0]
         summary["ground_motion"] = None
     return summary

@@ -61,6 +61,10 @@ __all__ = [
     "save_geometry",
     "load_geometry",
     "MASONRY",
+    "MATERIAL_KEYS",
+    "material_from_table",
+    "material_table",
+    "read_material",
     "joint_axes",
     "footing_patches",
     "grounded_bodies",
@@ -116,6 +120,76 @@ class Material:
 
 
 MASONRY = Material()
+
+#: The [material] table of structure.toml and of ``simulate --material FILE``: each key (its unit in
+#: its name) and the :class:`Material` field it sets, with the factor from the key's unit to SI.
+MATERIAL_KEYS: dict[str, tuple[str, float]] = {
+    "density_kg_m3": ("density", 1.0),
+    "friction": ("friction", 1.0),
+    "restitution": ("restitution", 1.0),
+    "compressive_strength_mpa": ("compressive_strength", 1e6),
+    "tensile_strength_mpa": ("tensile_strength", 1e6),
+    "cohesion_mpa": ("shear_strength", 1e6),
+    "mortar_youngs_modulus_mpa": ("mortar_youngs_modulus", 1e6),
+    "mortar_poisson": ("mortar_poisson", 1.0),
+    "unit_youngs_modulus_mpa": ("unit_youngs_modulus", 1e6),
+    "unit_poisson": ("unit_poisson", 1.0),
+    "joint_thickness_m": ("joint_thickness_m", 1.0),
+}
+_MATERIAL_KEY_OF = {name: key for key, (name, _) in MATERIAL_KEYS.items()}
+
+
+def material_from_table(table, where: str, base: Material = MASONRY) -> Material:
+    """The material a [material] table gives (:data:`MATERIAL_KEYS`; a key left out keeps
+    ``base``'s value). Bad input (an unknown key, a value that is no number or out of range) ends in
+    an :class:`InputError` that names ``where`` and the key."""
+    import difflib
+
+    if not isinstance(table, dict):
+        raise InputError(f"{where}: [material] must be a table of numbers ({', '.join(MATERIAL_KEYS)})")
+    changes = {}
+    for key, value in table.items():
+        if key not in MATERIAL_KEYS:
+            close = difflib.get_close_matches(str(key), list(MATERIAL_KEYS), n=1, cutoff=0.6)
+            hint = f"did you mean {close[0]}?" if close else f"valid keys are {', '.join(MATERIAL_KEYS)}"
+            raise InputError(f"{where}: [material] has no key {key!r}; {hint}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise InputError(f"{where}: [material] {key} = {value!r}: give a finite number")
+        name, scale = MATERIAL_KEYS[key]
+        changes[name] = float(value) * scale
+    try:
+        return replace(base, **changes)
+    except InputError as exc:  # Material's own checks name its fields: say them as the table's keys
+        message = str(exc)
+        for name, key in _MATERIAL_KEY_OF.items():
+            scale = MATERIAL_KEYS[key][1]
+            if f"material {name} = " in message:
+                value = getattr(base, name) if name not in changes else changes[name]
+                message = message.replace(f"material {name} = {value}", f"{key} = {value / scale:g}")
+        if "must exceed" in message:
+            message = (
+                f"unit_youngs_modulus_mpa ({changes.get('unit_youngs_modulus', base.unit_youngs_modulus) / 1e6:g}) must "
+                f"exceed mortar_youngs_modulus_mpa ({changes.get('mortar_youngs_modulus', base.mortar_youngs_modulus) / 1e6:g}) "
+                "for the joint stiffness E_u E_m / (t (E_u - E_m)); give the units' and the mortar's moduli"
+            )
+        raise InputError(f"{where}: [material] {message}") from None
+
+
+def material_table(material: Material) -> dict[str, float]:
+    """``material`` as a [material] table (:data:`MATERIAL_KEYS`): what summary.json echoes."""
+    return {key: float(getattr(material, name)) / scale for key, (name, scale) in MATERIAL_KEYS.items()}
+
+
+def read_material(path: str | Path, base: Material = MASONRY) -> Material:
+    """The material of a TOML file: its [material] table, or its keys at the top level."""
+    from ..spec import read_toml
+
+    data = read_toml(Path(path), "material file")
+    table = data.get("material", data) if isinstance(data, dict) else data
+    if isinstance(data, dict) and "material" in data and len(data) > 1:
+        others = sorted(k for k in data if k != "material")
+        raise InputError(f"{path}: a material file holds a [material] table only; remove {others}")
+    return material_from_table(table, str(path), base)
 
 
 #: Upper limits of the solver settings: far beyond what changes a result (the convergence study
@@ -264,7 +338,7 @@ class Pushover:
 
     rate_g_per_s: float = 0.01
     direction_deg: float = 0.0
-    max_g: float = 1.0
+    max_g: float = 5.0  # mortar walls need 3-4.5 g (a ramp that reaches it says so in summary.json)
 
     def __post_init__(self) -> None:
         if not (self.rate_g_per_s > 0 and math.isfinite(self.rate_g_per_s)):

@@ -25,6 +25,10 @@ simulation every sample runs::
     [inputs.trace]
     vertices = { choices = [4, 5, 6, 8] }  # or target_dice = { range = [0.95, 0.99] }
 
+    [inputs.material]       # any key of a [material] table, about the structure's value (or the defaults)
+    friction = { range = [0.5, 0.8] }
+    tensile_strength_mpa = { sigma = 0.05 }
+
     [sweep]                 # a truth sweep: generator parameters of `synth`, each a list or {from, to, n}
     "photos.yaw_deg" = [0, 10, 20, 30]
     "synthetic.seed" = [1, 2]
@@ -157,7 +161,7 @@ class SimulateSpec:
     pushover: bool = False
     direction_deg: float = 0.0
     pushover_rate_g_per_s: float = 0.05
-    pushover_max_g: float = 1.0
+    pushover_max_g: float = 5.0
 
     @property
     def loads(self) -> tuple[dict, ...]:
@@ -333,6 +337,17 @@ def parse_study(data: dict, path: Path) -> Study:
         if group == "mask":
             _unknown(path, "[inputs.mask]", table, MASK_FIELDS)
             inputs += [_law(path, f"mask.{k}", v, mean=0.0, integer=True) for k, v in table.items()]
+        elif group == "material":
+            from ..simulation.scene import MATERIAL_KEYS, material_from_table, material_table
+
+            _unknown(path, "[inputs.material]", table, tuple(MATERIAL_KEYS))
+            base = material_table(material_from_table(dict(spec.material), str(src)))
+            for k, v in table.items():
+                inp = _law(path, f"material.{k}", v, mean=base[k])
+                for x in inp.choices or (inp.low, inp.high):  # the bounds a draw can take, checked now
+                    if isinstance(x, (int, float)) and math.isfinite(x):
+                        material_from_table({**dict(spec.material), k: x}, f"{path}: [inputs.material] {k}")
+                inputs.append(inp)
         elif group == "trace":
             _unknown(path, "[inputs.trace]", table, TRACE_FIELDS)
             for k, v in table.items():
@@ -350,7 +365,7 @@ def parse_study(data: dict, path: Path) -> Study:
         else:
             targets = list(walls) if group == "every_wall" else [group]
             if group not in walls and group != "every_wall":
-                close = difflib.get_close_matches(group, [*walls, "every_wall", "mask", "trace"], n=1)
+                close = difflib.get_close_matches(group, [*walls, "every_wall", "mask", "trace", "material"], n=1)
                 raise InputError(
                     f"{path}: [inputs.{group}]: '{spec.name}' has no wall '{group}'"
                     + (f"; did you mean {close[0]}?" if close else f"; its walls are {', '.join(walls)}")
@@ -449,7 +464,7 @@ def parse_study(data: dict, path: Path) -> Study:
             pushover=pushover,
             direction_deg=_number(path, "[simulate] direction_deg", s.get("direction_deg", 0.0)),
             pushover_rate_g_per_s=_number(path, "[simulate] rate_g_per_s", s.get("rate_g_per_s", 0.05), positive=True),
-            pushover_max_g=_number(path, "[simulate] max_g", s.get("max_g", 1.0), positive=True),
+            pushover_max_g=_number(path, "[simulate] max_g", s.get("max_g", 5.0), positive=True),
         )
         if sim.duration_s > 600:
             raise InputError(f"{path}: [simulate] duration_s = {sim.duration_s:g}: at most 600 s per run")

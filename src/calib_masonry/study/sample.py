@@ -275,7 +275,10 @@ def _simulation(study: Study, sample: Sample, structure) -> tuple:
     from ..simulation.scene import Pushover
 
     sim = study.simulate
-    varied = any(not k.startswith(("synthetic.", "photos.")) for k in sample.values) or study.scenario is not None
+    varied = (
+        any(not k.startswith(("synthetic.", "photos.", "material.")) for k in sample.values)
+        or study.scenario is not None
+    )
     if varied:
         geometry = simulation_geometry(structure)
     else:  # every sample simulates the same model: its contact geometry once per worker
@@ -295,7 +298,17 @@ def _simulation(study: Study, sample: Sample, structure) -> tuple:
             seed=study.seed * 1000 + sample.load["record"],
             direction_deg=sim.direction_deg,
         )
-    return geometry, load
+    return geometry, load, _material(study, sample)
+
+
+def _material(study: Study, sample: Sample):
+    """The sample's material: the structure's [material] (or the defaults) with its drawn values."""
+    from ..simulation.scene import material_from_table
+
+    source = study.structure or study.scenario
+    base = dict(_structure(source, require_sources=study.structure is not None).material)
+    drawn = {k.split(".", 1)[1]: float(v) for k, v in sample.values.items() if k.startswith("material.")}
+    return material_from_table({**base, **drawn}, f"sample {sample.index}")
 
 
 def outcome(result) -> dict:
@@ -379,7 +392,8 @@ def run_sample(study: Study, sample: Sample) -> dict:
     with _row(sample) as row:
         outputs, job = _evaluate(study, sample)
         if job is not None:
-            outputs.update(outcome(simulate(*job, progress=False, joints_ahead=False)))
+            geometry, load, material = job
+            outputs.update(outcome(simulate(geometry, load, material=material, progress=False, joints_ahead=False)))
         row.update(outputs)
     return row
 
@@ -401,6 +415,7 @@ async def run_sample_async(study: Study, sample: Sample) -> dict:
         with _row(sample) as row:
             outputs, job = await asyncio.to_thread(_evaluate, study, sample)
             if job is not None:
-                outputs.update(outcome(await simulate_async(*job, progress=False)))
+                geometry, load, material = job
+                outputs.update(outcome(await simulate_async(geometry, load, material=material, progress=False)))
             row.update(outputs)
     return row

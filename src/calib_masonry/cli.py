@@ -282,8 +282,23 @@ def _cmd_simulate(args) -> int:
     from dataclasses import replace
 
     from .simulation.run import SimulationConfig, simulate_to_folder
-    from .simulation.scene import Pushover, SolverSettings
+    from .simulation.scene import Pushover, ShearTest, SolverSettings
 
+    if args.shear_test:
+        given = [
+            f
+            for f, v in (("--pushover", args.pushover), ("--accelerogram", args.accelerogram), ("--pga", args.pga))
+            if v
+        ]
+        if given:
+            raise InputError(
+                f"--shear-test with {', '.join(given)}: the shear test pushes the wall's loading beam and applies no "
+                f"other load; drop {', '.join(given)}"
+            )
+        if args.precompression_mpa is None:
+            raise InputError("--shear-test: give --precompression-mpa S, the vertical stress on the wall (MPa)")
+    elif args.precompression_mpa is not None or args.shear_span_ratio is not None:
+        raise InputError("--precompression-mpa and --shear-span-ratio belong to --shear-test; add --shear-test")
     if args.pushover and (args.accelerogram or args.pga is not None):
         given = "--accelerogram" if args.accelerogram else "--pga"
         raise InputError(
@@ -320,8 +335,29 @@ def _cmd_simulate(args) -> int:
         pushover=Pushover(rate_g_per_s=args.pushover_rate, direction_deg=args.direction, max_g=args.pushover_max)
         if args.pushover
         else None,
+        shear_test=ShearTest(
+            precompression_pa=args.precompression_mpa * 1e6,
+            boundary=args.boundary,
+            shear_span_ratio=args.shear_span_ratio,
+        )
+        if args.shear_test
+        else None,
     )
     s = simulate_to_folder(args.model_dir, args.out, config, overwrite=args.overwrite)
+    if args.shear_test:
+        st = s["shear_test"]
+        peak = st["peak_lateral_force_kn"]
+        print(
+            f"shear test: {s['bricks'] - 1} stones, {st['boundary']}, {st['precompression_mpa']:g} MPa "
+            f"({st['vertical_load_kn']:.1f} kN), H0/L = {st['shear_span_ratio']:.2f}: peak lateral force "
+            + (
+                f"{peak:.1f} kN at {st['drift_at_peak_percent']:.3f} % drift, {st['mechanism']}"
+                if peak is not None
+                else "not reached (the ramp ended first)"
+            )
+            + f" -> {args.out}"
+        )
+        return 0
     if args.pushover:
         value = s["collapse_multiplier_g"]
         print(
@@ -539,6 +575,29 @@ def _parser() -> argparse.ArgumentParser:
     )
     m.add_argument(
         "--direction", type=float, default=0.0, help="pushover direction in degrees from global X (default 0)"
+    )
+    m.add_argument(
+        "--shear-test",
+        action="store_true",
+        help="the laboratory shear-compression test: a rigid beam on the wall's top carries --precompression-mpa "
+        "and is pushed along the wall by a slow force ramp; writes force_drift.csv/png, the peak lateral force (kN), "
+        "the drift at the peak and the mechanism (a single wall's model)",
+    )
+    m.add_argument(
+        "--precompression-mpa", type=float, default=None, help="shear test: vertical stress on the wall's section, MPa"
+    )
+    m.add_argument(
+        "--boundary",
+        choices=["cantilever", "double-fixed"],
+        default="cantilever",
+        help="shear test: the beam's rotation free (cantilever, default) or held (double-fixed)",
+    )
+    m.add_argument(
+        "--shear-span-ratio",
+        type=float,
+        default=None,
+        help="shear test, cantilever: H0/L, the lateral load's height over the wall's length (default: the wall's "
+        "height plus 0.1 m)",
     )
     m.add_argument(
         "--material",

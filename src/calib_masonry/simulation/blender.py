@@ -391,6 +391,24 @@ def build_scene(scene: Scene):
             c.use_breaking = False  # the joint model decides when a joint cracks (see joints.py)
             c.enabled = not fixed[bond.a]  # a joint of the part held fixed acts once that part is set free
             constraints.append(e)
+    for k in scene.held_rotation:
+        # its rotation locked to the ground, its translations free (a generic constraint with angular
+        # limits only): it acts once the body is set free
+        e = bpy.data.objects.new(f"held_rotation_{k:05d}", None)
+        e.location = tuple(float(x) for x in scene.bodies[k].location)
+        if rw.constraints is None:
+            ccol = bpy.data.collections.new("RigidBodyConstraints")
+            sc.collection.children.link(ccol)
+            rw.constraints = ccol
+        rw.constraints.objects.link(e)
+        c = e.rigid_body_constraint
+        c.type = "GENERIC"
+        c.object1 = plate
+        c.object2 = objects[k]
+        for axis in "xyz":
+            setattr(c, f"use_limit_ang_{axis}", True)
+            setattr(c, f"limit_ang_{axis}_lower", 0.0)
+            setattr(c, f"limit_ang_{axis}_upper", 0.0)
     return bpy, objects, plate, constraints, fixed
 
 

@@ -390,6 +390,10 @@ class JointModel:
         mom = np.array([b.moments for b in bonds], dtype=np.float64).reshape(-1, 3)
         self.iuu, self.ivv, self.iuv = mom[:, 0], mom[:, 1], mom[:, 2]
         self.outline = np.array([b.outline for b in bonds], dtype=np.float64)  # (J, K, 2)
+        # each joint's tensile strength and cohesion: the material's, none for a dry joint
+        wet = np.array([not getattr(b, "dry", False) for b in bonds[: self.nj]], dtype=bool)
+        self.tensile_strength = np.where(wet, self.material.tensile_strength, 0.0)
+        self.cohesion = np.where(wet, self.material.shear_strength, 0.0)
         kn, ks = self.stiffness.normal, self.stiffness.shear
         D = np.zeros((self.n_all, 6, 6))
         D[:, 0, 0] = D[:, 1, 1] = ks * self.area
@@ -399,6 +403,15 @@ class JointModel:
         D[:, 3, 4] = D[:, 4, 3] = -kn * self.iuv
         D[:, 5, 5] = ks * (self.iuu + self.ivv)
         self.D = D
+        if getattr(scene, "held_rotation", ()):
+            # a body whose rotation is held (a shear test's beam between fixed ends): a spring on its
+            # rotations a thousand times stiffer than the whole joint network's in bending
+            span = float(np.ptp(self.x, axis=0).max()) + 1.0
+            big = 1e3 * kn * float(self.area.sum()) * span**2
+            diag = self._reg.diagonal().copy()
+            for k in scene.held_rotation:
+                diag[6 * k + 3 : 6 * k + 6] = big
+            self._reg = sp.diags(diag)
         # L (J, 6, 12): the joint-frame relative displacement and rotation of b against a, from the
         # two bodies' (translation, rotation) about their centroids
         self.ground = self.b < 0
@@ -742,7 +755,7 @@ class JointModel:
         outline, area, iuu, ivv = self.outline[:n], self.area[:n], self.iuu[:n], self.ivv[:n]
         ou, ov = outline[..., 0], outline[..., 1]
         sigma = kn * (rel[:, 2:3] + rel[:, 3:4] * ov - rel[:, 4:5] * ou)  # (J, K), tension positive
-        tension = _ratio(sigma.max(axis=1), m.tensile_strength)
+        tension = _ratio(sigma.max(axis=1), self.tensile_strength)
         # a compressed joint whose tensile corner has cracked stands as a no-tension section while
         # its compressive resultant stays inside the patch: it fails in bending only once the
         # resultant leaves the outline (rocking)
@@ -757,7 +770,7 @@ class JointModel:
         rmax = np.sqrt((outline**2).sum(axis=2)).max(axis=1)
         tau = np.hypot(forces[:, 0], forces[:, 1]) / area + np.abs(forces[:, 5]) * rmax / polar
         sigma_c = np.maximum(0.0, -forces[:, 2] / area)
-        shear = _ratio(tau, m.shear_strength + m.friction * sigma_c)
+        shear = _ratio(tau, self.cohesion + m.friction * sigma_c)
         crit = np.stack([tension, compression, shear], axis=1)
         return JointState(utilisation=crit.max(axis=1), mode=crit.argmax(axis=1), forces=forces, relative=rel)
 
@@ -811,6 +824,11 @@ class JointModel:
         linked = self._pad(intact)
         linked |= (closed if closed is not None else self.corner_mask).any(axis=1)
         return linked
+
+    @property
+    def motion(self) -> np.ndarray | None:
+        """The bodies' displacements and rotations ``(6 B,)`` of the last solve (None before any)."""
+        return None if self._last is None else self._last[2]
 
     def corner_motion(self) -> np.ndarray:
         """The largest relative displacement ``(J',)`` (m) of each joint's corners in the last

@@ -176,11 +176,13 @@ MECHANISM_SHARE = 0.25
 
 
 def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
-    """How the structure failed, from its joints' relative motion where the collapse has begun: the
+    """How the structure failed, from the joints that let go where the collapse has begun: the
     first frame after the warm-up at which a brick has moved by the run-away displacement
-    (:func:`_runaway_m`). The joints taking part are those whose two sides moved apart by at least
-    :data:`MECHANISM_SHARE` of the largest such motion (and 1 mm); each opened (its motion mostly
-    along its normal) or slid (mostly across it), and is a bed joint (normal within 45 degrees of
+    (:func:`_runaway_m`). The joints taking part are those Bullet let go by then (the joint model
+    found no equilibrium with them); each opened (it cracked in tension) or slid (in shear or
+    crushing). Without any (a run the joint model did not watch), they are those whose two sides moved
+    apart by at least :data:`MECHANISM_SHARE` of the largest such motion (and 1 mm), opened where
+    that motion is mostly along the normal. Each is a bed joint (normal within 45 degrees of
     vertical, footings included) or a head joint. "stepped (diagonal) cracking": at least a third
     of them are head joints and the bed joints among them lie at two levels or more; otherwise
     "rocking" where most opened, "sliding" where most slid. None if nothing ran away."""
@@ -205,15 +207,23 @@ def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
         here = out.positions[f][k] + np.einsum("kij,kj->ki", turn[k], p - out.positions[start][k])
         return np.where((body < 0)[:, None], plate, here)
 
-    d = moved_to(b) - moved_to(a)
-    opening = np.einsum("ki,ki->k", d, n)
-    slip = np.linalg.norm(d - opening[:, None] * n, axis=1)
-    size = np.linalg.norm(d, axis=1)
-    active = size >= max(1e-3, MECHANISM_SHARE * float(size.max()))
-    if not active.any():
-        return None
+    t_f = float(out.time[f] - out.time[start])
+    released = out.bond_release_time_s
+    if released is not None and out.bond_break_mode is not None and np.any(np.isfinite(released) & (released <= t_f)):
+        # the joints Bullet let go by then, as the joint model cracked them: what the mechanism
+        # needed (Bullet's motion after the peak, a rocking block sliding off its toe, is no guide)
+        active = np.isfinite(released) & (released <= t_f)
+        opened = active & (out.bond_break_mode == FAILURE_MODES.index("tension"))
+    else:  # nothing let go (a run without the joint model's watch): the joints' relative motion
+        d = moved_to(b) - moved_to(a)
+        opening = np.einsum("ki,ki->k", d, n)
+        slip = np.linalg.norm(d - opening[:, None] * n, axis=1)
+        size = np.linalg.norm(d, axis=1)
+        active = size >= max(1e-3, MECHANISM_SHARE * float(size.max()))
+        if not active.any():
+            return None
+        opened = active & (opening > slip)
     bed = np.abs(n[:, 2]) >= math.cos(math.radians(45.0))
-    opened = active & (opening > slip)
     head = active & ~bed
     levels = np.unique(np.round(p[active & bed, 2] / 0.05)).size  # bed joints 5 cm apart in height
     if head.sum() >= active.sum() / 3 and levels >= 2:
@@ -224,7 +234,7 @@ def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
         kind = "sliding"
     return {
         "mechanism": kind,
-        "at_time_s": float(out.time[f] - out.time[start]),
+        "at_time_s": t_f,
         "joints": int(active.sum()),
         "opened": int(opened.sum()),
         "slid": int((active & ~opened).sum()),
@@ -412,4 +422,103 @@ def plot_pushover(scene: Scene, curve: tuple[float | None, np.ndarray, np.ndarra
     ax.grid(alpha=0.3)
     fig.tight_layout()
     plt.save(fig, path, dpi=110)
+    plt.close(fig)
+
+
+def _elastic_drift(scene: Scene, out: RunOutput, lam: np.ndarray, along: np.ndarray) -> np.ndarray:
+    """The beam's displacement along the push (m) at lateral loads ``lam`` (g) before the peak, from
+    the joint model (Bullet holds the intact structure rigid, so its poses show no drift before a
+    mechanism): each load solved with the joints that had cracked by then, less the displacement under
+    gravity alone."""
+    from .joints import JointModel
+
+    jm = JointModel(scene)
+    beam = scene.notes["shear_test"]["beam"]
+    broke = out.bond_break_time_s if out.bond_break_time_s is not None else np.full(len(scene.bonds), np.nan)
+    rate = scene.pushover.rate_g_per_s
+    drift = np.zeros(len(lam))
+    ref = None
+    for i, x in enumerate(np.concatenate([[0.0], lam])):
+        intact = ~(broke <= x / rate)  # NaN: never cracked
+        jm.solve(np.array([x * G * along[0], x * G * along[1], -G]), intact)
+        d = float(jm.motion[6 * beam : 6 * beam + 3] @ along) if jm.motion is not None else 0.0
+        if i == 0:
+            ref = d
+        else:
+            drift[i - 1] = d - ref
+    return drift
+
+
+def shear_curve(scene: Scene, out: RunOutput, m: Metrics, curve, levels: int = 40) -> dict:
+    """A shear test's force-drift curve and its peak (see
+    :func:`~calib_masonry.simulation.scene.shear_test_scene`): the lateral force at the top (kN:
+    ``lambda`` times the notes' ``force_per_g_kn``) against the drift (the beam's displacement along
+    the push over the wall's height). Up to the peak, at ``levels`` loads, the drift is the joint
+    model's elastic one with the joints cracked by then (:func:`_elastic_drift`); after it, that plus
+    the beam's motion in Bullet. The peak force is the force at the collapse multiplier (the last
+    load before the wall ran away), None if the ramp ended first."""
+    st = scene.notes["shear_test"]
+    value, lam, _ = curve
+    start = m.start_frame
+    d = np.radians(scene.pushover.direction_deg)
+    along = np.array([np.cos(d), np.sin(d), 0.0])
+    top = float(value) if value is not None else float(lam.max())
+    pre = np.linspace(0.0, top, levels + 1)[1:]
+    pre_drift = _elastic_drift(scene, out, pre, along) / st["height_m"]
+    beam = st["beam"]
+    rel = out.positions[start:, beam] - out.positions[start, beam] - (out.plate[start:] - out.plate[start])
+    after = lam > top
+    post_drift = pre_drift[-1] + (rel[after] @ along) / st["height_m"]
+    peak = None if value is None else float(value * st["force_per_g_kn"])
+    return {
+        "force_kn": np.concatenate([[0.0], pre, lam[after]]) * st["force_per_g_kn"],
+        "drift": np.concatenate([[0.0], pre_drift, post_drift]),
+        "peak_lateral_force_kn": peak,
+        "drift_at_peak": None if value is None else float(pre_drift[-1]),
+    }
+
+
+def write_shear_curve(scene: Scene, shear: dict, folder: Path, figures: bool = True) -> None:
+    """force_drift.csv (drift in per cent, force in kN, per frame) and force_drift.png."""
+    rows = np.column_stack([shear["drift"] * 100, shear["force_kn"]])
+    np.savetxt(
+        folder / "force_drift.csv",
+        rows,
+        delimiter=",",
+        header="drift_percent,lateral_force_kn",
+        comments="",
+        fmt="%.6g",
+    )
+    if not figures:
+        return
+    from .. import _figure as plt
+
+    st = scene.notes["shear_test"]
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    drift, force = shear["drift"] * 100, shear["force_kn"]
+    peak = shear["peak_lateral_force_kn"]
+    pre = force <= (peak if peak is not None else np.inf) + 1e-9
+    ax.plot(drift[pre], force[pre], color="C0", lw=1.2, label="up to the peak (joint model)")
+    if (~pre).any():
+        ax.plot(drift[~pre], force[~pre], color="C0", lw=1.0, ls="--", label="after it: the wall runs away (Bullet)")
+    top = max(3.0, 3 * 100 * (shear["drift_at_peak"] or 0.0))
+    if drift.max() > top:
+        ax.set_xlim(0, top)
+    ax.legend(fontsize=8, loc="lower right")
+    if shear["peak_lateral_force_kn"] is not None:
+        ax.axhline(shear["peak_lateral_force_kn"], color="k", lw=0.8, ls="--")
+        ax.text(
+            ax.get_xlim()[1], shear["peak_lateral_force_kn"], f"peak {shear['peak_lateral_force_kn']:.1f} kN "
+            f"at {100 * shear['drift_at_peak']:.3f} % ", fontsize=8, ha="right", va="bottom",
+        )  # fmt: skip
+    ax.set_xlabel("drift (%)")
+    ax.set_ylabel("lateral force (kN)")
+    ax.set_title(
+        f"shear test, {st['boundary']}, {st['precompression_mpa']:g} MPa ({st['vertical_load_kn']:.1f} kN), "
+        f"H0/L = {st['shear_span_ratio']:.2f}",
+        fontsize=9,
+    )
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    plt.save(fig, folder / "force_drift.png", dpi=110)
     plt.close(fig)

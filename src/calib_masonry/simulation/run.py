@@ -37,12 +37,14 @@ from .scene import (
     Pushover,
     Scene,
     SceneGeometry,
+    ShearTest,
     SolverSettings,
     load_geometry,
     material_table,
     save_geometry,
     scene_from_geometry,
     scene_geometry,
+    shear_test_scene,
 )
 
 __all__ = [
@@ -102,6 +104,7 @@ class SimulationConfig:
     # a quasi-static collapse analysis instead of a ground motion (then pga, duration, seed,
     # accelerogram and components are not used)
     pushover: Pushover | None = None
+    shear_test: ShearTest | None = None  # the laboratory shear-compression test instead of a load
 
     def __post_init__(self) -> None:
         if self.pga_g is None and self.accelerogram is None:
@@ -346,9 +349,12 @@ def scene_for(
 def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
     """The scene ``simulate_to_folder`` runs for a model folder and a configuration."""
     geometry, stored = geometry_for_model(model_dir)
-    load = config.pushover if config.pushover is not None else motion_for(config)
     material, source = model_material(model_dir, config.material)
-    scene = scene_for(geometry, load, solver=config.solver, material=material, foundation=config.foundation)
+    if config.shear_test is not None:
+        scene = shear_test_scene(geometry, config.shear_test, material=material, solver=config.solver)
+    else:
+        load = config.pushover if config.pushover is not None else motion_for(config)
+        scene = scene_for(geometry, load, solver=config.solver, material=material, foundation=config.foundation)
     scene.notes["geometry_stored"] = stored
     scene.notes["material_source"] = source
     return scene
@@ -421,6 +427,8 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
         "material": {**material_table(mat), "source": scene.notes.get("material_source", "given")},
         "frame": "ground: the plate stays put and the ground motion acts on every brick as an inertial force",
         "foundation_bonds": int(scene.notes.get("foundation_bonds", 0)),
+        # without a footing (--no-foundation), the bottom course bears on the ground through dry joints
+        "ground_contacts": int(scene.notes.get("ground_contacts", 0)),
         # the bodies and contact patches: read from the model folder's sim_geometry.npz (stored
         # by build) or, for a model built without it or edited since, computed in this run
         "geometry_stored_by_build": bool(scene.notes.get("geometry_stored", False)),
@@ -465,6 +473,17 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
             )
         summary["collapse_multiplier_g"] = curve[0]
         summary["ground_motion"] = None
+        if "shear_test" in scene.notes:
+            from .results import shear_curve
+
+            shear = shear_curve(scene, out, m, curve)
+            summary["shear_test"] = {
+                **scene.notes["shear_test"],
+                "peak_lateral_force_kn": shear["peak_lateral_force_kn"],
+                "drift_at_peak_percent": None if shear["drift_at_peak"] is None else 100 * shear["drift_at_peak"],
+                "reached_max": shear["peak_lateral_force_kn"] is None,
+                "mechanism": (summary["mechanism"] or {}).get("mechanism"),
+            }
     return summary
 
 
@@ -619,6 +638,10 @@ def write_simulation(
         ),
     )
     t1 = time.perf_counter()
+    if "shear_test" in scene.notes and result.curve is not None:
+        from .results import shear_curve, write_shear_curve
+
+        write_shear_curve(scene, shear_curve(scene, r, m, result.curve), out, figures=figures)
     if figures:
         if scene.pushover is not None:
             plot_pushover(scene, result.curve, out / "pushover.png")

@@ -54,6 +54,8 @@ __all__ = [
     "Bond",
     "Plate",
     "Pushover",
+    "ShearTest",
+    "shear_test_scene",
     "Scene",
     "SceneGeometry",
     "scene_geometry",
@@ -285,7 +287,9 @@ class Bond:
     """A mortar joint between bodies ``a`` and ``b`` (``b = -1``: the ground plate, a foundation
     joint): the patch's centroid, its normal from a to b, area, second moments
     ``(I_uu, I_vv, I_uv)`` about the centroid in the joint frame (:func:`joint_axes`) and its
-    outline's corners ``(K, 2)`` in (u, v) about the centroid."""
+    outline's corners ``(K, 2)`` in (u, v) about the centroid. A ``dry`` joint has no tensile
+    strength and no cohesion whatever the material (a structure set on the ground without a footing
+    bears on it through such joints: they hold by friction and compression alone)."""
 
     a: int
     b: int
@@ -294,6 +298,7 @@ class Bond:
     area_m2: float
     moments: np.ndarray  # (3,) m^4
     outline: np.ndarray  # (K, 2) m
+    dry: bool = False
 
     @classmethod
     def rectangle(cls, a: int, b: int, location, normal, along, length: float, width: float) -> "Bond":
@@ -359,6 +364,55 @@ class Pushover:
         return np.clip(np.asarray(t, dtype=np.float64) * self.rate_g_per_s, 0.0, self.max_g)
 
 
+BOUNDARIES = ("cantilever", "double-fixed")
+
+
+@dataclass(frozen=True)
+class ShearTest:
+    """The laboratory shear-compression test of a wall: a rigid loading beam on its top carries the
+    vertical load ``precompression_pa`` times the wall's section (length x thickness) and is pushed
+    along the wall by a slowly rising lateral load, ``rate_per_s`` of that vertical load per second
+    (force-controlled, up to ``max_ratio`` of it), its rotation free (``cantilever``: the lateral
+    load acts at the beam's centroid, ``shear_span_ratio`` H0 / L above the wall's foot, default the
+    wall's height plus 0.1 m) or held (``double-fixed``: H0 = H / 2). The wall stands on a footing
+    of its own mortar, the beam on its top course through joints of the same mortar."""
+
+    precompression_pa: float
+    boundary: str = "cantilever"
+    shear_span_ratio: float | None = None
+    rate_per_s: float = 0.01
+    max_ratio: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.precompression_pa) and self.precompression_pa > 0):
+            raise InputError(
+                f"--precompression-mpa {self.precompression_pa / 1e6:g}: must be > 0 MPa (the vertical stress the "
+                "loading beam puts on the wall's section)"
+            )
+        if self.precompression_pa > 50e6:
+            raise InputError(
+                f"--precompression-mpa {self.precompression_pa / 1e6:g}: above 50 MPa, more than any masonry carries; "
+                "give the stress in MPa"
+            )
+        if self.boundary not in BOUNDARIES:
+            raise InputError(f"--boundary {self.boundary!r}: choose one of {', '.join(BOUNDARIES)}")
+        if self.shear_span_ratio is not None:
+            if self.boundary != "cantilever":
+                raise InputError(
+                    "--shear-span-ratio: a double-fixed wall's shear span is half its height; drop the flag "
+                    "or test a cantilever"
+                )
+            if not (math.isfinite(self.shear_span_ratio) and self.shear_span_ratio > 0):
+                raise InputError(f"--shear-span-ratio {self.shear_span_ratio:g}: must be > 0 (H0 / L)")
+        for name in ("rate_per_s", "max_ratio"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
+                raise InputError(f"shear test {name} = {getattr(self, name)}: must be > 0")
+
+    @property
+    def duration_s(self) -> float:
+        return self.max_ratio / self.rate_per_s
+
+
 @dataclass(frozen=True)
 class Scene:
     bodies: tuple[Body, ...]
@@ -370,6 +424,9 @@ class Scene:
     duration_s: float = 1.0
     solver: SolverSettings = SolverSettings()
     gravity: float = G
+    # bodies whose rotation is held (a shear test's loading beam between fixed ends): Bullet locks it
+    # with a constraint to the ground, the joint model with a stiff spring on its rotations
+    held_rotation: tuple[int, ...] = ()
     notes: dict = field(default_factory=dict)
 
     @property
@@ -937,8 +994,10 @@ def scene_from_geometry(
             g.patch_pairs, g.patch_centroids, g.patch_normals, g.patch_areas, g.patch_moments, g.patch_outlines
         )
     )
-    if foundation:
-        bonds = bonds + footing_patches(bodies, g.max_gap_m)
+    # the bottom course bears on the ground through joints: of mortar on a footing (``foundation``),
+    # else dry (friction and compression alone): the joint model decides when they open or slide, as
+    # for every other joint, rather than Bullet's friction letting the whole structure creep
+    bonds = bonds + tuple(b if foundation else replace(b, dry=True) for b in footing_patches(bodies, g.max_gap_m))
     lo = np.min([b.location + b.vertices.min(axis=0) for b in bodies], axis=0)
     hi = np.max([b.location + b.vertices.max(axis=0) for b in bodies], axis=0)
     span = float(max(hi[0] - lo[0], hi[1] - lo[1]))
@@ -952,7 +1011,8 @@ def scene_from_geometry(
         "mortar_fill_volume": g.mortar_fill_volume,
         "bricks_without_fill": g.bricks_without_fill,
         "bonds": len(bonds),
-        "foundation_bonds": sum(bd.b < 0 for bd in bonds),
+        "foundation_bonds": sum(bd.b < 0 and not bd.dry for bd in bonds),
+        "ground_contacts": sum(bd.b < 0 and bd.dry for bd in bonds),
         "max_hull_volume_change": float(g.hull_volume_change.max(initial=0.0)),
         "joint_coverage": g.coverage_summary(),
     }
@@ -965,5 +1025,133 @@ def scene_from_geometry(
         duration_s=duration_s,
         solver=solver,
         material=material,
+        notes=notes,
+    )
+
+
+def _box_body(name: str, size, centre, mass: float, material: Material) -> Body:
+    """A rectangular box ``size`` (x, y, z) centred on ``centre``, of ``mass`` kg."""
+    hx, hy, hz = (0.5 * float(v) for v in size)
+    v = np.array([[x, y, z] for x in (-hx, hx) for y in (-hy, hy) for z in (-hz, hz)], dtype=np.float64)
+    f = np.array(
+        [
+            [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+            [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3],
+        ],
+        dtype=np.int64,
+    )  # fmt: skip
+    volume = 8 * hx * hy * hz
+    return Body(
+        name=name,
+        vertices=v,
+        faces=f,
+        location=np.asarray(centre, dtype=np.float64),
+        mass=float(mass),
+        friction=math.sqrt(material.friction),
+        restitution=material.restitution,
+        volume=volume,
+        shape="BOX",
+    )
+
+
+def capping_patches(bodies: Sequence[Body], beam: int, tol_m: float, top: float) -> tuple[Bond, ...]:
+    """Joints between every body whose top lies within ``tol_m`` of ``top`` and the loading beam
+    (body ``beam``) resting there: :func:`footing_patches` upside down (each body's top face within
+    ``tol_m`` of its own top; the normal points up, from the body to the beam)."""
+    basis = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    up = np.array([0.0, 0.0, 1.0])
+    out = []
+    for i, b in enumerate(bodies):
+        v = b.vertices + b.location
+        own = float(v[:, 2].max())
+        if own < top - tol_m:
+            continue
+        crown = v[v[:, 2] >= own - tol_m]
+        hull = shapely.MultiPoint(crown[:, :2]).convex_hull
+        if hull.area <= 1e-6:
+            continue
+        c2, moments, outline, area = patch_section(hull, basis, up)
+        out.append(
+            Bond(
+                a=i,
+                b=beam,
+                location=np.array([c2[0], c2[1], top]),
+                normal=up,
+                area_m2=area,
+                moments=moments,
+                outline=outline,
+            )
+        )
+    return tuple(out)
+
+
+def shear_test_scene(
+    geometry: SceneGeometry, test: ShearTest, *, material: Material = MASONRY, solver: SolverSettings = SolverSettings()
+) -> Scene:
+    """The scene of :class:`ShearTest` on a single wall's geometry: the wall on its footing, a rigid
+    loading beam on its top (as long and thick as the wall, weighing the vertical load N =
+    precompression x L x t, so that gravity puts N on the wall), bonded to the top course, and a
+    lateral load rising along the wall: a uniform lateral acceleration ``lambda g`` (a pushover),
+    which puts ``lambda N`` on the beam and ``lambda W`` on the wall's own weight W (a few per cent of
+    N in laboratory tests; the reported force is the top force with the same overturning moment,
+    ``lambda (N + W H / (2 H0))``). The notes carry N, W, L, t, H, H0 and the beam's index."""
+    base = scene_from_geometry(geometry, duration_s=test.duration_s, material=material, solver=solver, foundation=True)
+    lo = np.min([b.location + b.vertices.min(axis=0) for b in base.bodies], axis=0)
+    hi = np.max([b.location + b.vertices.max(axis=0) for b in base.bodies], axis=0)
+    along_x = (hi[0] - lo[0]) >= (hi[1] - lo[1])
+    length = float((hi - lo)[0 if along_x else 1])
+    thick = float((hi - lo)[1 if along_x else 0])
+    height = float(hi[2] - lo[2])
+    if thick > 0.5 * length:
+        raise InputError(
+            f"shear test: the model is {length:.3g} x {thick:.3g} m in plan, not a single wall; build one wall "
+            "(one [[wall]] table) to test it"
+        )
+    if test.boundary == "double-fixed":
+        beam_h, h0 = 0.2, 0.5 * height
+    else:
+        h0 = test.shear_span_ratio * length if test.shear_span_ratio is not None else height + 0.1
+        if h0 <= height:
+            raise InputError(
+                f"--shear-span-ratio {h0 / length:g}: puts the load {h0:.3g} m above the foot, inside the wall "
+                f"({height:.3g} m high); give at least {height / length:.3g}"
+            )
+        beam_h = 2.0 * (h0 - height)
+    n = test.precompression_pa * length * thick
+    w = float(sum(b.mass for b in base.bodies)) * base.gravity
+    beam = _box_body(
+        "loading_beam",
+        (length, thick, beam_h) if along_x else (thick, length, beam_h),
+        ((lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] + beam_h / 2),
+        n / base.gravity,
+        material,
+    )
+    k = len(base.bodies)
+    caps = capping_patches(base.bodies, k, geometry.max_gap_m, float(hi[2]))
+    if not caps:
+        raise InputError("shear test: no stone reaches the wall's top to carry the loading beam")
+    pushover = Pushover(rate_g_per_s=test.rate_per_s, direction_deg=0.0 if along_x else 90.0, max_g=test.max_ratio)
+    notes = dict(base.notes)
+    notes["shear_test"] = {
+        "boundary": test.boundary,
+        "precompression_mpa": test.precompression_pa / 1e6,
+        "vertical_load_kn": n / 1e3,
+        "wall_weight_kn": w / 1e3,
+        "length_m": length,
+        "thickness_m": thick,
+        "height_m": height,
+        "shear_span_m": h0,
+        "shear_span_ratio": h0 / length,
+        "beam": k,
+        "cap_bonds": len(caps),
+        "force_per_g_kn": (n + w * height / (2 * h0)) / 1e3,
+    }
+    return replace(
+        base,
+        bodies=base.bodies + (beam,),
+        bonds=base.bonds + caps,
+        pushover=pushover,
+        duration_s=test.duration_s,
+        held_rotation=(k,) if test.boundary == "double-fixed" else (),
         notes=notes,
     )

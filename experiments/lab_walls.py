@@ -1,0 +1,213 @@
+"""The laboratory shear-compression walls of ../shared/data/external/stone_masonry_db against the
+model: each wall's drawn stone layout turned into a stone mask, built at its real size, tested in
+shear at its precompression and boundary, and its peak lateral force compared with the measured one.
+
+Why: the joint model and the contacts are checked against limit analysis in the tests; this is the
+check against real walls. Two single-leaf series of the Stone Masonry Database (Vanin et al. 2017):
+
+- SW.* (Lourenco, Oliveira, Roca & Orduna 2005): dry joints, sawn granite blocks, monotonic,
+  cantilever, H0/H = 1.11. Dry: f_t = c = 0. Friction: mu = 0.6 (the unit-joint value of Lourenco
+  1996, "Computational strategies for masonry structures", Table 4.2, already the package's default;
+  the paper's own direct shear tests were not at hand here).
+- WI* (Vasconcelos & Lourenco 2009): irregular granite stones in hydraulic lime mortar, cyclic,
+  cantilever, H0/H = 1.104. The package's default mortar (f_t 0.2, c 0.3 MPa = 1.5 f_t, mu 0.6:
+  the Bullet Constraints Builder's masonry preset and Lourenco 1996's ratios), the database's mortar
+  compressive strength f_c,m (3.8 MPa) and the units' density of granite, 2650 kg/m^3.
+
+No value is fitted to the measured Vmax. Each drawing (crackmaps/crackmap_<unit>_D0p00_<ref>.png:
+the stone outlines in grey, the wall's outline in black, the damage after the test in red and
+yellow) becomes a mask by :func:`stone_mask`: the outline's four corners map to the wall's L x H
+(the drawings are slightly skewed), the regions the grey lines close are the stones (red crack lines
+run along the joints and count as joints, the yellow hatching of crushed zones is ignored), and the
+mortar between stones of a mortared wall, one network of low solidity, is dropped.
+
+    .venv/bin/python experiments/lab_walls.py [--out DIR] [--only SW.30.1 WI1.100]
+
+prints per test: sigma0, measured Vmax (the larger of the two directions), predicted, ratio,
+mechanism (model) and failure type (test); then per series the mean and the coefficient of
+variation of the ratios. Measured on 2026-11-26: see docs/stone_walls.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DB = ROOT.parent / "shared" / "data" / "external" / "stone_masonry_db"
+PX_PER_M = 1000
+MATERIALS = {
+    "SW": {"friction": 0.6, "tensile_strength_mpa": 0.0, "cohesion_mpa": 0.0, "density_kg_m3": 2650.0},
+    "WI": {"friction": 0.6, "density_kg_m3": 2650.0, "compressive_strength_mpa": 3.8},
+}
+
+
+def drawing_of(unit: str) -> Path:
+    """The crackmap of a test unit: SW.100.1 -> SW1001, WI1.100 -> WI1100."""
+    key = unit.replace(".", "")
+    found = sorted((DB / "crackmaps").glob(f"crackmap_{key}_D0p00_*.png"))
+    if not found:
+        raise FileNotFoundError(f"no crackmap for {unit} ({key}) in {DB / 'crackmaps'}")
+    return found[0]
+
+
+def stone_mask(
+    png: Path, length_m: float, height_m: float, px_per_m: int = PX_PER_M, mortar: bool = False
+) -> np.ndarray:
+    """The stones of a drawing as a binary mask (stones 255, joints 0) of the wall's L x H."""
+    import cv2
+    from PIL import Image
+    from scipy import ndimage
+
+    rgb = np.asarray(Image.open(png).convert("RGB")).astype(np.int32)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    white = (r > 200) & (g > 200) & (b > 150)  # white, and the light tints of the hatching's edges
+    # crushed zones' hatching (yellow, orange): drawn over stones and joints alike, not a joint
+    yellow = (r > 170) & (g > 165) & (b < r - 30)  # (orange and red crack lines run along joints)
+    line = ~(white | yellow)
+    ys, xs = np.nonzero(line)
+    s, d = xs + ys, xs - ys
+    quad = np.array(
+        [
+            [xs[s.argmin()], ys[s.argmin()]],
+            [xs[d.argmax()], ys[d.argmax()]],
+            [xs[s.argmax()], ys[s.argmax()]],
+            [xs[d.argmin()], ys[d.argmin()]],
+        ],
+        dtype=np.float32,
+    )  # top-left, top-right, bottom-right, bottom-left
+    w, h = int(round(length_m * px_per_m)), int(round(height_m * px_per_m))
+    target = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], dtype=np.float32)
+    label, count = ndimage.label(~line)
+    label = cv2.warpPerspective(
+        label.astype(np.float32), cv2.getPerspectiveTransform(quad, target), (w, h), flags=cv2.INTER_NEAREST
+    ).astype(np.int64)
+    label[:2], label[-2:], label[:, :2], label[:, -2:] = 0, 0, 0, 0  # the wall's outline
+    keep = np.zeros(count + 1, dtype=bool)
+    for k, sl in enumerate(ndimage.find_objects(label), start=1):
+        if sl is None:
+            continue
+        own = label[sl] == k
+        area = own.sum() / px_per_m**2
+        if area < 2e-4:  # a speck between lines
+            continue
+        if mortar:  # the mortar network: large, far from convex
+            ys_, xs_ = np.nonzero(own)
+            hull = cv2.convexHull(np.column_stack([xs_, ys_]).astype(np.int32))
+            if own.sum() / max(cv2.contourArea(hull), 1.0) < 0.7:
+                continue
+        keep[k] = True
+    stones = keep[label] & (label > 0)
+    # neighbouring stones separated by one pixel of joint at least
+    edge = np.zeros_like(stones)
+    for axis in (0, 1):
+        diff = np.diff(label, axis=axis) != 0
+        if axis == 0:
+            edge[1:] |= diff
+            edge[:-1] |= diff
+        else:
+            edge[:, 1:] |= diff
+            edge[:, :-1] |= diff
+    final, _ = ndimage.label(stones & ~edge)
+    size = np.bincount(final.ravel())
+    size[0] = 0
+    return np.where(size[final] >= 2e-4 * px_per_m**2, 255, 0).astype(np.uint8)  # no specks of aliasing
+
+
+def tests() -> list[dict]:
+    with open(DB / "tests.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    out = []
+    for row in rows:
+
+        def num(key):
+            v = row[key].strip()
+            return float(v) if v else None
+
+        vmax = [v for v in (num("Vmax,+ [kN]"), num("Vmax,- [kN]")) if v is not None]
+        out.append(
+            {
+                "unit": row["Test unit name"],
+                "series": "SW" if row["Test unit name"].startswith("SW") else "WI",
+                "H": num("H [mm]") / 1000,
+                "L": num("L [mm]") / 1000,
+                "t": num("t [mm]") / 1000,
+                "H0": num("H0 [mm]") / 1000,
+                "sigma0": num("σ0,tot [MPa]"),
+                "vmax": max(vmax),
+                "failure": row["From test report: Failure type"].strip() or "?",
+            }
+        )
+    return out
+
+
+def run(test: dict, folder: Path) -> dict:
+    """Mask, structure, build and shear test of one wall in ``folder``; the simulate summary."""
+    from PIL import Image
+
+    folder.mkdir(parents=True, exist_ok=True)
+    mask = stone_mask(drawing_of(test["unit"]), test["L"], test["H"], mortar=test["series"] == "WI")
+    Image.fromarray(mask).save(folder / "mask.png")
+    material = "\n".join(f"{k} = {v}" for k, v in MATERIALS[test["series"]].items())
+    (folder / "structure.toml").write_text(
+        f'[structure]\nname = "{test["unit"]}"\nthickness_m = {test["t"]}\nvertices = 8\nclosed = false\n\n'
+        f'[[wall]]\nname = "w"\nmask = "mask.png"\nwidth_m = {test["L"]}\nheight_m = {test["H"]}\ntheta_deg = 0\n\n'
+        f"[material]\n{material}\n"
+    )
+    cli = [sys.executable, "-m", "calib_masonry"]
+
+    def call(args: list[str]) -> None:
+        r = subprocess.run(args, capture_output=True, text=True)
+        if r.returncode != 0:
+            raise RuntimeError(f"{' '.join(args[2:5])}: exit {r.returncode}: {r.stderr.strip()[-2000:]}")
+
+    subprocess.run(
+        [*cli, "build", str(folder / "structure.toml"), "--out", str(folder / "model"), "--overwrite"],
+        check=True,
+        capture_output=True,
+    )
+    call(
+        [*cli, "simulate", str(folder / "model"), "--shear-test", "--precompression-mpa", str(test["sigma0"])]
+        + ["--boundary", "cantilever", "--shear-span-ratio", str(test["H0"] / test["L"])]
+        + ["--out", str(folder / "shear"), "--overwrite", "--gif-frames", "0"]
+    )
+    return json.loads((folder / "shear" / "summary.json").read_text())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument(
+        "--out", default=None, help="keep each wall's mask, model and run here (default: a temporary folder)"
+    )
+    ap.add_argument("--only", nargs="*", default=None, help="test units to run (default: all)")
+    args = ap.parse_args()
+    base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="lab_walls_"))
+    ratios: dict[str, list[float]] = {}
+    print(f"{'test':>10} {'sigma0':>7} {'Vmax':>7} {'model':>7} {'ratio':>6}  mechanism (model) / failure (test)")
+    for t in tests():
+        if args.only and t["unit"] not in args.only:
+            continue
+        s = run(t, base / t["unit"])
+        st = s["shear_test"]
+        peak = st["peak_lateral_force_kn"]
+        ratio = peak / t["vmax"] if peak is not None else float("nan")
+        ratios.setdefault(t["series"], []).append(ratio)
+        print(
+            f"{t['unit']:>10} {t['sigma0']:7.3f} {t['vmax']:7.1f} {peak if peak is not None else float('nan'):7.1f} "
+            f"{ratio:6.2f}  {st['mechanism']} / {t['failure']}  (coverage {s['joint_coverage']['median']})",
+            flush=True,
+        )
+    for series, r in ratios.items():
+        r = np.array(r)
+        print(f"{series}: mean ratio {np.nanmean(r):.3f}, CoV {np.nanstd(r) / np.nanmean(r):.3f}, n = {len(r)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -148,7 +148,7 @@ def tests() -> list[dict]:
     return out
 
 
-def run(test: dict, folder: Path) -> dict:
+def run(test: dict, folder: Path, boundary: str = "cantilever") -> dict:
     """Mask, structure, build and shear test of one wall in ``folder``; the simulate summary."""
     from PIL import Image
 
@@ -175,7 +175,8 @@ def run(test: dict, folder: Path) -> dict:
     )
     call(
         [*cli, "simulate", str(folder / "model"), "--shear-test", "--precompression-mpa", str(test["sigma0"])]
-        + ["--boundary", "cantilever", "--shear-span-ratio", str(test["H0"] / test["L"])]
+        + ["--boundary", boundary]
+        + (["--shear-span-ratio", str(test["H0"] / test["L"])] if boundary == "cantilever" else [])
         + ["--out", str(folder / "shear"), "--overwrite", "--gif-frames", "0"]
     )
     return json.loads((folder / "shear" / "summary.json").read_text())
@@ -187,6 +188,12 @@ def main() -> None:
         "--out", default=None, help="keep each wall's mask, model and run here (default: a temporary folder)"
     )
     ap.add_argument("--only", nargs="*", default=None, help="test units to run (default: all)")
+    ap.add_argument(
+        "--boundary",
+        default="cantilever",
+        choices=["cantilever", "double-fixed"],
+        help="the beam's rotation (default: cantilever, as the database reports every test of both series)",
+    )
     args = ap.parse_args()
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="lab_walls_"))
     ratios: dict[str, list[float]] = {}
@@ -194,7 +201,7 @@ def main() -> None:
     for t in tests():
         if args.only and t["unit"] not in args.only:
             continue
-        s = run(t, base / t["unit"])
+        s = run(t, base / t["unit"], args.boundary)
         st = s["shear_test"]
         peak = st["peak_lateral_force_kn"]
         ratio = peak / t["vmax"] if peak is not None else float("nan")

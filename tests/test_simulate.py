@@ -525,7 +525,10 @@ def test_bottom_course_is_bonded_to_the_plate(small_model):
     from calib_masonry.simulation.run import SimulationConfig, scene_for_model
 
     cfg = SimulationConfig(duration_s=0.2, foundation=False)
-    assert not any(b.b < 0 for b in scene_for_model(small_model / "model", cfg).bonds)
+    # without a footing the bottom course bears on the ground through dry joints (friction and
+    # compression alone), which the joint model opens or slides as it does any other joint
+    loose = [b for b in scene_for_model(small_model / "model", cfg).bonds if b.b < 0]
+    assert len(loose) >= 4 and all(b.dry for b in loose)
     scene = scene_for_model(small_model / "model", SimulationConfig(pga_g=0.1, duration_s=0.2))  # the default
     ground = [b for b in scene.bonds if b.b < 0]
     z_bottom = [float((b.location + b.vertices)[:, 2].min()) for b in scene.bodies]
@@ -535,7 +538,7 @@ def test_bottom_course_is_bonded_to_the_plate(small_model):
     for b in ground:
         assert np.allclose(b.normal, [0, 0, -1]) and b.location[2] == pytest.approx(lowest)
         assert b.area_m2 > 0 and b.moments[0] > 0 and b.moments[1] > 0
-    assert scene.notes["foundation_bonds"] == len(ground)
+    assert scene.notes["foundation_bonds"] == len(ground) and not any(b.dry for b in ground)
 
 
 def _under_gravity(tmp_path, name: str, seconds: float = 10.0):

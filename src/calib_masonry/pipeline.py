@@ -498,6 +498,19 @@ def write_build(
         # deadlock in CPython 3.11's import locks (gh-83065). A CI run hung in the demo's build,
         # where this was the one place two threads imported at once (cause not shown).
         from .simulation import run  # noqa: F401
+
+        if blend:
+            # and Blender loaded before that thread starts: loading bpy's libraries (USD's static
+            # initialisers take the GIL while the loader's lock is held) beside a thread in numpy
+            # (whose temporaries' elision asks the loader, dladdr) deadlocked a build of a 1000 px/m
+            # stone wall (both threads' stacks seen in gdb)
+            from .errors import BackendMissing
+            from .simulation.blender import require_bpy
+
+            try:
+                require_bpy()
+            except BackendMissing:
+                pass
     # the simulation's bodies and contact patches, computed once here rather than in every
     # `simulate` run of this model, on a second core while the meshes, model.blend and figures are
     # written (joined however the block ends)

@@ -127,19 +127,30 @@ def _runaway_m(scene: Scene) -> float:
     return max(scene.solver.moved_threshold_m, 10 * ONSET_DRIFT * structure_height(scene))
 
 
+def _watched(scene: Scene) -> slice:
+    """The bodies whose running away is the collapse: every brick, or a shear test's loading beam
+    alone (the force acts there; a loose stone falling out of the wall is no peak of that force)."""
+    if "shear_test" in scene.notes:
+        k = scene.notes["shear_test"]["beam"]
+        return slice(k, k + 1)
+    return slice(None)
+
+
 def pushover_stop(scene: Scene, settle_s: float = 1.0):
     """A ``stop`` for :func:`~calib_masonry.simulation.blender.run`: true ``settle_s`` after the largest
-    brick displacement (from the end of the warm-up, relative to the plate) has run away."""
+    brick displacement (from the end of the warm-up, relative to the plate; a shear test's beam's)
+    has run away."""
     s = scene.solver
     limit = _runaway_m(scene)
     state = {"ref": None, "since": None}
+    watched = _watched(scene)
 
     def stop(frame: int, positions: np.ndarray, plate: np.ndarray) -> bool:
         if state["ref"] is None:
             state["ref"] = (positions.astype(np.float64).copy(), np.asarray(plate, dtype=np.float64).copy())
             return False
         p0, q0 = state["ref"]
-        d = np.linalg.norm(positions - p0 - (plate - q0), axis=1).max()
+        d = np.linalg.norm(positions[watched] - p0[watched] - (plate - q0), axis=1).max()
         if state["since"] is None and d > limit:
             state["since"] = frame
         return state["since"] is not None and frame - state["since"] >= settle_s * s.fps
@@ -148,14 +159,19 @@ def pushover_stop(scene: Scene, settle_s: float = 1.0):
 
 
 def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float | None, np.ndarray, np.ndarray]:
-    """The pushover's collapse multiplier (g), or None if the structure did not run away within
-    the ramp; and the lateral acceleration (g) and roof displacement (m) at every frame from the
+    """The pushover's collapse multiplier (g), or None if the structure (a shear test's loading beam)
+    did not run away within the ramp; and the lateral acceleration (g) and roof displacement (m) at every frame from the
     end of the warm-up (the pushover curve)."""
     p = scene.pushover
     start = m.start_frame
     t = out.time[start:] - out.time[start]
     lam = p.lateral_g(t)
-    rel = out.positions[start:] - out.positions[start] - (out.plate[start:] - out.plate[start])[:, None, :]
+    watched = _watched(scene)
+    rel = (
+        out.positions[start:, watched]
+        - out.positions[start, watched]
+        - (out.plate[start:] - out.plate[start])[:, None, :]
+    )
     dmax = np.linalg.norm(rel, axis=2).max(axis=1)
     height = structure_height(scene)
     limit = _runaway_m(scene)
@@ -189,7 +205,8 @@ def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
     if not scene.bonds:
         return None
     start = m.start_frame
-    rel = out.positions[start:] - out.positions[start] - (out.plate[start:] - out.plate[start])[:, None, :]
+    w = _watched(scene)
+    rel = out.positions[start:, w] - out.positions[start, w] - (out.plate[start:] - out.plate[start])[:, None, :]
     moved = np.flatnonzero(np.linalg.norm(rel, axis=2).max(axis=1) > _runaway_m(scene))
     if moved.size == 0:
         return None

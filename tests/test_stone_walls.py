@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import shutil
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -271,3 +272,22 @@ def test_shear_test_inputs_are_checked(tmp_path):
         ShearTest(precompression_pa=1e5, boundary="double-fixed", shear_span_ratio=1.0)
     with pytest.raises(InputError, match="choose one of cantilever, double-fixed"):
         ShearTest(precompression_pa=1e5, boundary="pinned")
+
+
+@pytest.mark.parametrize("unit, stones", [("WI1.100", (28, 40)), ("SW.30.1", (45, 62))])
+def test_a_laboratory_drawing_becomes_a_stone_mask_of_the_walls_size(unit, stones):
+    # experiments/lab_walls.py: the drawing's outline mapped to L x H, the stones the grey lines
+    # close (by eye: WI1.100 has 6 courses of 5-6 stones, SW.30.1 10 courses of 5-6 blocks)
+    import sys
+
+    from scipy import ndimage
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+    from lab_walls import drawing_of, stone_mask, tests
+
+    row = next(t for t in tests() if t["unit"] == unit)
+    mask = stone_mask(drawing_of(unit), row["L"], row["H"], mortar=row["series"] == "WI")
+    assert mask.shape == (round(row["H"] * 1000), round(row["L"] * 1000))
+    count = ndimage.label(mask > 0)[1]
+    assert stones[0] <= count <= stones[1]
+    assert 0.5 < (mask > 0).mean() < 0.97  # mortar (WI) or hairline joints (SW) between the stones

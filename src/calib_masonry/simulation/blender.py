@@ -49,6 +49,7 @@ from ..errors import BackendMissing, signals_deferred
 from ..progress import progress as _progress
 from .joints import CrackTracker
 from .scene import Scene, grounded_bodies, joint_axes
+from .scene import box_mesh as _box  # the tests build their blocks with it
 
 __all__ = ["RunOutput", "drain", "run", "require_bpy", "steps", "write_model_blend"]
 
@@ -199,39 +200,6 @@ def write_model_blend(walls, path: str | Path) -> None:
     with _signals_held(), _stdout_quiet():
         bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
     _reset(bpy)
-
-
-def _box(size) -> tuple[np.ndarray, np.ndarray]:
-    sx, sy, sz = (s / 2 for s in size)
-    v = np.array(
-        [
-            (-sx, -sy, -sz),
-            (sx, -sy, -sz),
-            (sx, sy, -sz),
-            (-sx, sy, -sz),
-            (-sx, -sy, sz),
-            (sx, -sy, sz),
-            (sx, sy, sz),
-            (-sx, sy, sz),
-        ]
-    )
-    f = np.array(
-        [
-            (0, 3, 2),
-            (0, 2, 1),
-            (4, 5, 6),
-            (4, 6, 7),
-            (0, 1, 5),
-            (0, 5, 4),
-            (1, 2, 6),
-            (1, 6, 5),
-            (2, 3, 7),
-            (2, 7, 6),
-            (3, 0, 4),
-            (3, 4, 7),
-        ]
-    )
-    return v, f
 
 
 def _quaternions(r: np.ndarray) -> np.ndarray:

@@ -566,6 +566,37 @@ def _overlapping_unbonded(bodies: Sequence[Body], bonded: set[tuple[int, int]], 
     return out
 
 
+def _level_patches(bodies: Sequence[Body], level: float, tol_m: float, sign: float, other: int) -> tuple[Bond, ...]:
+    """Joints between body ``other`` (-1: the plate) and every body whose bottom (``sign`` -1) or top
+    (``sign`` +1) lies within ``tol_m`` of ``level``: the body's face within ``tol_m`` of its own
+    bottom or top, at ``level``, its normal ``(0, 0, sign)`` from the body to ``other``."""
+    basis = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    normal = np.array([0.0, 0.0, sign])
+    out = []
+    for i, b in enumerate(bodies):
+        z = sign * (b.vertices[:, 2] + b.location[2])  # heights, the face's side up
+        own = float(z.max())
+        if own < sign * level - tol_m:
+            continue
+        face = (b.vertices + b.location)[z >= own - tol_m]
+        hull = shapely.MultiPoint(face[:, :2]).convex_hull
+        if hull.area <= 1e-6:
+            continue
+        c2, moments, outline, area = patch_section(hull, basis, normal)
+        out.append(
+            Bond(
+                a=i,
+                b=other,
+                location=np.array([c2[0], c2[1], level]),
+                normal=normal,
+                area_m2=area,
+                moments=moments,
+                outline=outline,
+            )
+        )
+    return tuple(out)
+
+
 def footing_patches(bodies: Sequence[Body], tol_m: float, bottom: float | None = None) -> tuple[Bond, ...]:
     """Joints between the plate and every body whose bottom lies within a joint's width ``tol_m`` of
     ``bottom`` (default: the structure's lowest level): the bed joint on the footing, as thick as it
@@ -573,31 +604,7 @@ def footing_patches(bodies: Sequence[Body], tol_m: float, bottom: float | None =
     own bottom; its normal points down, from the body to the ground."""
     if bottom is None:
         bottom = min(float(b.location[2] + b.vertices[:, 2].min()) for b in bodies)
-    basis = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    down = np.array([0.0, 0.0, -1.0])
-    out = []
-    for i, b in enumerate(bodies):
-        v = b.vertices + b.location
-        own = float(v[:, 2].min())
-        if own > bottom + tol_m:
-            continue
-        base = v[v[:, 2] <= own + tol_m]
-        hull = shapely.MultiPoint(base[:, :2]).convex_hull
-        if hull.area <= 1e-6:
-            continue
-        c2, moments, outline, area = patch_section(hull, basis, down)
-        out.append(
-            Bond(
-                a=i,
-                b=-1,
-                location=np.array([c2[0], c2[1], bottom]),
-                normal=down,
-                area_m2=area,
-                moments=moments,
-                outline=outline,
-            )
-        )
-    return tuple(out)
+    return _level_patches(bodies, bottom, tol_m, -1.0, -1)
 
 
 @dataclass(frozen=True)
@@ -811,7 +818,10 @@ def scene_geometry(
     # (:func:`wall_patches`); where walls meet, the bricks' facing faces
     segments = wall_segments(bricks, reach)
     raise_if_stopped()
-    corner_patches = across(contact_patches(bricks, max_gap_m=max_gap_m, angle_deg=15.0), ids=True)
+    several_walls = len(set(wall_of.tolist())) > 1  # a single wall has no corner joints to look for
+    corner_patches = (
+        across(contact_patches(bricks, max_gap_m=max_gap_m, angle_deg=15.0), ids=True) if several_walls else []
+    )
     bonded = {(int(r[0]), int(r[1])) for r in segments} | {(min(p.a, p.b), max(p.a, p.b)) for p in corner_patches}
     outlines: list[np.ndarray | None] = [None] * len(bricks)
     labels = {}  # each wall's nearest-brick raster: the mortar cells' and the coverage's
@@ -839,7 +849,7 @@ def scene_geometry(
         ungrown = _overlapping_unbonded(bodies, bonded)
         for i in ungrown:
             bodies[i] = make_body(i, None)
-        if len(set(wall_of.tolist())) > 1:
+        if several_walls:
             # where walls meet, the joints are the faces the filled bodies share (the hulls of two
             # neighbouring cells overlap where a cell is not convex: their shared face is a joint even
             # so, overlap up to a joint's reach)
@@ -1029,18 +1039,43 @@ def scene_from_geometry(
     )
 
 
-def _box_body(name: str, size, centre, mass: float, material: Material) -> Body:
-    """A rectangular box ``size`` (x, y, z) centred on ``centre``, of ``mass`` kg."""
-    hx, hy, hz = (0.5 * float(v) for v in size)
-    v = np.array([[x, y, z] for x in (-hx, hx) for y in (-hy, hy) for z in (-hz, hz)], dtype=np.float64)
+def box_mesh(size) -> tuple[np.ndarray, np.ndarray]:
+    """A box ``size`` (x, y, z) centred on the origin: its corners ``(8, 3)`` and triangles ``(12, 3)``."""
+    sx, sy, sz = (s / 2 for s in size)
+    v = np.array(
+        [
+            (-sx, -sy, -sz),
+            (sx, -sy, -sz),
+            (sx, sy, -sz),
+            (-sx, sy, -sz),
+            (-sx, -sy, sz),
+            (sx, -sy, sz),
+            (sx, sy, sz),
+            (-sx, sy, sz),
+        ]
+    )
     f = np.array(
         [
-            [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-            [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3],
-        ],
-        dtype=np.int64,
-    )  # fmt: skip
-    volume = 8 * hx * hy * hz
+            (0, 3, 2),
+            (0, 2, 1),
+            (4, 5, 6),
+            (4, 6, 7),
+            (0, 1, 5),
+            (0, 5, 4),
+            (1, 2, 6),
+            (1, 6, 5),
+            (2, 3, 7),
+            (2, 7, 6),
+            (3, 0, 4),
+            (3, 4, 7),
+        ]
+    )
+    return v, f
+
+
+def _box_body(name: str, size, centre, mass: float, material: Material) -> Body:
+    """A rectangular box ``size`` (x, y, z) centred on ``centre``, of ``mass`` kg."""
+    v, f = box_mesh(size)
     return Body(
         name=name,
         vertices=v,
@@ -1049,7 +1084,7 @@ def _box_body(name: str, size, centre, mass: float, material: Material) -> Body:
         mass=float(mass),
         friction=math.sqrt(material.friction),
         restitution=material.restitution,
-        volume=volume,
+        volume=float(np.prod(size)),
         shape="BOX",
     )
 
@@ -1058,31 +1093,7 @@ def capping_patches(bodies: Sequence[Body], beam: int, tol_m: float, top: float)
     """Joints between every body whose top lies within ``tol_m`` of ``top`` and the loading beam
     (body ``beam``) resting there: :func:`footing_patches` upside down (each body's top face within
     ``tol_m`` of its own top; the normal points up, from the body to the beam)."""
-    basis = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    up = np.array([0.0, 0.0, 1.0])
-    out = []
-    for i, b in enumerate(bodies):
-        v = b.vertices + b.location
-        own = float(v[:, 2].max())
-        if own < top - tol_m:
-            continue
-        crown = v[v[:, 2] >= own - tol_m]
-        hull = shapely.MultiPoint(crown[:, :2]).convex_hull
-        if hull.area <= 1e-6:
-            continue
-        c2, moments, outline, area = patch_section(hull, basis, up)
-        out.append(
-            Bond(
-                a=i,
-                b=beam,
-                location=np.array([c2[0], c2[1], top]),
-                normal=up,
-                area_m2=area,
-                moments=moments,
-                outline=outline,
-            )
-        )
-    return tuple(out)
+    return _level_patches(bodies, top, tol_m, 1.0, beam)
 
 
 def shear_test_scene(

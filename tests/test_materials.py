@@ -107,8 +107,9 @@ def test_a_study_samples_material_fields_about_the_structures_values(tmp_path, m
     fr = [v["material.friction"] for v in drawn]
     assert abs(sum(fr) / len(fr) - 0.7) < 0.05 and min(fr) != max(fr)  # about the structure's 0.7
     assert all(0.0 <= v["material.tensile_strength_mpa"] <= 0.2 for v in drawn)
+    from calib_masonry.spec import load_structure
     from calib_masonry.study.sample import _material
 
-    m = _material(s, samples(s)[3])
+    m = _material(samples(s)[3], load_structure(structure).material)
     assert m.friction == pytest.approx(drawn[3]["material.friction"])
     assert m.tensile_strength == pytest.approx(drawn[3]["material.tensile_strength_mpa"] * 1e6)

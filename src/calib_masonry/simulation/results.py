@@ -211,28 +211,28 @@ def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
     if moved.size == 0:
         return None
     f = start + int(moved[0])
-    R = rotations(out.quaternions[[start, f]])  # (2, B, 3, 3)
-    turn = R[1] @ np.transpose(R[0], (0, 2, 1))  # each body's rotation since the start
-    a = np.array([b.a for b in scene.bonds])
-    b = np.array([b.b for b in scene.bonds])
+    t_f = float(out.time[f] - out.time[start])
     p = np.array([bd.location for bd in scene.bonds])
     n = np.array([bd.normal for bd in scene.bonds])
-
-    def moved_to(body: np.ndarray) -> np.ndarray:
-        plate = p + (out.plate[f] - out.plate[start])
-        k = np.maximum(body, 0)
-        here = out.positions[f][k] + np.einsum("kij,kj->ki", turn[k], p - out.positions[start][k])
-        return np.where((body < 0)[:, None], plate, here)
-
-    t_f = float(out.time[f] - out.time[start])
     released = out.bond_release_time_s
-    if released is not None and out.bond_break_mode is not None and np.any(np.isfinite(released) & (released <= t_f)):
+    active = np.zeros(len(scene.bonds), dtype=bool)
+    if released is not None and out.bond_break_mode is not None:
+        active = np.isfinite(released) & (released <= t_f)
+    if active.any():
         # the joints Bullet let go by then, as the joint model cracked them: what the mechanism
         # needed (Bullet's motion after the peak, a rocking block sliding off its toe, is no guide)
-        active = np.isfinite(released) & (released <= t_f)
         opened = active & (out.bond_break_mode == FAILURE_MODES.index("tension"))
     else:  # nothing let go (a run without the joint model's watch): the joints' relative motion
-        d = moved_to(b) - moved_to(a)
+        R = rotations(out.quaternions[[start, f]])  # (2, B, 3, 3)
+        turn = R[1] @ np.transpose(R[0], (0, 2, 1))  # each body's rotation since the start
+
+        def moved_to(body: np.ndarray) -> np.ndarray:
+            plate = p + (out.plate[f] - out.plate[start])
+            k = np.maximum(body, 0)
+            here = out.positions[f][k] + np.einsum("kij,kj->ki", turn[k], p - out.positions[start][k])
+            return np.where((body < 0)[:, None], plate, here)
+
+        d = moved_to(np.array([bd.b for bd in scene.bonds])) - moved_to(np.array([bd.a for bd in scene.bonds]))
         opening = np.einsum("ki,ki->k", d, n)
         slip = np.linalg.norm(d - opening[:, None] * n, axis=1)
         size = np.linalg.norm(d, axis=1)

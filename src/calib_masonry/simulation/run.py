@@ -155,6 +155,7 @@ class SimulationResult:
     metrics: object  # results.Metrics
     curve: tuple | None
     summary: dict
+    shear: dict | None = None  # a shear test's force-drift curve (results.shear_curve), None otherwise
 
     @property
     def collapse_multiplier_g(self) -> float | None:
@@ -374,7 +375,7 @@ def model_material(model_dir: str | Path, given: Material | None = None) -> tupl
     return MASONRY, "defaults (calib_masonry.simulation.scene.Material)"
 
 
-def _summary(scene: Scene, out, m, curve, name: str) -> dict:
+def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) -> dict:
     from .results import ONSET_DRIFT, failure_mode_counts, mechanism, outcome
 
     s = scene.solver
@@ -473,10 +474,7 @@ def _summary(scene: Scene, out, m, curve, name: str) -> dict:
             )
         summary["collapse_multiplier_g"] = curve[0]
         summary["ground_motion"] = None
-        if "shear_test" in scene.notes:
-            from .results import shear_curve
-
-            shear = shear_curve(scene, out, m, curve)
+        if shear is not None:
             summary["shear_test"] = {
                 **scene.notes["shear_test"],
                 "peak_lateral_force_kn": shear["peak_lateral_force_kn"],
@@ -503,7 +501,7 @@ def _scene_steps(
     from threadpoolctl import threadpool_limits
 
     from .blender import require_bpy, steps
-    from .results import collapse_multiplier, metrics, pushover_stop
+    from .results import collapse_multiplier, metrics, pushover_stop, shear_curve
 
     if threading.current_thread() is not threading.main_thread():
         warnings.warn(
@@ -522,8 +520,14 @@ def _scene_steps(
         out = yield from steps(scene, progress=progress, blend_path=blend_path, stop=stop, joints_ahead=joints_ahead)
     m = metrics(scene, out)
     curve = collapse_multiplier(scene, out, m) if scene.pushover is not None else None
+    shear = shear_curve(scene, out, m, curve) if "shear_test" in scene.notes and curve is not None else None
     return SimulationResult(
-        scene=scene, output=out, metrics=m, curve=curve, summary=_summary(scene, out, m, curve, name)
+        scene=scene,
+        output=out,
+        metrics=m,
+        curve=curve,
+        summary=_summary(scene, out, m, curve, name, shear),
+        shear=shear,
     )
 
 
@@ -638,10 +642,10 @@ def write_simulation(
         ),
     )
     t1 = time.perf_counter()
-    if "shear_test" in scene.notes and result.curve is not None:
-        from .results import shear_curve, write_shear_curve
+    if result.shear is not None:
+        from .results import write_shear_curve
 
-        write_shear_curve(scene, shear_curve(scene, r, m, result.curve), out, figures=figures)
+        write_shear_curve(scene, result.shear, out, figures=figures)
     if figures:
         if scene.pushover is not None:
             plot_pushover(scene, result.curve, out / "pushover.png")

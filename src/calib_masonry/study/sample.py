@@ -261,15 +261,16 @@ def _evaluate(study: Study, sample: Sample) -> tuple[dict, tuple | None]:
         spec, keys, drawn = _varied(_structure(study.structure), study, sample.values, study.structure)
         result = build(spec, traces={n: _trace(*k) for n, k in keys.items()}, progress=False, warn_closure=False)
         outputs = {**drawn, **_build_outputs(result)}
-    job = _simulation(study, sample, result.structure) if study.simulate is not None else None
+    job = _simulation(study, sample, result.structure, result.spec.material) if study.simulate is not None else None
     return outputs, job
 
 
 _GEOMETRY: dict = {}  # the simulation geometry of an unvaried model, once per worker
 
 
-def _simulation(study: Study, sample: Sample, structure) -> tuple:
-    """The sample's simulation: the model's geometry and the load."""
+def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -> tuple:
+    """The sample's simulation: the model's geometry, the load and the material (the structure's
+    [material] ``material``, as its spec holds it, with the sample's drawn values)."""
     from ..simulation.ground_motion import synthetic_motion
     from ..simulation.run import simulation_geometry
     from ..simulation.scene import Pushover
@@ -298,17 +299,15 @@ def _simulation(study: Study, sample: Sample, structure) -> tuple:
             seed=study.seed * 1000 + sample.load["record"],
             direction_deg=sim.direction_deg,
         )
-    return geometry, load, _material(study, sample)
+    return geometry, load, _material(sample, material)
 
 
-def _material(study: Study, sample: Sample):
-    """The sample's material: the structure's [material] (or the defaults) with its drawn values."""
+def _material(sample: Sample, base: tuple = ()):
+    """The sample's material: the structure's [material] ``base`` (or the defaults) with its drawn values."""
     from ..simulation.scene import material_from_table
 
-    source = study.structure or study.scenario
-    base = dict(_structure(source, require_sources=study.structure is not None).material)
     drawn = {k.split(".", 1)[1]: float(v) for k, v in sample.values.items() if k.startswith("material.")}
-    return material_from_table({**base, **drawn}, f"sample {sample.index}")
+    return material_from_table({**dict(base), **drawn}, f"sample {sample.index}")
 
 
 def outcome(result) -> dict:

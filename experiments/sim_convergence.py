@@ -11,6 +11,9 @@ For each model and setting it prints
   the collapse PGA is all a higher PGA could add.
 
 Then the collapse PGA of every seed at every setting, and its largest change from the default.
+``--settings`` also offers "2x fps" (the frame rate at which the joint model checks the joints and
+the ground motion is applied); ``--quasi-static`` holds the intact structure rigid under the quake
+instead of letting it vibrate (simulation/dynamics.py).
 
     .venv/bin/python experiments/sim_convergence.py                      # everything (hours on 2 cores)
     .venv/bin/python experiments/sim_convergence.py --models paper_example --seeds 0 --pga 0.2 0.3 0.4
@@ -48,6 +51,7 @@ SETTINGS = {
     "2x iterations": replace(DEFAULT, iterations=2 * DEFAULT.iterations),
     "2x both": replace(DEFAULT, substeps=2 * DEFAULT.substeps, iterations=2 * DEFAULT.iterations),
     # finer still, asked for by name (--settings): does the outcome settle beyond a doubling?
+    "2x fps": replace(DEFAULT, fps=2 * DEFAULT.fps),
     "4x iterations": replace(DEFAULT, iterations=4 * DEFAULT.iterations),
     "4x both": replace(DEFAULT, substeps=4 * DEFAULT.substeps, iterations=4 * DEFAULT.iterations),
 }
@@ -85,6 +89,11 @@ def main() -> None:
         help="names under data_synthetic/ or paths to any structure.toml",
     )
     p.add_argument("--settings", nargs="+", default=DOUBLED, choices=list(SETTINGS))
+    p.add_argument(
+        "--quasi-static",
+        action="store_true",
+        help="hold the intact structure rigid under the quake (simulate --quasi-static) instead of letting it vibrate",
+    )
     p.add_argument("--pga", nargs="+", type=float, default=[round(0.05 * k, 2) for k in range(1, 13)])
     p.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2], help="none: gravity only")
     p.add_argument("--duration", type=float, default=10.0, help="seconds of ground motion per quake run")
@@ -98,7 +107,7 @@ def main() -> None:
             toml = Path(name) if name.endswith(".toml") else ROOT / "data_synthetic" / name / "structure.toml"
             build_to_folder(load_structure(toml), model, figures=False, progress=False)
             for setting in args.settings:
-                solver = SETTINGS[setting]
+                solver = replace(SETTINGS[setting], dynamics=not args.quasi_static)
                 label = f"{name:14s} {setting:14s}"
                 if args.gravity_s > 0:
                     r = one_run(model, solver, 0.0, 0, args.gravity_s)

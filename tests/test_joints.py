@@ -56,7 +56,7 @@ def test_patch_section_of_a_rectangle_and_a_rotated_one():
     assert abs(mom_r[2]) == pytest.approx(abs(math.sin(math.radians(60)) * (mom[0] - mom[1]) / 2), rel=1e-9)
 
 
-def test_joint_stiffness_is_the_udec_interface_formula():
+def test_joint_stiffness_is_mortar_and_units_in_series():
     m = Material(
         mortar_youngs_modulus=2e9,
         unit_youngs_modulus=12e9,
@@ -64,10 +64,20 @@ def test_joint_stiffness_is_the_udec_interface_formula():
         unit_poisson=0.2,
         joint_thickness_m=0.012,
     )
-    k = joint_stiffness(m)
+    k = joint_stiffness(m, np.array([0.0, 0.3]))
     gm, gu = 2e9 / 2.5, 12e9 / 2.4
-    assert k.normal == pytest.approx(12e9 * 2e9 / (0.012 * 10e9))
-    assert k.shear == pytest.approx(gu * gm / (0.012 * (gu - gm)))
+    assert k.normal == pytest.approx([2e9 / 0.012, 1 / (0.012 / 2e9 + 0.3 / 12e9)])
+    assert k.shear == pytest.approx([gm / 0.012, 1 / (0.012 / gm + 0.3 / gu)])
+    # in a column, a joint between two blocks carries a block's height of unit (half of each), the
+    # foundation joint half of one (the ground is rigid): each joint shortens by F (t_j/E_m + l/E_u) / A
+    n, h = 4, 0.3
+    jm = JointModel(_column(n, material=m))
+    assert jm.unit_length == pytest.approx([h / 2] + [h] * (n - 1))
+    st, _ = jm.solve(np.array([0.0, 0.0, -G]), np.ones(n, bool))
+    above = np.array([jm.mass[i:].sum() * G for i in range(n)])
+    flexibility = (0.012 / 2e9 + jm.unit_length / 12e9) / (0.4 * 0.2)
+    assert st.forces[:, 2] == pytest.approx(-above, rel=1e-6)
+    assert st.relative[:, 2] == pytest.approx(-above * flexibility, rel=1e-6)
 
 
 @pytest.mark.parametrize("lam", [0.0, 0.15])

@@ -446,6 +446,10 @@ def test_simulate_cli_outputs(small_model):
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
     assert s["bricks"] > 30 and s["bonds"] > s["bricks"]
+    # the structure vibrated elastically, at the period `modes` gives, and its drift and shear are recorded
+    d = s["dynamics"]
+    assert d["elastic"] and d["damping_ratio"] == 0.05 and 0 < d["first_period_s"] < 1
+    assert d["max_roof_drift_m"] > 0 and d["max_base_shear_kn"] > 0
     for f in ("poses.npz", "scene.blend", "ground_motion.png", "histories.png", "frames/frame_000.png", "collapse.gif"):
         assert (out / f).is_file(), f
     poses = np.load(out / "poses.npz")
@@ -485,10 +489,42 @@ def test_simulate_cli_pushover(small_model):
     assert (out / "pushover.png").is_file() and not (out / "ground_motion.png").exists()
 
 
+def test_modes_cli(small_model, tmp_path):
+    out = tmp_path / "modes"
+    r = _cli("modes", small_model / "model", "--n", "4", "--out", out)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((out / "modes.json").read_text())
+    periods = [m["period_s"] for m in doc["modes"]]
+    assert len(periods) == 4 and periods == sorted(periods, reverse=True) and periods[0] > 0
+    assert doc["bodies_in_modes"] == doc["bodies"] and doc["total_mass_kg"] > 0
+    assert set(doc["empirical_first_period_of_masonry_towers"]) == {"eurocode_8", "italian_guidelines"}
+    assert (out / "modes.png").is_file()
+    assert f"T = {periods[0]:.4f} s" in r.stdout and "EN 1998-1" in r.stdout
+    # a softer mortar (--material) lengthens every period
+    soft = tmp_path / "soft.toml"
+    soft.write_text("[material]\nmortar_youngs_modulus_mpa = 100\n")
+    r = _cli("modes", small_model / "model", "--n", "1", "--material", soft, "--out", tmp_path / "soft", "--no-figures")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "soft" / "modes.json").read_text())["modes"][0]["period_s"] > 1.5 * periods[0]
+    assert not (tmp_path / "soft" / "modes.png").exists()
+    # bad input: one line, exit 2, nothing written
+    for args, msg in (
+        (["--n", "0"], "at least one mode"),
+        (["--out", small_model / "model"], "--out"),
+    ):
+        o = tmp_path / "bad"
+        argv = ["modes", small_model / "model", "--out", o, *args]
+        r = _cli(*argv)
+        lines = [line for line in r.stderr.splitlines() if line.strip()]
+        assert r.returncode == 2 and len(lines) == 1 and msg in lines[0], r.stderr
+        assert not o.exists()
+
+
 @pytest.mark.parametrize(
     "case, msg",
     [
         ("nobricks", "no bricks.json"),
+        ("damping", "--damping 1.5"),
         ("negative", "--pga"),
         ("huge", "must lie in 0..5 g"),
         ("badcsv", "accelerogram"),
@@ -511,6 +547,8 @@ def test_simulate_bad_input(small_model, tmp_path, case, msg):
         args += ["--accelerogram", tmp_path / "x.csv"]
     elif case == "frames":
         args += ["--frames", "-1"]
+    elif case == "damping":
+        args += ["--damping", "1.5"]
     else:
         (tmp_path / "x.csv").write_text("garbage\n")
         args += ["--accelerogram", tmp_path / "x.csv"]

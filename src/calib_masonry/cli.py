@@ -310,9 +310,15 @@ def _cmd_simulate(args) -> int:
         d,
         **{
             k: v
-            for k, v in (("fps", args.fps), ("substeps", args.substeps), ("iterations", args.iterations))
+            for k, v in (
+                ("fps", args.fps),
+                ("substeps", args.substeps),
+                ("iterations", args.iterations),
+                ("damping_ratio", args.damping),
+            )
             if v is not None
         },
+        dynamics=not args.quasi_static,
     )
     material = None
     if args.material:
@@ -370,6 +376,35 @@ def _cmd_simulate(args) -> int:
         f"simulate: {s['bricks']} bricks, {s['bonds']} bonds, {s['ground_motion']['source']}: {s['outcome']}; "
         f"moved {s['moved_fraction_final']:.1%} of bricks, {s['bonds_broken_fraction']:.1%} of bonds broken, "
         f"max roof drift {s['max_roof_drift_m'] * 1000:.0f} mm; stepping {s['seconds']['stepping']:.1f} s -> {args.out}"
+    )
+    return 0
+
+
+def _cmd_modes(args) -> int:
+    from .simulation.run import modes_to_folder
+
+    material = None
+    if args.material:
+        from .simulation.scene import read_material
+
+        material = read_material(args.material)
+    doc = modes_to_folder(
+        args.model_dir, args.out, n=args.n, material=material, figures=not args.no_figures, overwrite=args.overwrite
+    )
+    print(
+        f"modes: {doc['bodies_in_modes']} of {doc['bodies']} bodies held by joints, {doc['total_mass_kg']:.0f} kg, "
+        f"height {doc['height_m']:.2f} m -> {args.out}"
+    )
+    for row in doc["modes"]:
+        f = row["effective_mass_fraction"]
+        print(
+            f"  mode {row['mode']}: T = {row['period_s']:.4f} s ({row['frequency_hz']:.2f} Hz), effective mass "
+            f"x {f['x']:.1%}, y {f['y']:.1%}, z {f['z']:.1%}"
+        )
+    emp = doc["empirical_first_period_of_masonry_towers"]
+    print(
+        "  empirical first period of masonry towers of this height: "
+        + "; ".join(f"{e['formula']} = {e['period_s']:.3f} s ({e['source']})" for e in emp.values())
     )
     return 0
 
@@ -568,6 +603,18 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")
     m.add_argument("--iterations", type=int, default=None, help="solver iterations per substep (default 150)")
     m.add_argument(
+        "--damping",
+        type=float,
+        default=None,
+        help="the structure's viscous damping as a ratio of critical, Rayleigh at its first two modes (default 0.05)",
+    )
+    m.add_argument(
+        "--quasi-static",
+        action="store_true",
+        help="under a ground motion, hold the intact structure rigid (its joints' forces quasi-static) instead of "
+        "letting it vibrate elastically",
+    )
+    m.add_argument(
         "--pushover",
         action="store_true",
         help="quasi-static collapse analysis: ramp a uniform lateral acceleration until the structure "
@@ -646,6 +693,15 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--no-figures", action="store_true")
     _overwrite_flag(st)
     st.set_defaults(func=_cmd_study)
+
+    mo = sub.add_parser("modes", help="natural periods, effective modal masses and mode shapes of a built model")
+    mo.add_argument("model_dir", help="a folder `calib-masonry build` wrote")
+    mo.add_argument("--n", type=int, default=6, help="how many of the lowest modes")
+    mo.add_argument("--out", required=True)
+    mo.add_argument("--material", default=None, help="a TOML [material] table (as structure.toml's) for this run")
+    mo.add_argument("--no-figures", action="store_true")
+    _overwrite_flag(mo)
+    mo.set_defaults(func=_cmd_modes)
 
     d = sub.add_parser("demo", help="build the paper example from its masks and compare with its truth")
     d.add_argument("--out", default="out/demo")

@@ -159,6 +159,10 @@ class RunOutput:
     bond_release_time_s: np.ndarray | None = None  # when Bullet let each cracked bond go, NaN if never
     max_utilisation: np.ndarray | None = None  # (F,) the intact joints' largest utilisation at each frame
     seconds_joints: float = 0.0  # wall time spent in the joint model
+    # the elastic vibration of the structure the intact joints hold (simulation/dynamics.py), per
+    # joint-model step after the warm-up: time_s, roof_drift_m, base_shear_n, first_mode (arrays),
+    # first_period_s and damping_ratio; None for a quasi-static run
+    elastic: dict | None = None
 
 
 def _reset(bpy) -> None:
@@ -605,4 +609,18 @@ def steps(
         bond_release_time_s=tracker.release_time_s if tracker is not None else None,
         max_utilisation=utilisation if record else None,
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
+        elastic=_elastic_history(tracker, float(n - 1) / s.fps),
     )
+
+
+def _elastic_history(tracker, end_s: float) -> dict | None:
+    """The tracker's record of the elastic vibration up to the run's last frame (a tracker running
+    ahead of Bullet may have stepped further)."""
+    if tracker is None or tracker.elastic is None:
+        return None
+    h = {k: np.asarray(v, dtype=np.float64) for k, v in tracker.history.items()}
+    keep = h["time_s"] + tracker.t0 <= end_s + 1e-9
+    out = {k: v[keep] for k, v in h.items()}
+    out["first_period_s"] = tracker.first_period_s
+    out["damping_ratio"] = tracker.elastic.ratio
+    return out

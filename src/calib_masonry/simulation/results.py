@@ -301,14 +301,29 @@ def plot_histories(scene: Scene, out: RunOutput, m: Metrics, path: Path) -> None
     from .. import _figure as plt
 
     t = out.time - out.time[m.start_frame]
-    fig, ax = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    el = getattr(out, "elastic", None)
+    rows = 3 if el is None else 4
+    fig, ax = plt.subplots(rows, 1, figsize=(8, 7 if el is None else 9), sharex=True)
+    if el is not None:
+        # the elastic vibration of what the intact joints hold (sub-millimetre: Bullet keeps it rigid)
+        te = el["time_s"]  # from the end of the warm-up, as t
+        ax[3].plot(te, el["roof_drift_m"] * 1000, color="C4", lw=0.8)
+        ax[3].set_ylabel("elastic roof drift (mm)")
+        twin = ax[3].twinx()
+        twin.plot(te, el["base_shear_n"] / 1000, color="C1", lw=0.6, alpha=0.7)
+        twin.set_ylabel("base shear (kN)", color="C1")
+        ax[3].set_title(
+            f"elastic vibration: T1 = {el['first_period_s']:.3f} s, {el['damping_ratio']:.0%} damping", fontsize=9
+        )
+        ax[3].set_xlabel("time since the ground started moving (s)")
     ax[0].plot(t, m.roof_drift_m * 1000, color="C3")
     ax[0].set_ylabel("roof drift (mm)")
     ax[1].plot(t, m.moved_fraction * 100, color="C0")
     ax[1].set_ylabel(f"bricks moved > {scene.solver.moved_threshold_m * 100:g} cm (%)")
     ax[2].plot(t, m.broken_fraction * 100, color="C2")
     ax[2].set_ylabel("bonds broken (%)")
-    ax[2].set_xlabel("time since the ground started moving (s)")
+    if el is None:
+        ax[2].set_xlabel("time since the ground started moving (s)")
     # a flat history on its own autoscaled axis (+-0.04 %) looked like motion: each panel spans at
     # least a floor (1 mm, 1 %), and one that stays at zero says so
     for a, values, floor in (

@@ -30,7 +30,7 @@ from ..build3d.place import Footprint, WallGeometry, corners, wall_frames
 from ..errors import InputError
 from ..io import check_output, read_json, staged_output, write_json
 from .ground_motion import MAX_PGA_G, G, GroundMotion, read_accelerogram, synthetic_motion
-from .joints import joint_stiffness
+from .joints import scene_joint_stiffness
 from .scene import (
     MASONRY,
     Material,
@@ -375,11 +375,52 @@ def model_material(model_dir: str | Path, given: Material | None = None) -> tupl
     return MASONRY, "defaults (calib_masonry.simulation.scene.Material)"
 
 
+def _dynamics_summary(scene: Scene, out) -> dict:
+    """The elastic vibration of a run (see simulation/dynamics.py), or why there was none."""
+    el = out.elastic
+    if el is None:
+        why = (
+            "quasi-static: a pushover or shear test ramps its load slowly"
+            if scene.motion is None
+            else "quasi-static (--quasi-static), or no body is joined to the ground"
+        )
+        return {"elastic": False, "note": why, "first_period_s": _first_period(scene)}
+    drift, shear = el["roof_drift_m"], el["base_shear_n"]
+    return {
+        "elastic": True,
+        "method": "Newmark average acceleration on the intact joints and the bricks' rigid-body inertia, Rayleigh "
+        "damping at the first two modes, on the undamaged stiffness; its joints crack on the vibration's forces. "
+        "Bullet keeps the structure it holds rigid: the drift below is the vibration's, not the poses'",
+        "first_period_s": el["first_period_s"],
+        "damping_ratio": el["damping_ratio"],
+        "max_roof_drift_m": float(drift.max()) if drift.size else 0.0,
+        "max_base_shear_kn": float(shear.max()) / 1000 if shear.size else 0.0,
+        "max_first_mode_kg05_m": float(np.abs(el["first_mode"]).max()) if el["first_mode"].size else 0.0,
+    }
+
+
+def _first_period(scene: Scene) -> float | None:
+    """The first natural period of the scene's intact structure (None if nothing is joined to the ground)."""
+    from .dynamics import modes
+
+    try:
+        return float(modes(scene, 1).periods_s[0])
+    except InputError:
+        return None
+
+
+def _spread(values: np.ndarray) -> dict | None:
+    """The median and range of per-joint values, for summary.json."""
+    if not len(values):
+        return None
+    return {"median": float(np.median(values)), "min": float(values.min()), "max": float(values.max())}
+
+
 def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) -> dict:
     from .results import ONSET_DRIFT, failure_mode_counts, mechanism, outcome
 
     s = scene.solver
-    k = joint_stiffness(scene.material)
+    k = scene_joint_stiffness(scene)
     mat = scene.material
     summary = {
         "model": name,
@@ -412,8 +453,9 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
             "model": "elastic interfaces (UDEC/3DEC convention) between rigid bricks, cracked ones as "
             "frictional no-tension contacts; Bullet keeps joints rigid until the joint model has no "
             "equilibrium with them (calib_masonry.simulation.joints)",
-            "normal_stiffness_n_per_m3": k.normal,
-            "shear_stiffness_n_per_m3": k.shear,
+            # per unit area, mortar and units in series: the median over the joints and their range
+            "normal_stiffness_n_per_m3": _spread(k.normal),
+            "shear_stiffness_n_per_m3": _spread(k.shear),
             "tensile_strength_pa": mat.tensile_strength,
             "compressive_strength_pa": mat.compressive_strength,
             "cohesion_pa": mat.shear_strength,
@@ -439,6 +481,7 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
             "bricks_without_fill": scene.notes.get("bricks_without_fill", 0),
         },
         "joint_coverage": scene.notes.get("joint_coverage"),
+        "dynamics": _dynamics_summary(scene, out),
         "moved_fraction_final": float(m.moved_fraction[-1]),
         "moved_threshold_m": s.moved_threshold_m,
         "max_roof_drift_m": float(m.roof_drift_m.max()),
@@ -640,6 +683,11 @@ def write_simulation(
         bond_release_time_s=(
             r.bond_release_time_s if r.bond_release_time_s is not None else np.full(len(scene.bonds), np.nan)
         ),
+        **(
+            {f"elastic_{k}": v for k, v in r.elastic.items() if isinstance(v, np.ndarray)}
+            if r.elastic is not None
+            else {}
+        ),
     )
     t1 = time.perf_counter()
     if result.shear is not None:
@@ -660,6 +708,14 @@ def write_simulation(
     write_json(out / "summary.json", summary)
 
 
+def _out_beside_model(out: str | Path, model_dir: str | Path) -> None:
+    model = Path(model_dir).resolve()
+    if Path(out).resolve() == model or Path(out).resolve() in model.parents:
+        raise InputError(
+            f"--out {out}: holds the model folder {model_dir}, which a run would replace; give another folder"
+        )
+
+
 def simulate_to_folder(
     model_dir: str | Path,
     out: str | Path,
@@ -674,11 +730,7 @@ def simulate_to_folder(
 
     require_bpy()
     check_output(out, command="simulate", overwrite=overwrite)
-    model = Path(model_dir).resolve()
-    if Path(out).resolve() == model or Path(out).resolve() in model.parents:
-        raise InputError(
-            f"--out {out}: holds the model folder {model_dir}, which a run would replace; give another folder"
-        )
+    _out_beside_model(out, model_dir)
     t0 = time.perf_counter()
     scene = scene_for_model(model_dir, config)
     t_scene = time.perf_counter() - t0
@@ -694,3 +746,40 @@ def simulate_to_folder(
             progress=progress,
         )
     return read_json(Path(out) / "summary.json")
+
+
+def model_modes(model_dir: str | Path, n: int = 6, material: Material | None = None):
+    """The ``n`` lowest natural modes of a model folder's intact structure, with the scene they
+    are of (its material: ``material``, else the model's material.toml, else the defaults)."""
+    from .dynamics import modes
+
+    geometry, _ = geometry_for_model(model_dir)
+    mat, source = model_material(model_dir, material)
+    scene = scene_for(geometry, None, material=mat, duration_s=1.0)
+    scene.notes["material_source"] = source
+    return modes(scene, n), scene
+
+
+def modes_to_folder(
+    model_dir: str | Path,
+    out: str | Path,
+    *,
+    n: int = 6,
+    material: Material | None = None,
+    figures: bool = True,
+    overwrite: bool = False,
+) -> dict:
+    """modes.json (periods, effective modal masses, the empirical periods of masonry towers of the
+    model's height) and modes.png (each mode's shape) of a model folder into ``out``, all or nothing."""
+    from .dynamics import write_modes
+
+    check_output(out, command="modes", overwrite=overwrite)
+    _checked_model_dir(model_dir)
+    _out_beside_model(out, model_dir)
+    m, scene = model_modes(model_dir, n, material)
+    with staged_output(out, "modes", overwrite=overwrite) as stage:
+        doc = write_modes(m, scene, stage, figure=figures)
+        doc["model"] = str(model_dir)
+        doc["material"]["source"] = scene.notes.get("material_source")
+        write_json(stage / "modes.json", doc)
+    return doc

@@ -1,0 +1,435 @@
+"""The intact structure as an elastic body: mass matrix, natural periods, mode shapes and effective
+modal masses.
+
+Why this module exists. The joint model (simulation/joints.py) holds the bricks together with the
+joints' stiffness and solves their forces quasi-statically. A real tower is not rigid: it has a
+natural period (0.1-0.5 s for masonry towers, in the band where earthquakes carry most energy) and
+amplifies the ground's motion near it. This module gives the undamped modes of the structure the
+joints hold, from the same stiffness (every joint intact, mortar and units in series, see
+:func:`calib_masonry.simulation.joints.joint_stiffness`) and the bricks' rigid-body inertia:
+
+    K phi = omega^2 M phi
+
+on the bodies that a chain of joints ties to the ground (a body no joint holds has no elastic
+mode), by a sparse shift-invert Lanczos solve (ARPACK through ``scipy.sparse.linalg.eigsh``) about
+a small negative shift, so that ``K + M`` is factorised, positive definite even when some body
+is free to move; a dense solve for small structures. Each body has six degrees of freedom, the
+translation of its centroid and a small rotation about it (global axes), as in the joint model;
+its mass block is ``diag(m, m, m)`` and its inertia tensor about the centroid (from its mesh, the
+divergence theorem on signed tetrahedra, scaled to the body's mass).
+
+The modes are mass-normalised (``phi^T M phi = 1``). A direction ``d``'s participation is
+``L_d = phi^T M r_d`` (``r_d`` the rigid translation of every body along ``d``) and the mode's
+effective modal mass along ``d`` is ``L_d^2``; over all modes they sum to the structure's mass.
+
+Units: metres, kilograms, seconds, radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..errors import InputError
+from .scene import Body, Scene, grounded_bodies
+
+__all__ = [
+    "Modes",
+    "body_inertia",
+    "mass_matrix",
+    "stiffness_matrix",
+    "modes",
+    "empirical_tower_periods",
+    "modes_json",
+    "write_modes",
+]
+
+#: below this many unknowns the eigenproblem is solved densely (ARPACK needs k < n and is slow on tiny ones)
+_DENSE = 600
+
+
+@dataclass(frozen=True)
+class Modes:
+    """Natural modes of a structure's intact joints (see the module docstring)."""
+
+    periods_s: np.ndarray  # (n,) ascending
+    shapes: np.ndarray  # (n, B, 6) mass-normalised, per body of the whole scene (0 on bodies not held)
+    participation: np.ndarray  # (n, 3) L_d along x, y, z, kg^0.5
+    effective_mass_kg: np.ndarray  # (n, 3) L_d^2
+    total_mass_kg: float  # of the bodies the joints tie to the ground
+    bodies: np.ndarray  # (B,) bool: the bodies in the eigenproblem
+
+    @property
+    def frequencies_hz(self) -> np.ndarray:
+        return 1.0 / self.periods_s
+
+    @property
+    def effective_mass_fraction(self) -> np.ndarray:
+        return self.effective_mass_kg / self.total_mass_kg
+
+
+def _rotation(q) -> np.ndarray:
+    w, x, y, z = (float(c) for c in q)
+    n = np.sqrt(w * w + x * x + y * y + z * z) or 1.0
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def body_inertia(body: Body) -> np.ndarray:
+    """The body's inertia tensor (3, 3) about its centroid in global axes, kg m^2: its mesh's, by
+    signed tetrahedra from the origin (the canonical second moment ``det(A) / 120 A (1 + I) A^T`` of
+    each), shifted to the mesh's centroid and scaled to the body's mass."""
+    v = np.asarray(body.vertices, dtype=np.float64)
+    f = np.asarray(body.faces, dtype=np.int64)
+    A = np.stack([v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]], axis=2)  # (F, 3, 3): columns a, b, c
+    det = np.linalg.det(A)
+    volume = det.sum() / 6.0
+    if not abs(volume) > 1e-15:
+        raise InputError(f"body {body.name}: its mesh encloses no volume; it has no inertia")
+    first = (det[:, None] * A.sum(axis=2)).sum(axis=0) / 24.0
+    S = np.ones((3, 3)) + np.eye(3)
+    second = np.einsum("f,fij,jk,flk->il", det / 120.0, A, S, A)
+    c = first / volume
+    second = second - volume * np.outer(c, c)
+    I_body = (np.trace(second) * np.eye(3) - second) * (body.mass / volume)
+    R = _rotation(body.rotation)
+    return R @ I_body @ R.T
+
+
+def mass_matrix(scene: Scene) -> sp.csr_matrix:
+    """Block-diagonal ``(6 B, 6 B)``: each body's mass on its translations, its inertia tensor about
+    its centroid on its rotations."""
+    blocks = []
+    for body in scene.bodies:
+        blk = np.zeros((6, 6))
+        blk[:3, :3] = body.mass * np.eye(3)
+        blk[3:, 3:] = body_inertia(body)
+        blocks.append(blk)
+    return sp.block_diag(blocks, format="csr") if blocks else sp.csr_matrix((0, 0))
+
+
+def stiffness_matrix(scene: Scene, intact: np.ndarray | None = None, model=None) -> sp.csr_matrix:
+    """The stiffness ``(6 B, 6 B)`` of the scene's joints (default every one intact), without the
+    joint model's weak springs that hold free bodies (``model``: the scene's JointModel, if made)."""
+    from .joints import JointModel, _scatter
+
+    jm = model if model is not None else JointModel(scene)
+    if jm.nj == 0:
+        return sp.csr_matrix((6 * jm.nb, 6 * jm.nb))
+    idx = np.flatnonzero(np.ones(jm.nj, bool) if intact is None else np.asarray(intact, bool))
+    return _scatter(jm.dofs[idx], jm.Kj[idx], 6 * jm.nb).tocsr()
+
+
+def modes(scene: Scene, n: int = 6, *, model=None, mass: sp.spmatrix | None = None) -> Modes:
+    """The ``n`` lowest natural modes of the scene's intact structure (see the module docstring);
+    ``model`` and ``mass``: the scene's JointModel and mass matrix, if made."""
+    if n < 1:
+        raise InputError(f"modes: n = {n}: ask for at least one mode")
+    held = grounded_bodies(scene.bonds, len(scene.bodies))
+    if not held.any():
+        raise InputError(
+            "modes: no body is joined to the ground (a structure without a foundation, or without joints) "
+            "has no elastic modes; build it with its footing"
+        )
+    K = stiffness_matrix(scene, model=model)
+    M = sp.csr_matrix(mass) if mass is not None else mass_matrix(scene)
+    dof = np.flatnonzero(np.repeat(held, 6))
+    K, M = K[dof][:, dof], M[dof][:, dof]
+    size = len(dof)
+    n = min(n, size if size <= _DENSE else size - 1)
+    # shift: below the lowest eigenvalue, so that K - sigma M is positive definite
+    sigma = -1.0
+    if size <= _DENSE:
+        w, V = sla.eigh(K.toarray(), M.toarray(), subset_by_index=[0, n - 1])
+    else:
+        w, V = spla.eigsh(K.tocsc(), k=n, M=M.tocsc(), sigma=sigma, which="LM")
+        order = np.argsort(w)
+        w, V = w[order], V[:, order]
+    # mass-normalise (eigh and eigsh do, up to rounding) and fix each shape's sign: the largest
+    # translation positive
+    V = V / np.sqrt(np.einsum("ik,ik->k", V, M @ V))
+    trans = V.reshape(-1, 6, n)[:, :3]
+    flat = trans.reshape(-1, n)
+    sign = np.sign(flat[np.abs(flat).argmax(axis=0), np.arange(n)])
+    V = V * np.where(sign == 0, 1.0, sign)
+    omega = np.sqrt(np.maximum(w, 0.0))
+    periods = np.where(omega > 0, 2 * np.pi / np.where(omega > 0, omega, 1.0), np.inf)
+    r = np.zeros((size, 3))
+    for d in range(3):
+        r[d::6, d] = 1.0
+    L = V.T @ (M @ r)  # (n, 3)
+    shapes = np.zeros((n, len(scene.bodies), 6))
+    shapes[:, held] = V.T.reshape(n, -1, 6)
+    total = float(sum(b.mass for b, h in zip(scene.bodies, held) if h))
+    return Modes(
+        periods_s=periods,
+        shapes=shapes,
+        participation=L,
+        effective_mass_kg=L**2,
+        total_mass_kg=total,
+        bodies=held,
+    )
+
+
+def empirical_tower_periods(height_m: float) -> dict[str, dict]:
+    """The first period of a masonry tower of this height by two empirical formulas, for comparison:
+
+    * EN 1998-1:2004 (Eurocode 8), 4.3.3.2.2, eq. (4.6): ``T1 = C_t H^(3/4)``, ``C_t = 0.05`` for
+      structures other than frames (masonry), meant for buildings up to 40 m;
+    * the Italian guidelines for the cultural heritage (DPCM 9 February 2011, for masonry towers):
+      ``T1 = 0.0187 H^1.17``.
+    """
+    h = float(height_m)
+    return {
+        "eurocode_8": {"period_s": 0.05 * h**0.75, "formula": "0.05 H^0.75", "source": "EN 1998-1:2004, eq. (4.6)"},
+        "italian_guidelines": {
+            "period_s": 0.0187 * h**1.17,
+            "formula": "0.0187 H^1.17",
+            "source": "Linee Guida per il patrimonio culturale, DPCM 9/2/2011 (masonry towers)",
+        },
+    }
+
+
+def modes_json(m: Modes, scene: Scene) -> dict:
+    """The modes as a JSON-able dict (modes.json)."""
+    bottom = min(float(np.min(np.asarray(b.vertices)[:, 2]) + b.location[2]) for b in scene.bodies)
+    top = max(float(np.max(np.asarray(b.vertices)[:, 2]) + b.location[2]) for b in scene.bodies)
+    height = top - bottom
+    rows = []
+    for k in range(len(m.periods_s)):
+        frac = m.effective_mass_fraction[k]
+        rows.append(
+            {
+                "mode": k + 1,
+                "period_s": float(m.periods_s[k]),
+                "frequency_hz": float(m.frequencies_hz[k]),
+                "effective_mass_fraction": {"x": float(frac[0]), "y": float(frac[1]), "z": float(frac[2])},
+                "participation_kg05": {
+                    "x": float(m.participation[k, 0]),
+                    "y": float(m.participation[k, 1]),
+                    "z": float(m.participation[k, 2]),
+                },
+            }
+        )
+    return {
+        "modes": rows,
+        "total_mass_kg": m.total_mass_kg,
+        "bodies_in_modes": int(m.bodies.sum()),
+        "bodies": len(scene.bodies),
+        "height_m": height,
+        "cumulative_effective_mass_fraction": {
+            d: float(m.effective_mass_fraction[:, i].sum()) for i, d in enumerate("xyz")
+        },
+        "empirical_first_period_of_masonry_towers": empirical_tower_periods(height),
+        "material": {
+            "unit_youngs_modulus_pa": scene.material.unit_youngs_modulus,
+            "mortar_youngs_modulus_pa": scene.material.mortar_youngs_modulus,
+            "joint_thickness_m": scene.material.joint_thickness_m,
+            "density_kg_m3": scene.material.density,
+        },
+        "method": "undamped modes of the intact joints (mortar and units in series) and the bricks' rigid-body "
+        "inertia, sparse shift-invert Lanczos (calib_masonry.simulation.dynamics)",
+    }
+
+
+def write_modes(m: Modes, scene: Scene, out: Path, figure: bool = True) -> dict:
+    """modes.json and modes.png (each mode's deformed shape) into the folder ``out``."""
+    from ..io import write_json
+
+    doc = modes_json(m, scene)
+    write_json(Path(out) / "modes.json", doc)
+    if figure:
+        _modes_figure(m, scene, Path(out) / "modes.png")
+    return doc
+
+
+def _modes_figure(m: Modes, scene: Scene, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x = np.array([b.location for b in scene.bodies], dtype=np.float64).reshape(-1, 3)
+    held = m.bodies
+    span = float(np.ptp(x[held], axis=0).max()) if held.any() else 1.0
+    n = len(m.periods_s)
+    cols = min(n, 3)
+    rows = -(-n // cols)
+    fig = plt.figure(figsize=(4.2 * cols, 4.4 * rows))
+    for k in range(n):
+        ax = fig.add_subplot(rows, cols, k + 1, projection="3d")
+        u = m.shapes[k, :, :3]
+        mag = np.linalg.norm(u, axis=1)
+        scale = 0.1 * span / max(float(mag.max()), 1e-30)
+        p = x + scale * u
+        ax.scatter(*x[held].T, s=2, c="0.8", depthshade=False)
+        sc = ax.scatter(
+            *p[held].T,
+            s=4,
+            c=mag[held] / max(float(mag.max()), 1e-30),
+            cmap="viridis",
+            vmin=0,
+            vmax=1,
+            depthshade=False,
+        )
+        frac = m.effective_mass_fraction[k]
+        ax.set_title(
+            f"mode {k + 1}: T = {m.periods_s[k]:.3f} s\nmass x {frac[0]:.0%}, y {frac[1]:.0%}, z {frac[2]:.0%}",
+            fontsize=9,
+        )
+        ax.set_box_aspect(np.maximum(np.ptp(np.vstack([x[held], p[held]]), axis=0), 1e-3))
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_zlabel("z (m)", fontsize=7)
+        ax.tick_params(labelsize=6)
+    fig.colorbar(sc, ax=fig.axes, shrink=0.5, label="displacement / largest (shapes scaled to 10 % of the span)")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def rayleigh(ratio: float, omega_1: float, omega_2: float) -> tuple[float, float]:
+    """Rayleigh damping ``C = alpha M + beta K`` with the damping ``ratio`` at the circular
+    frequencies ``omega_1`` and ``omega_2`` (rad/s); equal frequencies give the tangent at that one."""
+    w1, w2 = float(omega_1), float(omega_2)
+    return 2.0 * ratio * w1 * w2 / (w1 + w2), 2.0 * ratio / (w1 + w2)
+
+
+class ElasticResponse:
+    """The linear elastic vibration of the part of a structure that intact joints tie to the ground,
+    relative to the ground, under the load ``m g(t)`` on every body (``g`` the gravity and the
+    ground's inertial acceleration, the joint model's load):
+
+        M u'' + C u' + K u = f(t),     C = alpha M + beta K  (Rayleigh)
+
+    integrated by Newmark's average-acceleration rule (gamma 1/2, beta 1/4: unconditionally stable,
+    no numerical damping) with the load linear in time between two calls and substeps no longer
+    than ``T1 / substeps_per_period`` of the first period, so that the frame rate does not set the
+    accuracy (the period elongation of the rule is about (2 pi dt / T)^2 / 12: 0.2 % at 40 substeps a
+    period). ``u`` starts at the static equilibrium of the first load (gravity), at rest.
+
+    ``K`` is the stiffness of the undamaged structure (every joint intact: the joint model's,
+    mortar and units in series) and stays so after joints crack: the cracked joints that still
+    bear keep most of a joint's stiffness in compression, and the vibration of the structure that
+    stands goes on at its undamaged period (the lengthening of the period by cracking is not
+    modelled). Vibrating on the intact joints alone instead left the upper part of a tower whose
+    base joints had cracked in tension on a few intact patches, nearly a mechanism in the linear
+    model, and its drift grew without bound (Stylite, 0.3 g: 8 m in 9 s). The joint model, which
+    carries the cracked joints as contacts, takes the vibration's forces as part of each body's
+    load; a piece Bullet has set free takes none (the caller masks it). :meth:`inertial_force` is
+    ``-M u'' - C u'``, the
+    force the vibration adds to each body's load in the joint model's equilibrium."""
+
+    def __init__(
+        self,
+        model,
+        mass: sp.spmatrix,
+        *,
+        ratio: float = 0.05,
+        omega: tuple[float, float],
+        substeps_per_period: int = 40,
+    ) -> None:
+        if not 0.0 <= ratio < 1.0:
+            raise InputError(f"damping ratio {ratio}: give a fraction of critical damping in [0, 1), e.g. 0.05")
+        self.model = model
+        self.M = sp.csr_matrix(mass)
+        self.ratio = float(ratio)
+        self.alpha, self.beta = rayleigh(ratio, *omega)
+        self.dt_max = 2.0 * np.pi / float(omega[0]) / substeps_per_period
+        n = 6 * model.nb
+        self.u = np.zeros(n)
+        self.v = np.zeros(n)
+        self.a = np.zeros(n)
+        self._g = None
+        self._t = None
+        self._lu = None
+        self._dt = None
+        self.set_intact(np.ones(model.nj, dtype=bool))
+
+    def set_intact(self, intact: np.ndarray) -> None:
+        """Vibrate on these intact joints from now on (see the class docstring)."""
+        from .joints import _scatter
+
+        m = self.model
+        intact = np.asarray(intact, dtype=bool)
+        self.bodies = grounded_bodies_of(m, intact)
+        self.dof = np.flatnonzero(np.repeat(self.bodies, 6))
+        idx = np.flatnonzero(intact)
+        K = _scatter(m.dofs[idx], m.Kj[idx], 6 * m.nb).tocsr()
+        self.K = K[self.dof][:, self.dof].tocsc()
+        self.Md = self.M[self.dof][:, self.dof].tocsc()
+        keep = np.zeros(6 * m.nb, dtype=bool)
+        keep[self.dof] = True
+        for x in (self.u, self.v, self.a):
+            x[~keep] = 0.0
+        self._lu = None
+
+    def _factor(self, dt: float):
+        if self._lu is None or abs(self._dt - dt) > 1e-9 * dt:  # frame times differ by rounding
+            C = self.alpha * self.Md + self.beta * self.K
+            self._lu = spla.splu((self.K + (4.0 / dt**2) * self.Md + (2.0 / dt) * C).tocsc())
+            self._dt = dt
+        return self._lu
+
+    def _force(self, g: np.ndarray) -> np.ndarray:
+        return self.model._load(g)[self.dof]
+
+    def advance(self, time_s: float, g: np.ndarray) -> None:
+        """Integrate from the last call to ``time_s``, the load linear in time from the last call's
+        ``g`` to this one's; the first call sets the static equilibrium under ``g``."""
+        g = np.asarray(g, dtype=np.float64)
+        if self._g is None or not len(self.dof):
+            if len(self.dof):
+                self.u[self.dof] = spla.spsolve(self.K, self._force(g))
+            self._g, self._t = g, float(time_s)
+            return
+        span = float(time_s) - self._t
+        if span <= 0:
+            self._g = g
+            return
+        steps = max(1, int(np.ceil(span / self.dt_max - 1e-9)))
+        dt = span / steps
+        lu = self._factor(dt)
+        d = self.dof
+        u, v, a = self.u[d], self.v[d], self.a[d]
+        M, K = self.Md, self.K
+        for k in range(1, steps + 1):
+            f = self._force(self._g + (g - self._g) * (k / steps))
+            mu = M @ ((4.0 / dt**2) * u + (4.0 / dt) * v + a)
+            cu = (2.0 / dt) * u + v
+            rhs = f + mu + self.alpha * (M @ cu) + self.beta * (K @ cu)
+            u1 = lu.solve(rhs)
+            a1 = (4.0 / dt**2) * (u1 - u) - (4.0 / dt) * v - a
+            v = v + 0.5 * dt * (a + a1)
+            u, a = u1, a1
+        self.u[d], self.v[d], self.a[d] = u, v, a
+        self._g, self._t = g, float(time_s)
+
+    def inertial_force(self) -> np.ndarray:
+        """``-M u'' - C u'`` on every body (6 B,): zero on the bodies not in the vibration."""
+        out = np.zeros_like(self.u)
+        d = self.dof
+        v = self.v[d]
+        out[d] = -(self.Md @ (self.a[d] + self.alpha * v)) - self.beta * (self.K @ v)
+        return out
+
+
+def grounded_bodies_of(model, intact: np.ndarray) -> np.ndarray:
+    """``(B,)`` True for the bodies a chain of the joint model's ``intact`` joints ties to the ground."""
+    from .scene import plate_linked
+
+    held = np.zeros(model.n_all, dtype=bool)
+    held[: model.nj] = intact
+    if model.n_all == 0:
+        return np.zeros(model.nb, dtype=bool)
+    return plate_linked(model.a, model.b, model.nb, held)

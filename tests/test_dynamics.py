@@ -1,0 +1,163 @@
+"""The intact structure as an elastic body: inertia, natural periods against beam theory, the
+Newmark integration against free vibration, and resonance against the first mode's amplification
+(no Blender)."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+
+from calib_masonry.simulation.dynamics import ElasticResponse, body_inertia, mass_matrix, modes, rayleigh
+from calib_masonry.simulation.ground_motion import G, GroundMotion
+from calib_masonry.simulation.joints import CrackTracker, JointModel
+from calib_masonry.simulation.scene import Material
+
+from .test_joints import _block, _column
+
+
+def test_inertia_of_a_box_and_of_a_rotated_one():
+    b = _block("b", (0.4, 0.2, 0.3), (1.0, 2.0, 3.0))
+    m = b.mass
+    assert np.diag(body_inertia(b)) == pytest.approx(
+        m / 12 * np.array([0.2**2 + 0.3**2, 0.4**2 + 0.3**2, 0.4**2 + 0.2**2])
+    )
+    # a quarter turn about z swaps the x and y moments
+    c = 2**-0.5
+    r = replace(b, rotation=(c, 0.0, 0.0, c))
+    assert np.diag(body_inertia(r)) == pytest.approx(
+        m / 12 * np.array([0.4**2 + 0.3**2, 0.2**2 + 0.3**2, 0.4**2 + 0.2**2])
+    )
+
+
+def _timoshenko_period(E, G_, rho, A, second_moment, L, kappa=5 / 6, elements=400):
+    """First period of a clamped-free Timoshenko beam: finite elements with the exact static
+    stiffness of a Timoshenko element (Przemieniecki) and lumped translational and rotary mass."""
+    I = second_moment  # noqa: E741
+    le = L / elements
+    phi = 12 * E * I / (kappa * G_ * A * le**2)
+    k = (
+        E
+        * I
+        / ((1 + phi) * le**3)
+        * np.array(
+            [
+                [12, 6 * le, -12, 6 * le],
+                [6 * le, (4 + phi) * le**2, -6 * le, (2 - phi) * le**2],
+                [-12, -6 * le, 12, -6 * le],
+                [6 * le, (2 - phi) * le**2, -6 * le, (4 + phi) * le**2],
+            ]
+        )
+    )
+    n = 2 * (elements + 1)
+    K, M = np.zeros((n, n)), np.zeros(n)
+    for e in range(elements):
+        K[2 * e : 2 * e + 4, 2 * e : 2 * e + 4] += k
+        M[2 * e : 2 * e + 4] += np.array([rho * A, rho * I, rho * A, rho * I]) * le / 2
+    w = sla.eigh(K[2:, 2:], np.diag(M[2:]), eigvals_only=True, subset_by_index=[0, 0])
+    return 2 * np.pi / np.sqrt(w[0])
+
+
+@pytest.mark.parametrize("courses, size", [(20, (0.4, 0.2, 0.3)), (36, (0.25, 0.12, 0.065))])
+def test_first_period_of_a_bonded_column_is_the_timoshenko_beams(courses, size):
+    mat = Material()
+    lx, ly, h = size
+    m = modes(_column(courses, size=size, material=mat), 3)
+    # the column's effective moduli: units and mortar in series over a course (no mortar mass: the
+    # blocks touch in the model, the joint's thickness is in its stiffness)
+    t = mat.joint_thickness_m
+    E = h / (t / mat.mortar_youngs_modulus + h / mat.unit_youngs_modulus)
+    gm = mat.mortar_youngs_modulus / (2 * (1 + mat.mortar_poisson))
+    gu = mat.unit_youngs_modulus / (2 * (1 + mat.unit_poisson))
+    Gs = h / (t / gm + h / gu)
+    L, A = courses * h, lx * ly
+    weak = _timoshenko_period(E, Gs, mat.density, A, lx * ly**3 / 12, L)
+    strong = _timoshenko_period(E, Gs, mat.density, A, ly * lx**3 / 12, L)
+    assert m.periods_s[0] == pytest.approx(weak, rel=0.05)
+    assert m.periods_s[1] == pytest.approx(strong, rel=0.05)
+    # the weak axis is y: its mode moves the mass along y, about 61 % of it (a uniform cantilever's)
+    assert m.effective_mass_fraction[0, 1] == pytest.approx(0.613, abs=0.03)
+    assert m.effective_mass_fraction[0, [0, 2]] == pytest.approx([0, 0], abs=1e-6)
+
+
+def test_effective_masses_sum_to_the_mass():
+    sc = _column(3)
+    m = modes(sc, 18)
+    assert m.effective_mass_kg.sum(axis=0) == pytest.approx([m.total_mass_kg] * 3, rel=1e-9)
+    M = mass_matrix(sc).toarray()
+    V = m.shapes.reshape(18, -1)
+    assert V @ M @ V.T == pytest.approx(np.eye(18), abs=1e-9)
+
+
+def _tracker_scene(courses=20, material=Material()):
+    sc = _column(courses, size=(0.4, 0.2, 0.3), material=material)
+    still = GroundMotion(dt=0.01, displacement=np.zeros((3, 2)), acceleration=np.zeros((3, 2)))
+    return replace(sc, motion=still)
+
+
+def test_newmark_free_vibration_has_the_first_period_and_the_damping_ratio():
+    sc = _tracker_scene()
+    m = modes(sc, 2)
+    omega = 2 * np.pi / m.periods_s
+    jm = JointModel(sc)
+    el = ElasticResponse(jm, mass_matrix(sc), ratio=0.05, omega=(omega[0], omega[1]))
+    rate = 200.0
+    el.advance(0.0, np.array([0.0, 0.0, -G]))
+    el.advance(1 / rate, np.array([0.0, 0.0, -G]))
+    # pull along y for a while, then let go: free vibration in the first mode (the pull's shape is
+    # close to it; higher modes die out faster)
+    for k in range(2, 400):
+        el.advance(k / rate, np.array([0.0, 0.05 * G, -G]))
+    top = []
+    for k in range(400, 1400):
+        el.advance(k / rate, np.array([0.0, 0.0, -G]))
+        top.append(el.u.reshape(-1, 6)[-1, 1])
+    y = np.array(top)
+    t = np.arange(len(y)) / rate
+    peaks = [i for i in range(1, len(y) - 1) if y[i] > y[i - 1] and y[i] > y[i + 1] and y[i] > 0]
+    period = np.diff(t[peaks]).mean()
+    assert period == pytest.approx(m.periods_s[0], rel=0.01)
+    decrement = np.log(y[peaks[1]] / y[peaks[-1]]) / (len(peaks) - 2)
+    assert decrement / (2 * np.pi) == pytest.approx(0.05, rel=0.1)
+
+
+def test_rayleigh_damping_has_the_ratio_at_both_frequencies():
+    a, b = rayleigh(0.05, 10.0, 40.0)
+    for w in (10.0, 40.0):
+        assert a / (2 * w) + b * w / 2 == pytest.approx(0.05)
+
+
+def _cracks(sc, amplitude_g, f, rate=50.0):
+    """Whether a harmonic base acceleration of this amplitude (along y, a sin^2 ramp then steady)
+    cracks a joint of the column."""
+    x = np.array([b.location for b in sc.bodies])
+    tr = CrackTracker(sc, x, np.repeat(np.eye(3)[None], len(x), 0), np.zeros(3), 0.0)
+    ramp = max(3 / f, 3.0)
+    for k in range(int((ramp + 4 / f + 10.0) * rate) + 1):
+        t = k / rate
+        a = amplitude_g * G * np.sin(0.5 * np.pi * min(t / ramp, 1.0)) ** 2 * np.sin(2 * np.pi * f * t)
+        tr.step(t, np.array([0.0, -a, -G]), x, None, None)
+        if np.isfinite(tr.break_time_s).any():
+            return True
+    return False
+
+
+def _onset(sc, f):
+    lo, hi = 1e-3, 1.0
+    for _ in range(11):  # to 0.6 % in the amplitude
+        mid = np.sqrt(lo * hi)
+        lo, hi = (lo, mid) if _cracks(sc, mid, f) else (mid, hi)
+    return hi
+
+
+@pytest.mark.slow
+def test_resonance_cracks_at_the_amplitude_the_first_modes_amplification_says():
+    sc = _tracker_scene(material=Material(tensile_strength=0.05e6))
+    f1 = 1 / modes(sc, 1).periods_s[0]
+    at_f1, at_fifth = _onset(sc, f1), _onset(sc, 0.2 * f1)
+    zeta, r = 0.05, 0.2
+    amplification = 1 / (2 * zeta) / (1 / np.sqrt((1 - r**2) ** 2 + (2 * zeta * r) ** 2))
+    assert at_fifth / at_f1 == pytest.approx(amplification, rel=0.15)
+    # and quasi-statically (the structure rigid) the frequency would not matter
+    rigid = replace(sc, solver=replace(sc.solver, dynamics=False))
+    assert _onset(rigid, f1) == pytest.approx(_onset(rigid, 0.2 * f1), rel=0.02)

@@ -878,3 +878,36 @@ def test_a_flat_history_is_drawn_flat_not_magnified(tmp_path, monkeypatch):
     axes = saved[0].axes
     assert all(a.get_ylim()[1] - a.get_ylim()[0] >= 1.0 for a in axes)
     assert sum("zero throughout" in t.get_text() for a in axes for t in a.texts) == 2
+
+
+def test_frames_show_cracked_joints_and_the_time_origin_of_the_histories():
+    """frames/*.png drew no cracked joint and counted time from the warm-up's start, histories.png
+    from the ground's: both now count from the ground's start, and the frames mark the joints
+    cracked by then."""
+    from calib_masonry.simulation.blender import RunOutput
+    from calib_masonry.simulation.results import _FramePainter
+    from calib_masonry.simulation.scene import Bond, Scene
+
+    a = _block((0.4, 0.2, 0.2), (0, 0, 0.1))
+    b = _block((0.4, 0.2, 0.2), (0, 0, 0.3))
+    bonds = (
+        Bond.rectangle(0, 1, (0, 0, 0.2), (0, 0, 1.0), (1.0, 0, 0), 0.4, 0.2),
+        Bond.rectangle(0, -1, (0, 0, 0), (0, 0, -1.0), (1.0, 0, 0), 0.4, 0.2),
+    )
+    scene = Scene(bodies=(a, b), bonds=bonds, solver=SolverSettings(warmup_s=0.2, fps=10))
+    n = 8
+    out = RunOutput(
+        time=np.arange(n) / 10,
+        positions=np.repeat(np.array([[[0, 0, 0.1], [0, 0, 0.3]]]), n, axis=0),
+        quaternions=np.tile([1.0, 0, 0, 0], (n, 2, 1)),
+        plate=np.zeros((n, 3)),
+        seconds_build=0.0,
+        seconds_stepping=0.0,
+        bond_break_time_s=np.array([0.3, np.nan]),
+    )
+    painter = _FramePainter(scene, out)
+    early, late = painter.figure(3), painter.figure(6)  # 0.1 s and 0.4 s after the warm-up's 2 frames
+    title = early.axes[0].get_title()
+    assert title.startswith("t = 0.10 s since the ground started moving") and "0 joints cracked" in title
+    assert "1 joint cracked" in late.axes[0].get_title()
+    assert len(late.axes[0].collections) == len(early.axes[0].collections) + 1  # the red marks

@@ -377,14 +377,30 @@ class _FramePainter:
                 tri, facecolors=np.column_stack([0.75 * sh, 0.45 * sh, 0.32 * sh, np.ones_like(sh)]), linewidths=0
             )
         )
+        # the joints cracked by this frame, red, where they have moved with their first body
+        start = min(scene.solver.warmup_frames, len(out.time) - 1)
+        since = out.time[f] - out.time[start]
+        cracked = 0
+        if out.bond_break_time_s is not None and len(scene.bonds):
+            k = np.flatnonzero(np.asarray(out.bond_break_time_s) <= since + 1e-9)
+            cracked = len(k)
+            if cracked:
+                a = np.array([scene.bonds[j].a for j in k])
+                loc = np.array([scene.bonds[j].location for j in k], dtype=np.float64)
+                x0 = np.array([scene.bodies[i].location for i in a], dtype=np.float64)
+                p = np.einsum("kij,kj->ki", self.R[f, a], loc - x0) + out.positions[f, a]
+                ax.scatter(*p.T, s=4, c="red", depthshade=False, zorder=5)
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_zlim(min(lo[2], 0.0), hi[2])
         ax.set_box_aspect((hi[0] - lo[0] + 2 * pad, hi[1] - lo[1] + 2 * pad, hi[2] - min(lo[2], 0.0)))
         ax.view_init(elev=20, azim=-60)
         ax.tick_params(labelsize=7)
+        # the time origin of histories.png: the end of the warm-up, when the ground starts moving
         ax.set_title(
-            f"t = {out.time[f]:.2f} s (ground moves from {out.time[0] + scene.solver.warmup_s:.2f} s)", fontsize=9
+            f"t = {since:.2f} s since the ground started moving; {cracked} joint{'' if cracked == 1 else 's'} "
+            "cracked (red)",
+            fontsize=9,
         )
         fig.tight_layout()
         return fig

@@ -450,6 +450,7 @@ def test_simulate_cli_outputs(small_model):
     d = s["dynamics"]
     assert d["elastic"] and d["damping_ratio"] == 0.05 and 0 < d["first_period_s"] < 1
     assert d["max_roof_drift_m"] > 0 and d["max_base_shear_kn"] > 0
+    assert 0.0 <= s["set_free_fraction"] <= 1.0
     for f in ("poses.npz", "scene.blend", "ground_motion.png", "histories.png", "frames/frame_000.png", "collapse.gif"):
         assert (out / f).is_file(), f
     poses = np.load(out / "poses.npz")

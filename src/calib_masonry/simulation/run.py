@@ -399,6 +399,15 @@ def _dynamics_summary(scene: Scene, out) -> dict:
     }
 
 
+def _set_free_fraction(scene: Scene, out) -> float:
+    from .scene import grounded_bodies
+
+    if not scene.bonds or out.bond_release_time_s is None:
+        return 0.0
+    held = ~np.isfinite(out.bond_release_time_s)
+    return float(1.0 - grounded_bodies(scene.bonds, len(scene.bodies), held).mean())
+
+
 def _first_period(scene: Scene) -> float | None:
     """The first natural period of the scene's intact structure (None if nothing is joined to the ground)."""
     from .dynamics import modes
@@ -492,6 +501,10 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
         "bonds_released": int(np.isfinite(out.bond_release_time_s).sum()) if out.bond_release_time_s is not None else 0,
         "max_brick_displacement_m": float(m.max_displacement_m.max()),
         "outcome": outcome(float(m.moved_fraction[-1])),
+        # the bricks the joint model cut off from the ground (no joint Bullet still holds ties them
+        # to the plate): its decision, the same whatever Bullet's settings; how far they then move
+        # (moved_fraction_final, outcome) is Bullet's
+        "set_free_fraction": _set_free_fraction(scene, out),
         # rocking, sliding or stepped (diagonal) cracking, from the joints' motion where the
         # collapse began (None: nothing ran away); see calib_masonry.simulation.results.mechanism
         "mechanism": mechanism(scene, out, m),

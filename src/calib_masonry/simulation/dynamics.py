@@ -122,13 +122,9 @@ def mass_matrix(scene: Scene) -> sp.csr_matrix:
 def stiffness_matrix(scene: Scene, intact: np.ndarray | None = None, model=None) -> sp.csr_matrix:
     """The stiffness ``(6 B, 6 B)`` of the scene's joints (default every one intact), without the
     joint model's weak springs that hold free bodies (``model``: the scene's JointModel, if made)."""
-    from .joints import JointModel, _scatter
+    from .joints import JointModel
 
-    jm = model if model is not None else JointModel(scene)
-    if jm.nj == 0:
-        return sp.csr_matrix((6 * jm.nb, 6 * jm.nb))
-    idx = np.flatnonzero(np.ones(jm.nj, bool) if intact is None else np.asarray(intact, bool))
-    return _scatter(jm.dofs[idx], jm.Kj[idx], 6 * jm.nb).tocsr()
+    return (model if model is not None else JointModel(scene)).stiffness_matrix(intact)
 
 
 def modes(scene: Scene, n: int = 6, *, model=None, mass: sp.spmatrix | None = None) -> Modes:
@@ -354,25 +350,11 @@ class ElasticResponse:
         self._t = None
         self._lu = None
         self._dt = None
-        self.set_intact(np.ones(model.nj, dtype=bool))
-
-    def set_intact(self, intact: np.ndarray) -> None:
-        """Vibrate on these intact joints from now on (see the class docstring)."""
-        from .joints import _scatter
-
-        m = self.model
-        intact = np.asarray(intact, dtype=bool)
-        self.bodies = grounded_bodies_of(m, intact)
+        # the undamaged structure: every joint intact, the bodies they tie to the ground
+        self.bodies = model.grounded(np.ones(model.nj, dtype=bool))
         self.dof = np.flatnonzero(np.repeat(self.bodies, 6))
-        idx = np.flatnonzero(intact)
-        K = _scatter(m.dofs[idx], m.Kj[idx], 6 * m.nb).tocsr()
-        self.K = K[self.dof][:, self.dof].tocsc()
+        self.K = model.stiffness_matrix()[self.dof][:, self.dof].tocsc()
         self.Md = self.M[self.dof][:, self.dof].tocsc()
-        keep = np.zeros(6 * m.nb, dtype=bool)
-        keep[self.dof] = True
-        for x in (self.u, self.v, self.a):
-            x[~keep] = 0.0
-        self._lu = None
 
     def _factor(self, dt: float):
         if self._lu is None or abs(self._dt - dt) > 1e-9 * dt:  # frame times differ by rounding
@@ -443,14 +425,3 @@ def _cholesky(A: sp.spmatrix):
         return np.array(x).ravel()
 
     return solve
-
-
-def grounded_bodies_of(model, intact: np.ndarray) -> np.ndarray:
-    """``(B,)`` True for the bodies a chain of the joint model's ``intact`` joints ties to the ground."""
-    from .scene import plate_linked
-
-    held = np.zeros(model.n_all, dtype=bool)
-    held[: model.nj] = intact
-    if model.n_all == 0:
-        return np.zeros(model.nb, dtype=bool)
-    return plate_linked(model.a, model.b, model.nb, held)

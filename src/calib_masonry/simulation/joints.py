@@ -506,13 +506,26 @@ class JointModel:
         out[: self.nj] = np.asarray(intact, dtype=bool)
         return out
 
+    def stiffness_matrix(self, intact: np.ndarray | None = None) -> sp.csr_matrix:
+        """The stiffness ``(6 B, 6 B)`` of the ``intact`` mortar joints (default all of them), without
+        the weak springs that hold free bodies."""
+        if self.n_all == 0:
+            return sp.csr_matrix((6 * self.nb, 6 * self.nb))
+        idx = np.flatnonzero(np.ones(self.nj, bool) if intact is None else np.asarray(intact, bool)[: self.n_all])
+        return _scatter(self.dofs[idx], self.Kj[idx], 6 * self.nb).tocsr()
+
+    def grounded(self, held: np.ndarray) -> np.ndarray:
+        """``(B,)`` True for the bodies that a chain of the ``held`` mortar joints ``(J,)`` ties to the ground."""
+        if self.n_all == 0:
+            return np.zeros(self.nb, dtype=bool)
+        return plate_linked(self.a, self.b, self.nb, self._pad(held))
+
     def _joint_matrix(self, intact: np.ndarray) -> sp.csc_matrix:
         """The intact joints' part of the stiffness plus the weak springs (kept for the last intact set)."""
         key = intact.tobytes()
         if self._joint_part is not None and self._joint_part[0] == key:
             return self._joint_part[1]
-        idx = np.flatnonzero(intact)
-        K = _scatter(self.dofs[idx], self.Kj[idx], 6 * self.nb) + self._reg
+        K = self.stiffness_matrix(intact) + self._reg
         self._joint_part = (key, K.tocsc())
         return self._joint_part[1]
 
@@ -1016,26 +1029,23 @@ class CrackTracker:
                 self._phi1 = mass @ first.shapes[0].ravel()  # q_1 = phi_1^T M u
                 z = self.model.x[:, 2]
                 self._top = np.flatnonzero(z >= z.max() - 0.05 * max(float(np.ptp(z)), 1e-9))
-                self._footing = np.flatnonzero(self.model.b[:n] < 0)
 
     def release_factors(self) -> None:
         """The joint model's :meth:`JointModel.release_factors`: on the thread that stepped it."""
         self.model.release_factors()
 
-    def _record(self, time_s: float, g: np.ndarray, extra: np.ndarray) -> None:
+    def _record(self, time_s: float, g: np.ndarray, extra: np.ndarray, held_bodies: np.ndarray | None) -> None:
         """The vibration's roof drift (the mean horizontal displacement of the top 5 % of the
         height), base shear (the horizontal resultant of the loads, inertial forces included, on
         the bodies that held joints tie to the ground: what their footing carries) and first modal
-        coordinate at this step."""
+        coordinate at this step. ``held_bodies``: those bodies, None while every joint is held."""
         u = self.elastic.u.reshape(-1, 6)
         h = self.history
         h["time_s"].append(float(time_s) - self.t0)
         h["roof_drift_m"].append(float(np.hypot(*u[self._top, :2].mean(axis=0))))
         on = self.model._load(g).reshape(-1, 6)[:, :2] + extra.reshape(-1, 6)[:, :2]
-        if not self.held.all():
-            from .dynamics import grounded_bodies_of
-
-            on = on[grounded_bodies_of(self.model, self.held)]
+        if held_bodies is not None:
+            on = on[held_bodies]
         h["base_shear_n"].append(float(np.hypot(*on.sum(axis=0))))
         h["first_mode"].append(float(self._phi1 @ self.elastic.u))
 
@@ -1066,6 +1076,7 @@ class CrackTracker:
             closed = None
             extra = None
             start = None
+            held_bodies = None  # the bodies held joints tie to the ground, once some joint is let go
             if self.elastic is not None:
                 before = self.elastic.u.copy()
                 self.elastic.advance(time_s, g)
@@ -1075,13 +1086,12 @@ class CrackTracker:
                     start = self.model.motion + (self.elastic.u - before)
                 if not self.held.all():
                     # a piece Bullet has set free moves as Bullet says: no vibration's forces on it
-                    from .dynamics import grounded_bodies_of
-
-                    extra.reshape(-1, 6)[~grounded_bodies_of(self.model, self.held)] = 0.0
+                    held_bodies = self.model.grounded(self.held)
+                    extra.reshape(-1, 6)[~held_bodies] = 0.0
             if self.elastic is not None and self.intact.all() and self.model.n_all == self.model.nj:
                 # while nothing has cracked the joints' forces are the vibration's: K u
                 state = self.model.state(self.elastic.u)
-                self._record(time_s, g, extra)
+                self._record(time_s, g, extra, held_bodies)
                 self.max_utilisation = float(state.utilisation.max())
                 if self.max_utilisation <= 1.0:
                     return np.zeros(0, dtype=np.int64)
@@ -1104,7 +1114,7 @@ class CrackTracker:
             )
             self.intact[new] = False
             if self.elastic is not None:
-                self._record(time_s, g, extra)
+                self._record(time_s, g, extra, held_bodies)
             self.break_time_s[new] = float(time_s) - self.t0
             self.break_mode[new] = modes
             self.max_utilisation = float(np.where(self.intact, state.utilisation, 0.0).max(initial=0.0))

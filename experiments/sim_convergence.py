@@ -6,8 +6,9 @@ For each model and setting it prints
 * gravity alone (``--gravity-s``, default 20 s): joints cracked, the largest brick displacement;
 * a quake sweep (PGA 0.05 to 0.6 g in steps of 0.05, Kanai-Tajimi, two components, per seed):
   joints cracked, bricks set free (no joint Bullet still holds ties them to the plate: the joint
-  model's decision) and bricks moved at every PGA run, and the collapse PGA (the lowest PGA at which
-  more than half of the bricks move). The sweep climbs the PGAs and stops at the first collapse:
+  model's decision) and bricks moved at every PGA run (the verdict's: the freed pieces moved as
+  rigid bodies, simulation/pieces.py; Bullet's animation's beside it), and the collapse PGA (the
+  lowest PGA at which more than half of the bricks move). The sweep climbs the PGAs and stops at the first collapse:
   the collapse PGA is all a higher PGA could add.
 
 Then the collapse PGA of every seed at every setting, and its largest change from the default.
@@ -17,6 +18,8 @@ instead of letting it vibrate (simulation/dynamics.py).
 
     .venv/bin/python experiments/sim_convergence.py                      # everything (hours on 2 cores)
     .venv/bin/python experiments/sim_convergence.py --models paper_example --seeds 0 --pga 0.2 0.3 0.4
+    .venv/bin/python experiments/sim_convergence.py --models stylite --settings default "2x fps" \
+        --without-bullet --gravity-s 0        # the frame rate's effect on the verdict, without Bullet
 
 Each model is built into a temporary folder from data_synthetic/<model>/structure.toml, or from
 any structure file given by its path (``--models path/to/structure.toml``: a structure never used
@@ -38,7 +41,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from calib_masonry.pipeline import build_to_folder  # noqa: E402
-from calib_masonry.simulation.blender import run  # noqa: E402
+from calib_masonry.simulation.blender import _gravity_per_frame, run  # noqa: E402
+from calib_masonry.simulation.joints import CrackTracker  # noqa: E402
+from calib_masonry.simulation.pieces import piece_motion  # noqa: E402
 from calib_masonry.simulation.results import metrics  # noqa: E402
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model  # noqa: E402
 from calib_masonry.simulation.scene import SolverSettings, grounded_bodies  # noqa: E402
@@ -75,7 +80,38 @@ def one_run(model: Path, solver: SolverSettings, pga: float, seed: int, duration
         "freed": float(freed),
         "cracked": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
         "moved": float(m.moved_fraction[-1]),
+        "bullet_moved": float(metrics(scene, out, bullet=True).moved_fraction[-1]),
         "max_disp_mm": float(np.linalg.norm(out.positions[w:] - out.positions[w], axis=2).max() * 1000),
+        "seconds": time.perf_counter() - t,
+    }
+
+
+def verdict_without_bullet(model: Path, solver: SolverSettings, pga: float, seed: int, duration: float) -> dict:
+    """The verdict of a quake run from the joint model and the freed pieces alone, Bullet left out:
+    the same cracks, releases and pieces' motion as :func:`one_run` wherever the joint model reads
+    no pose (every body on a joint: the tracker's ``reads_poses`` False), in a third of the time."""
+    scene = scene_for_model(
+        model, SimulationConfig(pga_g=pga, duration_s=duration, seed=seed, solver=solver, figures=False)
+    )
+    t = time.perf_counter()
+    g = _gravity_per_frame(scene)
+    x = np.array([b.location for b in scene.bodies])
+    R = np.repeat(np.eye(3)[None], len(x), axis=0)
+    warm = solver.warmup_frames
+    tracker = CrackTracker(scene, x, R, np.zeros(3), warm / solver.fps)
+    if tracker.reads_poses:
+        raise SystemExit(f"{model}: some body stands on the plate without a joint; run it with Bullet")
+    for f in range(warm + 1, len(g)):
+        tracker.step((f - 1) / solver.fps, g[f], x, R, np.zeros(3))
+    times = (np.arange(warm, len(g)) - warm) / solver.fps
+    pm = piece_motion(scene, tracker.release_time_s, times, velocity=tracker.free_velocity, model=tracker.model)
+    moved = (pm.distance_m() > solver.moved_threshold_m).mean(axis=1)
+    held = ~np.isfinite(tracker.release_time_s)
+    return {
+        "freed": float(1.0 - grounded_bodies(scene.bonds, len(scene.bodies), held).mean()),
+        "cracked": float(np.isfinite(tracker.break_time_s).mean()),
+        "moved": float(moved[-1]),
+        "bullet_moved": float("nan"),
         "seconds": time.perf_counter() - t,
     }
 
@@ -93,6 +129,11 @@ def main() -> None:
         "--quasi-static",
         action="store_true",
         help="hold the intact structure rigid under the quake (simulate --quasi-static) instead of letting it vibrate",
+    )
+    p.add_argument(
+        "--without-bullet",
+        action="store_true",
+        help="the verdict from the joint model and the rigid pieces alone (verdict_without_bullet): for the fps setting",
     )
     p.add_argument("--pga", nargs="+", type=float, default=[round(0.05 * k, 2) for k in range(1, 13)])
     p.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2], help="none: gravity only")
@@ -119,10 +160,13 @@ def main() -> None:
                 for seed in args.seeds:
                     collapse[(name, setting, seed)] = None
                     for pga in sorted(args.pga):
-                        r = one_run(model, solver, pga, seed, args.duration)
+                        r = (verdict_without_bullet if args.without_bullet else one_run)(
+                            model, solver, pga, seed, args.duration
+                        )
                         print(
                             f"{label} seed {seed} PGA {pga:4.2f} g: cracked {r['cracked']:6.1%}  set free "
-                            f"{r['freed']:6.1%}  moved {r['moved']:6.1%}  ({r['seconds']:.0f} s)",
+                            f"{r['freed']:6.1%}  moved {r['moved']:6.1%} (Bullet's {r['bullet_moved']:6.1%})  "
+                            f"({r['seconds']:.0f} s)",
                             flush=True,
                         )
                         if r["moved"] > 0.5:

@@ -48,6 +48,7 @@ import numpy as np
 from ..errors import BackendMissing, signals_deferred
 from ..progress import progress as _progress
 from .joints import CrackTracker
+from .pieces import piece_motion
 from .scene import Scene, grounded_bodies, joint_axes
 from .scene import box_mesh as _box  # the tests build their blocks with it
 
@@ -163,6 +164,9 @@ class RunOutput:
     # joint-model step after the warm-up: time_s, roof_drift_m, base_shear_n, first_mode (arrays),
     # first_period_s and damping_ratio; None for a quasi-static run
     elastic: dict | None = None
+    # the pieces the joint model set free, moved as rigid bodies to convergence (simulation/pieces.py):
+    # the verdict's motion; None where no ground motion ran with the joint model
+    pieces: object | None = None
 
 
 def _reset(bpy) -> None:
@@ -577,6 +581,17 @@ def steps(
             ahead.close()  # a pushover that has run away, an error, a signal: no check runs on after the run
     seconds_stepping = time.perf_counter() - t1
     mats, plate_pos, utilisation = mats[:n], plate_pos[:n], utilisation[:n]
+    pieces = None
+    if record and tracker is not None and scene.motion is not None:
+        # the verdict's motion of what the joints set free: rigid pieces, converged (not Bullet's)
+        pieces = piece_motion(
+            scene,
+            tracker.release_time_s,
+            (np.arange(warm, n) - warm) / s.fps,
+            velocity=tracker.free_velocity,
+            model=tracker.model,
+            progress=progress if np.isfinite(tracker.release_time_s).any() else False,
+        )
     if not record:
         grab(0)  # the final state only
     if blend_path is not None:
@@ -610,6 +625,7 @@ def steps(
         max_utilisation=utilisation if record else None,
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
+        pieces=pieces,
     )
 
 

@@ -1009,6 +1009,9 @@ class CrackTracker:
         self.max_utilisation = 0.0
         self.seconds = 0.0
         self._unit = None
+        # each body's elastic velocity (B, 6) when joints were let go, by release time since t0: the
+        # pieces set free then start with it (simulation/pieces.py)
+        self.free_velocity: dict[float, np.ndarray] = {}
         # the elastic vibration of what the intact joints hold, under a ground motion (dynamics.py)
         self.elastic = None
         self.history: dict[str, list[float]] = {"time_s": [], "roof_drift_m": [], "base_shear_n": [], "first_mode": []}
@@ -1124,6 +1127,8 @@ class CrackTracker:
                 self.held[release] = False
                 self.release_time_s[release] = float(time_s) - self.t0
                 self.model.forget(release)
+                if self.elastic is not None:
+                    self.free_velocity[float(time_s) - self.t0] = self.elastic.v.reshape(-1, 6).copy()
             return release
         finally:
             self.seconds += time.perf_counter() - t

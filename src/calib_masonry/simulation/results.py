@@ -77,10 +77,18 @@ def outcome(moved_fraction: float) -> str:
     return "collapsed" if moved_fraction >= 0.5 else "damaged" if moved_fraction > 0.01 else "standing"
 
 
-def metrics(scene: Scene, out: RunOutput) -> Metrics:
+def metrics(scene: Scene, out: RunOutput, *, bullet: bool = False) -> Metrics:
+    """The run's metrics from the bricks' motion: under a ground motion with the joint model, the
+    motion of the pieces it set free moved as rigid bodies to convergence (``out.pieces``,
+    simulation/pieces.py), not Bullet's, whose freed pieces move as far as its iterative solve of
+    their joints converges; ``bullet=True`` reads Bullet's (the animation's) instead."""
     s = scene.solver
     start = min(s.warmup_frames, len(out.time) - 1)
-    rel = out.positions - out.positions[start] - (out.plate - out.plate[start])[:, None, :]
+    if getattr(out, "pieces", None) is not None and not bullet:
+        rel = np.zeros(out.positions.shape)
+        rel[start:] = out.pieces.displacement_m[: len(out.time) - start]
+    else:
+        rel = out.positions - out.positions[start] - (out.plate - out.plate[start])[:, None, :]
     dist = np.linalg.norm(rel, axis=2)
     dist[:start] = 0.0
     moved = (dist > s.moved_threshold_m).mean(axis=1)

@@ -375,6 +375,26 @@ def model_material(model_dir: str | Path, given: Material | None = None) -> tupl
     return MASONRY, "defaults (calib_masonry.simulation.scene.Material)"
 
 
+def _pieces_summary(scene: Scene, out) -> dict | None:
+    """How the freed pieces were moved for the verdict (simulation/pieces.py), and how many bricks
+    Bullet's animation moved beside it."""
+    p = out.pieces
+    if p is None:
+        return None
+    from .results import metrics
+
+    bullet = metrics(scene, out, bullet=True)
+    return {
+        "motion": "rigid pieces on their contacts, explicit step 1/20 of the shortest contact period",
+        "count": int(p.pieces),
+        "fallen_fraction": float(p.fallen.mean()) if len(p.fallen) else 0.0,
+        "step_s": float(p.dt_s) if np.isfinite(p.dt_s) else None,
+        "steps": int(p.steps),
+        "seconds": round(float(p.seconds), 3),
+        "bullet_moved_fraction_final": float(bullet.moved_fraction[-1]),
+    }
+
+
 def _dynamics_summary(scene: Scene, out) -> dict:
     """The elastic vibration of a run (see simulation/dynamics.py), or why there was none."""
     el = out.elastic
@@ -503,8 +523,10 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
         "outcome": outcome(float(m.moved_fraction[-1])),
         # the bricks the joint model cut off from the ground (no joint Bullet still holds ties them
         # to the plate): its decision, the same whatever Bullet's settings; how far they then move
-        # (moved_fraction_final, outcome) is Bullet's
+        # (moved_fraction_final, outcome) is the rigid pieces' motion ("pieces" below), Bullet's
+        # only without a ground motion
         "set_free_fraction": _set_free_fraction(scene, out),
+        "pieces": _pieces_summary(scene, out),
         # rocking, sliding or stepped (diagonal) cracking, from the joints' motion where the
         # collapse began (None: nothing ran away); see calib_masonry.simulation.results.mechanism
         "mechanism": mechanism(scene, out, m),

@@ -1,0 +1,489 @@
+"""The pieces a ground motion sets free, as rigid bodies on their contacts, integrated to convergence.
+
+Why this module exists. Once the joint model lets go of the cracked joints under a piece of the
+structure (simulation/joints.py), Bullet moves the piece: its bodies turn dynamic and the held
+joints among them become Bullet's rigid constraints. A piece of hundreds of bricks is then held
+together only as far as Bullet's iterative solve converges, and how far it rocks or slides, and so
+whether the structure counts as collapsed, changed with the solver's substeps and iterations (the
+Stylite tower: a collapse PGA of 0.35 g at the defaults, 0.20 g at twice the substeps or the
+iterations; docs/dynamics.md). The joint model never cracks a joint inside a piece once it is free,
+so such a piece *is* one rigid body; this module moves it as one.
+
+The model (small strains, finite motion):
+
+* A piece is a connected set of free bodies (no chain of held joints ties them to the ground), the
+  held joints between them its internal ones: one rigid body with the summed mass, the inertia
+  tensor about its centroid (the bodies' own plus the parallel-axis terms) and a rigid transform
+  ``x -> R (x - c) + c + d`` from its place when the run began.
+* It bears on the rest of the structure, on the plate and on other pieces at the outline corners of
+  the joints the joint model let go (and, for bodies standing on the plate without a joint, of
+  their footprint), with the joint model's corner springs (each corner its share of the joint's
+  area times the joint's normal and shear stiffness, units and mortar in series): no tension,
+  Coulomb friction with the material's coefficient (an elastic-plastic tangential spring whose slip
+  is kept), and a dashpot at ``contact_damping`` of critical on each spring against the piece's
+  mass (default 1: an impact does not rebound, as in Housner's rocking block; the energy a
+  rocking piece then loses per impact follows from its geometry, not from this number).
+* The rest of the structure (held by its joints) is rigid and moves with the ground: its elastic
+  vibration is not felt by the pieces resting on it (it is small against the motions that decide a
+  collapse: a few millimetres at the roof).
+* Loads: gravity and the ground's inertial force ``-m a_g(t)`` (the ground motion's mean
+  acceleration over each step). A piece set free starts with the momentum and angular momentum of
+  its bodies' elastic vibration at that moment (zero for a quasi-static run).
+* Symplectic Euler with a step of ``1 / steps_per_period`` of the shortest period of any piece on
+  its contact springs (all closed), so the step follows from the structure, not from Bullet's
+  settings. A piece whose any body has moved ``fallen_m`` has fallen: it is no longer integrated
+  (its bodies count as moved), and its contacts with other pieces are dropped.
+
+The displacement of every body's centroid at every frame is what the run's verdict reads (bricks
+moved, collapse time; simulation/results.py); Bullet's own motion of the freed pieces is the
+animation, its count of bricks moved reported beside the verdict.
+
+Units: metres, kilograms, seconds, radians.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ..errors import InputError
+from ..progress import progress as _progress
+from .scene import Scene
+
+__all__ = ["PieceSettings", "PieceMotion", "piece_motion", "rigid_velocity"]
+
+
+@dataclass(frozen=True)
+class PieceSettings:
+    """How the freed pieces are integrated (see the module docstring)."""
+
+    steps_per_period: float = 20.0  # explicit steps per shortest contact period
+    contact_damping: float = 1.0  # of critical, on every contact spring (1: an impact does not rebound)
+    stiffness_factor: float = 1.0  # times the contacts' stiffness (a convergence check doubles it)
+    # the contacts' stiffness is at most that which the piece's weight compresses by this fraction of
+    # its size: a penalty, stiff enough that rocking and sliding do not feel it (measured: the
+    # verdict does not change at a fifth of it, tests/test_pieces.py), and it keeps the explicit
+    # step to about a millisecond instead of the joints' ~20 microseconds
+    settle_fraction: float = 1e-4
+    fallen_m: float = 0.5  # a piece that has moved this far (any body) has fallen
+
+    def __post_init__(self) -> None:
+        if not self.steps_per_period >= 4.0:
+            raise InputError(f"piece steps_per_period {self.steps_per_period}: at least 4 (default 20)")
+        if not 0.0 <= self.contact_damping <= 2.0:
+            raise InputError(f"piece contact_damping {self.contact_damping}: a ratio of critical in [0, 2] (default 1)")
+        if not self.stiffness_factor > 0.0 or not self.fallen_m > 0.0 or not self.settle_fraction > 0.0:
+            raise InputError("piece stiffness_factor, settle_fraction and fallen_m must be > 0")
+
+
+@dataclass(frozen=True)
+class PieceMotion:
+    """The freed pieces' motion at the asked times: ``displacement_m`` ``(T, B, 3)`` of every body's
+    centroid from its place (0 for a body the joints hold; float32), ``pieces`` how many pieces
+    there were at the end, ``fallen`` ``(B,)`` the bodies of pieces that fell, ``dt_s`` the (last)
+    step, ``steps`` how many were taken and ``seconds`` the wall time."""
+
+    time_s: np.ndarray
+    displacement_m: np.ndarray
+    pieces: int
+    fallen: np.ndarray
+    dt_s: float
+    steps: int
+    seconds: float = 0.0
+
+    def distance_m(self) -> np.ndarray:
+        """``(T, B)`` every body's displacement's length."""
+        return np.linalg.norm(self.displacement_m.astype(np.float64), axis=2)
+
+
+def _skew(w: np.ndarray) -> np.ndarray:
+    out = np.zeros(w.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -w[..., 2], w[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = w[..., 2], -w[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -w[..., 1], w[..., 0]
+    return out
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of ``(n, 3)`` arrays (numpy's ``cross`` costs ten times more on small ones)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
+def _rotate(R: np.ndarray, w: np.ndarray, exact: bool = True) -> np.ndarray:
+    """``exp(skew(w)) R`` per piece (Rodrigues), re-orthonormalised if ``exact``."""
+    th = np.linalg.norm(w, axis=1)
+    small = th < 1e-12
+    k = np.where(small[:, None], 0.0, w / np.where(small, 1.0, th)[:, None])
+    K = _skew(k)
+    s, c = np.sin(th)[:, None, None], (1.0 - np.cos(th))[:, None, None]
+    E = np.eye(3) + s * K + c * (K @ K)
+    out = E @ R
+    if not exact:
+        return out
+    u, _, vt = np.linalg.svd(out)
+    return u @ vt
+
+
+def rigid_velocity(mass: np.ndarray, inertia: np.ndarray, x: np.ndarray, velocity: np.ndarray):
+    """The velocity ``(v, omega)`` of one rigid body made of bodies of ``mass`` (n,), inertia
+    tensors ``(n, 3, 3)`` about centroids ``x`` (n, 3), moving at ``velocity`` (n, 6) (centroid
+    velocity, angular velocity): the one with their momentum and angular momentum."""
+    M = mass.sum()
+    c = (mass[:, None] * x).sum(axis=0) / M
+    v = (mass[:, None] * velocity[:, :3]).sum(axis=0) / M
+    r = x - c
+    rr = (r * r).sum(axis=1)[:, None, None] * np.eye(3) - r[:, :, None] * r[:, None, :]
+    inertia_c = inertia.sum(axis=0) + (mass[:, None, None] * rr).sum(axis=0)
+    L = np.einsum("nij,nj->i", inertia, velocity[:, 3:]) + (mass[:, None] * np.cross(r, velocity[:, :3] - v)).sum(
+        axis=0
+    )
+    return v, np.linalg.solve(inertia_c, L), c, inertia_c
+
+
+class _Pieces:
+    """The integrator's state: pieces, their contacts and the corners' slip."""
+
+    def __init__(self, scene: Scene, model, inertia: np.ndarray, settings: PieceSettings) -> None:
+        self.settings = settings
+        self.model = model
+        self.mass = model.mass
+        self.x = model.x
+        self.inertia = inertia
+        self.gravity = float(scene.gravity)
+        self.friction = float(scene.material.friction)
+        self.body_size = np.array([np.cbrt(max(b.volume, 1e-9)) for b in scene.bodies])
+        nb = model.nb
+        self.piece_of = np.full(nb, -1)
+        self.n = 0
+        # per piece: reference centroid c, displacement d, rotation R, velocity v, angular velocity w
+        self.c = np.zeros((0, 3))
+        self.d = np.zeros((0, 3))
+        self.R = np.zeros((0, 3, 3))
+        self.v = np.zeros((0, 3))
+        self.w = np.zeros((0, 3))
+        self.M = np.zeros(0)
+        self.I0 = np.zeros((0, 3, 3))
+        self.alive = np.zeros(0, dtype=bool)
+        self.fallen = np.zeros(nb, dtype=bool)
+        self.final = np.zeros((nb, 3))  # displacement of the bodies of fallen pieces when they fell
+        K = model.outline.shape[1] if model.n_all else 0
+        self.slip = np.zeros((model.n_all, K, 2))
+        self.points = model.corner_points() if model.n_all else np.zeros((0, K, 3))
+        k = model._corner_k * settings.stiffness_factor if model.n_all else np.zeros((0, K, 3))
+        self.k = k
+
+    # ---------------------------------------------------------------- pieces
+    def regroup(self, free: np.ndarray, held: np.ndarray, velocity: np.ndarray | None) -> None:
+        """Make the pieces of the ``free`` bodies (B,) joined by ``held`` joints (nj,): a piece
+        splits with its parent's transform; bodies newly free start at rest where they are, with
+        the momentum of ``velocity`` (B, 6) if given."""
+        m = self.model
+        nb = m.nb
+        keep = held & free[m.a[: m.nj]] & (m.b[: m.nj] >= 0)
+        keep &= free[np.where(m.b[: m.nj] >= 0, m.b[: m.nj], 0)]
+        a, b = m.a[: m.nj][keep], m.b[: m.nj][keep]
+        graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(nb, nb))
+        _, label = connected_components(graph, directed=False)
+        ids = np.flatnonzero(free)
+        groups = {}
+        for j in ids:
+            groups.setdefault(int(label[j]), []).append(int(j))
+        old = (self.c, self.d, self.R, self.v, self.w, self.alive)
+        old_of = self.piece_of.copy()
+        c, d, R, v, w, M, I0, alive, size = [], [], [], [], [], [], [], [], []
+        piece_of = np.full(nb, -1)
+        for members in groups.values():
+            idx = np.array(members)
+            if self.fallen[idx].any():
+                continue  # a fallen piece stays where it fell (its bodies already counted)
+            vel = np.zeros((len(idx), 6)) if velocity is None else velocity[idx]
+            vi, wi, ci, Ii = rigid_velocity(self.mass[idx], self.inertia[idx], self.x[idx], vel)
+            parents = old_of[idx]
+            p = parents[0]
+            if p >= 0 and (parents == p).all():
+                # a part of a piece already moving: the same transform and velocity field
+                pc, pd, pR, pv, pw, _ = (o[p] for o in old)
+                di = pR @ (ci - pc) + pc + pd - ci
+                vi = pv + np.cross(pw, pR @ (ci - pc))
+                wi = pw
+                Ri = pR
+            else:
+                di, Ri = np.zeros(3), np.eye(3)
+            piece_of[idx] = len(c)
+            c.append(ci), d.append(di), R.append(Ri), v.append(vi), w.append(wi)
+            M.append(self.mass[idx].sum()), I0.append(Ii), alive.append(True)
+            size.append(float(np.ptp(self.x[idx], axis=0).max() + self.body_size[idx].mean()))
+        self.n = len(c)
+        self.piece_of = piece_of
+        self.c = np.array(c).reshape(-1, 3)
+        self.d = np.array(d).reshape(-1, 3)
+        self.R = np.array(R).reshape(-1, 3, 3)
+        self.v = np.array(v).reshape(-1, 3)
+        self.w = np.array(w).reshape(-1, 3)
+        self.M = np.array(M)
+        self.I0 = np.array(I0).reshape(-1, 3, 3)
+        self.alive = np.array(alive, dtype=bool)
+        self.size = np.array(size)
+        self._contacts(held)
+
+    def _contacts(self, held: np.ndarray) -> None:
+        """The contact corners: of the joints let go (and the plate contacts) between a piece and
+        anything else."""
+        m = self.model
+        if m.n_all == 0 or self.n == 0:
+            self.cj = self.ck = np.zeros(0, dtype=int)
+            self.pa = self.pb = np.zeros(0, dtype=int)
+            return
+        let_go = np.ones(m.n_all, dtype=bool)
+        let_go[: m.nj] = ~held
+        pa = self.piece_of[m.a]
+        pb = np.where(m.b >= 0, self.piece_of[np.maximum(m.b, 0)], -1)
+        use = let_go & (pa != pb) & ((pa >= 0) | (pb >= 0))
+        jc, kc = np.nonzero(use[:, None] & m.corner_mask)
+        self.cj, self.ck = jc, kc
+        self.pa, self.pb = pa[jc], pb[jc]
+        self.frame = m.R[jc]  # (C, 3, 3) columns u, v, n
+        self.p = self.points[jc, kc]
+        kc_ = self.k[jc, kc]
+        # the penalty: no stiffer than the weight compressing the contacts by settle_fraction of the size
+        factor = np.ones(self.n)
+        for i in range(self.n):
+            on = (self.pa == i) | (self.pb == i)
+            total = float(kc_[on, 2].sum())
+            if total > 0:
+                cap = self.M[i] * self.gravity / (self.settings.settle_fraction * self.size[i])
+                factor[i] = min(1.0, cap / total)
+        f = np.minimum(
+            np.where(self.pa >= 0, factor[np.maximum(self.pa, 0)], 1.0),
+            np.where(self.pb >= 0, factor[np.maximum(self.pb, 0)], 1.0),
+        )
+        self.kc = kc_ * f[:, None]
+        self._prepare()
+
+    def step_size(self) -> float:
+        """``1 / steps_per_period`` of the shortest period of a piece on its contacts, all closed."""
+        shortest = np.inf
+        for i in range(self.n):
+            on = (self.pa == i) | (self.pb == i)
+            if not on.any():
+                continue
+            r = self.p[on] - (self.c[i] + self.d[i])
+            K = np.zeros((6, 6))
+            for col in range(3):
+                kk = self.kc[on, col]
+                e = self.frame[on, :, col]  # (C, 3) the spring's direction
+                J = np.concatenate([e, np.cross(r, e)], axis=1)  # (C, 6): d(e . x)/d(d, theta)
+                K += (J * kk[:, None]).T @ J
+            Mi = np.zeros((6, 6))
+            Mi[:3, :3] = self.M[i] * np.eye(3)
+            Mi[3:, 3:] = self.R[i] @ self.I0[i] @ self.R[i].T
+            L = np.linalg.cholesky(Mi)
+            Li = np.linalg.inv(L)
+            top = float(np.linalg.eigvalsh(Li @ K @ Li.T).max())
+            if top > 0:
+                w = np.sqrt(top)
+                # the explicit step's stability with stiffness-proportional damping (beta = 2 zeta / omega_0)
+                zeta = self.settings.contact_damping * w * np.sqrt(self.M[i] / max(float(self.kc[on, 2].sum()), 1e-30))
+                stable = 2.0 / w * (np.sqrt(1.0 + zeta**2) - zeta)
+                shortest = min(shortest, 2.0 * np.pi / w / self.settings.steps_per_period, 0.5 * stable)
+        return shortest
+
+    # ---------------------------------------------------------------- motion
+    def _prepare(self) -> None:
+        """Per contact set: the sides as indices into the pieces with the still ground appended
+        (index ``n``), the maps summing corner forces onto pieces, each corner's dashpot."""
+        n = self.n
+        self.sa = np.where(self.pa >= 0, self.pa, n)
+        self.sb = np.where(self.pb >= 0, self.pb, n)
+        C = len(self.cj)
+        cols = np.arange(C)
+        self.Sa = csr_matrix((np.ones(C), (self.sa, cols)), shape=(n + 1, C))
+        self.Sb = csr_matrix((np.ones(C), (self.sb, cols)), shape=(n + 1, C))
+        # the dashpot: contact_damping of critical against the lighter side's translation on all its
+        # closed normal springs (stiffness-proportional: c = 2 zeta k sqrt(M / K))
+        tot = np.asarray(self.Sa @ self.kc[:, 2] + self.Sb @ self.kc[:, 2]).ravel()[:n]
+        Mg = np.concatenate([self.M, [np.inf]])
+        lighter = np.where(Mg[self.sa] <= Mg[self.sb], self.sa, self.sb)
+        beta = 2.0 * self.settings.contact_damping * np.sqrt(self.M[lighter] / np.maximum(tot[lighter], 1e-30))
+        self.cdamp = self.kc * beta[:, None]
+        self.fn = self.frame[:, :, 2].copy()
+        self.fu = self.frame[:, :, 0].copy()
+        self.fv = self.frame[:, :, 1].copy()
+        self.I0inv = np.linalg.inv(self.I0) if n else np.zeros((0, 3, 3))
+        self._count = 0
+
+    def advance(self, g: np.ndarray, dt: float) -> None:
+        """One step of ``dt`` under the load ``g`` (3,) per unit mass."""
+        n = self.n
+        if n == 0:
+            return
+        F = self.M[:, None] * g[None, :]
+        T = np.zeros((n, 3))
+        if len(self.cj):
+            z = np.zeros((1, 3))
+            R = np.concatenate([self.R, np.eye(3)[None]])
+            c = np.concatenate([self.c, z])
+            cd = c + np.concatenate([self.d, z])
+            v = np.concatenate([self.v, z])
+            w = np.concatenate([self.w, z])
+            ra = np.einsum("cij,cj->ci", R[self.sa], self.p - c[self.sa])
+            rb = np.einsum("cij,cj->ci", R[self.sb], self.p - c[self.sb])
+            gap = (rb + cd[self.sb]) - (ra + cd[self.sa])  # b against a
+            vel = (v[self.sb] + _cross(w[self.sb], rb)) - (v[self.sa] + _cross(w[self.sa], ra))
+            fu, fv, fn = self.fu, self.fv, self.fn
+            du = np.stack([(gap * fu).sum(1), (gap * fv).sum(1)], axis=1)
+            dn = (gap * fn).sum(1)
+            vu = np.stack([(vel * fu).sum(1), (vel * fv).sum(1)], axis=1)
+            vn = (vel * fn).sum(1)
+            k, cdamp = self.kc, self.cdamp
+            closed = dn < 0.0
+            N = np.maximum(np.where(closed, -k[:, 2] * dn - cdamp[:, 2] * vn, 0.0), 0.0)
+            s = self.slip[self.cj, self.ck]
+            # the tangential spring and dashpot, capped at Coulomb's limit mu N; where it is reached,
+            # the spring's slip is kept so that it carries that force; an open corner sticks again
+            # where it next touches
+            trial = -k[:, :2] * (du - s) - cdamp[:, :2] * vu
+            limit = self.friction * N
+            size = np.sqrt((trial**2).sum(1))
+            over = size > limit
+            Tt = trial * np.where(over, limit / np.maximum(size, 1e-300), 1.0)[:, None]
+            s = np.where(over[:, None], du + Tt / np.maximum(k[:, :2], 1e-300), s)
+            s = np.where(closed[:, None], s, du)
+            self.slip[self.cj, self.ck] = s
+            Tt = Tt * closed[:, None]
+            fb = fn * N[:, None] + fu * Tt[:, :1] + fv * Tt[:, 1:]  # on side b; -fb on side a
+            F += (self.Sb @ fb - self.Sa @ fb)[:n]
+            T += (self.Sb @ _cross(rb, fb) - self.Sa @ _cross(ra, fb))[:n]
+        live = self.alive
+        Rt = np.transpose(self.R, (0, 2, 1))
+        Iw = self.R @ self.I0 @ Rt
+        Iinv = self.R @ self.I0inv @ Rt
+        gyro = _cross(self.w, np.einsum("nij,nj->ni", Iw, self.w))
+        dw = np.einsum("nij,nj->ni", Iinv, T - gyro)
+        self.v[live] += dt * F[live] / self.M[live, None]
+        self.w[live] += dt * dw[live]
+        self.d[live] += dt * self.v[live]
+        self._count += 1
+        self.R[live] = _rotate(self.R[live], dt * self.w[live], exact=self._count % 64 == 0)
+
+    def displacement(self) -> np.ndarray:
+        """(B, 3) every body's centroid displacement (fallen ones as they fell)."""
+        out = self.final.copy()
+        on = self.piece_of >= 0
+        if on.any():
+            i = self.piece_of[on]
+            x = self.x[on]
+            out[on] = np.einsum("nij,nj->ni", self.R[i], x - self.c[i]) + self.c[i] + self.d[i] - x
+        return out
+
+    def check_fallen(self) -> bool:
+        """Stop the pieces that have fallen; True if any did (their contacts are dropped)."""
+        disp = self.displacement()
+        dist = np.linalg.norm(disp, axis=1)
+        gone = False
+        for i in np.flatnonzero(self.alive):
+            idx = self.piece_of == i
+            if dist[idx].max() > self.settings.fallen_m:
+                self.alive[i] = False
+                self.fallen[idx] = True
+                self.final[idx] = disp[idx]
+                self.v[i] = self.w[i] = 0.0
+                gone = True
+        if gone:
+            keep = ((self.pa < 0) | self.alive[np.maximum(self.pa, 0)]) & (
+                (self.pb < 0) | self.alive[np.maximum(self.pb, 0)]
+            )
+            for name in ("cj", "ck", "pa", "pb", "frame", "p", "kc"):
+                setattr(self, name, getattr(self, name)[keep])
+            self._prepare()
+        return gone
+
+
+def piece_motion(
+    scene: Scene,
+    release_time_s: np.ndarray,
+    times_s: np.ndarray,
+    *,
+    velocity: dict[float, np.ndarray] | None = None,
+    model=None,
+    settings: PieceSettings | None = None,
+    progress: bool | None = False,
+) -> PieceMotion:
+    """The freed pieces' motion (module docstring) at ``times_s`` (T,), seconds since the ground
+    began to move, given when the joint model let each joint go (``release_time_s`` (nj,), NaN
+    for never; a joint let go at ``t`` is let go before the step from ``t``). ``velocity`` maps
+    a release time to every body's elastic velocity (B, 6) at it (None: pieces start from rest).
+    ``model``: the run's :class:`~calib_masonry.simulation.joints.JointModel` (else built);
+    ``progress`` as :func:`calib_masonry.progress.progress`."""
+    from .dynamics import body_inertia
+    from .joints import JointModel
+
+    settings = settings if settings is not None else PieceSettings()
+    if model is None:
+        model = JointModel(scene, contact_gap_m=scene.solver.contact_gap_m)
+    clock = time.perf_counter()
+    times_s = np.asarray(times_s, dtype=np.float64)
+    nb = model.nb
+    out = np.zeros((len(times_s), nb, 3), dtype=np.float32)
+    release = np.asarray(release_time_s, dtype=np.float64)
+    if nb == 0 or len(times_s) == 0:
+        return PieceMotion(times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0)
+    release = np.where(release <= times_s[-1], release, np.nan)  # let go after the last time asked: no matter
+    inertia = np.array([body_inertia(b) for b in scene.bodies])
+    state = _Pieces(scene, model, inertia, settings)
+    events = np.unique(release[np.isfinite(release)])
+    start_free = ~model.grounded(np.ones(model.nj, dtype=bool)) if model.nj else np.ones(nb, dtype=bool)
+    if start_free.any():
+        events = np.unique(np.concatenate([[0.0], events]))
+    if events.size == 0:
+        return PieceMotion(times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0)
+    gravity = np.array([0.0, 0.0, -scene.gravity])
+    motion = scene.motion
+    t = float(min(events[0], times_s[0]))
+    dt = np.inf
+    steps = 0
+    marks = np.unique(np.concatenate([events, times_s]))
+    marks = marks[marks >= t]
+    k_event = 0
+    k_time = 0
+    for mark in _progress(marks, desc="pieces", unit="mark", enabled=progress if state.n or events.size else False):
+        span = mark - t
+        if span > 0 and state.n and dt < np.inf:
+            n = max(1, int(np.ceil(span / dt - 1e-9)))
+            grid = t + span * np.arange(n + 1) / n
+            if motion is not None:
+                a = motion.mean_acceleration(grid)  # (n, 2)
+            else:
+                a = np.zeros((n, 2))
+            h = span / n
+            for q in range(n):
+                g = gravity.copy()
+                g[:2] -= a[q]
+                state.advance(g, h)
+                if (q & 63) == 63:
+                    state.check_fallen()
+            state.check_fallen()
+            steps += n
+        t = mark
+        while k_event < len(events) and events[k_event] <= t + 1e-12:
+            held = ~(release <= events[k_event] + 1e-12)
+            free = ~model.grounded(held) if model.nj else np.ones(nb, dtype=bool)
+            vel = velocity.get(float(events[k_event])) if velocity else None
+            state.regroup(free, held, vel)
+            dt = state.step_size()
+            k_event += 1
+        while k_time < len(times_s) and times_s[k_time] <= t + 1e-12:
+            out[k_time] = state.displacement()
+            k_time += 1
+    while k_time < len(times_s):
+        out[k_time] = state.displacement()
+        k_time += 1
+    return PieceMotion(times_s, out, int(state.n), state.fallen.copy(), float(dt), steps, time.perf_counter() - clock)

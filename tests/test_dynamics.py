@@ -131,12 +131,19 @@ def _cracks(sc, amplitude_g, f, rate=50.0):
     """Whether a harmonic base acceleration of this amplitude (along y, a sin^2 ramp then steady)
     cracks a joint of the column."""
     x = np.array([b.location for b in sc.bodies])
-    tr = CrackTracker(sc, x, np.repeat(np.eye(3)[None], len(x), 0), np.zeros(3), 0.0)
     ramp = max(3 / f, 3.0)
-    for k in range(int((ramp + 4 / f + 10.0) * rate) + 1):
-        t = k / rate
-        a = amplitude_g * G * np.sin(0.5 * np.pi * min(t / ramp, 1.0)) ** 2 * np.sin(2 * np.pi * f * t)
-        tr.step(t, np.array([0.0, -a, -G]), x, None, None)
+    end = ramp + 4 / f + 10.0
+    dt = 0.002
+    t = np.arange(int(end / dt) + 2) * dt
+    a = amplitude_g * G * np.sin(0.5 * np.pi * np.minimum(t / ramp, 1.0)) ** 2 * np.sin(2 * np.pi * f * t)
+    vel = np.concatenate([[0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) * dt)])
+    disp = np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt)])
+    zero = np.zeros_like(t)
+    record = GroundMotion(dt=dt, displacement=np.column_stack([zero, disp]), acceleration=np.column_stack([zero, a]))
+    sc = replace(sc, motion=record)
+    tr = CrackTracker(sc, x, np.repeat(np.eye(3)[None], len(x), 0), np.zeros(3), 0.0)
+    for k in range(int(end * rate) + 1):
+        tr.step(k / rate, np.array([0.0, 0.0, -G]), x, None, None)  # the vibration reads the record
         if np.isfinite(tr.break_time_s).any():
             return True
     return False

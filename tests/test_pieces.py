@@ -111,3 +111,17 @@ def test_no_piece_without_a_joint_let_go():
     assert pm.pieces == 0 and pm.steps == 0
     assert not pm.displacement_m.any()
     assert math.isinf(pm.dt_s)
+
+
+def test_a_heavy_piece_on_a_light_one_does_not_sink_into_it():
+    # a block ten times denser on a light one, every joint let go on still ground: two pieces, the
+    # light one carrying the heavy one's weight to the plate; both settle under 0.2 mm (the
+    # penalty must be as stiff as the heaviest piece needs, on every contact)
+    size = (0.4, 0.4, 0.3)
+    light = _block("light", size, (0, 0, 0.15))
+    heavy = _block("heavy", size, (0, 0, 0.45), density=18000.0)
+    bonds = (Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, 0.4, 0.4), Bond.rectangle(0, 1, (0, 0, 0.3), UP, X, 0.4, 0.4))
+    sc = Scene(bodies=(light, heavy), bonds=bonds, material=DRY, motion=constant_acceleration(0.0, 1.0))
+    pm = piece_motion(sc, np.zeros(2), np.array([0.0, 1.0]))
+    assert pm.pieces == 2
+    assert np.abs(pm.displacement_m[-1]).max() < 2e-4  # a factor per piece: 1.6 mm

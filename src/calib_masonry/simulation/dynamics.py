@@ -334,10 +334,16 @@ class ElasticResponse:
         ratio: float = 0.05,
         omega: tuple[float, float],
         substeps_per_period: int = 40,
+        motion=None,
+        ground_start_s: float = 0.0,
     ) -> None:
         if not 0.0 <= ratio < 1.0:
             raise InputError(f"damping ratio {ratio}: give a fraction of critical damping in [0, 1), e.g. 0.05")
         self.model = model
+        # the ground motion itself, sampled at every step (the load between calls is then the
+        # record's, not a line between the calls' loads: independent of how often one calls)
+        self.motion = motion
+        self.ground_start_s = float(ground_start_s)
         self.M = sp.csr_matrix(mass)
         self.ratio = float(ratio)
         self.alpha, self.beta = rayleigh(ratio, *omega)
@@ -366,27 +372,46 @@ class ElasticResponse:
     def _force(self, g: np.ndarray) -> np.ndarray:
         return self.model._load(g)[self.dof]
 
-    def advance(self, time_s: float, g: np.ndarray) -> None:
-        """Integrate from the last call to ``time_s``, the load linear in time from the last call's
-        ``g`` to this one's; the first call sets the static equilibrium under ``g``."""
+    def load_at(self, time_s: float, g: np.ndarray) -> np.ndarray:
+        """The load per unit mass at ``time_s``: ``g``'s vertical with the record's ground
+        acceleration at that time (``g`` itself without a record)."""
+        g = np.asarray(g, dtype=np.float64)
+        if self.motion is None:
+            return g
+        t = float(time_s) - self.ground_start_s
+        m = self.motion
+        out = g.copy()
+        out[:2] = -np.array([np.interp(t, m.time, m.acceleration[:, k], left=0.0, right=0.0) for k in range(2)])
+        return out
+
+    def advance(self, time_s: float, g: np.ndarray, *, until=None) -> float:
+        """Integrate from the last call to ``time_s``: under the record's ground acceleration at
+        every step if there is one (``g`` then gives the vertical), else under the load linear in
+        time from the last call's ``g`` to this one's; the first call sets the static equilibrium
+        under ``g``. ``until(u)``, if given, is asked after every step and stops the integration
+        there when True. Returns the time reached."""
         g = np.asarray(g, dtype=np.float64)
         if self._g is None or not len(self.dof):
             if len(self.dof):
-                self.u[self.dof] = spla.spsolve(self.K, self._force(g))
+                self.u[self.dof] = spla.spsolve(self.K, self._force(self.load_at(time_s, g)))
             self._g, self._t = g, float(time_s)
-            return
+            return self._t
         span = float(time_s) - self._t
         if span <= 0:
             self._g = g
-            return
+            return self._t
         steps = max(1, int(np.ceil(span / self.dt_max - 1e-9)))
         dt = span / steps
         lu = self._factor(dt)
         d = self.dof
         u, v, a = self.u[d], self.v[d], self.a[d]
         M, K = self.Md, self.K
+        t_start, g_start = self._t, self._g
+        reached = float(time_s)
         for k in range(1, steps + 1):
-            f = self._force(self._g + (g - self._g) * (k / steps))
+            tk = t_start + span * (k / steps)
+            gk = self.load_at(tk, g) if self.motion is not None else g_start + (g - g_start) * (k / steps)
+            f = self._force(gk)
             mu = M @ ((4.0 / dt**2) * u + (4.0 / dt) * v + a)
             cu = (2.0 / dt) * u + v
             rhs = f + mu + self.alpha * (M @ cu) + self.beta * (K @ cu)
@@ -394,8 +419,14 @@ class ElasticResponse:
             a1 = (4.0 / dt**2) * (u1 - u) - (4.0 / dt) * v - a
             v = v + 0.5 * dt * (a + a1)
             u, a = u1, a1
+            if until is not None and k < steps:
+                self.u[d] = u
+                if until(self.u):
+                    reached = tk
+                    break
         self.u[d], self.v[d], self.a[d] = u, v, a
-        self._g, self._t = g, float(time_s)
+        self._g, self._t = (self.load_at(reached, g) if reached < time_s else g), reached
+        return reached
 
     def inertial_force(self) -> np.ndarray:
         """``-M u'' - C u'`` on every body (6 B,): zero on the bodies not in the vibration."""

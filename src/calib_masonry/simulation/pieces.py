@@ -253,19 +253,18 @@ class _Pieces:
         self.frame = m.R[jc]  # (C, 3, 3) columns u, v, n
         self.p = self.points[jc, kc]
         kc_ = self.k[jc, kc]
-        # the penalty: no stiffer than the weight compressing the contacts by settle_fraction of the size
-        factor = np.ones(self.n)
+        # the penalty: no stiffer than the heaviest piece's weight compressing its contacts by
+        # settle_fraction of its size, one factor for every contact (a light stone under a heavy
+        # piece carries the heavy one's weight: its contacts must be as stiff)
+        factor = np.zeros(self.n)
         for i in range(self.n):
             on = (self.pa == i) | (self.pb == i)
             total = float(kc_[on, 2].sum())
             if total > 0:
                 cap = self.M[i] * self.gravity / (self.settings.settle_fraction * self.size[i])
                 factor[i] = min(1.0, cap / total)
-        f = np.minimum(
-            np.where(self.pa >= 0, factor[np.maximum(self.pa, 0)], 1.0),
-            np.where(self.pb >= 0, factor[np.maximum(self.pb, 0)], 1.0),
-        )
-        self.kc = kc_ * f[:, None]
+        f = float(factor.max(initial=0.0)) or 1.0
+        self.kc = kc_ * f
         self._prepare()
 
     def step_size(self) -> float:

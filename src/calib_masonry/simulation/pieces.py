@@ -246,7 +246,9 @@ class _Pieces:
         let_go[: m.nj] = ~held
         pa = self.piece_of[m.a]
         pb = np.where(m.b >= 0, self.piece_of[np.maximum(m.b, 0)], -1)
-        use = let_go & (pa != pb) & ((pa >= 0) | (pb >= 0))
+        # a fallen piece's bodies (piece -1 now) are no ground to bear on: their contacts are gone
+        gone = self.fallen[m.a] | np.where(m.b >= 0, self.fallen[np.maximum(m.b, 0)], False)
+        use = let_go & (pa != pb) & ((pa >= 0) | (pb >= 0)) & ~gone
         jc, kc = np.nonzero(use[:, None] & m.corner_mask)
         self.cj, self.ck = jc, kc
         self.pa, self.pb = pa[jc], pb[jc]

@@ -52,6 +52,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
 from ..progress import progress as _progress
+from .joints import _skew
 from .scene import Scene
 
 __all__ = ["PieceSettings", "PieceMotion", "piece_motion", "rigid_velocity"]
@@ -98,14 +99,6 @@ class PieceMotion:
     def distance_m(self) -> np.ndarray:
         """``(T, B)`` every body's displacement's length."""
         return np.linalg.norm(self.displacement_m.astype(np.float64), axis=2)
-
-
-def _skew(w: np.ndarray) -> np.ndarray:
-    out = np.zeros(w.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -w[..., 2], w[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = w[..., 2], -w[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -w[..., 1], w[..., 0]
-    return out
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

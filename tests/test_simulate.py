@@ -249,6 +249,42 @@ def test_the_verdict_does_not_read_bullets_substeps_or_iterations():
         np.testing.assert_array_equal(m.moved_fraction, m0.moved_fraction)
 
 
+def test_the_verdict_does_not_read_the_frame_rate():
+    # the stack above under a broadband record: the joint model checks the joints on a grid of its
+    # own (SolverSettings.check_interval_s) from the ground's start, at the record's samples, and
+    # the pieces step from one release to the next, so that at 25 and at 50 frames a second the
+    # cracks, the releases, the freed pieces' motion and the verdict are the same, bit for bit
+    from calib_masonry.simulation.ground_motion import synthetic_motion
+    from calib_masonry.simulation.results import metrics
+
+    size = (0.3, 0.2, 0.15)
+    bodies = tuple(_block(size, (0, 0, 0.075 + 0.15 * k)) for k in range(6))
+    bonds = (Bond.rectangle(0, -1, (0, 0, 0.0), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2),) + tuple(
+        Bond.rectangle(k, k + 1, (0, 0, 0.15 * (k + 1)), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2) for k in range(5)
+    )
+    base = Scene(
+        bodies=bodies,
+        bonds=bonds,
+        duration_s=2.0,
+        solver=_solver(warmup=0.2),
+        material=Material(tensile_strength=2e3, shear_strength=2e3),
+        motion=synthetic_motion(0.5, 2.0, seed=3),
+    )
+    runs = []
+    for fps in (25, 50):
+        scene = replace(base, solver=replace(base.solver, fps=fps))
+        out = run(scene, progress=False)
+        runs.append((out, metrics(scene, out)))
+    (a, ma), (b, mb) = runs
+    assert np.isfinite(a.bond_release_time_s).any() and a.pieces.pieces >= 1
+    for name in ("bond_break_time_s", "bond_break_mode", "bond_release_time_s"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    # every other frame at 50 fps is a frame at 25 fps
+    np.testing.assert_array_equal(b.pieces.time_s[::2], a.pieces.time_s)
+    np.testing.assert_array_equal(b.pieces.displacement_m[::2], a.pieces.displacement_m)
+    np.testing.assert_array_equal(mb.moved_fraction[::2], ma.moved_fraction)
+
+
 def _pushover(bodies, bonds=(), rate=0.01, max_g=0.6, material=Material(), mu=0.6, direction=0.0, solver=None):
     scene = Scene(
         bodies=tuple(bodies),

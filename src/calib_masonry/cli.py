@@ -315,6 +315,7 @@ def _cmd_simulate(args) -> int:
                 ("substeps", args.substeps),
                 ("iterations", args.iterations),
                 ("damping_ratio", args.damping),
+                ("check_interval_s", args.check_interval),
             )
             if v is not None
         },
@@ -607,6 +608,13 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=None,
         help="the structure's viscous damping as a ratio of critical, Rayleigh at its first two modes (default 0.05)",
+    )
+    m.add_argument(
+        "--check-interval",
+        type=float,
+        default=None,
+        help="under a ground motion, seconds between the joint model's checks of the joints, the same at every "
+        "frame rate (default 0.01)",
     )
     m.add_argument(
         "--quasi-static",

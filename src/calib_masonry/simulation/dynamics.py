@@ -301,6 +301,17 @@ def rayleigh(ratio: float, omega_1: float, omega_2: float) -> tuple[float, float
     return 2.0 * ratio * w1 * w2 / (w1 + w2), 2.0 * ratio / (w1 + w2)
 
 
+def record_load(motion, t: float, g: np.ndarray) -> np.ndarray:
+    """The load per unit mass ``t`` seconds after the ground began to move: ``g``'s vertical with
+    the ground ``motion``'s acceleration then, reversed (``g`` itself without a motion)."""
+    g = np.asarray(g, dtype=np.float64)
+    if motion is None:
+        return g
+    out = g.copy()
+    out[:2] = -np.array([np.interp(t, motion.time, motion.acceleration[:, k], left=0.0, right=0.0) for k in range(2)])
+    return out
+
+
 class ElasticResponse:
     """The linear elastic vibration of the part of a structure that intact joints tie to the ground,
     relative to the ground, under the load ``m g(t)`` on every body (``g`` the gravity and the
@@ -378,14 +389,7 @@ class ElasticResponse:
     def load_at(self, time_s: float, g: np.ndarray) -> np.ndarray:
         """The load per unit mass at ``time_s``: ``g``'s vertical with the record's ground
         acceleration at that time (``g`` itself without a record)."""
-        g = np.asarray(g, dtype=np.float64)
-        if self.motion is None:
-            return g
-        t = float(time_s) - self.ground_start_s
-        m = self.motion
-        out = g.copy()
-        out[:2] = -np.array([np.interp(t, m.time, m.acceleration[:, k], left=0.0, right=0.0) for k in range(2)])
-        return out
+        return record_load(self.motion, float(time_s) - self.ground_start_s, g)
 
     def advance(self, time_s: float, g: np.ndarray, *, until=None) -> float:
         """Integrate from the last call to ``time_s``: under the record's ground acceleration at

@@ -129,6 +129,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import InputError
+from .dynamics import record_load
 from .scene import Bond, Material, Scene, footing_patches, joint_axes, plate_linked
 
 __all__ = [
@@ -1034,6 +1035,10 @@ class CrackTracker:
         self.free_velocity: dict[float, np.ndarray] = {}
         # the elastic vibration of what the intact joints hold, under a ground motion (dynamics.py)
         self.elastic = None
+        # under a ground motion the joints are checked on a grid common to all frame rates (step)
+        self.ground_motion = scene.motion
+        self.check_interval_s = float(scene.solver.check_interval_s)
+        self._next_check = 0
         self.history: dict[str, list[float]] = {"time_s": [], "roof_drift_m": [], "base_shear_n": [], "first_mode": []}
         if scene.motion is not None and scene.solver.dynamics and n:
             from .dynamics import ElasticResponse, mass_matrix, modes
@@ -1095,78 +1100,101 @@ class CrackTracker:
     ) -> np.ndarray:
         """The joints that Bullet must let go before the coming step's load ``g`` (3,), given the
         current poses; returns their indices (joints that crack are recorded, and let go only
-        once the model has no equilibrium with them)."""
+        once the model has no equilibrium with them).
+
+        Under a ground motion the joints are checked on a grid of ``check_interval_s`` from the
+        ground's start, not at the frames: every grid point up to ``time_s`` not checked yet is
+        checked, at the record's acceleration then (``g`` gives the vertical), so that the cracks,
+        the releases and their times are the same at any frame rate (wherever no pose is read).
+        Without one (a pushover) the frame's ``g`` is checked at ``time_s``."""
         t = time.perf_counter()
         try:
             if self.model.nj == 0:
                 return np.zeros(0, dtype=np.int64)
             g = np.asarray(g, dtype=np.float64)
-            closed = None
-            extra = None
-            start = None
-            held_bodies = None  # the bodies held joints tie to the ground, once some joint is let go
-            crack_time_s = float(time_s)
-            if self.elastic is not None:
-                before = self.elastic.u.copy()
-                until = None
-                if self.intact.all() and self.model.n_all == self.model.nj:
-                    # while every joint is intact their forces are K u: checked at every step of the
-                    # vibration, so that a peak between two calls cracks where it happens (at 25
-                    # frames a second a 5 Hz sway is seen at 5 points a cycle, as low as 0.81 of its peak)
-                    def until(u: np.ndarray) -> bool:
-                        return self.model.utilisation_bound(u) > 1.0 and bool(
-                            self.model.state(u).utilisation.max() > 1.0
-                        )
-
-                crack_time_s = self.elastic.advance(time_s, g, until=until)
-                # the load at the instant checked: the record's ground acceleration then
-                g = self.elastic.load_at(crack_time_s, g)
-                extra = self.elastic.inertial_force()
-                if self.model.motion is not None:
-                    # the vibration moved the structure it holds: start the contact iteration there
-                    start = self.model.motion + (self.elastic.u - before)
-                if not self.held.all():
-                    # a piece Bullet has set free moves as Bullet says: no vibration's forces on it
-                    held_bodies = self.model.grounded(self.held)
-                    extra.reshape(-1, 6)[~held_bodies] = 0.0
-            if self.elastic is not None and self.intact.all() and self.model.n_all == self.model.nj:
-                # while nothing has cracked the joints' forces are the vibration's: K u
-                state = self.model.state(self.elastic.u)
-                self._record(crack_time_s, g, extra, held_bodies)
-                self.max_utilisation = float(state.utilisation.max())
-                if self.max_utilisation <= 1.0:
-                    return np.zeros(0, dtype=np.int64)
-            elif self.intact.all() and self.model.n_all == self.model.nj:
-                # forces are linear in g while nothing has cracked: combine the unit-load solutions
-                unit = self._unit_states()
-                state = self.model.state_from_relative(sum(g[k] * unit[k].relative for k in range(3)))
-                self.max_utilisation = float(state.utilisation.max())
-                if self.max_utilisation <= 1.0:
-                    return np.zeros(0, dtype=np.int64)
-            else:
-                # the cracked joints Bullet holds are contacts in the model; those it has let go
-                # are Bullet's alone; bodies standing on the plate bear where Bullet says they touch
-                closed = np.repeat(self.model._pad(self.held)[:, None], self.model.outline.shape[1], axis=1)
-                if self.model.n_all > self.model.nj:
-                    gaps = self.model.corner_gaps(positions, rotations, plate, *self.ref)
-                    closed[self.model.nj :] = gaps[self.model.nj :] < self.model.contact_gap_m
-            new, modes, state = self.model.crack(
-                g, self.intact, closed, runaway_m=self.release_m, extra=extra, start=start
-            )
-            self.intact[new] = False
-            if self.elastic is not None:
-                self._record(crack_time_s, g, extra, held_bodies)
-            self.break_time_s[new] = crack_time_s - self.t0
-            self.break_mode[new] = modes
-            self.max_utilisation = float(np.where(self.intact, state.utilisation, 0.0).max(initial=0.0))
-            moving = self.model.corner_motion()[: self.model.nj] > self.release_m
-            release = np.flatnonzero(moving & ~self.intact & self.held)
-            if release.size:
-                self.held[release] = False
-                self.release_time_s[release] = float(time_s) - self.t0
-                self.model.forget(release)
-                if self.elastic is not None:
-                    self.free_velocity[float(time_s) - self.t0] = self.elastic.v.reshape(-1, 6).copy()
-            return release
+            if self.ground_motion is None:
+                return self._check(float(time_s), g, positions, rotations, plate)
+            h = self.check_interval_s
+            last = int(np.floor((float(time_s) - self.t0) / h + 1e-6))
+            out = []
+            peak = None
+            while self._next_check <= last:
+                tk = self.t0 + self._next_check * h
+                out.append(
+                    self._check(tk, record_load(self.ground_motion, tk - self.t0, g), positions, rotations, plate)
+                )
+                peak = self.max_utilisation if peak is None else max(peak, self.max_utilisation)
+                self._next_check += 1
+            if peak is not None:
+                self.max_utilisation = peak  # the largest of this frame's checks
+            return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
         finally:
             self.seconds += time.perf_counter() - t
+
+    def _check(
+        self, time_s: float, g: np.ndarray, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray
+    ) -> np.ndarray:
+        """One check of the joints at ``time_s`` under the load ``g``: :meth:`step`'s."""
+        closed = None
+        extra = None
+        start = None
+        held_bodies = None  # the bodies held joints tie to the ground, once some joint is let go
+        crack_time_s = float(time_s)
+        if self.elastic is not None:
+            before = self.elastic.u.copy()
+            until = None
+            if self.intact.all() and self.model.n_all == self.model.nj:
+                # while every joint is intact their forces are K u: checked 20 times a first
+                # period of the vibration, so that a peak between two checks cracks where it
+                # happens (the unseen tower's 0.07 s period is 7 check intervals of 0.01 s)
+                def until(u: np.ndarray) -> bool:
+                    return self.model.utilisation_bound(u) > 1.0 and bool(self.model.state(u).utilisation.max() > 1.0)
+
+            crack_time_s = self.elastic.advance(time_s, g, until=until)
+            # the load at the instant checked: the record's ground acceleration then
+            g = self.elastic.load_at(crack_time_s, g)
+            extra = self.elastic.inertial_force()
+            if self.model.motion is not None:
+                # the vibration moved the structure it holds: start the contact iteration there
+                start = self.model.motion + (self.elastic.u - before)
+            if not self.held.all():
+                # a piece Bullet has set free moves as Bullet says: no vibration's forces on it
+                held_bodies = self.model.grounded(self.held)
+                extra.reshape(-1, 6)[~held_bodies] = 0.0
+        if self.elastic is not None and self.intact.all() and self.model.n_all == self.model.nj:
+            # while nothing has cracked the joints' forces are the vibration's: K u
+            state = self.model.state(self.elastic.u)
+            self._record(crack_time_s, g, extra, held_bodies)
+            self.max_utilisation = float(state.utilisation.max())
+            if self.max_utilisation <= 1.0:
+                return np.zeros(0, dtype=np.int64)
+        elif self.intact.all() and self.model.n_all == self.model.nj:
+            # forces are linear in g while nothing has cracked: combine the unit-load solutions
+            unit = self._unit_states()
+            state = self.model.state_from_relative(sum(g[k] * unit[k].relative for k in range(3)))
+            self.max_utilisation = float(state.utilisation.max())
+            if self.max_utilisation <= 1.0:
+                return np.zeros(0, dtype=np.int64)
+        else:
+            # the cracked joints Bullet holds are contacts in the model; those it has let go
+            # are Bullet's alone; bodies standing on the plate bear where Bullet says they touch
+            closed = np.repeat(self.model._pad(self.held)[:, None], self.model.outline.shape[1], axis=1)
+            if self.model.n_all > self.model.nj:
+                gaps = self.model.corner_gaps(positions, rotations, plate, *self.ref)
+                closed[self.model.nj :] = gaps[self.model.nj :] < self.model.contact_gap_m
+        new, modes, state = self.model.crack(g, self.intact, closed, runaway_m=self.release_m, extra=extra, start=start)
+        self.intact[new] = False
+        if self.elastic is not None:
+            self._record(crack_time_s, g, extra, held_bodies)
+        self.break_time_s[new] = crack_time_s - self.t0
+        self.break_mode[new] = modes
+        self.max_utilisation = float(np.where(self.intact, state.utilisation, 0.0).max(initial=0.0))
+        moving = self.model.corner_motion()[: self.model.nj] > self.release_m
+        release = np.flatnonzero(moving & ~self.intact & self.held)
+        if release.size:
+            self.held[release] = False
+            self.release_time_s[release] = float(time_s) - self.t0
+            self.model.forget(release)
+            if self.elastic is not None:
+                self.free_velocity[float(time_s) - self.t0] = self.elastic.v.reshape(-1, 6).copy()
+        return release

@@ -441,43 +441,45 @@ def piece_motion(
         return PieceMotion(times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0)
     gravity = np.array([0.0, 0.0, -scene.gravity])
     motion = scene.motion
-    t = float(min(events[0], times_s[0]))
+    # the steps run from one release to the next (and on to the last time asked), not from one time
+    # asked to the next: the motion does not depend on when it is looked at (the frame rate); each
+    # time asked reads the state of the first step at or after it (steps are a fraction of a ms)
+    ends = np.append(events, max(float(times_s[-1]), float(events[-1])))
     dt = np.inf
     steps = 0
-    marks = np.unique(np.concatenate([events, times_s]))
-    marks = marks[marks >= t]
-    k_event = 0
     k_time = 0
-    for mark in _progress(marks, desc="pieces", unit="mark", enabled=progress if state.n or events.size else False):
-        span = mark - t
-        if span > 0 and state.n and dt < np.inf:
-            n = max(1, int(np.ceil(span / dt - 1e-9)))
-            grid = t + span * np.arange(n + 1) / n
-            if motion is not None:
-                a = motion.mean_acceleration(grid)  # (n, 2)
-            else:
-                a = np.zeros((n, 2))
-            h = span / n
-            for q in range(n):
-                g = gravity.copy()
-                g[:2] -= a[q]
-                state.advance(g, h)
-                if (q & 63) == 63:
-                    state.check_fallen()
-            state.check_fallen()
-            steps += n
-        t = mark
-        while k_event < len(events) and events[k_event] <= t + 1e-12:
-            held = ~(release <= events[k_event] + 1e-12)
-            free = ~model.grounded(held) if model.nj else np.ones(nb, dtype=bool)
-            vel = velocity.get(float(events[k_event])) if velocity else None
-            state.regroup(free, held, vel)
-            dt = state.step_size()
-            k_event += 1
-        while k_time < len(times_s) and times_s[k_time] <= t + 1e-12:
+
+    def read(t_now: float) -> None:
+        nonlocal k_time
+        while k_time < len(times_s) and times_s[k_time] <= t_now + 1e-12:
             out[k_time] = state.displacement()
             k_time += 1
-    while k_time < len(times_s):
-        out[k_time] = state.displacement()
-        k_time += 1
+
+    read(float(events[0]) - 1e-9)  # before the first release nothing has moved
+    for e in _progress(range(len(events)), desc="pieces", unit="release", enabled=progress):
+        t = float(events[e])
+        held = ~(release <= t + 1e-12)
+        free = ~model.grounded(held) if model.nj else np.ones(nb, dtype=bool)
+        vel = velocity.get(t) if velocity else None
+        state.regroup(free, held, vel)
+        dt = state.step_size()
+        read(t)
+        span = float(ends[e + 1]) - t
+        if span <= 0 or not state.n or dt == np.inf:
+            continue
+        n = max(1, int(np.ceil(span / dt - 1e-9)))
+        grid = t + span * np.arange(n + 1) / n
+        a = motion.mean_acceleration(grid) if motion is not None else np.zeros((n, 2))
+        h = span / n
+        for q in range(n):
+            g = gravity.copy()
+            g[:2] -= a[q]
+            state.advance(g, h)
+            if (q & 63) == 63:
+                state.check_fallen()
+            if k_time < len(times_s) and times_s[k_time] <= grid[q + 1] + 1e-12:
+                read(float(grid[q + 1]))
+        state.check_fallen()
+        steps += n
+    read(np.inf)
     return PieceMotion(times_s, out, int(state.n), state.fallen.copy(), float(dt), steps, time.perf_counter() - clock)

@@ -287,13 +287,13 @@ def plot_ground_motion(scene: Scene, path: Path) -> None:
                     where="post",
                     lw=0.9,
                     color="k" if k == 0 else "0.4",
-                    label=f"{name} as applied (mean over each frame)",
+                    label=f"{name} as Bullet applies it (mean over each frame)",
                 )
         ax[1].plot(m.time, m.displacement[:, 0] * 1000, lw=0.9, label="X")
         ax[1].plot(m.time, m.displacement[:, 1] * 1000, lw=0.9, label="Y")
         ax[0].set_title(
-            f"ground motion: {m.source}\napplied peak {m.applied_peak(fps) / G:.3f} g at {fps} fps, "
-            f"record peak {m.pga / G:.3f} g",
+            f"ground motion: {m.source}\npeak {m.pga / G:.3f} g (the joint model's and the verdict's); "
+            f"Bullet's frame means {m.applied_peak(fps) / G:.3f} g at {fps} fps",
             fontsize=9,
         )
     ax[0].set_ylabel("acceleration (g)")

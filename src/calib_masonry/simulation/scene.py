@@ -233,6 +233,11 @@ class SolverSettings:
     # at the first two modes); False: quasi-static, the structure rigid (a pushover always is)
     dynamics: bool = True
     damping_ratio: float = 0.05
+    # under a ground motion the joint model checks the joints every this many seconds of the record,
+    # on a grid from the ground's start that is the same at every frame rate (between frames too),
+    # at the record's acceleration at that instant: its cracks, releases and the verdict then do not
+    # depend on the frame rate (halving it is the accuracy check: experiments/sim_convergence.py)
+    check_interval_s: float = 0.01
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or self.substeps <= 0 or self.iterations <= 0:
@@ -251,6 +256,11 @@ class SolverSettings:
                     "doubling them is the accuracy check"
                 )
 
+        if not 0.0 < self.check_interval_s <= 0.1:
+            raise InputError(
+                f"--check-interval {self.check_interval_s}: the joints' check interval must be in (0, 0.1] s "
+                "(default 0.01: 20 checks a period of 0.2 s)"
+            )
         if not 0.0 <= self.damping_ratio < 1.0:
             raise InputError(
                 f"--damping {self.damping_ratio}: the ratio of critical damping must be in [0, 1) (masonry: about 0.05)"

@@ -1146,7 +1146,7 @@ class CrackTracker:
             if self.intact.all() and self.model.n_all == self.model.nj:
                 # while every joint is intact their forces are K u: checked 20 times a first
                 # period of the vibration, so that a peak between two checks cracks where it
-                # happens (the unseen tower's 0.07 s period is 7 check intervals of 0.01 s)
+                # happens (the unseen tower's 0.07 s period is 14 check intervals of 0.005 s)
                 def until(u: np.ndarray) -> bool:
                     return self.model.utilisation_bound(u) > 1.0 and bool(self.model.state(u).utilisation.max() > 1.0)
 

@@ -238,7 +238,8 @@ class SolverSettings:
     # at the record's acceleration at that instant: its cracks, releases and the verdict then do not
     # depend on the frame rate. 0.005 s is the synthetic record's own sampling (200 Hz): every sample
     # is checked. Halving it is the accuracy check (experiments/sim_convergence.py): on the Stylite
-    # tower 0.01 -> 0.005 s moved a collapse PGA by 0.10 g, 0.005 -> 0.0025 s by at most 0.05 g
+    # tower's three records 0.01 -> 0.005 s moved the collapse PGA by 0.00-0.10 g, 0.005 -> 0.0025 s
+    # by 0.05-0.10 g, as much as the freed pieces' own settings move it (docs/dynamics.md)
     check_interval_s: float = 0.005
 
     def __post_init__(self) -> None:

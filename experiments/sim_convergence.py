@@ -65,12 +65,8 @@ SETTINGS = {
     "4x iterations": replace(DEFAULT, iterations=4 * DEFAULT.iterations),
     "4x both": replace(DEFAULT, substeps=4 * DEFAULT.substeps, iterations=4 * DEFAULT.iterations),
 }
-DOUBLED = [
-    "default",
-    "2x substeps",
-    "2x iterations",
-    "2x both",
-]  # the tables of docs/measurements.md (Bullet as the verdict)
+# the tables of docs/measurements.md (Bullet as the verdict)
+DOUBLED = ["default", "2x substeps", "2x iterations", "2x both"]
 
 
 def one_run(model: Path, solver: SolverSettings, pga: float, seed: int, duration: float) -> dict:

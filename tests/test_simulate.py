@@ -136,16 +136,23 @@ def test_grounded_bodies_follow_the_held_joints_to_the_plate():
     assert not grounded_bodies((), 3).any()
 
 
-def test_a_bonded_stack_stands_exactly_still_until_its_joints_let_go():
-    # Bullet holds the part of a structure that held joints tie to the plate fixed (kinematic): a
-    # bonded stack shaken below its cracking load does not move at all, at any solver setting
-    # (Bullet's own rigid constraints let a tall stone tower sway by tens of millimetres, by its
-    # settings); the same stack with a weak mortar cracks, and the part let go falls
+def _stack_of_six():
+    """Six bricks 0.3 x 0.2 x 0.15 m stacked on the plate, bonded to it and to each other: the
+    bodies and the bonds of the shaken-stack tests below."""
     size = (0.3, 0.2, 0.15)
     bodies = tuple(_block(size, (0, 0, 0.075 + 0.15 * k)) for k in range(6))
     bonds = (Bond.rectangle(0, -1, (0, 0, 0.0), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2),) + tuple(
         Bond.rectangle(k, k + 1, (0, 0, 0.15 * (k + 1)), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2) for k in range(5)
     )
+    return bodies, bonds
+
+
+def test_a_bonded_stack_stands_exactly_still_until_its_joints_let_go():
+    # Bullet holds the part of a structure that held joints tie to the plate fixed (kinematic): a
+    # bonded stack shaken below its cracking load does not move at all, at any solver setting
+    # (Bullet's own rigid constraints let a tall stone tower sway by tens of millimetres, by its
+    # settings); the same stack with a weak mortar cracks, and the part let go falls
+    bodies, bonds = _stack_of_six()
     motion = constant_acceleration(0.4 * G, 1.0, dt=0.001)
     for iterations in (5, 50):
         solver = replace(_solver(warmup=0.2), iterations=iterations)
@@ -196,11 +203,7 @@ def test_the_joint_model_running_ahead_gives_the_run_of_one_check_before_each_st
     # process may differ in their last bits, see the README's "How it works")
     from calib_masonry.simulation.joints import CrackTracker
 
-    size = (0.3, 0.2, 0.15)
-    bodies = tuple(_block(size, (0, 0, 0.075 + 0.15 * k)) for k in range(6))
-    bonds = (Bond.rectangle(0, -1, (0, 0, 0.0), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2),) + tuple(
-        Bond.rectangle(k, k + 1, (0, 0, 0.15 * (k + 1)), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2) for k in range(5)
-    )
+    bodies, bonds = _stack_of_six()
     mortar = Material(tensile_strength=2e3, shear_strength=2e3)
     scene = Scene(
         bodies=bodies,
@@ -224,11 +227,7 @@ def test_the_verdict_does_not_read_bullets_substeps_or_iterations():
     # substeps or iterations leaves it bit for bit (Bullet's own motion of the piece may change)
     from calib_masonry.simulation.results import metrics
 
-    size = (0.3, 0.2, 0.15)
-    bodies = tuple(_block(size, (0, 0, 0.075 + 0.15 * k)) for k in range(6))
-    bonds = (Bond.rectangle(0, -1, (0, 0, 0.0), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2),) + tuple(
-        Bond.rectangle(k, k + 1, (0, 0, 0.15 * (k + 1)), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2) for k in range(5)
-    )
+    bodies, bonds = _stack_of_six()
     base = Scene(
         bodies=bodies,
         bonds=bonds,
@@ -257,11 +256,7 @@ def test_the_verdict_does_not_read_the_frame_rate():
     from calib_masonry.simulation.ground_motion import synthetic_motion
     from calib_masonry.simulation.results import metrics
 
-    size = (0.3, 0.2, 0.15)
-    bodies = tuple(_block(size, (0, 0, 0.075 + 0.15 * k)) for k in range(6))
-    bonds = (Bond.rectangle(0, -1, (0, 0, 0.0), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2),) + tuple(
-        Bond.rectangle(k, k + 1, (0, 0, 0.15 * (k + 1)), (0, 0, 1.0), (1.0, 0, 0), 0.3, 0.2) for k in range(5)
-    )
+    bodies, bonds = _stack_of_six()
     base = Scene(
         bodies=bodies,
         bonds=bonds,

@@ -28,7 +28,7 @@ def direct(study) -> float:
     from calib_masonry.pipeline import build, trace_wall
     from calib_masonry.spec import load_structure
     from calib_masonry.study.design import samples
-    from calib_masonry.study.sample import _build_outputs
+    from calib_masonry.study.sample import build_outputs
 
     t0 = time.perf_counter()
     spec = load_structure(study.structure)
@@ -43,20 +43,20 @@ def direct(study) -> float:
         with warnings.catch_warnings(record=True):  # a sample records its warnings too
             warnings.simplefilter("always")
             r = build(spec.with_walls(tuple(walls)), traces=traces, progress=False)
-        _build_outputs(r)  # the same outputs a sample reads (volume, mass, centre of mass, ...)
+        build_outputs(r)  # the same outputs a sample reads (volume, mass, centre of mass, ...)
     return time.perf_counter() - t0
 
 
 def on_cluster(study, workers: int) -> tuple[float, float]:
     """Seconds of the whole study on a new LocalCluster, and of the cluster's start-up alone."""
     from calib_masonry.study.design import samples
-    from calib_masonry.study.run import _dask, _execute
+    from calib_masonry.study.run import dask_client, execute_samples
 
     t0 = time.perf_counter()
     rows = []
-    with _dask(None, workers) as client:
+    with dask_client(None, workers) as client:
         t_up = time.perf_counter() - t0
-        _execute(study, samples(study), rows.append, client, progress=False)
+        execute_samples(study, samples(study), rows.append, client, progress=False)
     assert all(r["status"] == "ok" for r in rows), [r["error"] for r in rows if r["status"] != "ok"][:3]
     return time.perf_counter() - t0, t_up
 

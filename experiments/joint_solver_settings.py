@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from calib_masonry.pipeline import build_to_folder
-from calib_masonry.simulation.blender import _gravity_per_frame
 from calib_masonry.simulation.joints import ContactSettings, CrackTracker
+from calib_masonry.simulation.loop import gravity_per_frame
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model
 from calib_masonry.spec import load_structure
 
@@ -43,7 +43,7 @@ VARIANTS = {
 def replay(scene, settings: ContactSettings):
     """Crack and release times of every joint over the run's loads (the tracker alone)."""
     s = scene.solver
-    gravity = _gravity_per_frame(scene)
+    gravity = gravity_per_frame(scene)
     warm = s.warmup_frames
     pos = np.array([b.location for b in scene.bodies], dtype=np.float64).reshape(-1, 3)
     rot = np.broadcast_to(np.eye(3), (len(pos), 3, 3)).copy()

@@ -34,14 +34,14 @@ async def on_loop(geometry, load) -> None:
 def main() -> None:
     from calib_masonry.simulation.blender import require_bpy
     from calib_masonry.study.design import load_study, samples
-    from calib_masonry.study.sample import _evaluate
+    from calib_masonry.study.sample import evaluate_sample
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--study", default="data_synthetic/studies/stylite_fragility.toml")
     ap.add_argument("--sample", type=int, default=4)
     a = ap.parse_args()
     study = load_study(a.study)
-    _, job = _evaluate(study, samples(study)[a.sample])
+    _, job = evaluate_sample(study, samples(study)[a.sample])
     if job is None:
         raise SystemExit(f"{a.study}: no [simulate] table")
     require_bpy()  # as a study's worker does when the study starts

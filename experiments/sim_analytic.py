@@ -14,13 +14,13 @@ import math
 
 import numpy as np
 
-from calib_masonry.simulation.blender import _box, run
 from calib_masonry.simulation.ground_motion import G, constant_acceleration
-from calib_masonry.simulation.scene import Body, Plate, Scene, SolverSettings
+from calib_masonry.simulation.loop import run
+from calib_masonry.simulation.scene import Body, Plate, Scene, SolverSettings, box_mesh
 
 
 def block(size, loc, mu=0.6, rotation=(1.0, 0.0, 0.0, 0.0)) -> Body:
-    v, f = _box(size)
+    v, f = box_mesh(size)
     vol = float(np.prod(size))
     return Body("block", v, f, np.asarray(loc, float), 1800 * vol, math.sqrt(mu), 0.0, vol, rotation=rotation)
 

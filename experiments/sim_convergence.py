@@ -43,8 +43,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from calib_masonry.pipeline import build_to_folder  # noqa: E402
-from calib_masonry.simulation.blender import _gravity_per_frame, run  # noqa: E402
 from calib_masonry.simulation.joints import CrackTracker  # noqa: E402
+from calib_masonry.simulation.loop import gravity_per_frame, run  # noqa: E402
 from calib_masonry.simulation.pieces import piece_motion  # noqa: E402
 from calib_masonry.simulation.results import metrics  # noqa: E402
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model  # noqa: E402
@@ -100,7 +100,7 @@ def verdict_without_bullet(model: Path, solver: SolverSettings, pga: float, seed
         model, SimulationConfig(pga_g=pga, duration_s=duration, seed=seed, solver=solver, figures=False)
     )
     t = time.perf_counter()
-    g = _gravity_per_frame(scene)
+    g = gravity_per_frame(scene)
     x = np.array([b.location for b in scene.bodies])
     R = np.repeat(np.eye(3)[None], len(x), axis=0)
     warm = solver.warmup_frames

@@ -6,7 +6,7 @@ resident memory after the first and the last run and the growth per run:
 
 * ``ahead``: ``simulate()`` as by default, the joint model ahead of Bullet on a thread of its own;
 * ``inline``: ``simulate(..., joints_ahead=False)``, the joint model before each step, on this thread;
-* ``bare``: Bullet alone on the same scene (``blender.run(record=False)``: no joint model), the peer;
+* ``bare``: Bullet alone on the same scene (``loop.run(record=False)``: no joint model), the peer;
 * ``joints``: the joint model alone, replaying the first run's poses on a thread (no Blender);
 * ``dask``: ``simulate_async`` as a study runs it, coroutine tasks on one LocalCluster worker
   (its event loop, the main thread); the worker's memory.
@@ -55,7 +55,7 @@ async def _on_loop(geometry, motion, material) -> float:
 
 def one_mode(mode: str, runs: int) -> None:
     import calib_masonry as cm
-    from calib_masonry.simulation.blender import _gravity_per_frame, run
+    from calib_masonry.simulation.loop import gravity_per_frame, run
     from calib_masonry.simulation.run import scene_for, simulation_geometry
 
     structure, motion, weak = _scene()
@@ -80,7 +80,7 @@ def one_mode(mode: str, runs: int) -> None:
         out = run(scene, progress=False)
         q = out.quaternions
         rot = Rotation.from_quat(q.reshape(-1, 4)[:, [1, 2, 3, 0]]).as_matrix().reshape(q.shape[:2] + (3, 3))
-        gravity = _gravity_per_frame(scene)
+        gravity = gravity_per_frame(scene)
         warm, fps = scene.solver.warmup_frames, scene.solver.fps
 
         def replay() -> None:

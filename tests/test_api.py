@@ -91,7 +91,7 @@ def test_two_simulate_calls_in_one_process_agree(built):
 
     need_bpy()
     from calib_masonry import Material, Pushover, simulate, synthetic_motion
-    from calib_masonry.simulation.blender import _gravity_per_frame
+    from calib_masonry.simulation.loop import gravity_per_frame
     from calib_masonry.simulation.run import scene_for
 
     _, result = built
@@ -109,9 +109,9 @@ def test_two_simulate_calls_in_one_process_agree(built):
         for x, y in zip(sa.bodies, sb.bodies)
     )
     assert all(np.array_equal(x.location, y.location) and (x.a, x.b) == (y.a, y.b) for x, y in zip(sa.bonds, sb.bonds))
-    assert np.array_equal(_gravity_per_frame(sa), _gravity_per_frame(sb))
+    assert np.array_equal(gravity_per_frame(sa), gravity_per_frame(sb))
     again = scene_for(result.structure, motion, material=weak)
-    assert np.array_equal(_gravity_per_frame(again), _gravity_per_frame(sa))
+    assert np.array_equal(gravity_per_frame(again), gravity_per_frame(sa))
     assert np.array_equal(a.output.positions, b.output.positions), np.abs(a.output.positions - b.output.positions).max()
     assert np.array_equal(a.output.quaternions, b.output.quaternions)
     assert a.summary["bonds_broken"] == b.summary["bonds_broken"]

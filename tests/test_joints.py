@@ -8,11 +8,10 @@ import scipy.sparse as sp
 import shapely
 
 from calib_masonry.build3d.contacts import OUTLINE_POINTS, joint_axes, patch_section
-from calib_masonry.simulation.blender import _box, _quaternions
 from calib_masonry.simulation.ground_motion import G
 from calib_masonry.simulation.joints import FAILURE_MODES, JointModel, joint_stiffness
 from calib_masonry.simulation.results import rotations
-from calib_masonry.simulation.scene import Body, Bond, Material, Scene
+from calib_masonry.simulation.scene import Body, Bond, Material, Scene, box_mesh, quaternions_from_matrices
 
 DOWN = np.array([0.0, 0.0, -1.0])
 X = np.array([1.0, 0.0, 0.0])
@@ -20,7 +19,7 @@ UP = np.array([0.0, 0.0, 1.0])
 
 
 def _block(name, size, centre, density=1800.0):
-    v, f = _box(size)
+    v, f = box_mesh(size)
     vol = float(np.prod(size))
     return Body(name, v, f, np.asarray(centre, float), density * vol, 0.7, 0.0, vol)
 
@@ -258,7 +257,7 @@ def test_pose_quaternions_give_back_the_matrices():
 
     rng = np.random.default_rng(3)
     R = Rotation.random(200, random_state=rng).as_matrix()
-    q = _quaternions(R)
+    q = quaternions_from_matrices(R)
     ref = Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]]
     ref *= np.where(ref[:, :1] < 0, -1.0, 1.0)
     assert q == pytest.approx(ref, abs=1e-12)

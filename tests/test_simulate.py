@@ -13,10 +13,19 @@ from .conftest import need_bpy
 
 need_bpy(module_level=True)
 
-from calib_masonry.simulation.blender import _box, run  # noqa: E402
 from calib_masonry.simulation.ground_motion import G, constant_acceleration  # noqa: E402
+from calib_masonry.simulation.loop import run  # noqa: E402
 from calib_masonry.simulation.results import collapse_multiplier, metrics, pushover_stop  # noqa: E402
-from calib_masonry.simulation.scene import Body, Bond, Material, Plate, Pushover, Scene, SolverSettings  # noqa: E402
+from calib_masonry.simulation.scene import (  # noqa: E402
+    Body,
+    Bond,
+    Material,
+    Plate,
+    Pushover,
+    Scene,
+    SolverSettings,
+    box_mesh,
+)
 
 from .conftest import DATA  # noqa: E402
 
@@ -24,7 +33,7 @@ FPS = SolverSettings().fps  # the production settings: the benchmark runs at the
 
 
 def _block(size, loc, mu=0.6, rotation=(1.0, 0.0, 0.0, 0.0)):
-    v, f = _box(size)
+    v, f = box_mesh(size)
     vol = float(np.prod(size))
     return Body("block", v, f, np.asarray(loc, float), 1800 * vol, math.sqrt(mu), 0.0, vol, rotation=rotation)
 
@@ -947,7 +956,7 @@ def test_frames_show_cracked_joints_and_the_time_origin_of_the_histories():
     """frames/*.png drew no cracked joint and counted time from the warm-up's start, histories.png
     from the ground's: both now count from the ground's start, and the frames mark the joints
     cracked by then."""
-    from calib_masonry.simulation.blender import RunOutput
+    from calib_masonry.simulation.loop import RunOutput
     from calib_masonry.simulation.results import _FramePainter
     from calib_masonry.simulation.scene import Bond, Scene
 

@@ -32,29 +32,17 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
 from __future__ import annotations
 
 import contextlib
-import queue
 import re
 import signal
 import sys
-import threading
-import time
-from collections.abc import Callable, Generator, Iterator
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TypeVar
 
 import numpy as np
 
 from ..errors import BackendMissing, signals_deferred
-from ..progress import progress as _progress
-from .joints import CrackTracker
-from .pieces import piece_motion
-from .scene import Scene, grounded_bodies, joint_axes
-from .scene import box_mesh as _box  # the tests build their blocks with it
+from .scene import Scene, box_mesh, joint_axes, quaternions_from_matrices
 
-__all__ = ["RunOutput", "drain", "run", "require_bpy", "steps", "write_model_blend"]
-
-T = TypeVar("T")
+__all__ = ["BlenderEngine", "require_bpy", "write_model_blend"]
 
 
 # a path Blender puts on sys.path when it starts: <...>/5.0/scripts/modules and the like
@@ -142,33 +130,6 @@ def _stdout_quiet():
         os.close(devnull)
 
 
-@dataclass(frozen=True)
-class RunOutput:
-    """Poses at every frame (frame 0 is the initial state), in the frame that moves with the ground:
-    ``positions`` ``(F, B, 3)``, ``quaternions`` ``(F, B, 4)`` (w, x, y, z), ``plate`` ``(F, 3)``,
-    ``time`` ``(F,)`` seconds from the start of the warm-up; ``seconds_stepping`` is the wall time
-    of the stepping loop."""
-
-    time: np.ndarray
-    positions: np.ndarray
-    quaternions: np.ndarray
-    plate: np.ndarray
-    seconds_build: float
-    seconds_stepping: float
-    bond_break_time_s: np.ndarray | None = None  # cracking time of each bond after the warm-up, if watched
-    bond_break_mode: np.ndarray | None = None  # per bond: index into joints.FAILURE_MODES, -1 if intact
-    bond_release_time_s: np.ndarray | None = None  # when Bullet let each cracked bond go, NaN if never
-    max_utilisation: np.ndarray | None = None  # (F,) the intact joints' largest utilisation at each frame
-    seconds_joints: float = 0.0  # wall time spent in the joint model
-    # the elastic vibration of the structure the intact joints hold (simulation/dynamics.py), per
-    # joint-model step after the warm-up: time_s, roof_drift_m, base_shear_n, first_mode (arrays),
-    # first_period_s and damping_ratio; None for a quasi-static run
-    elastic: dict | None = None
-    # the pieces the joint model set free, moved as rigid bodies to convergence (simulation/pieces.py):
-    # the verdict's motion; None where no ground motion ran with the joint model
-    pieces: object | None = None
-
-
 def _reset(bpy) -> None:
     with _signals_held():
         bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -210,65 +171,17 @@ def write_model_blend(walls, path: str | Path) -> None:
     _reset(bpy)
 
 
-def _quaternions(r: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w, x, y, z) ``(..., 4)`` of rotation matrices ``(..., 3, 3)``, w >= 0
-    (scipy's Rotation; Blender's float32 matrices are taken to the nearest rotation)."""
-    from scipy.spatial.transform import Rotation
-
-    m = np.asarray(r, dtype=np.float64)
-    flat = m.reshape(-1, 3, 3)
-    if len(flat) == 0:
-        return np.zeros((*m.shape[:-2], 4))
-    q = Rotation.from_matrix(flat).as_quat(scalar_first=True)
-    q *= np.where(q[:, :1] < 0, -1.0, 1.0)
-    return q.reshape(*m.shape[:-2], 4)
-
-
 def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:
     """Quaternion (w, x, y, z) of the joint frame (:func:`~calib_masonry.simulation.scene.joint_axes`)
     whose z axis is ``normal``."""
     x, y, z = (a[0] for a in joint_axes(np.asarray(normal, dtype=np.float64)[None]))
-    return tuple(float(v) for v in _quaternions(np.column_stack([x, y, z])))
+    return tuple(float(v) for v in quaternions_from_matrices(np.column_stack([x, y, z])))
 
 
-def _gravity_per_frame(scene: Scene) -> np.ndarray:
-    """The gravity vector Bullet steps into each frame with, ``(frames + 1, 3)``; row k drives the
-    step from frame k - 1 to k (row 0: the initial state).
-
-    * Warm-up: gravity rises smoothly from 0 to g over ``gravity_ramp_s`` and then holds, so the
-      bonded structure takes its weight quasi-statically instead of ringing after a sudden load.
-    * Ground motion: applied as the inertial force it puts on every body in the ground's frame,
-      gravity ``(-a_x, -a_y, -g)`` with ``a`` the ground's mean acceleration over the frame, so the
-      velocities are exact at every frame. A kinematic plate keyed per frame would instead change
-      its velocity within one substep at every frame boundary: an acceleration spike of substeps x
-      a, which rocked a block at 0.9 g b / h (measured).
-    * Pushover: a uniform lateral acceleration ``lambda g`` along the pushover's direction, with
-      ``lambda`` rising linearly from 0 at the end of the warm-up (mean over each frame).
-    """
-    s = scene.solver
-    frames = scene.frames
-    warm = s.warmup_frames
-    t = (np.arange(frames + 1) - warm) / s.fps  # time since the ground started moving
-    g = np.zeros((frames + 1, 3))
-    g[:, 2] = -scene.gravity
-    ramp = min(s.gravity_ramp_s, s.warmup_s)
-    if ramp > 0:
-        x = np.clip((t + s.warmup_s) / ramp, 0.0, 1.0)
-        g[:, 2] *= x * x * (3.0 - 2.0 * x)
-    if scene.motion is not None:
-        g[1:, :2] = -scene.motion.mean_acceleration(t)
-    if scene.pushover is not None:
-        p = scene.pushover
-        lam = 0.5 * (p.lateral_g(t[:-1]) + p.lateral_g(t[1:]))  # the mean over each frame (linear ramp)
-        d = np.radians(p.direction_deg)
-        g[1:, 0] = lam * scene.gravity * np.cos(d)
-        g[1:, 1] = lam * scene.gravity * np.sin(d)
-    return g
-
-
-def _key_gravity(bpy, scene: Scene) -> None:
+def _key_gravity(bpy, g: np.ndarray) -> None:
+    """Key the scene's gravity at every frame: ``g`` ``(frames + 1, 3)``, row k driving the step
+    into frame k (:func:`~calib_masonry.simulation.loop.gravity_per_frame`)."""
     sc = bpy.context.scene
-    g = _gravity_per_frame(scene)
     if np.all(g == g[-1]):
         sc.gravity = tuple(float(x) for x in g[-1])
         return
@@ -283,11 +196,8 @@ def _key_gravity(bpy, scene: Scene) -> None:
         prefs.keyframe_new_interpolation_type = old
 
 
-def build_scene(scene: Scene):
-    """Create the Blender scene; returns (bpy, body objects, plate object, constraint objects: one
-    rigid, unbreakable FIXED constraint per mortar joint, the bodies held fixed (B,): kinematic,
-    their joints off in Bullet until they are set free)."""
-    bpy = require_bpy()
+def _world(bpy, scene: Scene):
+    """Reset Blender and set up the scene's rigid-body world (frames, substeps, iterations)."""
     _reset(bpy)
     sc = bpy.context.scene
     s = scene.solver
@@ -310,9 +220,13 @@ def build_scene(scene: Scene):
     sc.collection.children.link(bodies_col)
     rb_col = bpy.data.collections.new("RigidBodyWorld")
     rw.collection = rb_col
+    return sc, rw, bodies_col, rb_col
 
-    # ground plate: a passive BOX that stays put (the ground motion is applied as an inertial force)
-    pv, pf = _box(scene.plate.size)
+
+def _add_plate(bpy, scene: Scene, sc, rb_col):
+    """The ground plate: a passive BOX that stays put (the ground motion is applied as an
+    inertial force)."""
+    pv, pf = box_mesh(scene.plate.size)
     plate_loc = (scene.plate.centre[0], scene.plate.centre[1], scene.plate.top_z - scene.plate.size[2] / 2)
     plate = _mesh_object(bpy, "ground_plate", pv, pf, plate_loc, sc.collection)
     plate.rotation_euler = (0.0, np.radians(scene.plate.tilt_deg), 0.0)
@@ -324,10 +238,12 @@ def build_scene(scene: Scene):
     prb.restitution = 0.0
     prb.use_margin = True
     prb.collision_margin = 0.0
-    _key_gravity(bpy, scene)
+    return plate
 
-    warm = s.warmup_frames
-    fixed = grounded_bodies(scene.bonds, len(scene.bodies))
+
+def _add_bodies(bpy, scene: Scene, fixed: np.ndarray, bodies_col, rb_col) -> list:
+    """One active convex body per brick, damped during a warm-up, kinematic where held fixed."""
+    s = scene.solver
     objects = []
     for b, held_fixed in zip(scene.bodies, fixed):
         ob = _mesh_object(bpy, b.name, b.vertices, b.faces, b.location, bodies_col)
@@ -342,16 +258,27 @@ def build_scene(scene: Scene):
         rb.mass = float(b.mass)
         rb.friction = float(b.friction)
         rb.restitution = float(b.restitution)
-        rb.linear_damping = rb.angular_damping = s.warmup_damping if warm > 0 else 0.0
+        rb.linear_damping = rb.angular_damping = s.warmup_damping if s.warmup_frames > 0 else 0.0
         rb.use_deactivation = False
         rb.kinematic = bool(held_fixed)
         objects.append(ob)
+    return objects
 
-    constraints = []
-    if scene.bonds:
+
+def _constraint_collection(bpy, sc, rw):
+    if rw.constraints is None:
         ccol = bpy.data.collections.new("RigidBodyConstraints")
         sc.collection.children.link(ccol)
         rw.constraints = ccol
+    return rw.constraints
+
+
+def _add_joints(bpy, scene: Scene, fixed: np.ndarray, objects: list, plate, sc, rw) -> list:
+    """One rigid, unbreakable FIXED constraint per mortar joint (off where its part is held
+    fixed), and the rotation locks of ``scene.held_rotation``."""
+    constraints = []
+    if scene.bonds:
+        ccol = _constraint_collection(bpy, sc, rw)
         for k, bond in enumerate(scene.bonds):
             e = bpy.data.objects.new(f"bond_{k:05d}", None)
             e.location = tuple(float(x) for x in bond.location)
@@ -372,11 +299,7 @@ def build_scene(scene: Scene):
         # limits only): it acts once the body is set free
         e = bpy.data.objects.new(f"held_rotation_{k:05d}", None)
         e.location = tuple(float(x) for x in scene.bodies[k].location)
-        if rw.constraints is None:
-            ccol = bpy.data.collections.new("RigidBodyConstraints")
-            sc.collection.children.link(ccol)
-            rw.constraints = ccol
-        rw.constraints.objects.link(e)
+        _constraint_collection(bpy, sc, rw).objects.link(e)
         c = e.rigid_body_constraint
         c.type = "GENERIC"
         c.object1 = plate
@@ -385,258 +308,74 @@ def build_scene(scene: Scene):
             setattr(c, f"use_limit_ang_{axis}", True)
             setattr(c, f"limit_ang_{axis}_lower", 0.0)
             setattr(c, f"limit_ang_{axis}_upper", 0.0)
-    return bpy, objects, plate, constraints, fixed
+    return constraints
 
 
-def _ahead(fn: Callable[[int], T], items: range, release: Callable[[], None]) -> Iterator[T]:
-    """``fn(k)`` for each of ``items``, computed in order on a thread of its own as far ahead as it
-    gets, yielded in order; ``release()`` runs on that thread as it ends (the joint model's LU
-    factors are freed there, on the thread that made them: see
-    :meth:`~calib_masonry.simulation.joints.JointModel.release_factors`). Leaving early (an
-    error, a stop, ``close()``) stops the thread after the item it is on and waits for it, so
-    nothing runs on after the run; an error of ``fn`` is raised here, in its item's turn."""
-    results: queue.SimpleQueue = queue.SimpleQueue()
-    stop = threading.Event()
+class BlenderEngine:
+    """A :class:`~calib_masonry.simulation.scene.Scene` realised in Blender's Bullet, driven by
+    :func:`calib_masonry.simulation.loop.steps` (the :class:`~calib_masonry.simulation.loop.Engine`
+    interface). ``fixed`` ``(B,)``: the bodies held fixed (kinematic, their joints off) until set
+    free; ``gravity`` ``(frames + 1, 3)``: the gravity keyed at each frame.
 
-    def work() -> None:
-        try:
-            for k in items:
-                if stop.is_set():
-                    return
-                results.put((True, fn(k)))
-        except BaseException as exc:  # noqa: BLE001 - raised by the consumer in its turn
-            results.put((False, exc))
-        finally:
-            release()
+    Damping is switched, joints switched off and bodies set free on the *evaluated* copies of the
+    objects, which hold the live Bullet bodies and constraints (writing the originals tags the
+    depsgraph and crashed Blender in about half the trials)."""
 
-    thread = threading.Thread(target=work, name="calib-masonry-joints", daemon=True)
-    thread.start()
-    try:
-        for _ in items:
-            ok, value = results.get()
-            if not ok:
-                raise value
-            yield value
-    finally:
-        stop.set()
-        thread.join()
+    def __init__(self, scene: Scene, fixed: np.ndarray, gravity: np.ndarray) -> None:
+        bpy = require_bpy()
+        sc, rw, bodies_col, rb_col = _world(bpy, scene)
+        self.plate = _add_plate(bpy, scene, sc, rb_col)
+        _key_gravity(bpy, gravity)
+        self.objects = _add_bodies(bpy, scene, fixed, bodies_col, rb_col)
+        self.constraints = _add_joints(bpy, scene, fixed, self.objects, self.plate, sc, rw)
+        self.bpy, self.sc, self.bodies_col = bpy, sc, bodies_col
+        position = {ob.name: j for j, ob in enumerate(self.objects)}
+        self.order = np.array([position[ob.name] for ob in bodies_col.objects], dtype=int)
+        self.buf = np.zeros(len(self.objects) * 16, dtype=np.float32)
+        self.depsgraph = bpy.context.evaluated_depsgraph_get()
 
+    def step_to(self, frame: int) -> None:
+        self.sc.frame_set(frame + 1)  # our frame f is Blender's frame f + 1
 
-def run(scene: Scene, **options) -> RunOutput:
-    """Simulate ``scene`` in one pass: :func:`steps` with the same options, run to its end."""
-    return drain(steps(scene, **options))
-
-
-def drain(gen: Generator[int, None, T]) -> T:
-    """The value a generator of :func:`steps` (or a function built on it) returns, run to its end."""
-    while True:
-        try:
-            next(gen)
-        except StopIteration as end:
-            return end.value
-
-
-def steps(
-    scene: Scene,
-    *,
-    progress: bool | None = None,
-    blend_path: Path | None = None,
-    record: bool = True,
-    switch_off_s: np.ndarray | None = None,
-    stop=None,
-    joints_ahead: bool = True,
-) -> Generator[int, None, RunOutput]:
-    """Simulate ``scene`` in one pass, yielding each frame's number once it is stepped, and return
-    the :class:`RunOutput` (a caller that drives it from an event loop lets the loop run between
-    frames: :func:`calib_masonry.simulation.run.simulate_async`). Closing the generator early
-    stops the joint model's thread as an error would. ``joints_ahead=False`` runs the joint model
-    on this thread, one check before each step, instead of ahead on a thread of its own (the same
-    run, bit for bit): for a process whose cores are busy anyway (a study's workers).
-
-    The pass: the warm-up under (ramped) gravity with every joint intact
-    and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
-    joint model cracking joints before each step (:class:`~calib_masonry.simulation.joints.CrackTracker`).
-
-    Damping is switched, cracked joints switched off and bodies set free (kinematic -> dynamic,
-    with the held joints among them switched on) on the evaluated copies of the objects, which
-    hold the live Bullet bodies and constraints (writing the originals tags the depsgraph and
-    crashed Blender in about half the trials). With ``record=False`` only the stepping is done
-    (the bare-Bullet baseline): no poses are read and no joint model runs; ``switch_off_s`` (per
-    bond, seconds after the warm-up, NaN for never; the ``bond_release_time_s`` of a recorded run)
-    then replays that run's joint switches on a schedule fixed in advance, so the baseline does the
-    same Bullet work. ``stop(frame, positions (B, 3), plate (3,))``, if given, is asked after every
-    recorded frame whether the run may end there (a pushover ends once it has run away); the
-    output then holds the frames up to that one.
-    """
-    t0 = time.perf_counter()
-    bpy, objects, plate, constraints, fixed = build_scene(scene)
-    sc = bpy.context.scene
-    seconds_build = time.perf_counter() - t0
-    s = scene.solver
-    frames = scene.frames
-    warm = min(s.warmup_frames, frames)
-    nb = len(objects)
-    n = frames + 1 if record else 1
-    plate_pos = np.zeros((n, 3))
-    bodies_col = bpy.data.collections["Bricks"]
-    position = {ob.name: j for j, ob in enumerate(objects)}
-    order = np.array([position[ob.name] for ob in bodies_col.objects], dtype=int)
-    buf = np.zeros(nb * 16, dtype=np.float32)
-    mats = np.zeros((n, nb, 4, 4), dtype=np.float32)
-    gravity = _gravity_per_frame(scene)
-    utilisation = np.zeros(n)
-
-    def grab(i: int) -> None:
+    def read_poses(self, out: np.ndarray) -> np.ndarray:
         # one bulk read of every brick's world matrix (column-major 4x4)
-        bodies_col.objects.foreach_get("matrix_world", buf)
-        mats[i, order] = buf.reshape(nb, 4, 4).transpose(0, 2, 1)
-        plate_pos[i] = plate.matrix_world.translation
+        self.bodies_col.objects.foreach_get("matrix_world", self.buf)
+        out[self.order] = self.buf.reshape(len(self.objects), 4, 4).transpose(0, 2, 1)
+        return np.array(self.plate.matrix_world.translation)
 
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    tracker: CrackTracker | None = None
+    def end_warmup(self) -> None:
+        for ob in self.objects:
+            rb = ob.evaluated_get(self.depsgraph).rigid_body
+            rb.linear_damping = rb.angular_damping = 0.0
 
-    def end_warmup(i: int) -> None:
-        nonlocal tracker
-        if warm > 0:
-            for ob in objects:
-                rb = ob.evaluated_get(depsgraph).rigid_body
-                rb.linear_damping = rb.angular_damping = 0.0
-        if record and scene.bonds:
-            tracker = CrackTracker(scene, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i], (i) / s.fps)
-
-    schedule: dict[int, list[int]] = {}
-    if not record and switch_off_s is not None:
-        for k in np.flatnonzero(np.isfinite(switch_off_s)):
-            schedule.setdefault(warm + int(round(float(switch_off_s[k]) * s.fps)), []).append(int(k))
-
-    held = np.ones(len(scene.bonds), dtype=bool)  # the joints Bullet holds
-    bond_a = np.array([b.a for b in scene.bonds], dtype=np.int64)
-    freed_at = np.full(nb, -1)  # the frame at which each body held fixed was set free
-
-    def switch_off(bonds, frame: int) -> None:
+    def switch_off(self, bonds) -> None:
         for k in bonds:
-            live = constraints[k].evaluated_get(depsgraph).rigid_body_constraint
+            live = self.constraints[k].evaluated_get(self.depsgraph).rigid_body_constraint
             live.enabled = False
             live.disable_collisions = False  # the cracked joint's bricks bear on each other
-        held[list(bonds)] = False
-        # the part of the structure that no held joint ties to the plate any more is set free:
-        # its bodies turn dynamic (from rest) and the held joints among them act in Bullet
-        free = np.flatnonzero(fixed & ~grounded_bodies(scene.bonds, nb, held))
-        if free.size == 0:
-            return
-        fixed[free] = False
-        freed_at[free] = frame
-        for j in free:
-            objects[j].evaluated_get(depsgraph).rigid_body.kinematic = False
-        for k in np.flatnonzero(held & np.isin(bond_a, free)):
-            constraints[k].evaluated_get(depsgraph).rigid_body_constraint.enabled = True
 
-    def check(f: int, p: int):
-        # the joints that step f's load cracks and Bullet must let go, given the poses of frame p
-        # (read only for bodies that bear on the plate without a joint)
-        assert tracker is not None
-        release = tracker.step(
-            (f - 1) / s.fps,
-            gravity[f],
-            mats[p, :, :3, 3].astype(np.float64),
-            mats[p, :, :3, :3].astype(np.float64),
-            plate_pos[p].copy(),
-        )
-        return release, tracker.max_utilisation
+    def set_free(self, bodies: np.ndarray, bonds: np.ndarray) -> None:
+        for j in bodies:
+            self.objects[j].evaluated_get(self.depsgraph).rigid_body.kinematic = False
+        for k in bonds:
+            self.constraints[k].evaluated_get(self.depsgraph).rigid_body_constraint.enabled = True
 
-    # A tracker that reads no pose (no body bears on the plate without a joint) decides every step
-    # from the load history and its own state alone, so it runs ahead on the other core, frame
-    # after frame in order, while Bullet steps (frame_set releases the GIL): the joints cracked and
-    # let go are those of one check before each step, and the run takes the longer of the two.
-    ahead = None
-    t1 = time.perf_counter()
-    sc.frame_set(1)
-    if record:
-        grab(0)
-    if warm == 0:
-        end_warmup(0)
-    try:
-        for f in _progress(range(1, frames + 1), desc="simulate", unit="frame", enabled=progress):
-            i = f if record else 0
-            if tracker is not None:
-                if joints_ahead and ahead is None and not tracker.reads_poses:
-                    ahead = _ahead(lambda k, w=i - 1: check(k, w), range(f, frames + 1), tracker.release_factors)
-                p = i - 1
-                release, utilisation[p] = next(ahead) if ahead is not None else check(f, p)
-                if len(release):
-                    switch_off(release, f)
-            elif f - 1 in schedule:
-                switch_off(schedule[f - 1], f)
-            sc.frame_set(f + 1)  # our frame f is Blender's frame f + 1
-            if record:
-                grab(i)
-            if f == warm:
-                end_warmup(i)
-            if record and stop is not None and f > warm and stop(f, mats[i, :, :3, 3], plate_pos[i]):
-                n = f + 1
-                break
-            yield f
-    finally:
-        if ahead is not None:
-            ahead.close()  # a pushover that has run away, an error, a signal: no check runs on after the run
-    seconds_stepping = time.perf_counter() - t1
-    mats, plate_pos, utilisation = mats[:n], plate_pos[:n], utilisation[:n]
-    pieces = None
-    if record and tracker is not None and scene.motion is not None:
-        # the verdict's motion of what the joints set free: rigid pieces, converged (not Bullet's)
-        pieces = piece_motion(
-            scene,
-            tracker.release_time_s,
-            (np.arange(warm, n) - warm) / s.fps,
-            velocity=tracker.free_velocity,
-            model=tracker.model,
-            progress=progress if np.isfinite(tracker.release_time_s).any() else False,
-        )
-    if not record:
-        grab(0)  # the final state only
-    if blend_path is not None:
-        # keep the run in the file: the point cache holds every frame just stepped (with the joint
-        # model's cracks in it); marked as baked, it is saved and replayed instead of re-simulated
+    def save(self, path: Path, frames: int, freed_at: np.ndarray) -> None:
+        """Keep the run in the file: the point cache holds every frame just stepped (with the joint
+        model's cracks in it); marked as baked, it is saved and replayed instead of re-simulated. A
+        body held fixed plays its own (still) place, a dynamic one the cache: the bodies set free
+        in the run are keyed from fixed to dynamic at the frame they were set free."""
+        bpy, sc = self.bpy, self.sc
         rw = sc.rigidbody_world
-        rw.point_cache.frame_end = len(mats)  # a pushover may have stopped early
+        rw.point_cache.frame_end = frames  # a pushover may have stopped early
         with bpy.context.temp_override(scene=sc, point_cache=rw.point_cache), _signals_held():
             bpy.ops.ptcache.bake_from_cache()
-        # a body held fixed plays its own (still) place, a dynamic one the cache: the bodies set
-        # free in the run are keyed from fixed to dynamic at the frame they were set free
         for j in np.flatnonzero(freed_at >= 0):
-            rb = objects[j].rigid_body
+            rb = self.objects[j].rigid_body
             rb.keyframe_insert("kinematic", frame=1)
             rb.kinematic = False
             rb.keyframe_insert("kinematic", frame=int(freed_at[j]) + 1)  # our frame f is Blender's f + 1
-        sc.frame_end = len(mats)
+        sc.frame_end = frames
         sc.frame_set(1)
         with _signals_held(), _stdout_quiet():
-            bpy.ops.wm.save_as_mainfile(filepath=str(blend_path), check_existing=False, compress=True)
-    return RunOutput(
-        time=np.arange(n) / s.fps,
-        positions=mats[:, :, :3, 3].astype(np.float64),
-        quaternions=_quaternions(mats[:, :, :3, :3].astype(np.float64)),
-        plate=plate_pos,
-        seconds_build=seconds_build,
-        seconds_stepping=seconds_stepping,
-        bond_break_time_s=tracker.break_time_s if tracker is not None else None,
-        bond_break_mode=tracker.break_mode if tracker is not None else None,
-        bond_release_time_s=tracker.release_time_s if tracker is not None else None,
-        max_utilisation=utilisation if record else None,
-        seconds_joints=tracker.seconds if tracker is not None else 0.0,
-        elastic=_elastic_history(tracker, float(n - 1) / s.fps),
-        pieces=pieces,
-    )
-
-
-def _elastic_history(tracker, end_s: float) -> dict | None:
-    """The tracker's record of the elastic vibration up to the run's last frame (a tracker running
-    ahead of Bullet may have stepped further)."""
-    if tracker is None or tracker.elastic is None:
-        return None
-    h = {k: np.asarray(v, dtype=np.float64) for k, v in tracker.history.items()}
-    keep = h["time_s"] + tracker.t0 <= end_s + 1e-9
-    out = {k: v[keep] for k, v in h.items()}
-    out["first_period_s"] = tracker.first_period_s
-    out["damping_ratio"] = tracker.elastic.ratio
-    return out
+            bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .blender import RunOutput
 from .ground_motion import G
 from .joints import FAILURE_MODES
+from .loop import RunOutput
 from .scene import Scene
 
 ONSET_DRIFT = 1e-3  # a pushover's onset of collapse: a brick moves faster than this fraction of the height per second
@@ -145,7 +145,7 @@ def _watched(scene: Scene) -> slice:
 
 
 def pushover_stop(scene: Scene, settle_s: float = 1.0):
-    """A ``stop`` for :func:`~calib_masonry.simulation.blender.run`: true ``settle_s`` after the largest
+    """A ``stop`` for :func:`~calib_masonry.simulation.loop.run`: true ``settle_s`` after the largest
     brick displacement (from the end of the warm-up, relative to the plate; a shear test's beam's)
     has run away."""
     s = scene.solver

@@ -145,13 +145,13 @@ class SimulationConfig:
 
 @dataclass(frozen=True)
 class SimulationResult:
-    """One run: the scene it simulated, the poses at every frame (:class:`~calib_masonry.simulation.blender.RunOutput`),
+    """One run: the scene it simulated, the poses at every frame (:class:`~calib_masonry.simulation.loop.RunOutput`),
     the metrics read from them, the pushover curve (collapse multiplier in g or None, lateral
     acceleration in g and roof displacement in m per frame; None for a ground motion) and the
     summary (what ``summary.json`` holds)."""
 
     scene: Scene
-    output: object  # blender.RunOutput
+    output: object  # loop.RunOutput
     metrics: object  # results.Metrics
     curve: tuple | None
     summary: dict
@@ -566,7 +566,7 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
 def _run_scene(
     scene: Scene, name: str, *, progress: bool | None, blend_path: Path | None, joints_ahead: bool = True
 ) -> SimulationResult:
-    from .blender import drain
+    from .loop import drain
 
     return drain(_scene_steps(scene, name, progress=progress, blend_path=blend_path, joints_ahead=joints_ahead))
 
@@ -574,11 +574,12 @@ def _run_scene(
 def _scene_steps(
     scene: Scene, name: str, *, progress: bool | None, blend_path: Path | None, joints_ahead: bool = True
 ) -> Generator[int, None, SimulationResult]:
-    """The run of ``scene``, yielding after every frame (:func:`calib_masonry.simulation.blender.steps`),
+    """The run of ``scene``, yielding after every frame (:func:`calib_masonry.simulation.loop.steps`),
     returning its :class:`SimulationResult`."""
     from threadpoolctl import threadpool_limits
 
-    from .blender import require_bpy, steps
+    from .blender import require_bpy
+    from .loop import steps
     from .results import collapse_multiplier, metrics, pushover_stop, shear_curve
 
     if threading.current_thread() is not threading.main_thread():

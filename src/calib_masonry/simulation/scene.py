@@ -71,6 +71,8 @@ __all__ = [
     "footing_patches",
     "grounded_bodies",
     "plate_linked",
+    "quaternions_from_matrices",
+    "box_mesh",
 ]
 
 
@@ -1048,6 +1050,20 @@ def scene_from_geometry(
         material=material,
         notes=notes,
     )
+
+
+def quaternions_from_matrices(r: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w, x, y, z) ``(..., 4)`` of rotation matrices ``(..., 3, 3)``, w >= 0
+    (scipy's Rotation; an engine's float32 matrices are taken to the nearest rotation)."""
+    from scipy.spatial.transform import Rotation
+
+    m = np.asarray(r, dtype=np.float64)
+    flat = m.reshape(-1, 3, 3)
+    if len(flat) == 0:
+        return np.zeros((*m.shape[:-2], 4))
+    q = Rotation.from_matrix(flat).as_quat(scalar_first=True)
+    q *= np.where(q[:, :1] < 0, -1.0, 1.0)
+    return q.reshape(*m.shape[:-2], 4)
 
 
 def box_mesh(size) -> tuple[np.ndarray, np.ndarray]:

@@ -31,7 +31,7 @@ from .analysis import input_columns, output_columns, plot_study, summarize
 from .design import Sample, Study, samples, study_json
 from .sample import ROW_KEYS, run_sample, run_sample_async, warm_worker
 
-__all__ = ["run_study", "study_to_folder", "SCHEDULER_TIMEOUT_S"]
+__all__ = ["run_study", "study_to_folder", "dask_client", "execute_samples", "SCHEDULER_TIMEOUT_S"]
 
 SCHEDULER_TIMEOUT_S = 10.0
 # what every worker process starts with: a fixed hash seed, and one thread per numerical library (a
@@ -78,7 +78,7 @@ def check_scheduler(scheduler: str) -> None:
 
 
 @contextlib.contextmanager
-def _dask(scheduler: str | None, workers: int | None, simulate: bool = False):
+def dask_client(scheduler: str | None, workers: int | None, simulate: bool = False):
     """A connected dask client for the run (None for ``workers=0``: this process); with ``simulate``
     its workers have started Blender."""
     if workers == 0:
@@ -94,9 +94,11 @@ def _dask(scheduler: str | None, workers: int | None, simulate: bool = False):
             cluster.close()
 
 
-def _execute(
+def execute_samples(
     study_: Study, todo: list[Sample], on_row: Callable[[dict], None], client, *, progress: bool | None
 ) -> None:
+    """Run the samples ``todo`` of ``study_`` (on ``client``'s workers, or here for None), calling
+    ``on_row`` with each sample's row as it ends."""
     bar = _progress(total=len(todo), desc=f"study {study_.name}", unit="sample", enabled=progress)
     try:
         if client is None:
@@ -131,8 +133,8 @@ def run_study(
         check_scheduler(scheduler)
     _check_workers(workers)
     rows: dict[int, dict] = {}
-    with _dask(scheduler, workers, study_.simulate is not None) as client:
-        _execute(study_, samples(study_), lambda r: rows.__setitem__(r["sample"], r), client, progress=progress)
+    with dask_client(scheduler, workers, study_.simulate is not None) as client:
+        execute_samples(study_, samples(study_), lambda r: rows.__setitem__(r["sample"], r), client, progress=progress)
     ordered = [rows[i] for i in sorted(rows)]
     return ordered, summarize(study_, ordered)
 
@@ -229,7 +231,7 @@ def study_to_folder(
     _check_workers(workers)
     check_output(out, command="study", overwrite=overwrite)
     # an unreachable scheduler is refused before --out is touched
-    with _dask(scheduler, workers, study_.simulate is not None) as client:
+    with dask_client(scheduler, workers, study_.simulate is not None) as client:
         return _run_into(study_, Path(out), client, progress=progress, overwrite=overwrite, figures=figures)
 
 
@@ -253,7 +255,7 @@ def _run_into(study_: Study, out: Path, client, *, progress, overwrite: bool, fi
 
     t0 = time.perf_counter()
     try:
-        _execute(study_, todo, keep, client, progress=progress)
+        execute_samples(study_, todo, keep, client, progress=progress)
     except KeyboardInterrupt as exc:
         ran = len(done) - (len(every) - len(todo))
         exc.written = (

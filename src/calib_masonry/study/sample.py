@@ -35,7 +35,7 @@ import numpy as np
 from ..errors import CalibMasonryError, InputError
 from .design import Sample, Study
 
-__all__ = ["run_sample", "run_sample_async", "outcome", "ROW_KEYS"]
+__all__ = ["run_sample", "run_sample_async", "outcome", "build_outputs", "evaluate_sample", "ROW_KEYS"]
 
 ROW_KEYS = ("sample", "point", "status", "error", "warnings", "seconds", "worker")  # the bookkeeping columns
 
@@ -156,7 +156,8 @@ def _varied(spec, study: Study, values: dict, source: Path | None):
     return spec.with_walls(tuple(walls)), keys, drawn
 
 
-def _build_outputs(result) -> dict:
+def build_outputs(result) -> dict:
+    """The outputs a sample reads from a built model: volume, mass, centre of mass and the like."""
     from ..simulation.scene import MASONRY
 
     s = result.structure
@@ -232,7 +233,7 @@ def _sweep(study: Study, sample: Sample) -> tuple[dict, object]:
         _mask.cache_clear()
     _, true = truth_structure(spec)
     m = compare(result.structure, true)
-    out = _build_outputs(result)
+    out = build_outputs(result)
     out.update(
         precision=m["precision"],
         recall=m["recall"],
@@ -251,7 +252,7 @@ def _sweep(study: Study, sample: Sample) -> tuple[dict, object]:
     return out, result
 
 
-def _evaluate(study: Study, sample: Sample) -> tuple[dict, tuple | None]:
+def evaluate_sample(study: Study, sample: Sample) -> tuple[dict, tuple | None]:
     """The sample's build outputs, and the simulation it asks for (model geometry, load) or None."""
     from ..pipeline import build
 
@@ -260,7 +261,7 @@ def _evaluate(study: Study, sample: Sample) -> tuple[dict, tuple | None]:
     else:
         spec, keys, drawn = _varied(_structure(study.structure), study, sample.values, study.structure)
         result = build(spec, traces={n: _trace(*k) for n, k in keys.items()}, progress=False, warn_closure=False)
-        outputs = {**drawn, **_build_outputs(result)}
+        outputs = {**drawn, **build_outputs(result)}
     job = _simulation(study, sample, result.structure, result.spec.material) if study.simulate is not None else None
     return outputs, job
 
@@ -389,7 +390,7 @@ def run_sample(study: Study, sample: Sample) -> dict:
     from ..simulation.run import simulate
 
     with _row(sample) as row:
-        outputs, job = _evaluate(study, sample)
+        outputs, job = evaluate_sample(study, sample)
         if job is not None:
             geometry, load, material = job
             outputs.update(outcome(simulate(geometry, load, material=material, progress=False, joints_ahead=False)))
@@ -412,7 +413,7 @@ async def run_sample_async(study: Study, sample: Sample) -> dict:
     # process, and two interleaved catches would mix them up
     async with loop_lock("sample"):
         with _row(sample) as row:
-            outputs, job = await asyncio.to_thread(_evaluate, study, sample)
+            outputs, job = await asyncio.to_thread(evaluate_sample, study, sample)
             if job is not None:
                 geometry, load, material = job
                 outputs.update(outcome(await simulate_async(geometry, load, material=material, progress=False)))

@@ -1,0 +1,348 @@
+"""The simulation's stepping loop, free of any physics engine: the load history, the warm-up, the
+joint model's checks (on a thread of their own, ahead of the engine), the joints let go, the
+parts set free, and the verdict's rigid pieces after the run.
+
+The engine (Blender's Bullet: :class:`~calib_masonry.simulation.blender.BlenderEngine`) is driven
+through a small interface, :class:`Engine`: step to a frame, read the poses, switch damping off,
+switch joints off, set bodies free, save. Nothing here imports Blender; a test can drive the loop
+with an engine of its own.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Callable, Generator, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol, TypeVar
+
+import numpy as np
+
+from ..progress import progress as _progress
+from .joints import CrackTracker
+from .pieces import piece_motion
+from .scene import Scene, grounded_bodies, quaternions_from_matrices
+
+__all__ = ["Engine", "RunOutput", "drain", "gravity_per_frame", "run", "steps"]
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class RunOutput:
+    """Poses at every frame (frame 0 is the initial state), in the frame that moves with the ground:
+    ``positions`` ``(F, B, 3)``, ``quaternions`` ``(F, B, 4)`` (w, x, y, z), ``plate`` ``(F, 3)``,
+    ``time`` ``(F,)`` seconds from the start of the warm-up; ``seconds_stepping`` is the wall time
+    of the stepping loop."""
+
+    time: np.ndarray
+    positions: np.ndarray
+    quaternions: np.ndarray
+    plate: np.ndarray
+    seconds_build: float
+    seconds_stepping: float
+    bond_break_time_s: np.ndarray | None = None  # cracking time of each bond after the warm-up, if watched
+    bond_break_mode: np.ndarray | None = None  # per bond: index into joints.FAILURE_MODES, -1 if intact
+    bond_release_time_s: np.ndarray | None = None  # when Bullet let each cracked bond go, NaN if never
+    max_utilisation: np.ndarray | None = None  # (F,) the intact joints' largest utilisation at each frame
+    seconds_joints: float = 0.0  # wall time spent in the joint model
+    # the elastic vibration of the structure the intact joints hold (simulation/dynamics.py), per
+    # joint-model step after the warm-up: time_s, roof_drift_m, base_shear_n, first_mode (arrays),
+    # first_period_s and damping_ratio; None for a quasi-static run
+    elastic: dict | None = None
+    # the pieces the joint model set free, moved as rigid bodies to convergence (simulation/pieces.py):
+    # the verdict's motion; None where no ground motion ran with the joint model
+    pieces: object | None = None
+
+
+class Engine(Protocol):
+    """What the loop asks of a physics engine. Frame ``f`` of the run is the state after ``f``
+    steps (frame 0: the initial state); bodies are numbered as in ``scene.bodies``, joints as in
+    ``scene.bonds``."""
+
+    def step_to(self, frame: int) -> None:
+        """Advance to ``frame`` (frame 0: set up the initial state)."""
+
+    def read_poses(self, out: np.ndarray) -> np.ndarray:
+        """Write every body's world matrix into ``out`` ``(B, 4, 4)`` (row-major) and return the
+        plate's position ``(3,)``."""
+
+    def end_warmup(self) -> None:
+        """Take the warm-up's damping off every body."""
+
+    def switch_off(self, bonds: Sequence[int]) -> None:
+        """Let the joints ``bonds`` go (their bodies bear on each other from now on)."""
+
+    def set_free(self, bodies: np.ndarray, bonds: np.ndarray) -> None:
+        """Turn the bodies held fixed ``bodies`` dynamic (from rest) and switch the held joints
+        ``bonds`` among them on."""
+
+    def save(self, path: Path, frames: int, freed_at: np.ndarray) -> None:
+        """Save the run's first ``frames`` frames, the bodies set free keyed at ``freed_at``."""
+
+
+def gravity_per_frame(scene: Scene) -> np.ndarray:
+    """The gravity vector Bullet steps into each frame with, ``(frames + 1, 3)``; row k drives the
+    step from frame k - 1 to k (row 0: the initial state).
+
+    * Warm-up: gravity rises smoothly from 0 to g over ``gravity_ramp_s`` and then holds, so the
+      bonded structure takes its weight quasi-statically instead of ringing after a sudden load.
+    * Ground motion: applied as the inertial force it puts on every body in the ground's frame,
+      gravity ``(-a_x, -a_y, -g)`` with ``a`` the ground's mean acceleration over the frame, so the
+      velocities are exact at every frame. A kinematic plate keyed per frame would instead change
+      its velocity within one substep at every frame boundary: an acceleration spike of substeps x
+      a, which rocked a block at 0.9 g b / h (measured).
+    * Pushover: a uniform lateral acceleration ``lambda g`` along the pushover's direction, with
+      ``lambda`` rising linearly from 0 at the end of the warm-up (mean over each frame).
+    """
+    s = scene.solver
+    frames = scene.frames
+    warm = s.warmup_frames
+    t = (np.arange(frames + 1) - warm) / s.fps  # time since the ground started moving
+    g = np.zeros((frames + 1, 3))
+    g[:, 2] = -scene.gravity
+    ramp = min(s.gravity_ramp_s, s.warmup_s)
+    if ramp > 0:
+        x = np.clip((t + s.warmup_s) / ramp, 0.0, 1.0)
+        g[:, 2] *= x * x * (3.0 - 2.0 * x)
+    if scene.motion is not None:
+        g[1:, :2] = -scene.motion.mean_acceleration(t)
+    if scene.pushover is not None:
+        p = scene.pushover
+        lam = 0.5 * (p.lateral_g(t[:-1]) + p.lateral_g(t[1:]))  # the mean over each frame (linear ramp)
+        d = np.radians(p.direction_deg)
+        g[1:, 0] = lam * scene.gravity * np.cos(d)
+        g[1:, 1] = lam * scene.gravity * np.sin(d)
+    return g
+
+
+def _ahead(fn: Callable[[int], T], items: range, release: Callable[[], None]) -> Iterator[T]:
+    """``fn(k)`` for each of ``items``, computed in order on a thread of its own as far ahead as it
+    gets, yielded in order; ``release()`` runs on that thread as it ends (the joint model's LU
+    factors are freed there, on the thread that made them: see
+    :meth:`~calib_masonry.simulation.joints.JointModel.release_factors`). Leaving early (an
+    error, a stop, ``close()``) stops the thread after the item it is on and waits for it, so
+    nothing runs on after the run; an error of ``fn`` is raised here, in its item's turn."""
+    results: queue.SimpleQueue = queue.SimpleQueue()
+    stop = threading.Event()
+
+    def work() -> None:
+        try:
+            for k in items:
+                if stop.is_set():
+                    return
+                results.put((True, fn(k)))
+        except BaseException as exc:  # noqa: BLE001 - raised by the consumer in its turn
+            results.put((False, exc))
+        finally:
+            release()
+
+    thread = threading.Thread(target=work, name="calib-masonry-joints", daemon=True)
+    thread.start()
+    try:
+        for _ in items:
+            ok, value = results.get()
+            if not ok:
+                raise value
+            yield value
+    finally:
+        stop.set()
+        thread.join()
+
+
+def run(scene: Scene, **options) -> RunOutput:
+    """Simulate ``scene`` in one pass: :func:`steps` with the same options, run to its end."""
+    return drain(steps(scene, **options))
+
+
+def drain(gen: Generator[int, None, T]) -> T:
+    """The value a generator of :func:`steps` (or a function built on it) returns, run to its end."""
+    while True:
+        try:
+            next(gen)
+        except StopIteration as end:
+            return end.value
+
+
+def _blender_engine(scene: Scene, fixed: np.ndarray, gravity: np.ndarray) -> Engine:
+    from .blender import BlenderEngine
+
+    return BlenderEngine(scene, fixed, gravity)
+
+
+def steps(
+    scene: Scene,
+    *,
+    progress: bool | None = None,
+    blend_path: Path | None = None,
+    record: bool = True,
+    switch_off_s: np.ndarray | None = None,
+    stop=None,
+    joints_ahead: bool = True,
+    engine: Callable[[Scene, np.ndarray, np.ndarray], Engine] = _blender_engine,
+) -> Generator[int, None, RunOutput]:
+    """Simulate ``scene`` in one pass, yielding each frame's number once it is stepped, and return
+    the :class:`RunOutput` (a caller that drives it from an event loop lets the loop run between
+    frames: :func:`calib_masonry.simulation.run.simulate_async`). Closing the generator early
+    stops the joint model's thread as an error would. ``joints_ahead=False`` runs the joint model
+    on this thread, one check before each step, instead of ahead on a thread of its own (the same
+    run, bit for bit): for a process whose cores are busy anyway (a study's workers).
+
+    The pass: the warm-up under (ramped) gravity with every joint intact
+    and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
+    joint model cracking joints before each step (:class:`~calib_masonry.simulation.joints.CrackTracker`).
+
+    The bodies a chain of joints ties to the plate are held fixed by the engine, their joints off
+    there, until the joints let go set a part of the structure free (see
+    :mod:`~calib_masonry.simulation.blender` for why). With ``record=False`` only the stepping is
+    done (the bare-engine baseline): no poses are read and no joint model runs; ``switch_off_s``
+    (per bond, seconds after the warm-up, NaN for never; the ``bond_release_time_s`` of a recorded
+    run) then replays that run's joint switches on a schedule fixed in advance, so the baseline
+    does the same engine work. ``stop(frame, positions (B, 3), plate (3,))``, if given, is asked
+    after every recorded frame whether the run may end there (a pushover ends once it has run
+    away); the output then holds the frames up to that one. ``engine(scene, held fixed (B,),
+    gravity per frame)`` builds the engine (default: Blender's).
+    """
+    t0 = time.perf_counter()
+    nb = len(scene.bodies)
+    fixed = grounded_bodies(scene.bonds, nb)
+    gravity = gravity_per_frame(scene)
+    eng = engine(scene, fixed.copy(), gravity)
+    seconds_build = time.perf_counter() - t0
+    s = scene.solver
+    frames = scene.frames
+    warm = min(s.warmup_frames, frames)
+    n = frames + 1 if record else 1
+    plate_pos = np.zeros((n, 3))
+    mats = np.zeros((n, nb, 4, 4), dtype=np.float32)
+    utilisation = np.zeros(n)
+
+    def grab(i: int) -> None:
+        plate_pos[i] = eng.read_poses(mats[i])
+
+    tracker: CrackTracker | None = None
+
+    def end_warmup(i: int) -> None:
+        nonlocal tracker
+        if warm > 0:
+            eng.end_warmup()
+        if record and scene.bonds:
+            tracker = CrackTracker(scene, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i], (i) / s.fps)
+
+    schedule: dict[int, list[int]] = {}
+    if not record and switch_off_s is not None:
+        for k in np.flatnonzero(np.isfinite(switch_off_s)):
+            schedule.setdefault(warm + int(round(float(switch_off_s[k]) * s.fps)), []).append(int(k))
+
+    held = np.ones(len(scene.bonds), dtype=bool)  # the joints the engine holds
+    bond_a = np.array([b.a for b in scene.bonds], dtype=np.int64)
+    freed_at = np.full(nb, -1)  # the frame at which each body held fixed was set free
+
+    def switch_off(bonds, frame: int) -> None:
+        eng.switch_off(bonds)
+        held[list(bonds)] = False
+        # the part of the structure that no held joint ties to the plate any more is set free:
+        # its bodies turn dynamic (from rest) and the held joints among them act in the engine
+        free = np.flatnonzero(fixed & ~grounded_bodies(scene.bonds, nb, held))
+        if free.size == 0:
+            return
+        fixed[free] = False
+        freed_at[free] = frame
+        eng.set_free(free, np.flatnonzero(held & np.isin(bond_a, free)))
+
+    def check(f: int, p: int):
+        # the joints that step f's load cracks and the engine must let go, given the poses of
+        # frame p (read only for bodies that bear on the plate without a joint)
+        assert tracker is not None
+        release = tracker.step(
+            (f - 1) / s.fps,
+            gravity[f],
+            mats[p, :, :3, 3].astype(np.float64),
+            mats[p, :, :3, :3].astype(np.float64),
+            plate_pos[p].copy(),
+        )
+        return release, tracker.max_utilisation
+
+    # A tracker that reads no pose (no body bears on the plate without a joint) decides every step
+    # from the load history and its own state alone, so it runs ahead on the other core, frame
+    # after frame in order, while the engine steps (Blender's frame_set releases the GIL): the
+    # joints cracked and let go are those of one check before each step, and the run takes the
+    # longer of the two.
+    ahead = None
+    t1 = time.perf_counter()
+    eng.step_to(0)
+    if record:
+        grab(0)
+    if warm == 0:
+        end_warmup(0)
+    try:
+        for f in _progress(range(1, frames + 1), desc="simulate", unit="frame", enabled=progress):
+            i = f if record else 0
+            if tracker is not None:
+                if joints_ahead and ahead is None and not tracker.reads_poses:
+                    ahead = _ahead(lambda k, w=i - 1: check(k, w), range(f, frames + 1), tracker.release_factors)
+                p = i - 1
+                release, utilisation[p] = next(ahead) if ahead is not None else check(f, p)
+                if len(release):
+                    switch_off(release, f)
+            elif f - 1 in schedule:
+                switch_off(schedule[f - 1], f)
+            eng.step_to(f)
+            if record:
+                grab(i)
+            if f == warm:
+                end_warmup(i)
+            if record and stop is not None and f > warm and stop(f, mats[i, :, :3, 3], plate_pos[i]):
+                n = f + 1
+                break
+            yield f
+    finally:
+        if ahead is not None:
+            ahead.close()  # a pushover that has run away, an error, a signal: no check runs on after the run
+    seconds_stepping = time.perf_counter() - t1
+    mats, plate_pos, utilisation = mats[:n], plate_pos[:n], utilisation[:n]
+    pieces = None
+    if record and tracker is not None and scene.motion is not None:
+        # the verdict's motion of what the joints set free: rigid pieces, converged (not the engine's)
+        pieces = piece_motion(
+            scene,
+            tracker.release_time_s,
+            (np.arange(warm, n) - warm) / s.fps,
+            velocity=tracker.free_velocity,
+            model=tracker.model,
+            progress=progress if np.isfinite(tracker.release_time_s).any() else False,
+        )
+    if not record:
+        grab(0)  # the final state only
+    if blend_path is not None:
+        eng.save(blend_path, len(mats), freed_at)
+    return RunOutput(
+        time=np.arange(n) / s.fps,
+        positions=mats[:, :, :3, 3].astype(np.float64),
+        quaternions=quaternions_from_matrices(mats[:, :, :3, :3].astype(np.float64)),
+        plate=plate_pos,
+        seconds_build=seconds_build,
+        seconds_stepping=seconds_stepping,
+        bond_break_time_s=tracker.break_time_s if tracker is not None else None,
+        bond_break_mode=tracker.break_mode if tracker is not None else None,
+        bond_release_time_s=tracker.release_time_s if tracker is not None else None,
+        max_utilisation=utilisation if record else None,
+        seconds_joints=tracker.seconds if tracker is not None else 0.0,
+        elastic=_elastic_history(tracker, float(n - 1) / s.fps),
+        pieces=pieces,
+    )
+
+
+def _elastic_history(tracker, end_s: float) -> dict | None:
+    """The tracker's record of the elastic vibration up to the run's last frame (a tracker running
+    ahead of Bullet may have stepped further)."""
+    if tracker is None or tracker.elastic is None:
+        return None
+    h = {k: np.asarray(v, dtype=np.float64) for k, v in tracker.history.items()}
+    keep = h["time_s"] + tracker.t0 <= end_s + 1e-9
+    out = {k: v[keep] for k, v in h.items()}
+    out["first_period_s"] = tracker.first_period_s
+    out["damping_ratio"] = tracker.elastic.ratio
+    return out

@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_masonry.pipeline import build_to_folder
+from calib_masonry.build_folder import build_to_folder, load_model
 from calib_masonry.simulation.blender import require_bpy
 from calib_masonry.simulation.loop import run
 from calib_masonry.simulation.results import metrics
-from calib_masonry.simulation.run import SimulationConfig, load_model, scene_for_model, simulate_to_folder
+from calib_masonry.simulation.run import SimulationConfig, scene_for_model, simulate_to_folder
 from calib_masonry.simulation.scene import scene_geometry
 from calib_masonry.spec import load_structure
 

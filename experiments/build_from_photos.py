@@ -18,9 +18,9 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from calib_masonry.pipeline import build_to_folder
+from calib_masonry.build_folder import build_to_folder
+from calib_masonry.comparison import compare_dirs
 from calib_masonry.spec import PhotoSpec, load_structure
-from calib_masonry.study.compare import compare_dirs
 from calib_masonry.synthetic.truth import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]

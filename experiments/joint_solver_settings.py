@@ -22,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_masonry.pipeline import build_to_folder
-from calib_masonry.simulation.joints import ContactSettings, CrackTracker
+from calib_masonry.build_folder import build_to_folder
+from calib_masonry.simulation.joints import ContactSettings
 from calib_masonry.simulation.loop import gravity_per_frame
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model
+from calib_masonry.simulation.tracker import CrackTracker
 from calib_masonry.spec import load_structure
 
 ROOT = Path(__file__).resolve().parents[1]

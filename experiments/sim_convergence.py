@@ -42,13 +42,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from calib_masonry.pipeline import build_to_folder  # noqa: E402
-from calib_masonry.simulation.joints import CrackTracker  # noqa: E402
+from calib_masonry.build_folder import build_to_folder  # noqa: E402
 from calib_masonry.simulation.loop import gravity_per_frame, run  # noqa: E402
 from calib_masonry.simulation.pieces import piece_motion  # noqa: E402
 from calib_masonry.simulation.results import metrics  # noqa: E402
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model  # noqa: E402
 from calib_masonry.simulation.scene import SolverSettings, grounded_bodies  # noqa: E402
+from calib_masonry.simulation.tracker import CrackTracker  # noqa: E402
 from calib_masonry.spec import load_structure  # noqa: E402
 
 DEFAULT = SolverSettings()

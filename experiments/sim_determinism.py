@@ -215,7 +215,7 @@ def main() -> None:
         if a.dask and runs:
             if client is None:
                 client = _cluster()
-            from calib_masonry.simulation.run import simulation_geometry
+            from calib_masonry.build_folder import simulation_geometry
 
             geometry = simulation_geometry(result.structure)
             out, gap = client.submit(_on_loop, geometry, motion, weak, pure=False).result()

@@ -55,8 +55,9 @@ async def _on_loop(geometry, motion, material) -> float:
 
 def one_mode(mode: str, runs: int) -> None:
     import calib_masonry as cm
+    from calib_masonry.build_folder import simulation_geometry
     from calib_masonry.simulation.loop import gravity_per_frame, run
-    from calib_masonry.simulation.run import scene_for, simulation_geometry
+    from calib_masonry.simulation.run import scene_for
 
     structure, motion, weak = _scene()
     sizes = []
@@ -74,7 +75,7 @@ def one_mode(mode: str, runs: int) -> None:
         from scipy.spatial.transform import Rotation
         from threadpoolctl import threadpool_limits
 
-        from calib_masonry.simulation.joints import CrackTracker
+        from calib_masonry.simulation.tracker import CrackTracker
 
         scene = scene_for(structure, motion, material=weak)
         out = run(scene, progress=False)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calib_masonry.pipeline import build_to_folder
+from calib_masonry.build_folder import build_to_folder
 from calib_masonry.simulation.loop import run
 from calib_masonry.simulation.results import metrics, outcome
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model

@@ -233,7 +233,7 @@ def test_a_dask_worker_simulates_on_its_main_thread_as_this_process_does(built):
 
     need_bpy()
     from calib_masonry import Material, simulate, synthetic_motion
-    from calib_masonry.simulation.run import simulation_geometry
+    from calib_masonry.build_folder import simulation_geometry
 
     _, result = built
     motion = synthetic_motion(0.5, 1.0, seed=3, components=2)
@@ -269,7 +269,7 @@ def test_no_subprocess_in_the_library():
 
 def test_build_writes_the_simulation_geometry_without_reading_what_it_wrote(built, tmp_path, monkeypatch):
     from calib_masonry import read_build, write_build
-    from calib_masonry.simulation.run import geometry_for_model
+    from calib_masonry.build_folder import geometry_for_model
 
     _, result = built
     out = tmp_path / "model"

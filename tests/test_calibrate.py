@@ -473,9 +473,9 @@ def test_rectify_and_segment_recover_the_bricks(photo_set):
 
 @pytest.mark.slow
 def test_build_from_photos_matches_truth(photo_set, tmp_path):
-    from calib_masonry.pipeline import build_to_folder
+    from calib_masonry.build_folder import build_to_folder
+    from calib_masonry.comparison import compare_dirs
     from calib_masonry.spec import load_structure
-    from calib_masonry.study.compare import compare_dirs
 
     data, _ = photo_set
     spec = load_structure(data / "structure_photos.toml")
@@ -762,13 +762,13 @@ def test_the_wide_gaussian_is_the_direct_one_within_half_a_percent(shape, sigma)
 
 
 def test_distances_to_many_vanishing_points_are_those_to_each_bit_for_bit():
-    from calib_masonry.calibrate.lines import _dist_to_vp, _dist_to_vps
+    from calib_masonry.calibrate.segments import dist_to_vp, dist_to_vps
 
     rng = np.random.default_rng(3)
     seg = rng.normal(size=(60, 4))
     vps = np.r_[rng.normal(size=(20, 3)), [[1.0, 0.5, 0.0]]]  # one at infinity
-    many = _dist_to_vps(seg, vps)
-    assert all(np.array_equal(many[k], _dist_to_vp(seg, vp)) for k, vp in enumerate(vps))
+    many = dist_to_vps(seg, vps)
+    assert all(np.array_equal(many[k], dist_to_vp(seg, vp)) for k, vp in enumerate(vps))
 
 
 @pytest.mark.parametrize("shape", [(3000, 2000), (2999, 2001), (1201, 4000)])
@@ -780,7 +780,7 @@ def test_shrink_samples_rescales_grid(shape, s):
     from scipy.ndimage import gaussian_filter
     from skimage.transform import rescale
 
-    from calib_masonry.calibrate.lines import shrink
+    from calib_masonry.calibrate.segments import shrink
 
     y, x = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float32)
     ramp = 0.3 * x + 0.7 * y

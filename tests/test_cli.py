@@ -228,7 +228,7 @@ def test_sigterm_stops_simulate_and_sigkill_staging_goes_with_the_next_run(tmp_p
     import signal
     import time
 
-    from calib_masonry.pipeline import build_to_folder
+    from calib_masonry.build_folder import build_to_folder
     from calib_masonry.spec import load_structure
     from calib_masonry.synthetic.truth import synthesize
 

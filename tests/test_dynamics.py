@@ -10,8 +10,9 @@ import scipy.linalg as sla
 
 from calib_masonry.simulation.dynamics import ElasticResponse, body_inertia, mass_matrix, modes, rayleigh
 from calib_masonry.simulation.ground_motion import G, GroundMotion
-from calib_masonry.simulation.joints import CrackTracker, JointModel
+from calib_masonry.simulation.joints import JointModel
 from calib_masonry.simulation.scene import Material
+from calib_masonry.simulation.tracker import CrackTracker
 
 from .test_joints import _block, _column
 

@@ -5,10 +5,10 @@ import pytest
 
 from calib_masonry.build3d.bond import find_end_faces
 from calib_masonry.build3d.place import corners, wall_frames
+from calib_masonry.build_folder import build_to_folder
+from calib_masonry.comparison import compare_dirs
 from calib_masonry.io import read_mask
-from calib_masonry.pipeline import build_to_folder
 from calib_masonry.spec import load_structure
-from calib_masonry.study.compare import compare_dirs
 from calib_masonry.synthetic.layouts import layout_structure
 from calib_masonry.synthetic.truth import synthesize
 

@@ -139,9 +139,9 @@ def test_swat_refined_targets():
 def test_stylite_refined_truth_dice_per_wall(tmp_path):
     from dataclasses import replace
 
-    from calib_masonry.pipeline import build_to_folder
+    from calib_masonry.build_folder import build_to_folder
+    from calib_masonry.comparison import compare_dirs
     from calib_masonry.spec import load_structure
-    from calib_masonry.study.compare import compare_dirs
 
     spec = load_structure(DATA / "stylite" / "structure.toml")
     build_to_folder(spec, tmp_path / "split", figures=False, progress=False)

@@ -210,7 +210,7 @@ def test_the_joint_model_running_ahead_gives_the_run_of_one_check_before_each_st
     # runs ahead of Bullet on a thread of its own; its cracks and releases must be those it gives
     # checking each step just before it, bit for bit (the poses are Bullet's: two Bullet runs in one
     # process may differ in their last bits, see the README's "How it works")
-    from calib_masonry.simulation.joints import CrackTracker
+    from calib_masonry.simulation.tracker import CrackTracker
 
     bodies, bonds = _stack_of_six()
     mortar = Material(tensile_strength=2e3, shear_strength=2e3)
@@ -480,7 +480,7 @@ def test_pushover_cracks_a_bonded_wall_out_of_plane_at_the_analytic_moment(subst
 
 @pytest.fixture(scope="module")
 def small_model(tmp_path_factory):
-    from calib_masonry.pipeline import build_to_folder
+    from calib_masonry.build_folder import build_to_folder
     from calib_masonry.spec import load_structure
     from calib_masonry.synthetic.truth import synthesize
 
@@ -654,7 +654,7 @@ def test_bottom_course_is_bonded_to_the_plate(small_model):
 def _under_gravity(tmp_path, name: str, seconds: float = 10.0):
     """A shipped model (data_synthetic/NAME) built and run under gravity alone: the cracked joints'
     count and every brick's largest displacement after the 0.5 s settling."""
-    from calib_masonry.pipeline import build_to_folder
+    from calib_masonry.build_folder import build_to_folder
     from calib_masonry.simulation.results import metrics
     from calib_masonry.simulation.run import SimulationConfig, scene_for_model
     from calib_masonry.spec import load_structure
@@ -701,7 +701,7 @@ def _same_geometry(g, h) -> bool:
 def test_build_stores_the_geometry_simulate_would_compute(small_model, tmp_path, monkeypatch):
     import shutil
 
-    from calib_masonry.simulation.run import GEOMETRY_FILE, geometry_for_model, load_model
+    from calib_masonry.build_folder import GEOMETRY_FILE, geometry_for_model, load_model
     from calib_masonry.simulation.scene import scene_geometry
 
     stored, from_file = geometry_for_model(small_model / "model")
@@ -728,11 +728,11 @@ def test_build_stores_the_geometry_simulate_would_compute(small_model, tmp_path,
     again, from_file = geometry_for_model(model)
     assert not from_file and _same_geometry(again, stored)
 
-    # nor one computed by other code (any edit to the modules that compute it)
-    import calib_masonry.simulation.scene as scene_module
+    # nor one of another format version (the computation or the layout changed since)
+    import calib_masonry.build_folder as build_folder
 
     assert geometry_for_model(small_model / "model")[1]
-    monkeypatch.setattr(scene_module, "_geometry_code_version", lambda: "edited")
+    monkeypatch.setattr(build_folder, "GEOMETRY_FORMAT", build_folder.GEOMETRY_FORMAT + 1)
     assert not geometry_for_model(small_model / "model")[1]
 
 

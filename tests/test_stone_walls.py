@@ -23,8 +23,8 @@ DRY = Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6)
 
 def _swat_geometry(tmp_path):
     """The real stone mask of ../shared (45 stones, 0.84 x 1.01 m at 1000 px/m), 0.3 m thick."""
+    from calib_masonry.build_folder import simulation_geometry
     from calib_masonry.pipeline import build
-    from calib_masonry.simulation.run import simulation_geometry
     from calib_masonry.spec import load_structure
 
     shutil.copy(SWAT, tmp_path / "mask.png")
@@ -36,8 +36,8 @@ def _swat_geometry(tmp_path):
 
 
 def _structure_geometry(folder):
+    from calib_masonry.build_folder import simulation_geometry
     from calib_masonry.pipeline import build
-    from calib_masonry.simulation.run import simulation_geometry
     from calib_masonry.spec import load_structure
 
     return simulation_geometry(build(load_structure(folder / "structure.toml"), progress=False).structure)
@@ -183,8 +183,9 @@ def test_a_built_dry_panel_pushed_in_its_plane_matches_limit_analysis_with_or_wi
     # where the programme gives 0.58 g. The programme is associative (an upper bound of Coulomb's
     # non-associative friction).
     need_bpy()
+    from calib_masonry.build_folder import simulation_geometry
     from calib_masonry.pipeline import build
-    from calib_masonry.simulation.run import _run_scene, simulation_geometry
+    from calib_masonry.simulation.run import _run_scene
     from calib_masonry.spec import load_structure
     from calib_masonry.synthetic.truth import synthesize
 
@@ -217,8 +218,8 @@ def _one_stone_geometry(tmp_path, length=1.0, height=1.0, t=0.2):
     """One rectangular stone drawn as a mask, built through the pipeline."""
     from PIL import Image
 
+    from calib_masonry.build_folder import simulation_geometry
     from calib_masonry.pipeline import build
-    from calib_masonry.simulation.run import simulation_geometry
     from calib_masonry.spec import load_structure
 
     ppm = 400

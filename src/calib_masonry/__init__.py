@@ -24,8 +24,8 @@ __version__ = "0.1.0"
 
 # public name -> (module, attribute)
 _API = {
-    "demo": (".pipeline", "demo"),
-    "compare_to_file": (".study.compare", "compare_to_file"),
+    "demo": (".cli", "demo"),
+    "compare_to_file": (".comparison", "compare_to_file"),
     "synth_to_folder": (".synthetic.truth", "synth_to_folder"),
     "trace_to_file": (".wall2d.trace", "trace_to_file"),
     "footprint_to_folder": (".calibrate.footprint", "footprint_to_folder"),
@@ -63,9 +63,9 @@ _API = {
     "write_mask": (".io", "write_mask"),
     "BuildResult": (".pipeline", "BuildResult"),
     "build": (".pipeline", "build"),
-    "build_to_folder": (".pipeline", "build_to_folder"),
-    "read_build": (".pipeline", "read_build"),
-    "write_build": (".pipeline", "write_build"),
+    "build_to_folder": (".build_folder", "build_to_folder"),
+    "read_build": (".build_folder", "read_build"),
+    "write_build": (".build_folder", "write_build"),
     "GroundMotion": (".simulation.ground_motion", "GroundMotion"),
     "read_accelerogram": (".simulation.ground_motion", "read_accelerogram"),
     "synthetic_motion": (".simulation.ground_motion", "synthetic_motion"),
@@ -83,12 +83,12 @@ _API = {
     "WallSpec": (".spec", "WallSpec"),
     "load_structure": (".spec", "load_structure"),
     "structure_to_toml": (".spec", "structure_to_toml"),
-    "compare": (".study.compare", "compare"),
+    "compare": (".comparison", "compare"),
     "Study": (".study.design", "Study"),
     "load_study": (".study.design", "load_study"),
     "run_study": (".study.run", "run_study"),
     "study_to_folder": (".study.run", "study_to_folder"),
-    "compare_dirs": (".study.compare", "compare_dirs"),
+    "compare_dirs": (".comparison", "compare_dirs"),
     "synthesize": (".synthetic.truth", "synthesize"),
     "truth_structure": (".synthetic.truth", "truth_structure"),
     "RefineConfig": (".wall2d.refine", "RefineConfig"),
@@ -134,6 +134,9 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .build3d.place import wall_frames as wall_frames
     from .build3d.scale import image_from_wall as image_from_wall
     from .build3d.scale import wall_from_image as wall_from_image
+    from .build_folder import build_to_folder as build_to_folder
+    from .build_folder import read_build as read_build
+    from .build_folder import write_build as write_build
     from .calibrate.corner import calibrate_corner_photo as calibrate_corner_photo
     from .calibrate.fitresult import FitResult as FitResult
     from .calibrate.fitresult import FitStatus as FitStatus
@@ -144,6 +147,10 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .calibrate.rectify import calibrate_photo as calibrate_photo
     from .calibrate.rectify import rectify as rectify
     from .calibrate.rectify import rectify_to_folder as rectify_to_folder
+    from .cli import demo as demo
+    from .comparison import compare as compare
+    from .comparison import compare_dirs as compare_dirs
+    from .comparison import compare_to_file as compare_to_file
     from .errors import BackendMissing as BackendMissing
     from .errors import CalibMasonryError as CalibMasonryError
     from .errors import FitFailed as FitFailed
@@ -154,10 +161,6 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .io import write_mask as write_mask
     from .pipeline import BuildResult as BuildResult
     from .pipeline import build as build
-    from .pipeline import build_to_folder as build_to_folder
-    from .pipeline import demo as demo
-    from .pipeline import read_build as read_build
-    from .pipeline import write_build as write_build
     from .simulation.ground_motion import GroundMotion as GroundMotion
     from .simulation.ground_motion import read_accelerogram as read_accelerogram
     from .simulation.ground_motion import synthetic_motion as synthetic_motion
@@ -175,9 +178,6 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .spec import WallSpec as WallSpec
     from .spec import load_structure as load_structure
     from .spec import structure_to_toml as structure_to_toml
-    from .study.compare import compare as compare
-    from .study.compare import compare_dirs as compare_dirs
-    from .study.compare import compare_to_file as compare_to_file
     from .study.design import Study as Study
     from .study.design import load_study as load_study
     from .study.run import run_study as run_study

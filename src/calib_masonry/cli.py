@@ -65,7 +65,7 @@ def _cmd_trace(args) -> int:
 def _cmd_build(args) -> int:
     from dataclasses import replace
 
-    from .pipeline import build_to_folder
+    from .build_folder import build_to_folder
     from .spec import load_structure
 
     spec = load_structure(args.structure)
@@ -95,7 +95,7 @@ def _print_build(summary: dict, out) -> None:
 
 
 def _cmd_compare(args) -> int:
-    from .study.compare import compare_to_file
+    from .comparison import compare_to_file
 
     metrics, out = compare_to_file(args.run_dir, args.truth_dir, args.out)
     _print_compare(metrics, out)
@@ -149,9 +149,52 @@ def _cmd_study(args) -> int:
     return 0
 
 
-def _cmd_demo(args) -> int:
-    from .pipeline import demo
+def find_demo_data(explicit: str | Path | None = None) -> Path:
+    """The paper example's data folder: ``explicit``, else data_synthetic/paper_example under the
+    working folder or the project."""
+    candidates = (
+        [Path(explicit)]
+        if explicit
+        else [
+            Path.cwd() / "data_synthetic" / "paper_example",
+            Path(__file__).resolve().parents[2] / "data_synthetic" / "paper_example",
+        ]
+    )
+    for c in candidates:
+        if (c / "structure.toml").is_file():
+            return c
+    raise InputError(
+        "demo: data_synthetic/paper_example/structure.toml not found; run from the project folder "
+        "or give --data DIR (re-create it with `calib-masonry synth data_synthetic/paper_example/scenario.toml "
+        "--out data_synthetic/paper_example`)"
+    )
 
+
+def demo(out: str | Path, data: str | Path | None = None, *, overwrite: bool = False) -> tuple[dict, dict, dict, Path]:
+    """``calib-masonry demo``: build the paper example from its masks into ``out``, compare it with
+    its truth (compare.json) and check the build against what the method promises. Returns the
+    build summary, the metrics, the checks (name -> passed) and the data folder."""
+    from .build_folder import build_to_folder
+    from .comparison import compare_dirs
+    from .io import check_output, write_json
+    from .spec import load_structure
+
+    data = find_demo_data(data)
+    check_output(out, command="build", overwrite=overwrite)
+    summary = build_to_folder(load_structure(data / "structure.toml"), out, figures=True, overwrite=overwrite)
+    metrics = compare_dirs(out, data / "truth")
+    write_json(Path(out) / "compare.json", metrics)
+    checks = {
+        "precision == 1": metrics["precision"] == 1.0,
+        "recall == 1": metrics["recall"] == 1.0,
+        "every brick's Dice vs truth >= 0.98": (metrics["dice"]["min"] or 0) >= 0.98,
+        "closure error < 1 mm": summary["closure_error_m"] < 1e-3,
+        "max interpenetration <= 1e-6 m^3": metrics["max_interpenetration_m3"] <= 1e-6,
+    }
+    return summary, metrics, checks, data
+
+
+def _cmd_demo(args) -> int:
     t0 = time.perf_counter()
     summary, metrics, checks, data = demo(args.out, args.data, overwrite=args.overwrite)
     _print_build(summary, args.out)

@@ -81,7 +81,7 @@ def write_labelme(
     """Write a LabelMe file for the image ``image_path`` (relative to the file, as LabelMe wants it)
     of ``shape`` ``(rows, cols)``: the outline, occluders and pieces (polygons ``(n, 2)`` in
     pixel-centre coordinates). Returns the document."""
-    from .io import write_json
+    from ._json import write_json
 
     shapes = []
     if outline is not None:

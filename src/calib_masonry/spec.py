@@ -23,7 +23,6 @@ Units are SI inside; degrees appear only in the file (``theta_deg``). A scenario
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ from typing import Any
 import tomli_w
 
 from .errors import InputError
+from .io import read_toml
 
 __all__ = [
     "WallSpec",
@@ -521,16 +521,6 @@ def _corner_from(c, i: int, names, path: Path, require_sources: bool) -> CornerS
         raise InputError(f"{where}: photo file {p} not found; fix the path (relative to {path.name})")
     focal = _num(c, "focal_px", where, default=None)
     return CornerSpec(photo=p, walls=(pair[0], pair[1]), focal_px=None if focal is None else float(focal))
-
-
-def read_toml(path: Path, what: str) -> dict:
-    """A TOML file's tables; a missing or malformed file is an error naming it."""
-    if not path.is_file():
-        raise InputError(f"{path}: {what} not found; give the path of a .toml file")
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: not valid TOML ({exc}); fix the syntax") from None
 
 
 def load_structure(path: str | Path, *, require_sources: bool = True) -> StructureSpec:

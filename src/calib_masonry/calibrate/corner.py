@@ -27,8 +27,9 @@ from ..io import Photo, read_photo
 from .camera import angles_from_rotation, intrinsics, principal_point, wall_from_camera_rotation
 from .fit import _line_distances, _pad_segments
 from .fitresult import FitResult, FitStatus, HasFit, fit_result
-from .lines import DetectConfig, _hough_segments, _vanishing_point
+from .lines import DetectConfig, _hough_segments
 from .lm import least_squares
+from .segments import vanishing_point
 
 __all__ = [
     "CORNER_DETECT",
@@ -121,12 +122,12 @@ def _families(seg, config: DetectConfig, tol, norm, rng):
     ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
     horiz = seg[np.minimum(ang, 180 - ang) < config.horizontal_max_deg]
     vert = seg[np.abs(ang - 90.0) < config.vertical_max_deg]
-    vp1, in1 = _vanishing_point(norm(horiz), tol, config, rng)
+    vp1, in1 = vanishing_point(norm(horiz), tol, config.ransac_iterations, rng)
     rest = horiz[~in1]
     if len(rest) < 10:
         raise FitFailed("corner photo: only one wall's bed joints found; frame the corner so both walls show")
-    vp2, in2 = _vanishing_point(norm(rest), tol, config, rng)
-    vpz, _ = _vanishing_point(norm(vert), tol, config, rng)
+    vp2, in2 = vanishing_point(norm(rest), tol, config.ransac_iterations, rng)
+    vpz, _ = vanishing_point(norm(vert), tol, config.ransac_iterations, rng)
     fam1, fam2 = horiz[in1], rest[in2]
     if len(fam2) < 5:
         raise FitFailed("corner photo: the second wall's bed joints are too few; frame the corner so both walls show")
@@ -138,7 +139,8 @@ def _families(seg, config: DetectConfig, tol, norm, rng):
 def corner_vanishing_points(rgb: np.ndarray, config: CornerDetect = CORNER_DETECT):
     """Segments of a corner photo split into (bed of the left wall, bed of the right wall, head), in
     full-size pixels, with their vanishing points (homogeneous, full-size pixels)."""
-    from .lines import _dist_to_vp, working_gray
+    from .lines import working_gray
+    from .segments import dist_to_vp
 
     rows, cols = rgb.shape[:2]
     small, s = working_gray(rgb, config.ridges.work_long_side_px)
@@ -153,13 +155,13 @@ def corner_vanishing_points(rgb: np.ndarray, config: CornerDetect = CORNER_DETEC
     va, vb, vz = _families(ridge, config.ridges, config.ridges.vp_inlier_px / s / scale, norm, rng)
     tol = config.assign_px / s / scale
     en = norm(edge)
-    da, db, dz = (_dist_to_vp(en, v) for v in (va, vb, vz))
+    da, db, dz = (dist_to_vp(en, v) for v in (va, vb, vz))
     fam_a = edge[(da < tol) & (db >= tol) & (dz >= tol)]
     fam_b = edge[(db < tol) & (da >= tol) & (dz >= tol)]
     fam_z = edge[(dz < tol) & (da >= tol) & (db >= tol)]
     if config.with_ridges:
         rn = norm(ridge)
-        ra, rb = (_dist_to_vp(rn, v) for v in (va, vb))
+        ra, rb = (dist_to_vp(rn, v) for v in (va, vb))
         rtol = config.ridges.vp_inlier_px / s / scale
         fam_a = np.concatenate([fam_a, ridge[(ra < rtol) & (rb >= rtol)]])
         fam_b = np.concatenate([fam_b, ridge[(rb < rtol) & (ra >= rtol)]])

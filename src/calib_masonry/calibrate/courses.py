@@ -82,36 +82,19 @@ def course_period(profile: np.ndarray, *, min_period: float = 4.0) -> tuple[floa
     return period, max(se, 0.02 * period / max(len(pos), 1)), float(ac[k0])
 
 
-def course_scale(photo, result, config) -> dict:
-    """The wall's height from its courses: the orthophoto of the first fit ``result`` (a
-    :class:`~calib_masonry.calibrate.fit.CalibrationResult`) reduced to a row profile, its period,
-    and ``config.course_height_m`` (with ``config.course_height_sigma_m``, default
-    :data:`~calib_masonry.calibrate.rectify.COURSE_HEIGHT_RELATIVE_SIGMA` of it). Returns the
-    height, its sigma, the number of courses and the autocorrelation at the period."""
-    from .rectify import COURSE_HEIGHT_RELATIVE_SIGMA, SCALE_FLAGS, lens_of, rectify_image
-
-    c = float(config.course_height_m)
-    c_sigma = config.course_height_sigma_m or COURSE_HEIGHT_RELATIVE_SIGMA * c
-    w, h = result.width_m, result.height_m
-    rows = 1200
-    ppm = rows / h
-    if w * ppm > 3000:
-        ppm = 3000 / w
-        rows = int(round(h * ppm))
-    gray = np.asarray(photo.rgb, dtype=np.float32).mean(axis=-1)
-    ortho = rectify_image(gray, result.wall_from_image, w, h, ppm, lens=lens_of(result))
+def course_scale(ortho: np.ndarray, course_height_m: float, course_height_sigma_m: float) -> dict:
+    """The wall's height from its courses: the wall's orthophoto ``ortho`` (grey, its rows the
+    wall's height) reduced to a row profile, its period, and the course height (with its sigma).
+    Returns the height, its sigma, the number of courses and the autocorrelation at the period.
+    Raises :class:`~calib_masonry.errors.FitFailed` where no period stands out."""
+    c = float(course_height_m)
+    c_sigma = float(course_height_sigma_m)
     cols = ortho.shape[1]
     mid = ortho[:, int(0.1 * cols) : max(int(0.1 * cols) + 1, int(0.9 * cols))]
     profile = mid.mean(axis=1).astype(np.float64)
     # less a running mean about eight percent of the height (lighting and weathering vary slowly)
     profile = profile - ndimage.uniform_filter1d(profile, max(3, int(0.08 * len(profile))), mode="nearest")
-    try:
-        period, se, peak = course_period(profile)
-    except FitFailed as exc:
-        raise FitFailed(
-            f"--course-height: {exc}; the module cannot give the scale of this wall: use {SCALE_FLAGS.split(', --course-height M')[0]} "
-            "or a measured --camera-height"
-        ) from None
+    period, se, peak = course_period(profile)
     courses = len(profile) / period
     height = courses * c
     rel = math.hypot(c_sigma / c, se / period)

@@ -437,7 +437,7 @@ def _families(seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _vp(seg: np.ndarray, shape: tuple[int, int], axis: np.ndarray, rng: np.random.Generator, tol_px: float):
     """A family's vanishing point (homogeneous, pixels) by RANSAC and least squares, or the image
     axis's point at infinity when fewer than four segments support one."""
-    from .lines import DetectConfig, _vanishing_point
+    from .segments import vanishing_point
 
     if len(seg) < 4:
         return axis, None
@@ -445,7 +445,7 @@ def _vp(seg: np.ndarray, shape: tuple[int, int], axis: np.ndarray, rng: np.rando
     scale = float(max(shape))
     norm = np.c_[(seg[:, :2] - centre) / scale, (seg[:, 2:] - centre) / scale]
     try:
-        vp, inl = _vanishing_point(norm, tol_px / scale, DetectConfig(ransac_iterations=300), rng)
+        vp, inl = vanishing_point(norm, tol_px / scale, 300, rng)
     except FitFailed:
         return axis, None
     if inl.sum() < 3:
@@ -455,19 +455,19 @@ def _vp(seg: np.ndarray, shape: tuple[int, int], axis: np.ndarray, rng: np.rando
 
 
 def _inside_convex_mask(shape, quad, factor):
-    from .lines import _inside_convex
+    from .segments import inside_convex
 
     c = quad.mean(axis=0)
-    return _inside_convex(shape, c + (quad - c) * factor)
+    return inside_convex(shape, c + (quad - c) * factor)
 
 
 def _band_means(prob: np.ndarray, quad: np.ndarray) -> tuple[float, float]:
     """The mean probability inside ``quad`` and in the band around it (out to 1.15 times its size)."""
-    from .lines import _inside_convex
+    from .segments import inside_convex
 
     c = quad.mean(axis=0)
-    inside = _inside_convex(prob.shape, quad)
-    outer = _inside_convex(prob.shape, c + (quad - c) * 1.15) & ~inside
+    inside = inside_convex(prob.shape, quad)
+    outer = inside_convex(prob.shape, c + (quad - c) * 1.15) & ~inside
     a = float(prob[inside].mean()) if inside.any() else 0.0
     b = float(prob[outer].mean()) if outer.any() else 1.0
     return a, b
@@ -488,7 +488,7 @@ def _grab_cut(small: np.ndarray, quad: np.ndarray, occluded: np.ndarray | None, 
     alone did not (measured on the laboratory photos)."""
     import cv2
 
-    from .lines import _inside_convex, shrink
+    from .segments import inside_convex, shrink
 
     rows, cols = small.shape[:2]
     f = min(1.0, GRABCUT_LONG_SIDE_PX / max(rows, cols))
@@ -501,9 +501,9 @@ def _grab_cut(small: np.ndarray, quad: np.ndarray, occluded: np.ndarray | None, 
     q = (quad + 0.5) * [fx, fy] - 0.5
     c = q.mean(axis=0)
     mask = np.full(shape, cv2.GC_BGD, np.uint8)
-    mask[_inside_convex(shape, c + (q - c) * 1.35)] = cv2.GC_PR_BGD
-    mask[_inside_convex(shape, q)] = cv2.GC_PR_FGD
-    mask[_inside_convex(shape, c + (q - c) * 0.6)] = cv2.GC_FGD
+    mask[inside_convex(shape, c + (q - c) * 1.35)] = cv2.GC_PR_BGD
+    mask[inside_convex(shape, q)] = cv2.GC_PR_FGD
+    mask[inside_convex(shape, c + (q - c) * 0.6)] = cv2.GC_FGD
     if occluded is not None:
         occ = ndimage.zoom(occluded.astype(np.float32), (fy, fx), order=1, grid_mode=True, mode="grid-constant")
         mask[(occ[: shape[0], : shape[1]] > 0.5) & (mask != cv2.GC_BGD)] = cv2.GC_PR_BGD
@@ -527,7 +527,7 @@ def detect_outline(
     """The wall's outline in a photo ``(rows, cols, 3)`` in [0, 1]: see the module's docstring.
     ``occluders``: polygons ``(n, 2)`` in photo pixels to leave out. Raises FitFailed (naming
     ``--corners``) when the wall is not distinct from its surroundings or runs out of the photo."""
-    from .lines import shrink
+    from .segments import shrink
 
     rows, cols = rgb.shape[:2]
     s = min(1.0, config.appearance_long_side_px / max(rows, cols))
@@ -569,13 +569,13 @@ def detect_outline(
     rng = np.random.default_rng(config.seed)
     vp_head, inl_h = _vp(vert, (srows, scols), np.array([0.0, 1.0, 0.0]), rng, 1.5)
     if inl_h is not None and len(vert) >= 4:
-        from .lines import _near_heads
+        from .segments import near_heads
 
         centre = np.array([scols - 1, srows - 1]) / 2.0
         sc = float(max(srows, scols))
         hn = np.c_[(horiz[:, :2] - centre) / sc, (horiz[:, 2:] - centre) / sc]
         vn = np.c_[(vert[:, :2] - centre) / sc, (vert[:, 2:] - centre) / sc]
-        near_h = _near_heads(hn, vn[inl_h]) * sc
+        near_h = near_heads(hn, vn[inl_h]) * sc
         horiz_use = np.c_[near_h[:, :2] + centre, near_h[:, 2:] + centre]
     else:
         horiz_use = horiz

@@ -471,10 +471,16 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     if config.course_height_m is not None:
         from .courses import course_scale
 
+        c = float(config.course_height_m)
         try:
-            courses = course_scale(photo, result, config)
+            courses = course_scale(
+                _course_ortho(photo, result), c, config.course_height_sigma_m or COURSE_HEIGHT_RELATIVE_SIGMA * c
+            )
         except FitFailed as exc:
-            raise FitFailed(f"{photo.path}: {exc}") from None
+            raise FitFailed(
+                f"{photo.path}: --course-height: {exc}; the module cannot give the scale of this wall: use "
+                f"{SCALE_FLAGS.split(', --course-height M')[0]} or a measured --camera-height"
+            ) from None
         inp = replace(inp, known_height_m=courses["height_m"], known_height_sigma_m=courses["height_sigma_m"])
         result = calibrate(inp, start=result.params)
     if focal is None:
@@ -537,7 +543,7 @@ def front_face_ends(result, segments: np.ndarray) -> tuple[np.ndarray, list[str]
     Measured on tall walls rendered by Blender as 0.4 m thick boxes: W came out 2.3-7.9 % wide
     with the end face in the outline (experiments/bench_tall_walls_blender.py)."""
     from .camera import intrinsics, principal_point, wall_from_camera_rotation
-    from .lines import _dist_to_vp
+    from .segments import dist_to_vp
 
     seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
     if len(seg) < END_FACE_SEGMENTS:
@@ -552,9 +558,9 @@ def front_face_ends(result, segments: np.ndarray) -> tuple[np.ndarray, list[str]
     tol = 1.5
     course = (
         (length >= 12.0)
-        & (_dist_to_vp(ideal, vp_normal) < tol)
-        & (_dist_to_vp(ideal, h[:, 0]) > 3 * tol)
-        & (_dist_to_vp(ideal, h[:, 1]) > tol)
+        & (dist_to_vp(ideal, vp_normal) < tol)
+        & (dist_to_vp(ideal, h[:, 0]) > 3 * tol)
+        & (dist_to_vp(ideal, h[:, 1]) > tol)
     )
     if course.sum() < END_FACE_SEGMENTS:
         return None
@@ -753,6 +759,17 @@ def valid_ortho(calibration: PhotoCalibration, px_per_m: float, *, width_m=None,
             valid.shape, ortho_from_photo(calibration, poly, valid.shape, width_m=width, height_m=height)
         )
     return valid
+
+
+def _course_ortho(photo, result) -> np.ndarray:
+    """The first fit's orthophoto of the wall in grey, 1200 rows high (at most 3000 columns wide),
+    for the course count (:func:`~calib_masonry.calibrate.courses.course_scale`)."""
+    w, h = result.width_m, result.height_m
+    ppm = 1200 / h
+    if w * ppm > 3000:
+        ppm = 3000 / w
+    gray = np.asarray(photo.rgb, dtype=np.float32).mean(axis=-1)
+    return rectify_image(gray, result.wall_from_image, w, h, ppm, lens=lens_of(result))
 
 
 def lens_of(res: CalibrationResult) -> tuple[float, tuple[float, float], float, float] | None:
@@ -1000,7 +1017,7 @@ def segment_orthophoto(cal: PhotoCalibration, rect: np.ndarray, px_per_m: float)
     :class:`~calib_masonry.wall2d.segment.Segmentation`, the pieces' polygons and the occluders in
     ``rect``'s pixels."""
     from ..wall2d.segment import segment_wall
-    from .lines import shrink
+    from .segments import shrink
 
     f = min(1.0, SEGMENT_PX_PER_M / px_per_m)
     small = rect if f >= 1.0 else np.stack([shrink(np.ascontiguousarray(rect[..., k]), f) for k in range(3)], -1)

@@ -21,9 +21,9 @@ from typing import Protocol, TypeVar
 import numpy as np
 
 from ..progress import progress as _progress
-from .joints import CrackTracker
 from .pieces import piece_motion
 from .scene import Scene, grounded_bodies, quaternions_from_matrices
+from .tracker import CrackTracker
 
 __all__ = ["Engine", "RunOutput", "drain", "gravity_per_frame", "run", "steps"]
 
@@ -192,7 +192,7 @@ def steps(
 
     The pass: the warm-up under (ramped) gravity with every joint intact
     and the bodies damped, then the ground motion (or the pushover's ramp) with no damping, the
-    joint model cracking joints before each step (:class:`~calib_masonry.simulation.joints.CrackTracker`).
+    joint model cracking joints before each step (:class:`~calib_masonry.simulation.tracker.CrackTracker`).
 
     The bodies a chain of joints ties to the plate are held fixed by the engine, their joints off
     there, until the joints let go set a part of the structure free (see

@@ -25,8 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..build3d.assemble import Structure3D
-from ..build3d.export import bricks_from_json, bricks_json_bytes
-from ..build3d.place import Footprint, WallGeometry, corners, wall_frames
+from ..build_folder import checked_model_dir, geometry_for_model, simulation_geometry
 from ..errors import InputError
 from ..io import check_output, read_json, staged_output, write_json
 from .ground_motion import MAX_PGA_G, G, GroundMotion, read_accelerogram, synthetic_motion
@@ -39,11 +38,8 @@ from .scene import (
     SceneGeometry,
     ShearTest,
     SolverSettings,
-    load_geometry,
     material_table,
-    save_geometry,
     scene_from_geometry,
-    scene_geometry,
     shear_test_scene,
 )
 
@@ -55,16 +51,9 @@ __all__ = [
     "simulate_async",
     "write_simulation",
     "simulate_to_folder",
-    "simulation_geometry",
     "scene_for",
     "scene_for_model",
     "motion_for",
-    "load_model",
-    "read_model_json",
-    "model_from_json",
-    "geometry_for_model",
-    "store_geometry",
-    "GEOMETRY_FILE",
 ]
 
 
@@ -162,127 +151,6 @@ class SimulationResult:
         return None if self.curve is None else self.curve[0]
 
 
-GEOMETRY_FILE = "sim_geometry.npz"  # the simulation's bodies and contact patches, stored by `build`
-
-
-def _checked_model_dir(model_dir: str | Path) -> Path:
-    model_dir = Path(model_dir)
-    if not model_dir.is_dir():
-        raise InputError(f"MODEL_DIR {model_dir}: not a folder; give the --out folder of `calib-masonry build`")
-    if not (model_dir / "bricks.json").is_file():
-        raise InputError(
-            f"MODEL_DIR {model_dir}: has no bricks.json; run `calib-masonry build STRUCTURE.toml --out {model_dir}` first"
-        )
-    return model_dir
-
-
-def _closed_footprint(model_dir: Path):
-    if (model_dir / "summary.json").is_file():
-        return read_json(model_dir / "summary.json").get("closed_footprint")
-    return None
-
-
-def model_from_json(data: dict, closed, source: str | Path):
-    """Bricks, wall frames, corners and footprint of a ``build`` output's bricks.json contents
-    ``data`` (``closed``: the build summary's closed_footprint)."""
-    try:
-        bricks = bricks_from_json(data)
-        walls = tuple(
-            WallGeometry(
-                width_m=w["width_m"],
-                height_m=w["height_m"],
-                theta_rad=math.radians(w["theta_deg"]),
-                thickness_m=w["thickness_m"],
-                name=w["name"],
-            )
-            for w in data["walls"]
-        )
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"MODEL_DIR {source}: bricks.json is not a build output ({exc}); re-run build") from None
-    if not bricks:
-        raise InputError(f"MODEL_DIR {source}: bricks.json holds no bricks; nothing to simulate")
-    footprint = Footprint(walls=walls, closed=closed)
-    return bricks, wall_frames(footprint), corners(footprint), footprint
-
-
-def read_model_json(model_dir: str | Path) -> tuple[dict, bool | None]:
-    """A ``build`` output folder's bricks.json contents and its summary's closed_footprint."""
-    model_dir = _checked_model_dir(model_dir)
-    return read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json"), _closed_footprint(model_dir)
-
-
-def load_model(model_dir: str | Path):
-    """Bricks, wall frames, corners and footprint of a ``build`` output folder."""
-    return model_from_json(*read_model_json(model_dir), model_dir)
-
-
-def _geometry_key(raw: bytes, closed, max_gap_m: float, mortar_fill: bool) -> str:
-    """What a model's simulation geometry is computed from: the bricks.json bytes, whether the
-    footprint is closed, the joint reach and the mortar fill."""
-    import hashlib
-
-    h = hashlib.sha256(raw)
-    h.update(repr((closed, float(max_gap_m), bool(mortar_fill))).encode())
-    return h.hexdigest()
-
-
-def simulation_geometry(
-    model: Structure3D | SceneGeometry, *, max_gap_m: float = 0.06, mortar_fill: bool = True
-) -> SceneGeometry:
-    """The bodies and contact patches of a built structure, in memory."""
-    if isinstance(model, SceneGeometry):
-        return model
-    if not isinstance(model, Structure3D):
-        raise InputError(
-            f"simulate: the model must be a Structure3D (from build), a SceneGeometry or a build "
-            f"folder, got {type(model).__name__}"
-        )
-    return scene_geometry(
-        model.bricks, list(model.frames), list(model.corners), mortar_fill=mortar_fill, max_gap_m=max_gap_m
-    )
-
-
-def store_geometry(
-    structure: Structure3D,
-    model_dir: str | Path,
-    *,
-    max_gap_m: float = 0.06,
-    mortar_fill: bool = True,
-    bricks_json: bytes | None = None,
-    geometry: SceneGeometry | None = None,
-) -> SceneGeometry:
-    """Compute the simulation geometry of ``structure`` in memory (unless the caller has computed
-    it already: ``geometry``) and store it in ``model_dir`` (a ``build`` stage) as
-    sim_geometry.npz, keyed by the bricks.json that build writes for it (``bricks_json``, its
-    bytes, when the caller has them already; else made here) and by the joint reach and mortar
-    fill the geometry was computed with."""
-    if geometry is None:
-        geometry = simulation_geometry(structure, max_gap_m=max_gap_m, mortar_fill=mortar_fill)
-    if bricks_json is None:
-        bricks_json = bricks_json_bytes(structure)
-    key = _geometry_key(bricks_json, structure.footprint.is_closed, geometry.max_gap_m, geometry.mortar_fill)
-    save_geometry(geometry, Path(model_dir) / GEOMETRY_FILE, key)
-    return geometry
-
-
-def geometry_for_model(
-    model_dir: str | Path, *, max_gap_m: float = 0.06, mortar_fill: bool = True
-) -> tuple[SceneGeometry, bool]:
-    """The simulation geometry of a model folder and whether it came from the folder's
-    sim_geometry.npz. The stored copy is used only if it was computed from this bricks.json (its
-    hash), footprint and settings by this version of the code; otherwise (a model built before it
-    was stored, an edited bricks.json) the geometry is computed here from bricks.json."""
-    model_dir = _checked_model_dir(model_dir)
-    raw = (model_dir / "bricks.json").read_bytes()
-    closed = _closed_footprint(model_dir)
-    stored = load_geometry(model_dir / GEOMETRY_FILE, _geometry_key(raw, closed, max_gap_m, mortar_fill))
-    if stored is not None:
-        return stored, True
-    data = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
-    bricks, frames, cs, _ = model_from_json(data, closed, model_dir)
-    return scene_geometry(bricks, frames, cs, mortar_fill=mortar_fill, max_gap_m=max_gap_m), False
-
-
 def motion_for(config: SimulationConfig) -> GroundMotion:
     """The ground motion of a run. A synthetic record is scaled so that its samples (200 Hz) peak
     at the PGA, the same record at every frame rate: the joint model reads the record itself (its
@@ -363,7 +231,7 @@ def scene_for_model(model_dir: str | Path, config: SimulationConfig) -> Scene:
 def model_material(model_dir: str | Path, given: Material | None = None) -> tuple[Material, str]:
     """The material a run of the model uses and where it comes from: ``given`` (``--material``),
     else the model folder's material.toml (its structure's [material] table), else the defaults."""
-    from ..pipeline import MATERIAL_FILE
+    from ..build_folder import MATERIAL_FILE
     from .scene import read_material
 
     if given is not None:
@@ -810,7 +678,7 @@ def modes_to_folder(
     from .dynamics import write_modes
 
     check_output(out, command="modes", overwrite=overwrite)
-    _checked_model_dir(model_dir)
+    checked_model_dir(model_dir)
     _out_beside_model(out, model_dir)
     m, scene = model_modes(model_dir, n, material)
     with staged_output(out, "modes", overwrite=overwrite) as stage:

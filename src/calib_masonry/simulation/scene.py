@@ -60,8 +60,6 @@ __all__ = [
     "SceneGeometry",
     "scene_geometry",
     "scene_from_geometry",
-    "save_geometry",
-    "load_geometry",
     "MASONRY",
     "MATERIAL_KEYS",
     "material_from_table",
@@ -174,7 +172,7 @@ def material_table(material: Material) -> dict[str, float]:
 
 def read_material(path: str | Path, base: Material = MASONRY) -> Material:
     """The material of a TOML file: its [material] table, or its keys at the top level."""
-    from ..spec import read_toml
+    from ..io import read_toml
 
     data = read_toml(Path(path), "material file")
     table = data.get("material", data) if isinstance(data, dict) else data
@@ -633,7 +631,7 @@ class SceneGeometry:
     """The part of a scene that depends on the built bricks alone, not on materials, solver or
     ground motion: every body's shape (its mortar cell, or its brick where a cell would overlap a
     brick it is not bonded to) and the contact patches between bricks. ``build`` computes it once
-    and stores it in the model folder (:func:`save_geometry`), so that every simulation of a model
+    and stores it in the model folder (:func:`calib_masonry.build_folder.store_geometry`), so that every simulation of a model
     (an uncertainty study runs many) starts from it instead of recomputing it (about 2 s on the
     Stylite tower). Body ``i`` is brick ``i`` of the model, in order."""
 
@@ -908,85 +906,6 @@ def scene_geometry(
         max_gap_m=float(max_gap_m),
         mortar_fill=bool(mortar_fill),
         coverage=coverage,
-    )
-
-
-def _geometry_code_version() -> str:
-    """A hash of the source of every module the geometry is computed by, so that a stored copy
-    computed by other code (after any edit to them) is never taken for this code's result."""
-    import hashlib
-    import sys
-
-    from ..build3d import assemble, contacts, extrude, place
-    from . import mortar
-
-    h = hashlib.sha256()
-    for module in (sys.modules[__name__], mortar, contacts, assemble, extrude, place):
-        h.update(Path(module.__file__).read_bytes())
-    return h.hexdigest()[:16]
-
-
-def save_geometry(geometry: SceneGeometry, path: Path, key: str) -> None:
-    """Store ``geometry`` as an npz file; ``key`` names the inputs it was computed from (see
-    :func:`load_geometry`)."""
-    g = geometry
-    nv = np.array([len(v) for v in g.vertices], dtype=np.int64)
-    nf = np.array([len(f) for f in g.faces], dtype=np.int64)
-    with open(path, "wb") as fh:
-        np.savez(
-            fh,
-            key=np.array(f"{_geometry_code_version()}:{key}"),
-            names=np.array(g.names),
-            vertex_counts=nv,
-            vertices=np.concatenate(g.vertices).reshape(-1, 3),
-            face_counts=nf,
-            faces=np.concatenate(g.faces).reshape(-1, 3),
-            locations=g.locations,
-            brick_volumes=g.brick_volumes,
-            hull_volume_change=g.hull_volume_change,
-            patch_pairs=g.patch_pairs,
-            patch_centroids=g.patch_centroids,
-            patch_normals=g.patch_normals,
-            patch_areas=g.patch_areas,
-            patch_widths=g.patch_widths,
-            patch_moments=g.patch_moments,
-            patch_outlines=g.patch_outlines,
-            scalars=np.array([g.mortar_fill_volume, g.bricks_without_fill, g.max_gap_m, float(g.mortar_fill)]),
-            coverage=g.coverage,
-        )
-
-
-def load_geometry(path: Path, key: str) -> SceneGeometry | None:
-    """The geometry stored at ``path`` if it was computed from the inputs ``key`` names by this
-    version of the code (the source of the modules that compute it, hashed); None otherwise (no
-    file, another key, other code, an unreadable file)."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if str(z["key"]) != f"{_geometry_code_version()}:{key}":
-                return None
-            d = {k: z[k] for k in z.files}
-    except (OSError, ValueError, KeyError, EOFError):
-        return None
-    fill, without, gap, filled = (float(x) for x in d["scalars"])
-    return SceneGeometry(
-        names=tuple(str(n) for n in d["names"]),
-        vertices=tuple(np.split(d["vertices"], np.cumsum(d["vertex_counts"])[:-1])),
-        faces=tuple(np.split(d["faces"], np.cumsum(d["face_counts"])[:-1])),
-        locations=d["locations"],
-        brick_volumes=d["brick_volumes"],
-        hull_volume_change=d["hull_volume_change"],
-        patch_pairs=d["patch_pairs"],
-        patch_centroids=d["patch_centroids"],
-        patch_normals=d["patch_normals"],
-        patch_areas=d["patch_areas"],
-        patch_widths=d["patch_widths"],
-        patch_moments=d["patch_moments"],
-        patch_outlines=d["patch_outlines"],
-        mortar_fill_volume=fill,
-        bricks_without_fill=int(without),
-        max_gap_m=gap,
-        mortar_fill=bool(filled),
-        coverage=d["coverage"],
     )
 
 

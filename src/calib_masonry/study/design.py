@@ -288,7 +288,7 @@ def _sweep_values(path: Path, key: str, spec) -> tuple:
 
 def load_study(path: str | Path) -> Study:
     """Read and check a study file; every error names the file and key and says what to do."""
-    from ..spec import read_toml
+    from ..io import read_toml
 
     path = Path(path)
     return parse_study(read_toml(path, "study file"), path)

@@ -201,10 +201,10 @@ def _sweep_spec(base, values: dict):
 def _sweep(study: Study, sample: Sample) -> tuple[dict, object]:
     """Synthesise the swept walls (and photos), build them and compare with the exact truth: the
     outputs and the BuildResult."""
+    from ..comparison import compare
     from ..pipeline import build
     from ..spec import load_structure
     from ..synthetic.truth import synthesize, truth_structure
-    from .compare import compare
 
     spec = _sweep_spec(_structure(study.scenario, False), sample.values)
     with tempfile.TemporaryDirectory(prefix="calib-masonry-sample-") as tmp:
@@ -272,8 +272,8 @@ _GEOMETRY: dict = {}  # the simulation geometry of an unvaried model, once per w
 def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -> tuple:
     """The sample's simulation: the model's geometry, the load and the material (the structure's
     [material] ``material``, as its spec holds it, with the sample's drawn values)."""
+    from ..build_folder import simulation_geometry
     from ..simulation.ground_motion import synthetic_motion
-    from ..simulation.run import simulation_geometry
     from ..simulation.scene import Pushover
 
     sim = study.simulate

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .trace import TraceResult
+if TYPE_CHECKING:
+    from .trace import TraceResult
 
 __all__ = ["plot_trace"]
 

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import shapely
 
-from ..build3d.assemble import Structure3D
-from ..build3d.contacts import max_interpenetration
-from ..errors import InputError
-from ..io import read_json
+from .build3d.assemble import Structure3D
+from .build3d.contacts import max_interpenetration
+from .errors import InputError
+from .io import read_json
 
 __all__ = ["compare", "compare_dirs", "compare_to_file", "match_polygons", "IOU_MATCH"]
 
@@ -68,7 +68,7 @@ def _angle_diff_deg(a: float, b: float) -> float:
 
 def compare_dirs(run_dir: str | Path, truth_dir: str | Path) -> dict:
     """Metrics of the build in ``run_dir`` against the synthetic truth in ``truth_dir`` (see :func:`compare`)."""
-    from ..pipeline import read_build
+    from .build_folder import read_build
 
     run_dir, truth_dir = Path(run_dir), Path(truth_dir)
     if not run_dir.is_dir():
@@ -167,7 +167,7 @@ def compare(model: Structure3D, truth: Structure3D, *, where: str = "model") -> 
 
 def compare_to_file(run_dir: str | Path, truth_dir: str | Path, out: str | Path | None = None) -> tuple[dict, Path]:
     """``calib-masonry compare``: :func:`compare_dirs` written to ``out`` (default RUN_DIR/compare.json)."""
-    from ..io import check_not_input, check_output, staged_file, write_json
+    from .io import check_not_input, check_output, staged_file, write_json
 
     out = check_output(Path(out) if out else Path(run_dir) / "compare.json", folder=False)
     # every file of the truth is an input; of the run's folder, everything but an earlier compare.json

@@ -1,0 +1,257 @@
+"""The crack tracker: the joint model stepped through a run. Before each step of the engine it
+cracks the joints that the step's load cracks, and says which cracked joints the engine must let
+go (:class:`CrackTracker`); under a ground motion it carries the intact structure's elastic
+vibration (:mod:`~calib_masonry.simulation.dynamics`) and checks on a grid of its own.
+
+The joint model itself (stiffness, contact iteration, failure criteria) is
+:mod:`~calib_masonry.simulation.joints`; this module only steps it.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..errors import InputError
+from .dynamics import ElasticResponse, mass_matrix, modes, record_load
+from .joints import ContactSettings, JointModel, JointState
+from .scene import Scene
+
+__all__ = ["CrackTracker"]
+
+
+class CrackTracker:
+    """The joints of a run, from the end of the warm-up on: before each step, :meth:`step` cracks
+    the joints that the step's load (``m g`` on every body) cracks, given which cracked joints
+    still touch (from the poses), and says which cracked joints Bullet must let go. Records each
+    joint's cracking time, failure mode and release time.
+
+    A cracked joint is not let go at once: it is a frictional, no-tension contact in the joint
+    model, and while the model finds an equilibrium with it (every body's motion small, under
+    ``release_m``), Bullet keeps holding it with its rigid constraint, as it holds an intact one.
+    Bullet's own friction between two moving bodies creeps at a rate set by the time step (a
+    block on a block under a steady 0.2 g slides 38 mm in 5 s at the defaults, 5 mm at 4x the
+    substeps), so a crack handed to Bullet's contacts at once would let a standing structure
+    creep apart at a speed the solver chooses. Without an equilibrium the model's motion runs
+    away (the weak inertia-relief springs hold a mechanism at ``g / eps``, metres); the cracked
+    joints that then move by more than ``release_m`` are let go, and Bullet's contacts carry the
+    mechanism from there.
+
+    While no joint has cracked (and no body merely stands on the plate), the joint forces are
+    linear in ``g``: the three unit-load solutions are computed once and combined, so a structure
+    that stands costs one factorisation."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        positions: np.ndarray,
+        rotations: np.ndarray,
+        plate: np.ndarray,
+        time_s: float,
+        *,
+        settings: ContactSettings | None = None,
+    ) -> None:
+        # the sparse Cholesky (cvxopt's CHOLMOD) is imported here, on the thread that builds the
+        # tracker, not first where its steps may run (a thread of their own beside Bullet's): two
+        # threads importing modules of one package at once can hang in CPython 3.11 (gh-83065)
+        from cvxopt import cholmod, matrix, spmatrix  # noqa: F401
+
+        self.model = JointModel(scene, settings=settings, contact_gap_m=scene.solver.contact_gap_m)
+        n = self.model.nj
+        self.t0 = float(time_s)
+        self.release_m = self.model.settings.release_m
+        self.ref = (
+            np.asarray(positions, dtype=np.float64).copy(),
+            np.asarray(rotations, dtype=np.float64).copy(),
+            np.asarray(plate, dtype=np.float64).copy(),
+        )
+        self.intact = np.ones(n, dtype=bool)
+        self.held = np.ones(n, dtype=bool)  # Bullet's constraint still on
+        self.break_time_s = np.full(n, np.nan)
+        self.break_mode = np.full(n, -1, dtype=np.int64)
+        self.release_time_s = np.full(n, np.nan)
+        self.max_utilisation = 0.0
+        self.seconds = 0.0
+        self._unit = None
+        # each body's elastic velocity (B, 6) when joints were let go, by release time since t0: the
+        # pieces set free then start with it (simulation/pieces.py)
+        self.free_velocity: dict[float, np.ndarray] = {}
+        # the elastic vibration of what the intact joints hold, under a ground motion (dynamics.py)
+        self.elastic = None
+        # under a ground motion the joints are checked on a grid common to all frame rates (step)
+        self.ground_motion = scene.motion
+        self.check_interval_s = float(scene.solver.check_interval_s)
+        self._next_check = 0
+        self.history: dict[str, list[float]] = {"time_s": [], "roof_drift_m": [], "base_shear_n": [], "first_mode": []}
+        if scene.motion is not None and scene.solver.dynamics and n:
+            mass = mass_matrix(scene)
+            try:
+                first = modes(scene, 2, model=self.model, mass=mass)
+            except InputError:
+                first = None  # nothing joined to the ground: nothing vibrates
+            if first is not None and np.isfinite(first.periods_s).all():
+                omega = 2 * np.pi / first.periods_s
+                self.elastic = ElasticResponse(
+                    self.model,
+                    mass,
+                    ratio=scene.solver.damping_ratio,
+                    omega=(omega[0], omega[-1]),
+                    motion=scene.motion,
+                    ground_start_s=self.t0,
+                )
+                self.first_period_s = float(first.periods_s[0])
+                self._phi1 = mass @ first.shapes[0].ravel()  # q_1 = phi_1^T M u
+                z = self.model.x[:, 2]
+                self._top = np.flatnonzero(z >= z.max() - 0.05 * max(float(np.ptp(z)), 1e-9))
+
+    def release_factors(self) -> None:
+        """The joint model's :meth:`JointModel.release_factors`: on the thread that stepped it."""
+        self.model.release_factors()
+
+    def _record(self, time_s: float, g: np.ndarray, extra: np.ndarray, held_bodies: np.ndarray | None) -> None:
+        """The vibration's roof drift (the mean horizontal displacement of the top 5 % of the
+        height), base shear (the horizontal resultant of the loads, inertial forces included, on
+        the bodies that held joints tie to the ground: what their footing carries) and first modal
+        coordinate at this step. ``held_bodies``: those bodies, None while every joint is held."""
+        u = self.elastic.u.reshape(-1, 6)
+        h = self.history
+        h["time_s"].append(float(time_s) - self.t0)
+        h["roof_drift_m"].append(float(np.hypot(*u[self._top, :2].mean(axis=0))))
+        on = self.model._load(g).reshape(-1, 6)[:, :2] + extra.reshape(-1, 6)[:, :2]
+        if held_bodies is not None:
+            on = on[held_bodies]
+        h["base_shear_n"].append(float(np.hypot(*on.sum(axis=0))))
+        h["first_mode"].append(float(self._phi1 @ self.elastic.u))
+
+    @property
+    def reads_poses(self) -> bool:
+        """Whether :meth:`step` reads the poses: only for bodies that bear on the plate without a
+        foundation joint (where they touch it is Bullet's). Otherwise a step's outcome follows from
+        the load and the tracker's own state alone."""
+        return self.model.n_all > self.model.nj
+
+    def _unit_states(self) -> list[JointState]:
+        if self._unit is None:
+            eye = np.eye(3)
+            self._unit = [self.model.solve(eye[k], self.intact)[0] for k in range(3)]
+        return self._unit
+
+    def step(
+        self, time_s: float, g: np.ndarray, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray
+    ) -> np.ndarray:
+        """The joints that Bullet must let go before the coming step's load ``g`` (3,), given the
+        current poses; returns their indices (joints that crack are recorded, and let go only
+        once the model has no equilibrium with them).
+
+        Under a ground motion the joints are checked on a grid of ``check_interval_s`` from the
+        ground's start, not at the frames: every grid point up to ``time_s`` not checked yet is
+        checked, at the record's acceleration then (``g`` gives the vertical), so that the cracks,
+        the releases and their times are the same at any frame rate (wherever no pose is read).
+        Without one (a pushover) the frame's ``g`` is checked at ``time_s``."""
+        t = time.perf_counter()
+        try:
+            if self.model.nj == 0:
+                return np.zeros(0, dtype=np.int64)
+            g = np.asarray(g, dtype=np.float64)
+            if self.ground_motion is None:
+                return self._check(float(time_s), g, positions, rotations, plate)
+            h = self.check_interval_s
+            last = int(np.floor((float(time_s) - self.t0) / h + 1e-6))
+            out = []
+            peak = None
+            while self._next_check <= last:
+                tk = self.t0 + self._next_check * h
+                out.append(
+                    self._check(tk, record_load(self.ground_motion, tk - self.t0, g), positions, rotations, plate)
+                )
+                peak = self.max_utilisation if peak is None else max(peak, self.max_utilisation)
+                self._next_check += 1
+            if peak is not None:
+                self.max_utilisation = peak  # the largest of this frame's checks
+            return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+        finally:
+            self.seconds += time.perf_counter() - t
+
+    def _frozen(self, held_bodies: np.ndarray | None) -> np.ndarray:
+        """``(nj,)`` the held joints of the pieces already set free (no held joint ties their bodies
+        to the ground): the verdict moves each such piece as one rigid body (simulation/pieces.py)
+        and never cracks it again, so the checks leave them out (on the Stylite tower, set free at
+        1.5 s of a 0.3 g quake, each check of the rest of the run cost 50 ms with them)."""
+        nj = self.model.nj
+        if self.held.all():
+            return np.zeros(nj, dtype=bool)
+        grounded = held_bodies if held_bodies is not None else self.model.grounded(self.held)
+        return self.held & ~grounded[self.model.a[:nj]]
+
+    def _check(
+        self, time_s: float, g: np.ndarray, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray
+    ) -> np.ndarray:
+        """One check of the joints at ``time_s`` under the load ``g``: :meth:`step`'s."""
+        closed = None
+        extra = None
+        start = None
+        held_bodies = None  # the bodies held joints tie to the ground, once some joint is let go
+        crack_time_s = float(time_s)
+        if self.elastic is not None:
+            before = self.elastic.u.copy()
+            until = None
+            if self.intact.all() and self.model.n_all == self.model.nj:
+                # while every joint is intact their forces are K u: checked 20 times a first
+                # period of the vibration, so that a peak between two checks cracks where it
+                # happens (the unseen tower's 0.07 s period is 14 check intervals of 0.005 s)
+                def until(u: np.ndarray) -> bool:
+                    return self.model.utilisation_bound(u) > 1.0 and bool(self.model.state(u).utilisation.max() > 1.0)
+
+            crack_time_s = self.elastic.advance(time_s, g, until=until)
+            # the load at the instant checked: the record's ground acceleration then
+            g = self.elastic.load_at(crack_time_s, g)
+            extra = self.elastic.inertial_force()
+            if self.model.motion is not None:
+                # the vibration moved the structure it holds: start the contact iteration there
+                start = self.model.motion + (self.elastic.u - before)
+            if not self.held.all():
+                # a piece Bullet has set free moves as Bullet says: no vibration's forces on it
+                held_bodies = self.model.grounded(self.held)
+                extra.reshape(-1, 6)[~held_bodies] = 0.0
+        if self.elastic is not None and self.intact.all() and self.model.n_all == self.model.nj:
+            # while nothing has cracked the joints' forces are the vibration's: K u
+            state = self.model.state(self.elastic.u)
+            self._record(crack_time_s, g, extra, held_bodies)
+            self.max_utilisation = float(state.utilisation.max())
+            if self.max_utilisation <= 1.0:
+                return np.zeros(0, dtype=np.int64)
+        elif self.intact.all() and self.model.n_all == self.model.nj:
+            # forces are linear in g while nothing has cracked: combine the unit-load solutions
+            unit = self._unit_states()
+            state = self.model.state_from_relative(sum(g[k] * unit[k].relative for k in range(3)))
+            self.max_utilisation = float(state.utilisation.max())
+            if self.max_utilisation <= 1.0:
+                return np.zeros(0, dtype=np.int64)
+        else:
+            # the cracked joints Bullet holds are contacts in the model; those it has let go
+            # are Bullet's alone; bodies standing on the plate bear where Bullet says they touch
+            closed = np.repeat(self.model._pad(self.held)[:, None], self.model.outline.shape[1], axis=1)
+            if self.model.n_all > self.model.nj:
+                gaps = self.model.corner_gaps(positions, rotations, plate, *self.ref)
+                closed[self.model.nj :] = gaps[self.model.nj :] < self.model.contact_gap_m
+        frozen = self._frozen(held_bodies)
+        intact = self.intact & ~frozen
+        if frozen.any() and closed is not None:
+            closed[: self.model.nj][frozen] = False
+        new, modes, state = self.model.crack(g, intact, closed, runaway_m=self.release_m, extra=extra, start=start)
+        self.intact[new] = False
+        if self.elastic is not None:
+            self._record(crack_time_s, g, extra, held_bodies)
+        self.break_time_s[new] = crack_time_s - self.t0
+        self.break_mode[new] = modes
+        self.max_utilisation = float(np.where(intact & self.intact, state.utilisation, 0.0).max(initial=0.0))
+        moving = self.model.corner_motion()[: self.model.nj] > self.release_m
+        release = np.flatnonzero(moving & ~self.intact & self.held & ~frozen)
+        if release.size:
+            self.held[release] = False
+            self.release_time_s[release] = float(time_s) - self.t0
+            self.model.forget(release)
+            if self.elastic is not None:
+                self.free_velocity[float(time_s) - self.t0] = self.elastic.v.reshape(-1, 6).copy()
+        return release

@@ -137,15 +137,15 @@ def test_a_requested_stop_is_never_committed_even_if_its_exception_was_swallowed
     # exception the CLI's SIGTERM handler raises; the stop flag it also sets must still hold.
     import threading
 
-    from calib_masonry import errors
+    from calib_masonry import errors, process
 
-    monkeypatch.setattr(errors, "_STOP", threading.Event())
+    monkeypatch.setattr(process, "_STOP", threading.Event())
     out = tmp_path / "out"
     with pytest.raises(errors.Terminated):
         with staged_output(out, "build") as stage:
             (stage / "model.stl").write_text("whole, but the run was told to stop")
             try:
-                errors.request_stop()
+                process.request_stop()
                 raise errors.Terminated()
             except BaseException:  # what such an import does
                 pass

@@ -46,21 +46,21 @@ def test_a_requested_stop_ends_a_loop_at_its_next_step(monkeypatch):
 
     import pytest
 
-    from calib_masonry import errors
+    from calib_masonry import errors, process
 
-    monkeypatch.setattr(errors, "_STOP", threading.Event())
+    monkeypatch.setattr(process, "_STOP", threading.Event())
     for enabled in (False, None):
         seen = []
         with pytest.raises(errors.Terminated):
             for i in progress(range(5), desc="build", enabled=enabled):
                 seen.append(i)
                 if i == 1:
-                    errors.request_stop()
+                    process.request_stop()
         assert seen == [0, 1]
         bar = progress(total=3, desc="build", enabled=enabled)
         with pytest.raises(errors.Terminated):
             bar.update()
-        errors._STOP.clear()
+        process._STOP.clear()
 
 
 def test_a_signal_inside_a_deferred_section_is_raised_on_the_way_out(monkeypatch):
@@ -69,22 +69,22 @@ def test_a_signal_inside_a_deferred_section_is_raised_on_the_way_out(monkeypatch
 
     import pytest
 
-    from calib_masonry import errors
+    from calib_masonry import errors, process
 
-    monkeypatch.setattr(errors, "_STOP", threading.Event())
+    monkeypatch.setattr(process, "_STOP", threading.Event())
     reached = []
     with pytest.raises(errors.Terminated):
-        with errors.signals_deferred():
-            with errors.signals_deferred():
-                errors.on_signal(signal.SIGTERM, None)  # held back, even in a nested section
+        with process.signals_deferred():
+            with process.signals_deferred():
+                process.on_signal(signal.SIGTERM, None)  # held back, even in a nested section
                 reached.append("inner")
             reached.append("outer")
-    assert reached == ["inner", "outer"] and errors.stop_requested() and not errors._PENDING
+    assert reached == ["inner", "outer"] and process.stop_requested() and not process._PENDING
     with pytest.raises(KeyboardInterrupt) as caught:
-        errors.on_signal(signal.SIGINT, None)  # outside a section: at once
+        process.on_signal(signal.SIGINT, None)  # outside a section: at once
     assert not isinstance(caught.value, errors.Terminated)
     with pytest.raises(ValueError):  # the block's own error wins; the held signal is dropped with it
-        with errors.signals_deferred():
-            errors.on_signal(signal.SIGINT, None)
+        with process.signals_deferred():
+            process.on_signal(signal.SIGINT, None)
             raise ValueError
-    assert not errors._PENDING
+    assert not process._PENDING

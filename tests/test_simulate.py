@@ -885,7 +885,8 @@ def test_sigterm_during_blender_start_up_is_raised_after_it_not_inside_it():
     CI). The handler's exception is held until Blender has started."""
     child = (
         "import os, signal, sys, threading, time\n"
-        "from calib_masonry.errors import Terminated, on_signal\n"
+        "from calib_masonry.errors import Terminated\n"
+        "from calib_masonry.process import on_signal\n"
         "from calib_masonry.simulation.blender import require_bpy\n"
         "signal.signal(signal.SIGTERM, on_signal)\n"
         "def kill_during_import():\n"

@@ -25,7 +25,7 @@ from .errors import InputError
 from .io import check_output, read_json, staged_output, write_json, write_mask, write_rgb
 from .labelme import write_labelme_pair
 from .pipeline import BuildResult, PhotoWall, build
-from .simulation.scene import SceneGeometry, scene_geometry
+from .simulation.scene import MAX_GAP_M, SceneGeometry, scene_geometry
 from .spec import StructureSpec
 from .wall2d.trace import TraceResult
 
@@ -444,7 +444,7 @@ def _load_geometry(path: Path, key: str) -> SceneGeometry | None:
 
 
 def simulation_geometry(
-    model: Structure3D | SceneGeometry, *, max_gap_m: float = 0.06, mortar_fill: bool = True
+    model: Structure3D | SceneGeometry, *, max_gap_m: float = MAX_GAP_M, mortar_fill: bool = True
 ) -> SceneGeometry:
     """The bodies and contact patches of a built structure, in memory."""
     if isinstance(model, SceneGeometry):
@@ -463,7 +463,7 @@ def store_geometry(
     structure: Structure3D,
     model_dir: str | Path,
     *,
-    max_gap_m: float = 0.06,
+    max_gap_m: float = MAX_GAP_M,
     mortar_fill: bool = True,
     bricks_json: bytes | None = None,
     geometry: SceneGeometry | None = None,
@@ -483,7 +483,7 @@ def store_geometry(
 
 
 def geometry_for_model(
-    model_dir: str | Path, *, max_gap_m: float = 0.06, mortar_fill: bool = True
+    model_dir: str | Path, *, max_gap_m: float = MAX_GAP_M, mortar_fill: bool = True
 ) -> tuple[SceneGeometry, bool]:
     """The simulation geometry of a model folder and whether it came from the folder's
     sim_geometry.npz. The stored copy is used only if it was computed from this bricks.json (its

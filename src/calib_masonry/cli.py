@@ -15,7 +15,8 @@ import warnings
 from pathlib import Path
 from typing import NoReturn
 
-from .errors import CalibMasonryError, InputError, Terminated, on_signal
+from .errors import CalibMasonryError, InputError, Terminated
+from .process import on_signal
 
 __all__ = ["main"]
 
@@ -849,7 +850,7 @@ def main(argv: list[str] | None = None) -> int:
         from .io import trust_large_images
 
         trust_large_images()
-    # `kill`, `timeout` and schedulers send SIGTERM; both signals may be held back (errors.signals_deferred)
+    # `kill`, `timeout` and schedulers send SIGTERM; both signals may be held back (process.signals_deferred)
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
     try:
         return int(args.func(args) or 0)

@@ -6,21 +6,12 @@ Every message names the file or field, says what was wrong and what to do. The C
 
 from __future__ import annotations
 
-import contextlib
-import signal
-import threading
-
 __all__ = [
     "CalibMasonryError",
     "InputError",
     "BackendMissing",
     "FitFailed",
     "Terminated",
-    "request_stop",
-    "stop_requested",
-    "raise_if_stopped",
-    "on_signal",
-    "signals_deferred",
 ]
 
 
@@ -48,64 +39,3 @@ class Terminated(KeyboardInterrupt):
     def __init__(self, written: str | None = None) -> None:
         super().__init__()
         self.written = written
-
-
-_STOP = threading.Event()
-
-
-def request_stop() -> None:
-    """Ask the running work to stop: it raises :class:`Terminated` at its next progress step and
-    never commits an output folder. The CLI's SIGTERM handler calls this as well as raising, because
-    a few third-party imports swallow an exception raised in a signal handler (a bare ``except``
-    around an optional import), and the stop must not be lost there."""
-    _STOP.set()
-
-
-def stop_requested() -> bool:
-    return _STOP.is_set()
-
-
-def raise_if_stopped() -> None:
-    if _STOP.is_set():
-        raise Terminated()
-
-
-_HELD = 0  # depth of signals_deferred() sections (entered on the main thread, where handlers run)
-_PENDING: list[KeyboardInterrupt] = []
-
-
-def on_signal(signum, frame) -> None:
-    """The CLI's handler of SIGTERM and SIGINT: raise :class:`Terminated` (SIGTERM, after
-    :func:`request_stop`, kept even if some library swallows the exception) or
-    ``KeyboardInterrupt`` where the program is, or, inside :func:`signals_deferred`, on the way
-    out of it."""
-    if signum == signal.SIGTERM:
-        request_stop()
-        exc: KeyboardInterrupt = Terminated()
-    else:
-        exc = KeyboardInterrupt()
-    if _HELD:
-        _PENDING.append(exc)
-        return
-    raise exc
-
-
-@contextlib.contextmanager
-def signals_deferred():
-    """Let :func:`on_signal` hold its exception back until the block has ended: for C code that
-    calls back into Python and crashes if an exception appears there (Blender's start-up, its
-    factory reset, saving and baking: a SIGTERM during ``import bpy`` ended in SIGSEGV). Blocking
-    the signal with ``pthread_sigmask`` is not enough: a signal sent to the process goes to any
-    thread that does not block it (a BLAS or XLA worker started earlier), and CPython then runs
-    the handler on the main thread all the same."""
-    global _HELD
-    _HELD += 1
-    held: list[KeyboardInterrupt] = []
-    try:
-        yield
-    finally:
-        _HELD -= 1
-        if not _HELD:  # an error raised by the block itself goes on instead (a SIGTERM's stop stays requested)
-            held, _PENDING[:] = _PENDING[:1], []
-    if held:
-        raise held[0]

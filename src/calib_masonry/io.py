@@ -23,7 +23,8 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from ._json import json_bytes, read_json, records_json_bytes, write_json
-from .errors import InputError, raise_if_stopped
+from .errors import InputError
+from .process import raise_if_stopped
 
 __all__ = [
     "json_bytes",

@@ -63,7 +63,8 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
     """Calibrate a wall's photo, rectify it onto the wall (W x H) and segment its masonry units
     (:func:`calib_masonry.wall2d.segment.segment_wall`), leaving out the wall's occluders."""
     from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify, valid_ortho
-    from .errors import CalibMasonryError, raise_if_stopped
+    from .errors import CalibMasonryError
+    from .process import raise_if_stopped
     from .wall2d.segment import segment_wall
 
     kwargs = {}

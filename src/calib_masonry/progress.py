@@ -2,7 +2,7 @@
 scheduler, a Dask worker), a line at most every :data:`LOG_EVERY_S` seconds with what is done, the
 percent and the time left, and a last line when a step that logged ends.
 
-Every step also checks for a requested stop (:func:`calib_masonry.errors.request_stop`, which the
+Every step also checks for a requested stop (:func:`calib_masonry.process.request_stop`, which the
 CLI's SIGTERM handler calls), so a long loop ends at its next step even when the signal's own
 exception was swallowed by a third-party import."""
 
@@ -13,7 +13,7 @@ import sys
 import time
 from collections.abc import Iterable, Iterator
 
-from .errors import raise_if_stopped
+from .process import raise_if_stopped
 
 __all__ = ["LOG_EVERY_S", "progress"]
 

@@ -39,7 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import BackendMissing, signals_deferred
+from ..errors import BackendMissing
+from ..process import signals_deferred
 from .scene import Scene, box_mesh, joint_axes, quaternions_from_matrices
 
 __all__ = ["BlenderEngine", "require_bpy", "write_model_blend"]

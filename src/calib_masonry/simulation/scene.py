@@ -43,7 +43,8 @@ from ..build3d.contacts import (
 )
 from ..build3d.extrude import Polyhedron
 from ..build3d.place import Corner, WallFrame
-from ..errors import InputError, raise_if_stopped
+from ..errors import InputError
+from ..process import raise_if_stopped
 from .ground_motion import G, GroundMotion
 from .mortar import mortar_cells, nearest_labels, shared_boundary_lengths, wall_joints
 
@@ -62,6 +63,7 @@ __all__ = [
     "scene_from_geometry",
     "MASONRY",
     "MATERIAL_KEYS",
+    "MAX_GAP_M",
     "material_from_table",
     "material_table",
     "read_material",
@@ -801,13 +803,19 @@ def joint_coverage(
     return np.array([np.median(r), np.percentile(r, 10), joint_total / shared_total, len(r), float(np.sum(r == 0))])
 
 
+#: The widest mortar joint (m) two bricks are joined across: a gap wider than this between two
+#: neighbours is no joint. The default of every function that computes or looks up a model's
+#: simulation geometry.
+MAX_GAP_M = 0.06
+
+
 def scene_geometry(
     bricks: Sequence[Brick],
     frames: list[WallFrame],
     corners: list[Corner],
     *,
     mortar_fill: bool = True,
-    max_gap_m: float = 0.06,
+    max_gap_m: float = MAX_GAP_M,
 ) -> SceneGeometry:
     """Bodies and contact patches of a built structure (see the module docstring for the mortar model)."""
     if not bricks:

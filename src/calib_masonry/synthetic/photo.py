@@ -31,7 +31,8 @@ from ..calibrate.camera import (
 from ..calibrate.camera import (
     px_per_m as photo_px_per_m,
 )
-from ..errors import InputError, raise_if_stopped
+from ..errors import InputError
+from ..process import raise_if_stopped
 from ..spec import PhotoSpec, WallSpec
 from ..wall2d.dice import polygon_pixels
 from .layouts import Piece

@@ -55,7 +55,7 @@ def _shots(jobs: list, progress, desc: str):
     at a time because each photo in flight holds a few hundred MB. A stop request ends the work
     at the next photo."""
     from .._threads import thread_imap
-    from ..errors import raise_if_stopped
+    from ..process import raise_if_stopped
     from ..progress import progress as _progress
 
     def run(job):

@@ -35,7 +35,7 @@ from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
 from calib_masonry.errors import CalibMasonryError
 from calib_masonry.io import read_photo
 from calib_masonry.spec import PhotoSpec, load_structure
-from calib_masonry.synthetic.truth import synthesize
+from calib_masonry.synthetic.truth import synthesize_to_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -65,7 +65,7 @@ def run(seeds, size, noise_px, heading_sigmas) -> None:
             spec = replace(base, synthetic=replace(base.synthetic, seed=seed))
             out = Path(tmp) / f"s{seed}"
             t0 = time.perf_counter()
-            truth = synthesize(spec, out, figures=False, photos=photos, progress=False)
+            truth = synthesize_to_folder(spec, out, figures=False, photos=photos, progress=False)
             print(f"seed {seed}: {len(truth['photos'])} photos in {time.perf_counter() - t0:.0f} s", flush=True)
             rng = np.random.default_rng([seed, 99])
             fp_w, fp_sw, fp_t, fp_true = [], [], [], []

@@ -29,7 +29,7 @@ from scipy.optimize import minimize
 
 from calib_masonry.io import read_mask
 from calib_masonry.spec import load_structure
-from calib_masonry.synthetic.truth import synthesize
+from calib_masonry.synthetic.truth import synthesize_to_folder
 from calib_masonry.wall2d.dice import dice_polygon_region
 from calib_masonry.wall2d.refine import RefineConfig, refine_polygons
 from calib_masonry.wall2d.segment import label_bricks
@@ -98,7 +98,7 @@ def _synthetic_jobs(scenario: str, vertices: int = 8):
     with tempfile.TemporaryDirectory() as tmp:
         sc = Path(tmp) / "scenario.toml"
         sc.write_text(scenario)
-        synthesize(load_structure(sc, require_sources=False), Path(tmp) / "data", figures=False)
+        synthesize_to_folder(load_structure(sc, require_sources=False), Path(tmp) / "data", figures=False)
         return _jobs(Path(tmp) / "data", vertices)
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 from calib_masonry.build_folder import build_to_folder
 from calib_masonry.comparison import compare_dirs
 from calib_masonry.spec import PhotoSpec, load_structure
-from calib_masonry.synthetic.truth import synthesize
+from calib_masonry.synthetic.truth import synthesize_to_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -40,7 +40,7 @@ def main() -> None:
         for seed in a.seeds:
             spec = replace(base, synthetic=replace(base.synthetic, seed=seed))
             data = Path(tmp) / f"s{seed}"
-            truth = synthesize(spec, data, figures=False, photos=PhotoSpec(), progress=False)
+            truth = synthesize_to_folder(spec, data, figures=False, photos=PhotoSpec(), progress=False)
             eye = {p["name"]: p["eye_height_m"] for p in truth["photos"]}
             photo_spec = load_structure(data / "structure_photos.toml")
             fitted = photo_spec.with_walls(

@@ -153,7 +153,7 @@ def scenario(pga: float, duration: float) -> tuple:
     """The runs' scene: four stretcher walls built in a temporary folder (the BuildResult), a
     two-component motion (seed 3) at ``pga`` g for ``duration`` s, and the weak mortar."""
     import calib_masonry as cm
-    from calib_masonry.synthetic.truth import synthesize
+    from calib_masonry.synthetic.truth import synthesize_to_folder
 
     root = Path(tempfile.mkdtemp())
     walls = [(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)]
@@ -162,7 +162,7 @@ def scenario(pga: float, duration: float) -> tuple:
         for i, (w, h, t) in enumerate(walls)
     )
     (root / "s.toml").write_text(text)
-    synthesize(cm.load_structure(root / "s.toml", require_sources=False), root / "data", figures=False)
+    synthesize_to_folder(cm.load_structure(root / "s.toml", require_sources=False), root / "data", figures=False)
     result = cm.build(cm.load_structure(root / "data" / "structure.toml"), progress=False)
     motion = cm.synthetic_motion(pga, duration, seed=3, components=2)
     weak = cm.Material(tensile_strength=2e3, shear_strength=3e3)

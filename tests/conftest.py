@@ -59,13 +59,13 @@ def scenario_text(
 def make_scenario(tmp_path):
     """Write a scenario and run synth on it; returns the data folder."""
     from calib_masonry.spec import load_structure
-    from calib_masonry.synthetic.truth import synthesize
+    from calib_masonry.synthetic.truth import synthesize_to_folder
 
     def make(walls, name="data", **kw) -> Path:
         sc = tmp_path / f"{name}_scenario.toml"
         sc.write_text(scenario_text(walls, **kw))
         out = tmp_path / name
-        synthesize(load_structure(sc, require_sources=False), out, figures=False)
+        synthesize_to_folder(load_structure(sc, require_sources=False), out, figures=False)
         return out
 
     return make

@@ -65,14 +65,14 @@ def test_api_tour_runs_in_memory_and_writes_nothing(tmp_path):
 def built(tmp_path_factory):
     """A small four-wall structure built in memory from a synthetic scenario's masks."""
     from calib_masonry import build, load_structure
-    from calib_masonry.synthetic.truth import synthesize
+    from calib_masonry.synthetic.truth import synthesize_to_folder
 
     from .conftest import scenario_text
 
     root = tmp_path_factory.mktemp("api")
     sc = root / "s.toml"
     sc.write_text(scenario_text([(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)], seed=31))
-    synthesize(load_structure(sc, require_sources=False), root / "data", figures=False)
+    synthesize_to_folder(load_structure(sc, require_sources=False), root / "data", figures=False)
     return root, build(load_structure(root / "data" / "structure.toml"), progress=False)
 
 

@@ -257,13 +257,13 @@ def test_corners_alone_without_focal_are_not_singular_and_the_scale_says_where_i
 def photo_set(tmp_path_factory):
     """Two small walls photographed at 1500 x 1000 px (seed 4242, not used elsewhere)."""
     from calib_masonry.spec import PhotoSpec, load_structure
-    from calib_masonry.synthetic.truth import synthesize
+    from calib_masonry.synthetic.truth import synthesize_to_folder
 
     tmp = tmp_path_factory.mktemp("photos")
     sc = tmp / "scenario.toml"
     sc.write_text(scenario_text([(2.4, 2.0, 0.0), (2.0, 2.0, 90.0)], seed=4242, px_per_m=200))
     photos = replace(PhotoSpec(), long_side_px=1500, short_side_px=1000)
-    truth = synthesize(
+    truth = synthesize_to_folder(
         load_structure(sc, require_sources=False), tmp / "data", figures=False, photos=photos, progress=False
     )
     return tmp / "data", truth

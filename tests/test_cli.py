@@ -230,13 +230,13 @@ def test_sigterm_stops_simulate_and_sigkill_staging_goes_with_the_next_run(tmp_p
 
     from calib_masonry.build_folder import build_to_folder
     from calib_masonry.spec import load_structure
-    from calib_masonry.synthetic.truth import synthesize
+    from calib_masonry.synthetic.truth import synthesize_to_folder
 
     from .conftest import scenario_text
 
     sc = tmp_path / "s.toml"
     sc.write_text(scenario_text([(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)]))
-    synthesize(load_structure(sc, require_sources=False), tmp_path / "data", figures=False)
+    synthesize_to_folder(load_structure(sc, require_sources=False), tmp_path / "data", figures=False)
     build_to_folder(
         load_structure(tmp_path / "data" / "structure.toml"), tmp_path / "model", figures=False, progress=False
     )

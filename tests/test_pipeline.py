@@ -10,7 +10,7 @@ from calib_masonry.comparison import compare_dirs
 from calib_masonry.io import read_mask
 from calib_masonry.spec import load_structure
 from calib_masonry.synthetic.layouts import layout_structure
-from calib_masonry.synthetic.truth import synthesize
+from calib_masonry.synthetic.truth import synthesize_to_folder
 
 from .conftest import DATA, scenario_text
 
@@ -18,7 +18,7 @@ from .conftest import DATA, scenario_text
 @pytest.mark.parametrize("name", ["paper_example", "stylite"])
 def test_shipped_data_is_reproducible(tmp_path, name):
     spec = load_structure(DATA / name / "scenario.toml", require_sources=False)
-    synthesize(spec, tmp_path / name, figures=False)
+    synthesize_to_folder(spec, tmp_path / name, figures=False)
     for w in spec.walls:
         a = read_mask(DATA / name / "masks" / f"{w.name}.png")
         b = read_mask(tmp_path / name / "masks" / f"{w.name}.png")

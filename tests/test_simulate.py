@@ -482,14 +482,14 @@ def test_pushover_cracks_a_bonded_wall_out_of_plane_at_the_analytic_moment(subst
 def small_model(tmp_path_factory):
     from calib_masonry.build_folder import build_to_folder
     from calib_masonry.spec import load_structure
-    from calib_masonry.synthetic.truth import synthesize
+    from calib_masonry.synthetic.truth import synthesize_to_folder
 
     from .conftest import scenario_text
 
     root = tmp_path_factory.mktemp("sim")
     sc = root / "s.toml"
     sc.write_text(scenario_text([(1.6, 0.8, 0), (1.2, 0.8, 90), (1.6, 0.8, 180), (1.2, 0.8, 270)]))
-    synthesize(load_structure(sc, require_sources=False), root / "data", figures=False)
+    synthesize_to_folder(load_structure(sc, require_sources=False), root / "data", figures=False)
     build_to_folder(load_structure(root / "data" / "structure.toml"), root / "model", figures=False, progress=False)
     return root
 
@@ -833,7 +833,7 @@ def _stone_tower(tmp_path, seed: int, height: float, width: float, irregularity:
     from calib_masonry.pipeline import build
     from calib_masonry.simulation.run import scene_for
     from calib_masonry.spec import load_structure
-    from calib_masonry.synthetic.truth import synthesize
+    from calib_masonry.synthetic.truth import synthesize_to_folder
 
     walls = "".join(
         f'[[wall]]\nname = "w{i}"\nwidth_m = {width}\nheight_m = {height}\ntheta_deg = {t}\n'
@@ -844,7 +844,7 @@ def _stone_tower(tmp_path, seed: int, height: float, width: float, irregularity:
         '[synthetic]\nlayout = "stones"\nstone_length_m = [0.5, 0.9]\nstone_height_m = [0.3, 0.5]\n'
         f"mortar_m = 0.02\nirregularity = {irregularity}\npx_per_m = 100\nseed = {seed}\n" + walls
     )
-    synthesize(load_structure(tmp_path / "s.toml", require_sources=False), tmp_path / "d", figures=False)
+    synthesize_to_folder(load_structure(tmp_path / "s.toml", require_sources=False), tmp_path / "d", figures=False)
     result = build(load_structure(tmp_path / "d" / "structure.toml"), progress=False)
     return scene_for(result.structure, None, duration_s=1.0)
 

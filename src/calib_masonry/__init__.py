@@ -90,6 +90,7 @@ _API = {
     "study_to_folder": (".study.run", "study_to_folder"),
     "compare_dirs": (".comparison", "compare_dirs"),
     "synthesize": (".synthetic.truth", "synthesize"),
+    "Synthesis": (".synthetic.truth", "Synthesis"),
     "truth_structure": (".synthetic.truth", "truth_structure"),
     "RefineConfig": (".wall2d.refine", "RefineConfig"),
     "PhotoSegmentConfig": (".wall2d.segment", "PhotoSegmentConfig"),
@@ -182,6 +183,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .study.design import load_study as load_study
     from .study.run import run_study as run_study
     from .study.run import study_to_folder as study_to_folder
+    from .synthetic.truth import Synthesis as Synthesis
     from .synthetic.truth import synth_to_folder as synth_to_folder
     from .synthetic.truth import synthesize as synthesize
     from .synthetic.truth import truth_structure as truth_structure

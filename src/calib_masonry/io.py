@@ -7,6 +7,7 @@ image coordinates ``(x, y) = (c, r)``, origin top-left.
 from __future__ import annotations
 
 import contextlib
+import io
 import json
 import math
 import os
@@ -95,14 +96,15 @@ def _available_bytes() -> int | None:
 
 
 @contextlib.contextmanager
-def _opened_image(path: Path, field: str, hint: str) -> Iterator[Image.Image]:
-    """An image file, opened and decoded; a missing or unreadable file is a one-line InputError."""
-    if not path.is_file():
+def _opened_image(path: Path, field: str, hint: str, data: bytes | None = None) -> Iterator[Image.Image]:
+    """An image file (or its bytes ``data``, named ``path``), opened and decoded; a missing or
+    unreadable file is a one-line InputError."""
+    if data is None and not path.is_file():
         raise InputError(f"{field} {path}: file not found; check the path")
     try:
         with warnings.catch_warnings():  # the size is checked below, in one line
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            im = Image.open(path)
+            im = Image.open(path if data is None else io.BytesIO(data))
     except Image.DecompressionBombError as exc:
         raise InputError(f"{field} {path}: {exc}; downsample it or add --trust-large-images") from None
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
@@ -526,10 +528,11 @@ def _exif_lens(im) -> dict | None:
     return out if out["model"] else None
 
 
-def read_photo(path: str | Path, *, field: str = "PHOTO") -> Photo:
-    """Read a colour photo (JPEG, PNG, TIFF) and its EXIF focal length, compass heading and lens."""
+def read_photo(path: str | Path, *, field: str = "PHOTO", data: bytes | None = None) -> Photo:
+    """Read a colour photo (JPEG, PNG, TIFF) and its EXIF focal length, compass heading and lens;
+    from its bytes ``data``, when given (a photo made in memory), named ``path``."""
     path = Path(path)
-    with _opened_image(path, field, "give a JPEG, PNG or TIFF photo") as im:
+    with _opened_image(path, field, "give a JPEG, PNG or TIFF photo", data) as im:
         focal, heading = _exif_camera(im)
         lens = _exif_lens(im)
         rgb = np.asarray(im if im.mode == "RGB" else im.convert("RGB"), dtype=np.float32)

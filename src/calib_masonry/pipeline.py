@@ -15,7 +15,7 @@ from .build3d.assemble import Structure3D, WallPolygons, assemble
 from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
-from .io import read_mask, to_uint8, warn
+from .io import Photo, read_mask, to_uint8, warn
 from .progress import progress as _progress
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
@@ -59,9 +59,10 @@ class PhotoWall:
     occluders_ortho: tuple = ()  # the occluders in the orthophoto's pixels
 
 
-def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
-    """Calibrate a wall's photo, rectify it onto the wall (W x H) and segment its masonry units
-    (:func:`calib_masonry.wall2d.segment.segment_wall`), leaving out the wall's occluders."""
+def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) -> PhotoWall:
+    """Calibrate a wall's photo (``photo``, or read from ``wall.image``), rectify it onto the wall
+    (W x H) and segment its masonry units (:func:`calib_masonry.wall2d.segment.segment_wall`),
+    leaving out the wall's occluders."""
     from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify, valid_ortho
     from .errors import CalibMasonryError
     from .process import raise_if_stopped
@@ -85,7 +86,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec) -> PhotoWall:
             corners_px=wall.corners_px, focal_px=wall.focal_px, occluders=occluders, **kwargs, **known
         )
         raise_if_stopped()
-        cal = calibrate_photo(wall.image, config)
+        cal = calibrate_photo(photo if photo is not None else wall.image, config)
     except CalibMasonryError as exc:
         raise type(exc)(f"wall '{wall.name}': {exc}") from None
     res = cal.result
@@ -157,7 +158,7 @@ def _import_photo_stage() -> None:
 
 
 def resolve_photo_walls(
-    spec: StructureSpec, *, progress: bool | None = None, trace: bool = False
+    spec: StructureSpec, *, progress: bool | None = None, trace: bool = False, images: dict[str, Photo] | None = None
 ) -> tuple[StructureSpec, dict]:
     """Calibrate every photo wall; the spec with fitted sizes filled in, and the photo results by wall name.
 
@@ -166,13 +167,14 @@ def resolve_photo_walls(
     changes nothing. A stop request ends each wall at its next stage. With ``trace``, each wall's
     mask is also traced on its thread (:func:`trace_wall`, the same result as tracing it after),
     while the other thread works on its photo; walls that refine their outlines are left to the
-    caller (their JAX batches and progress bars belong on the main thread)."""
+    caller (their JAX batches and progress bars belong on the main thread). ``images``: photos in
+    memory by wall name, read instead of the walls' files."""
     todo = [w for w in spec.walls if w.mask is None and w.image is not None]
     if todo:
         _import_photo_stage()  # here, not by two threads at once (a half-imported module, seen)
 
     def one(wall: WallSpec) -> PhotoWall:
-        pw = photo_wall(wall, spec)
+        pw = photo_wall(wall, spec, (images or {}).get(wall.name))
         if trace and not wall.refine:
             pw = replace(pw, trace=trace_wall(pw.wall, spec, pw.mask, progress=False, labels=pw.labels))
         return pw
@@ -249,6 +251,7 @@ def build(
     spec: StructureSpec,
     *,
     traces: dict[str, TraceResult] | None = None,
+    images: dict[str, Photo] | None = None,
     progress: bool | None = None,
     warn_closure: bool = True,
 ) -> BuildResult:
@@ -256,7 +259,8 @@ def build(
     place, bond and extrude (Eqs. 2-4); in memory, writing nothing.
 
     ``traces`` (by wall name) gives walls already traced in memory (:func:`calib_masonry.trace`);
-    their mask or photo is then not read. ``warn_closure`` False: no warning that the footprint
+    their mask or photo is then not read; ``images`` (by wall name) gives photo walls' photos in
+    memory (:class:`calib_masonry.Photo`), read instead of their files. ``warn_closure`` False: no warning that the footprint
     does not close (a study's perturbed geometry never closes; its gap is an output there)."""
     traces_given = dict(traces or {})
     unknown = sorted(set(traces_given) - {w.name for w in spec.walls})
@@ -268,7 +272,9 @@ def build(
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     todo = tuple(w for w in spec.walls if w.name not in traces_given)
-    resolved, photos = resolve_photo_walls(spec.with_walls(todo), progress=progress, trace=True) if todo else (spec, {})
+    resolved, photos = (
+        resolve_photo_walls(spec.with_walls(todo), progress=progress, trace=True, images=images) if todo else (spec, {})
+    )
     fitted = {w.name: w for w in resolved.walls if w.name not in traces_given}
     spec = spec.with_walls(tuple(fitted.get(w.name, w) for w in spec.walls))
     if photos:  # calibrated, rectified, segmented and (unless they refine) traced

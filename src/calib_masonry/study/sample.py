@@ -23,7 +23,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
-import tempfile
 import time
 import warnings
 from collections.abc import Iterator
@@ -67,16 +66,11 @@ def _dilated(mask: np.ndarray, dilate_px: int) -> np.ndarray:
     return op(mask.astype(bool), structure=disk)
 
 
-@functools.lru_cache(maxsize=256)
-def _trace(key: tuple, vertices: int | None, target_dice: float | None, refine: bool):
-    """The trace of a wall's mask (``key``: ("mask", path, dilate) or ("photo", structure, wall, dilate))."""
+def _traced(mask: np.ndarray, vertices: int | None, target_dice: float | None, refine: bool, what: str):
+    """The trace of a (dilated) mask at a sample's trace settings."""
     from ..wall2d.refine import RefineConfig
     from ..wall2d.trace import TraceConfig, trace_mask
 
-    if key[0] == "mask":
-        mask = _mask(key[1], key[2])
-    else:
-        mask = _dilated(_photo_wall(key[1], key[2]).mask, key[3])
     config = TraceConfig(
         vertices=vertices,
         target_dice=target_dice if vertices is None else None,
@@ -84,8 +78,18 @@ def _trace(key: tuple, vertices: int | None, target_dice: float | None, refine: 
     )
     result = trace_mask(mask, config)
     if not result.bricks:
-        raise InputError(f"{key[1]}: no bricks found in the mask (dilated by {key[-1]} px); narrow [inputs.mask]")
+        raise InputError(f"{what}: no bricks found in the mask; narrow [inputs.mask]")
     return result
+
+
+@functools.lru_cache(maxsize=256)
+def _trace(key: tuple, vertices: int | None, target_dice: float | None, refine: bool):
+    """The trace of a wall's mask (``key``: ("mask", path, dilate) or ("photo", structure, wall, dilate))."""
+    if key[0] == "mask":
+        mask = _mask(key[1], key[2])
+    else:
+        mask = _dilated(_photo_wall(key[1], key[2]).mask, key[3])
+    return _traced(mask, vertices, target_dice, refine, f"{key[1]} (dilated by {key[-1]} px)")
 
 
 @functools.lru_cache(maxsize=32)
@@ -104,15 +108,18 @@ def _calibration(structure: Path, wall_name: str) -> tuple[np.ndarray, np.ndarra
     return fit.value[i], fit.covariance[np.ix_(i, i)]
 
 
-def _varied(spec, study: Study, values: dict, source: Path | None):
+def _varied(spec, study: Study, values: dict, source: Path | None, masks: dict | None = None):
     """The structure with the sample's values, the keys of its walls' traces and the values drawn
-    from calibrations (W, H by wall)."""
+    from calibrations (W, H by wall). ``masks``: walls' masks in memory by name (a synthetic
+    sweep's), keyed ("memory", wall, dilate)."""
     walls, keys, drawn = [], {}, {}
     vertices = values.get("trace.vertices")
     target = values.get("trace.target_dice")
     dilate = int(values.get("mask.dilate_px", 0))
     for w in spec.walls:
-        if w.mask is not None:
+        if masks is not None and w.name in masks:
+            key = ("memory", w.name, dilate)
+        elif w.mask is not None:
             key = ("mask", Path(w.mask), dilate)
         elif source is not None:
             key = ("photo", source, w.name, dilate)
@@ -199,38 +206,43 @@ def _sweep_spec(base, values: dict):
 
 
 def _sweep(study: Study, sample: Sample) -> tuple[dict, object]:
-    """Synthesise the swept walls (and photos), build them and compare with the exact truth: the
-    outputs and the BuildResult."""
+    """Synthesise the swept walls (and photos) in memory, build them and compare with the exact
+    truth: the outputs and the BuildResult. Nothing is written: the masks and photos are the
+    synthesis's own, as their files would read back."""
     from ..comparison import compare
-    from ..pipeline import build
-    from ..spec import load_structure
+    from ..pipeline import build, trace_wall
     from ..synthetic.truth import synthesize, truth_structure
 
     spec = _sweep_spec(_structure(study.scenario, False), sample.values)
-    with tempfile.TemporaryDirectory(prefix="calib-masonry-sample-") as tmp:
-        data = Path(tmp) / "data"
-        truth = synthesize(spec, data, figures=False, photos=spec.photos if study.photos else None, progress=False)
-        if study.photos:
-            built_spec = load_structure(data / "structure_photos.toml")
-            if study.fit_size:
-                eye = {p["name"]: p["eye_height_m"] for p in truth["photos"]}
-                built_spec = built_spec.with_walls(
-                    tuple(
-                        replace(w, width_m=math.nan, height_m=math.nan, camera_height_m=eye[w.name])
-                        for w in built_spec.walls
-                    )
+    syn = synthesize(spec, photos=spec.photos if study.photos else None, progress=False)
+    values = {k: v for k, v in sample.values.items() if not k.startswith(("synthetic.", "photos."))}
+    images = None
+    if study.photos:
+        built_spec = syn.photo_spec
+        images = {w.name: syn.photo(w.image) for w in built_spec.walls}
+        if study.fit_size:
+            eye = {p["name"]: p["eye_height_m"] for p in syn.truth["photos"]}
+            built_spec = built_spec.with_walls(
+                tuple(
+                    replace(w, width_m=math.nan, height_m=math.nan, camera_height_m=eye[w.name])
+                    for w in built_spec.walls
                 )
-        else:
-            built_spec = load_structure(data / "structure.toml")
-        values = {k: v for k, v in sample.values.items() if not k.startswith(("synthetic.", "photos."))}
-        if values:
-            built_spec, keys, _ = _varied(built_spec, study, values, None)
-            traces = {n: _trace(*k) for n, k in keys.items()} if not study.photos else None
-        else:
-            traces = None
-        result = build(built_spec, traces=traces, progress=False, warn_closure=False)  # its gap is an output
-        _trace.cache_clear()  # the masks lived in the temporary folder
-        _mask.cache_clear()
+            )
+    else:
+        built_spec = syn.spec
+    if values:
+        built_spec, keys, _ = _varied(built_spec, study, values, None, masks=None if study.photos else syn.masks)
+        traces = {
+            n: _traced(_dilated(syn.masks[n], k[0][2]), *k[1:], what=f"wall '{n}'")
+            if k[0][0] == "memory"
+            else _trace(*k)
+            for n, k in keys.items()
+        }
+    elif not study.photos:
+        traces = {w.name: trace_wall(w, built_spec, syn.masks[w.name], progress=False) for w in built_spec.walls}
+    else:
+        traces = None
+    result = build(built_spec, traces=traces, images=images, progress=False, warn_closure=False)  # its gap is an output
     _, true = truth_structure(spec)
     m = compare(result.structure, true)
     out = build_outputs(result)
@@ -335,8 +347,14 @@ def outcome(result) -> dict:
 def warm_worker(simulate: bool = False) -> None:
     """Import the stages a sample calls, once per worker when the study starts, so that the first
     sample of each worker does not pay for them (run on every worker by the study's client, on its
-    event loop: the worker's main thread, where Blender is then started if the study simulates)."""
+    event loop: the worker's main thread, where Blender is then started if the study simulates).
+    A warning outside a sample's row (which records its own) is one line, as the CLI prints them."""
+    import warnings
+
     from .. import pipeline  # noqa: F401
+    from ..process import print_warning
+
+    warnings.showwarning = print_warning
     from ..build3d import assemble  # noqa: F401
     from ..simulation import run  # noqa: F401
     from ..wall2d import trace  # noqa: F401

@@ -13,6 +13,7 @@ with ``heading_sigma_deg`` of noise).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
@@ -340,6 +341,13 @@ def render_photo(
 
 def save_jpeg(path, img: np.ndarray, *, focal_35mm: float | None, heading_deg: float | None, quality: int = 90) -> None:
     """Write a JPEG with EXIF focal length (35 mm equivalent and focal plane resolution) and heading."""
+    Path(path).write_bytes(jpeg_bytes(img, focal_35mm=focal_35mm, heading_deg=heading_deg, quality=quality))
+
+
+def jpeg_bytes(img: np.ndarray, *, focal_35mm: float | None, heading_deg: float | None, quality: int = 90) -> bytes:
+    """The bytes of a JPEG of ``img`` with EXIF focal length (35 mm equivalent and focal plane
+    resolution) and heading: a photo as a camera writes it, made in memory."""
+    import io
     from fractions import Fraction
 
     from PIL import Image
@@ -366,7 +374,9 @@ def save_jpeg(path, img: np.ndarray, *, focal_35mm: float | None, heading_deg: f
         gps = exif.get_ifd(0x8825)
         gps[16] = "T"
         gps[17] = rational(heading_deg % 360.0)
-    pil.save(path, quality=quality, exif=exif)
+    buf = io.BytesIO()
+    pil.save(buf, format="JPEG", quality=quality, exif=exif)
+    return buf.getvalue()
 
 
 def photograph_wall(wall: WallSpec, pieces: list[Piece], spec: PhotoSpec, rng: np.random.Generator) -> dict:

@@ -154,6 +154,50 @@ def test_yaw_sweep_reports_width_height_and_dice_errors_per_yaw(tmp_path):
     assert rows[0]["w0.width_error_m"] != rows[1]["w0.width_error_m"]  # each yaw was photographed anew
 
 
+_WRITE_EVENTS = {"os.mkdir", "os.rename", "os.replace", "os.remove", "os.rmdir", "shutil.rmtree", "shutil.move"}
+_WRITE_EVENTS |= {"tempfile.mkdtemp", "tempfile.mkstemp", "os.truncate", "os.link", "os.symlink"}
+
+
+@pytest.mark.parametrize("photos", [False, True])
+def test_a_sweep_sample_writes_no_file(tmp_path, photos):
+    """A synthetic sweep's sample synthesises, builds and compares in memory: no file is written,
+    no folder made (a study calls it thousands of times on workers). Every write the sample asks
+    of the interpreter is recorded through its audit events (PEP 578); the process's compiled-code
+    cache (JAX's, kept across runs) and /dev/null are not the sample's."""
+    from calib_masonry._jax import cache_dir
+    from calib_masonry.study.sample import evaluate_sample
+
+    allowed = (os.devnull, str(cache_dir()))
+
+    scenario = _study(tmp_path, scenario_text([(3.0, 2.4, 0)], seed=11, closed=False), "scenario.toml")
+    sweep = '"photos.yaw_deg" = [20]' if photos else '"synthetic.seed" = [3]'
+    extra = "" if photos else "[inputs.w0]\nwidth_m = { sigma = 0.01 }\n"
+    study = load_study(_study(tmp_path, f'[study]\nname = "w"\nscenario = "{scenario}"\n[sweep]\n{sweep}\n{extra}'))
+    writes: list = []
+    watching = [True]
+
+    def hook(event, args):
+        if not watching[0]:
+            return
+        if event == "open" and isinstance(args[0], (str, bytes, os.PathLike)):
+            mode, flags = args[1], args[2]
+            if (mode is not None and any(c in str(mode) for c in "wax+")) or (
+                mode is None and isinstance(flags, int) and flags & (os.O_WRONLY | os.O_RDWR | os.O_CREAT)
+            ):
+                writes.append(("open", str(args[0]), mode))
+        elif event in _WRITE_EVENTS:
+            writes.append((event, str(args[0]) if args else ""))
+
+    sys.addaudithook(hook)  # a hook cannot be removed: it stops watching at the end
+    try:
+        outputs, job = evaluate_sample(study, samples(study)[0])
+    finally:
+        watching[0] = False
+    assert job is None and outputs["recall"] == 1.0
+    writes = [w for w in writes if not w[1].startswith(allowed)]
+    assert writes == [], writes
+
+
 def _fragility_study(tmp_path: Path) -> Path:
     return _study(
         tmp_path,
@@ -238,6 +282,54 @@ def test_fragility_study_resumes_after_a_kill_and_matches_a_separate_scheduler_a
             if proc is not None:
                 proc.terminate()
                 proc.wait(timeout=30)
+
+
+KILL_DURING_CLUSTER_START = r"""
+import multiprocessing, os, signal, sys, threading, time
+from calib_masonry.cli import main
+
+def kill():
+    while not multiprocessing.active_children():  # the cluster's first worker process is starting
+        time.sleep(0.005)
+    time.sleep(0.2)
+    os.kill(os.getpid(), signal.SIGTERM)
+
+threading.Thread(target=kill, daemon=True).start()
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("when", ["cluster start", "samples running"])
+def test_sigterm_to_a_study_ends_in_one_line(tmp_path, small_structure, when):
+    """SIGTERM to `study` on a LocalCluster: exit code 2 and the CLI's one line (with the progress
+    line at most), whenever it comes. Before: during the cluster's start distributed's own close
+    failed at exit (an AssertionError traceback), and while samples ran the workers logged
+    CommClosedError tracebacks (30 lines) as the scheduler closed."""
+    path = _study(
+        tmp_path,
+        f'[study]\nname = "s"\nstructure = "{small_structure}"\n[sampling]\nn = 400\n'
+        "[inputs.w0]\nwidth_m = { sigma = 0.01 }\n",
+    )
+    out = tmp_path / "out"
+    argv = ["study", str(path), "--out", str(out), "--workers", "2"]
+    if when == "cluster start":
+        p = subprocess.Popen(
+            [sys.executable, "-c", KILL_DURING_CLUSTER_START, *argv], stderr=subprocess.PIPE, text=True
+        )
+    else:
+        p = subprocess.Popen([sys.executable, "-m", "calib_masonry", *argv], stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 300
+        while not (out.is_dir() and len(list((out / "samples").glob("*.json"))) >= 2):
+            assert p.poll() is None and time.monotonic() < deadline
+            time.sleep(0.1)
+        p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=120)
+    lines = err.strip().splitlines()
+    assert p.returncode == 2, err
+    assert "Traceback" not in err and "CommClosedError" not in err, err
+    assert lines[-1].startswith("error: terminated"), err
+    assert all(line.startswith("study s:") for line in lines[:-1]) and len(lines) <= 2, err
 
 
 def _free_port() -> int:
@@ -326,10 +418,12 @@ def test_a_calibration_input_draws_w_and_h_jointly_with_their_reported_correlati
 @pytest.mark.slow
 def test_from_calibration_draws_a_photo_walls_size_around_its_fit(tmp_path, make_scenario):
     from calib_masonry.spec import PhotoSpec, load_structure
-    from calib_masonry.synthetic.truth import synthesize
+    from calib_masonry.synthetic.truth import synthesize_to_folder
 
     sc = _study(tmp_path, scenario_text([(4.0, 3.0, 0)], seed=5, closed=False), "scenario.toml")
-    truth = synthesize(load_structure(sc, require_sources=False), tmp_path / "data", figures=False, photos=PhotoSpec())
+    truth = synthesize_to_folder(
+        load_structure(sc, require_sources=False), tmp_path / "data", figures=False, photos=PhotoSpec()
+    )
     eye = truth["photos"][0]["eye_height_m"]
     photos = (tmp_path / "data" / "structure_photos.toml").read_text()
     photos = photos.replace("width_m = 4.0\n", "").replace("height_m = 3.0\n", f"camera_height_m = {eye}\n")

@@ -16,13 +16,9 @@ from pathlib import Path
 from typing import NoReturn
 
 from .errors import CalibMasonryError, InputError, Terminated
-from .process import on_signal
+from .process import on_signal, print_warning
 
 __all__ = ["main"]
-
-
-def _print_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    print(f"warning: {message}", file=sys.stderr)
 
 
 def _cmd_synth(args) -> int:
@@ -845,7 +841,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     _tune_malloc(keep_freed=args.func is _cmd_synth and bool(getattr(args, "photos", False)))
     _one_blas_thread(args)
-    warnings.showwarning = _print_warning
+    warnings.showwarning = print_warning
     if args.trust_large_images:
         from .io import trust_large_images
 

@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 
 from .errors import Terminated
 
-__all__ = ["request_stop", "stop_requested", "raise_if_stopped", "on_signal", "signals_deferred"]
+__all__ = ["request_stop", "stop_requested", "raise_if_stopped", "on_signal", "signals_deferred", "print_warning"]
 
 
 _STOP = threading.Event()
@@ -73,3 +74,9 @@ def signals_deferred():
             held, _PENDING[:] = _PENDING[:1], []
     if held:
         raise held[0]
+
+
+def print_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line ``warning: ...`` on stderr: ``warnings.showwarning`` of the CLI and of a
+    study's Dask workers (whose warnings reach the same terminal)."""
+    print(f"warning: {message}", file=sys.stderr)

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..io import OUTPUT_MARKER, check_output, write_json
+from ..process import signals_deferred
 from ..progress import progress as _progress
 from .analysis import input_columns, output_columns, plot_study, summarize
 from .design import Sample, Study, samples, study_json
@@ -59,16 +60,37 @@ def _client(scheduler: str | None, workers: int | None):
     n = workers or os.cpu_count() or 1
     # no statistical profiler (it samples the sample's stack every 10 ms) and no GIL monitor in
     # the local workers: nobody reads them here, and they cost the samples' own Python time
-    with dask.config.set(WORKER_CONFIG):
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.ERROR,
-            env=WORKER_ENV,
-        )
-    return Client(cluster), cluster
+    cluster = client = None
+    try:
+        # a SIGTERM or Ctrl-C while the cluster starts is raised once it stands whole, and it is
+        # closed here: a cluster left half-built failed distributed's own close at exit (an
+        # AssertionError traceback after the CLI's one line)
+        with signals_deferred(), dask.config.set(WORKER_CONFIG):
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                # the scheduler serves HTTP even without a dashboard, on 8787 unless told: a port
+                # in use (another cluster) printed dask's three-line note; any free port says nothing
+                dashboard_address=":0",
+                # a sample's error is in its row; a stopped run's closing heartbeats are no errors
+                silence_logs=logging.CRITICAL,
+                env=WORKER_ENV,
+            )
+            client = Client(cluster)
+    except BaseException:
+        _close(client, cluster)
+        raise
+    return client, cluster
+
+
+def _close(client, cluster) -> None:
+    """Close a client and the cluster it owns, a signal meanwhile raised after both are closed."""
+    with signals_deferred():
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def check_scheduler(scheduler: str) -> None:
@@ -89,9 +111,7 @@ def dask_client(scheduler: str | None, workers: int | None, simulate: bool = Fal
         client.run(warm_worker, simulate)  # the stages' imports are start-up, not the first sample's cost
         yield client
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        _close(client, cluster)
 
 
 def execute_samples(

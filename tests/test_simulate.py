@@ -816,6 +816,8 @@ def test_scene_blend_replays_the_run(small_model, tmp_path):
         progress=False,
     )
     assert s["bonds_broken"] > 0
+    # the summary returned is the one written, made in memory (not read back from the file)
+    assert s == json.loads((tmp_path / "o" / "summary.json").read_text())
     z = np.load(tmp_path / "o" / "poses.npz")
     last = len(z["time"]) - 1
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "o" / "scene.blend"))

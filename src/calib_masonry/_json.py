@@ -12,7 +12,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["json_bytes", "read_json", "records_json_bytes", "write_json"]
+__all__ = ["json_bytes", "jsonable", "read_json", "records_json_bytes", "write_json"]
 
 
 #: the values json's encoder cannot write itself, which :func:`_json_default` converts
@@ -46,6 +46,13 @@ def _jsonable(obj: Any, exact: bool = False) -> Any:
     if isinstance(obj, float):
         return (obj if exact else round(obj, 10)) if np.isfinite(obj) else None
     return obj
+
+
+def jsonable(obj: Any, *, exact: bool = False) -> Any:
+    """``obj`` as :func:`write_json` writes it and ``json.load`` reads it back (numpy values as
+    numbers, tuples as lists, non-finite floats as None, floats rounded to 1e-10 unless ``exact``),
+    without the file."""
+    return _jsonable(obj, exact)
 
 
 def json_bytes(obj: Any, *, exact: bool = False) -> bytes:

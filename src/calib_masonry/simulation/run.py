@@ -24,10 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .._json import jsonable
 from ..build3d.assemble import Structure3D
 from ..build_folder import checked_model_dir, geometry_for_model, simulation_geometry
 from ..errors import InputError
-from ..io import check_output, read_json, staged_output, write_json
+from ..io import check_output, staged_output, write_json
 from .ground_motion import MAX_PGA_G, G, GroundMotion, read_accelerogram, synthetic_motion
 from .joints import scene_joint_stiffness
 from .scene import (
@@ -571,9 +572,10 @@ def write_simulation(
     frames_png: int = 6,
     gif_frames: int = 24,
     progress: bool | None = None,
-) -> None:
+) -> dict:
     """Write a result into the folder ``out`` (it must exist): summary.json, poses.npz and the figures
-    (ground_motion.png or pushover.png, histories.png, frames/, collapse.gif)."""
+    (ground_motion.png or pushover.png, histories.png, frames/, collapse.gif). Returns the summary
+    as written (:func:`calib_masonry._json.jsonable`)."""
     from .results import plot_ground_motion, plot_histories, plot_pushover, render_frames, write_collapse_gif
 
     scene, r, m = result.scene, result.output, result.metrics
@@ -610,6 +612,7 @@ def write_simulation(
     summary = dict(result.summary)
     summary["seconds"] = {**summary["seconds"], "figures": round(time.perf_counter() - t1, 3)}
     write_json(out / "summary.json", summary)
+    return jsonable(summary)
 
 
 def _out_beside_model(out: str | Path, model_dir: str | Path) -> None:
@@ -641,7 +644,7 @@ def simulate_to_folder(
     with staged_output(out, "simulate", overwrite=overwrite, keep=[config.accelerogram]) as stage:
         result = _run_scene(scene, str(model_dir), progress=progress, blend_path=stage / "scene.blend")
         result.summary["seconds"]["scene"] = round(t_scene, 3)
-        write_simulation(
+        summary = write_simulation(
             result,
             stage,
             figures=config.figures,
@@ -649,7 +652,7 @@ def simulate_to_folder(
             gif_frames=config.gif_frames,
             progress=progress,
         )
-    return read_json(Path(out) / "summary.json")
+    return summary
 
 
 def model_modes(model_dir: str | Path, n: int = 6, material: Material | None = None):

@@ -201,7 +201,9 @@ def test_a_built_dry_panel_pushed_in_its_plane_matches_limit_analysis_with_or_wi
             extra="brick_length_m = 0.29\nbrick_height_m = 0.14\nmortar_m = 0.01\n",
         )
     )
-    synthesize_to_folder(load_structure(tmp_path / "scenario.toml", require_sources=False), tmp_path / "data", figures=False)
+    synthesize_to_folder(
+        load_structure(tmp_path / "scenario.toml", require_sources=False), tmp_path / "data", figures=False
+    )
     g = simulation_geometry(build(load_structure(tmp_path / "data" / "structure.toml"), progress=False).structure)
     p = Pushover(rate_g_per_s=0.01, max_g=1.0)
     scene = scene_from_geometry(g, duration_s=p.duration_s, material=DRY, foundation=foundation, pushover=p)

@@ -1,5 +1,5 @@
-"""Masks or photos and the parameter table to a 3D brick model, as one call: :func:`build`
-(in memory); :func:`write_build` and :func:`read_build` at the edge."""
+"""Masks or photos and the parameter table to a 3D brick model, as one call: :func:`build`, in
+memory; a build folder is written and read by :mod:`calib_masonry.build_folder` (the edge)."""
 
 from __future__ import annotations
 

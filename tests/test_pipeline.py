@@ -28,6 +28,31 @@ def test_shipped_data_is_reproducible(tmp_path, name):
     )
 
 
+def test_a_synthesis_in_memory_writes_the_folder_synth_writes(tmp_path):
+    """synthesize (in memory) and write_synthesis give, file for file and byte for byte, the folder
+    synthesize_to_folder writes (which writes the truth's files while the photos render); the
+    photos read from memory are the photos read from their files."""
+    from calib_masonry.io import read_photo
+    from calib_masonry.spec import PhotoSpec
+    from calib_masonry.synthetic.truth import synthesize, write_synthesis
+
+    sc = tmp_path / "scenario.toml"
+    sc.write_text(scenario_text([(2.0, 1.2, 0), (1.6, 1.2, 90)], seed=12, closed=False))
+    spec = load_structure(sc, require_sources=False)
+    photos = PhotoSpec(long_side_px=600, short_side_px=400)
+    synthesize_to_folder(spec, tmp_path / "a", figures=False, photos=photos, progress=False)
+    result = synthesize(spec, photos=photos, progress=False)
+    write_synthesis(result, tmp_path / "b", figures=False)
+    files = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a").rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(tmp_path / "b") for p in (tmp_path / "b").rglob("*") if p.is_file())
+    assert "photos/w0.jpg" in {f.as_posix() for f in files}
+    for f in files:
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
+    on_disk = read_photo(tmp_path / "a" / "photos" / "w0.jpg")
+    in_memory = result.photo("photos/w0.jpg")
+    assert np.array_equal(on_disk.rgb, in_memory.rgb) and on_disk.focal_px == in_memory.focal_px
+
+
 @pytest.mark.parametrize(
     "layout, walls",
     [

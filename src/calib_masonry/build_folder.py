@@ -12,6 +12,7 @@ import contextlib
 import math
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,10 +25,12 @@ from .build3d.scale import wall_from_image
 from .errors import InputError
 from .io import check_output, read_json, staged_output, write_json, write_mask, write_rgb
 from .labelme import write_labelme_pair
-from .pipeline import BuildResult, PhotoWall, build
 from .simulation.scene import MAX_GAP_M, SceneGeometry, scene_geometry
-from .spec import StructureSpec
-from .wall2d.trace import TraceResult
+
+if TYPE_CHECKING:  # the stages in memory, read only for their types: reading a model loads none of them
+    from .pipeline import BuildResult, PhotoWall
+    from .spec import StructureSpec
+    from .wall2d.trace import TraceResult
 
 __all__ = [
     "GEOMETRY_FILE",
@@ -161,6 +164,8 @@ def build_to_folder(
 ) -> dict:
     """:func:`build` and :func:`write_build`: what ``calib-masonry build`` calls."""
     check_output(out, command="build", overwrite=overwrite)  # before the work, not after it
+    from .pipeline import build
+
     return write_build(
         build(spec, progress=progress),
         out,
@@ -222,25 +227,23 @@ def write_build(
     result.seconds["interpenetration_check"] = time.perf_counter() - t0
     inputs = [spec.source, *(w.mask for w in spec.walls), *(w.image for w in spec.walls)]
     want_geometry = simulation_geometry and bool(s.bricks)
-    if want_geometry:
-        # imported here, not on the geometry's thread while this one imports bpy, trimesh's
-        # exporters and matplotlib: two threads importing modules of one package at once can
-        # deadlock in CPython 3.11's import locks (gh-83065). A CI run hung in the demo's build,
-        # where this was the one place two threads imported at once (cause not shown).
-        from .simulation import mortar, scene  # noqa: F401
+    # the geometry's thread imports nothing: its modules (simulation.scene, mortar) are imported
+    # at this module's top, not on that thread while this one imports bpy, trimesh's exporters and
+    # matplotlib (two threads importing modules of one package at once can deadlock in CPython
+    # 3.11's import locks, gh-83065: a CI run hung in the demo's build, where this was the one
+    # place two threads imported at once)
+    if want_geometry and blend:
+        # and Blender loaded before that thread starts: loading bpy's libraries (USD's static
+        # initialisers take the GIL while the loader's lock is held) beside a thread in numpy
+        # (whose temporaries' elision asks the loader, dladdr) deadlocked a build of a 1000 px/m
+        # stone wall (both threads' stacks seen in gdb)
+        from .errors import BackendMissing
+        from .simulation.blender import require_bpy
 
-        if blend:
-            # and Blender loaded before that thread starts: loading bpy's libraries (USD's static
-            # initialisers take the GIL while the loader's lock is held) beside a thread in numpy
-            # (whose temporaries' elision asks the loader, dladdr) deadlocked a build of a 1000 px/m
-            # stone wall (both threads' stacks seen in gdb)
-            from .errors import BackendMissing
-            from .simulation.blender import require_bpy
-
-            try:
-                require_bpy()
-            except BackendMissing:
-                pass
+        try:
+            require_bpy()
+        except BackendMissing:
+            pass
     # the simulation's bodies and contact patches, computed once here rather than in every
     # `simulate` run of this model, on a second core while the meshes, model.blend and figures are
     # written (joined however the block ends)

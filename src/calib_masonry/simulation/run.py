@@ -611,8 +611,9 @@ def write_simulation(
             write_collapse_gif(scene, r, out / "collapse.gif", count=gif_frames, progress=progress)
     summary = dict(result.summary)
     summary["seconds"] = {**summary["seconds"], "figures": round(time.perf_counter() - t1, 3)}
+    summary = jsonable(summary)  # as written (write_json of it writes the same bytes)
     write_json(out / "summary.json", summary)
-    return jsonable(summary)
+    return summary
 
 
 def _out_beside_model(out: str | Path, model_dir: str | Path) -> None:

@@ -401,6 +401,7 @@ class JointModel:
         self._lu: dict = {}
         self._joint_part: tuple | None = None
         self._tangent: _Tangent | None = None  # the contact iteration's matrix and its analysis, made at first use
+        self._sub_tangents: dict = {}  # the same over the bodies still held, by their set (_tangent_of)
         self.factorisations = 0  # sparse factorisations (LU or Cholesky), over the model's life
         self._U: np.ndarray | None = None  # the last committed solve's motion
         self._last: tuple | None = None
@@ -585,6 +586,7 @@ class JointModel:
         closed: np.ndarray | None = None,
         start: np.ndarray | None = None,
         extra: np.ndarray | None = None,
+        joints: np.ndarray | None = None,
     ) -> tuple[JointState, np.ndarray]:
         """The joints' state under the load ``m g`` on every body (``g`` (3,) m/s^2), with the joints
         ``intact`` (J,) as mortar and the others as frictional, compression-only contacts at their
@@ -597,7 +599,8 @@ class JointModel:
         as the iteration finds it pulled or pressed. The iteration starts from the motion ``start``
         (6 B,), by default the last committed one; :attr:`converged` says whether it met its
         tolerance. ``extra`` (6 B,) adds forces and moments on the bodies (the inertial and damping
-        forces of the elastic vibration, see :class:`~calib_masonry.simulation.dynamics.ElasticResponse`)."""
+        forces of the elastic vibration, see :class:`~calib_masonry.simulation.dynamics.ElasticResponse`).
+        ``joints``: the mortar joints (indices) whose state is computed (default all; the others' zero)."""
         intact = self._pad(intact)
         cand = (~intact)[:, None] & self.corner_mask
         if closed is not None:
@@ -609,7 +612,7 @@ class JointModel:
         active = np.zeros_like(cand)
         if jc.size:
             active[jc, kc] = self._corner_relative(jc, kc, U)[:, 2] < 0.0
-        return self.state(U), active
+        return self.state(U, joints), active
 
     def _contact_forces(self, jc, kc, gap):
         """Forces ``(C, 3)`` (u, v, n in the joint frame, on b; ``F_n < 0`` presses) of the contact
@@ -673,7 +676,27 @@ class JointModel:
         F, T = self._contact_forces(jc, kc, gap)
         return K0 @ U - rhs + P.T @ F.ravel(), (gap, T)
 
-    def _newton_step(self, intact, jc, kc, K0, P, T, r) -> np.ndarray:
+    def _tangent_of(self, held: np.ndarray | None) -> tuple[_Tangent, np.ndarray, np.ndarray | None]:
+        """The contact iteration's matrix for the bodies ``held`` ``(B,)`` (None: all of them), its
+        joints' places in it (``(J',)``, -1 for a joint outside) and the motion's entries it holds
+        (``(6 B,)`` bool, None for all). Kept for the model's life (all) and the last few sets."""
+        if held is None or held.all():
+            if self._tangent is None:
+                self._tangent = _Tangent(self.dofs, 6 * self.nb)
+            return self._tangent, np.arange(self.n_all), None
+        key = held.tobytes()
+        if key not in self._sub_tangents:
+            inside = held[self.a] & (self.ground | held[self.bb])
+            local = np.full(self.n_all, -1, dtype=np.int64)
+            local[inside] = np.arange(int(inside.sum()))
+            keep = np.repeat(held, 6)
+            place = np.cumsum(keep) - 1  # each kept entry's place in the smaller motion
+            self._sub_tangents[key] = (_Tangent(place[self.dofs[inside]], int(keep.sum())), local, keep)
+            while len(self._sub_tangents) > 4:
+                self._sub_tangents.pop(next(iter(self._sub_tangents)))
+        return self._sub_tangents[key]
+
+    def _newton_step(self, intact, jc, kc, K0, P, T, r, held: np.ndarray | None = None) -> np.ndarray:
         """The step ``-J^-1 r`` for ``J = K0 + P^T T_s P``, with ``T_s`` the corners' tangents ``T``
         ``(C, 3, 3)`` without the friction's dependence on the normal displacement (``T[:, :2, 2]``,
         the only part that is not symmetric).
@@ -689,14 +712,19 @@ class JointModel:
         the exact tangent (202 joints; the joint model's 278 s -> 76 s). After a mechanism's onset
         the exact tangent's cascade changed with the tolerance; this iteration's, with crack rounds
         only from equilibria (:meth:`crack`), is the same from tolerance 1e-3 to 1e-5 on the
-        Stylite tower's 0.3 g quake (experiments/joint_solver_settings.py)."""
-        if self._tangent is None:
-            self._tangent = _Tangent(self.dofs, 6 * self.nb)
-        tan = self._tangent
+        Stylite tower's 0.3 g quake (experiments/joint_solver_settings.py).
+
+        ``held`` ``(B,)``: the bodies that intact joints and contact corners tie to the ground
+        (None: all). The others carry no joint force (each floats where its weak spring puts it,
+        :meth:`_contact_newton`), so their step is zero and the matrix is factorised over the held
+        bodies alone: once a quake has set a tower free, its few stones still on the ground cost
+        a factorisation of their size, not the tower's."""
+        tan, local, keep = self._tangent_of(held)
 
         def base() -> np.ndarray:
-            idx = np.flatnonzero(intact)
-            return tan.values(idx, self.Kj[idx][:, tan.ROW, tan.COL], self._reg.diagonal())
+            idx = np.flatnonzero(intact & (local >= 0))
+            diag = self._reg.diagonal()
+            return tan.values(local[idx], self.Kj[idx][:, tan.ROW, tan.COL], diag if keep is None else diag[keep])
 
         Ts = T.copy()
         Ts[:, :2, 2] = 0.0
@@ -705,7 +733,14 @@ class JointModel:
         blocks = np.einsum("cap,cap->cp", Lc[:, :, tan.ROW], TL[:, :, tan.COL])  # (Lc^T Ts Lc)[ROW, COL]
         self.factorisations += 1
         try:
-            return -tan.solve(tan.base(intact.tobytes(), base) + tan.values(jc, blocks), r)
+            inside = local[jc] >= 0  # contacts between two floating bodies are not in it
+            values = tan.base(intact.tobytes(), base) + tan.values(local[jc][inside], blocks[inside])
+            if keep is None:
+                return -tan.solve(values, r)
+            step = np.zeros_like(r)
+            if keep.any():
+                step[keep] = -tan.solve(values, r[keep])
+            return step
         except ArithmeticError:  # not positive definite in floating point (not seen): a general LU
             C = len(T)
             rows = np.repeat(np.arange(3 * C).reshape(C, 3), 3, axis=0).ravel()
@@ -727,7 +762,9 @@ class JointModel:
         # a group of bodies that nothing in the model ties to the ground stands where its weak
         # springs put it (the uniform load over ``eps m``: a rigid translation that loads none of
         # its joints); starting it there saves the dozen capped steps it would take to get there
-        free = np.repeat(self._free_bodies(intact, jc), 6)
+        free_bodies = self._free_bodies(intact, jc)
+        held = ~free_bodies if free_bodies.any() else None
+        free = np.repeat(free_bodies, 6)
         if free.any():
             U[free] = rhs[free] / self._reg.diagonal()[free]
         K0 = self._joint_matrix(intact)
@@ -748,7 +785,7 @@ class JointModel:
                     break  # stalled
             gap, T = st
             norm0 = np.linalg.norm(r)
-            dU = self._newton_step(intact, jc, kc, K0, P, T, r)
+            dU = self._newton_step(intact, jc, kc, K0, P, T, r, held)
             # a step that would move anything by more than ``step_m`` (or three times the largest
             # motion so far) is shortened: a free body's full step is g / eps, metres; then halved
             # while it does not lower the out-of-balance force
@@ -766,7 +803,7 @@ class JointModel:
                 Te = np.zeros_like(T)
                 touch = gap[:, 2] < 0.0
                 Te[touch] = self._corner_k[jc[touch], kc[touch]][:, :, None] * np.eye(3)
-                dU = self._newton_step(intact, jc, kc, K0, P, Te, r)
+                dU = self._newton_step(intact, jc, kc, K0, P, Te, r, held)
                 a = min(1.0, cap / max(float(np.abs(dU).max()), 1e-300))
                 r_new, st_new = self._residual(K0, P, jc, kc, U + a * dU, rhs)
             U = U + a * dU
@@ -794,10 +831,24 @@ class JointModel:
             k = self._corner_k[jc, kc]
             self.slip[jc, kc] = gap[:, :2] - F[:, :2] / np.maximum(k[:, :2], 1e-300)
 
-    def state(self, U: np.ndarray) -> JointState:
-        """Utilisation, governing criterion and forces of every mortar joint for the body motion ``U`` (6 B,)."""
-        n = self.nj
-        return self.state_from_relative(np.einsum("jab,jb->ja", self.L[:n], U[self.dofs[:n]]))
+    def state(self, U: np.ndarray, joints: np.ndarray | None = None) -> JointState:
+        """Utilisation, governing criterion and forces of every mortar joint for the body motion ``U``
+        (6 B,); of the mortar ``joints`` (indices) alone if given, the others' zero."""
+        if joints is None:
+            n = self.nj
+            return self.state_from_relative(np.einsum("jab,jb->ja", self.L[:n], U[self.dofs[:n]]))
+        part = self.state_from_relative(np.einsum("jab,jb->ja", self.L[joints], U[self.dofs[joints]]), joints)
+        out = JointState(
+            utilisation=np.zeros(self.nj),
+            mode=np.zeros(self.nj, dtype=part.mode.dtype),
+            forces=np.zeros((self.nj, 6)),
+            relative=np.zeros((self.nj, 6)),
+        )
+        out.utilisation[joints] = part.utilisation
+        out.mode[joints] = part.mode
+        out.forces[joints] = part.forces
+        out.relative[joints] = part.relative
+        return out
 
     def utilisation_bound(self, U: np.ndarray) -> float:
         """An upper bound of the mortar joints' largest utilisation under the body motion ``U``
@@ -818,17 +869,17 @@ class JointModel:
         shear = _ratio(tau, self.cohesion + m.friction * np.maximum(0.0, -forces[:, 2] / self.area[:n]))
         return float(max(tension.max(initial=0.0), compression.max(initial=0.0), shear.max(initial=0.0)))
 
-    def state_from_relative(self, rel: np.ndarray) -> JointState:
+    def state_from_relative(self, rel: np.ndarray, joints: np.ndarray | slice | None = None) -> JointState:
         """The same from every joint's relative displacement and rotation ``(J, 6)`` (d_u, d_v, d_n,
-        r_u, r_v, r_n) in its frame."""
+        r_u, r_v, r_n) in its frame; of the mortar ``joints`` (indices, ``(len(joints), 6)``) if given."""
         m = self.material
-        n = self.nj
-        forces = np.einsum("jab,jb->ja", self.D[:n], rel)
-        kn = self.stiffness.normal[:n, None]
-        outline, area, iuu, ivv = self.outline[:n], self.area[:n], self.iuu[:n], self.ivv[:n]
+        n = slice(None, self.nj) if joints is None else joints
+        forces = np.einsum("jab,jb->ja", self.D[n], rel)
+        kn = self.stiffness.normal[n, None]
+        outline, area, iuu, ivv = self.outline[n], self.area[n], self.iuu[n], self.ivv[n]
         ou, ov = outline[..., 0], outline[..., 1]
         sigma = kn * (rel[:, 2:3] + rel[:, 3:4] * ov - rel[:, 4:5] * ou)  # (J, K), tension positive
-        tension = _ratio(sigma.max(axis=1), self.tensile_strength)
+        tension = _ratio(sigma.max(axis=1), self.tensile_strength[n])
         # a compressed joint whose tensile corner has cracked stands as a no-tension section while
         # its compressive resultant stays inside the patch: it fails in bending only once the
         # resultant leaves the outline (rocking)
@@ -843,7 +894,7 @@ class JointModel:
         rmax = np.sqrt((outline**2).sum(axis=2)).max(axis=1)
         tau = np.hypot(forces[:, 0], forces[:, 1]) / area + np.abs(forces[:, 5]) * rmax / polar
         sigma_c = np.maximum(0.0, -forces[:, 2] / area)
-        shear = _ratio(tau, self.cohesion + m.friction * sigma_c)
+        shear = _ratio(tau, self.cohesion[n] + m.friction * sigma_c)
         crit = np.stack([tension, compression, shear], axis=1)
         return JointState(utilisation=crit.max(axis=1), mode=crit.argmax(axis=1), forces=forces, relative=rel)
 
@@ -868,18 +919,21 @@ class JointModel:
         strength for 9 s, every frame's rounds ended before they cracked anything.) Returns
         the indices cracked (in order), the criterion each failed by, and the state of the last
         solve that was not a run-away (the joints' forces at a run-away iterate are no state the
-        structure passes through). ``extra``: forces on the bodies besides ``m g``; ``start``: where the
+        structure passes through), of the joints intact in that solve (the others' zero: only
+        theirs decide a crack). ``extra``: forces on the bodies besides ``m g``; ``start``: where the
         first solve's iteration starts (see :meth:`solve`)."""
         intact = np.asarray(intact, dtype=bool)[: self.nj].copy()
         closed = None if closed is None else np.asarray(closed, dtype=bool).copy()
         cracked: list[np.ndarray] = []
         modes: list[np.ndarray] = []
-        state, _ = self.solve(g, intact, closed, start=start, extra=extra)
+        state, _ = self.solve(g, intact, closed, start=start, extra=extra, joints=np.flatnonzero(intact))
         kept = state
         for rounds in range(self.settings.max_rounds + 1):
             if (
                 runaway_m is not None
-                and self._motion(self._last[2])[self._linked(intact, closed) & ~self._pad(intact)].max(initial=0.0)
+                and self._motion(self._last[2], np.flatnonzero(self._linked(intact, closed) & ~self._pad(intact))).max(
+                    initial=0.0
+                )
                 > runaway_m
             ):
                 break  # a mechanism: no equilibrium to crack more joints from (module docstring)
@@ -894,7 +948,8 @@ class JointModel:
                 closed[new] = True  # a joint that has just cracked still touches
             cracked.append(new)
             modes.append(state.mode[new])
-            state, _ = self.solve(g, intact, closed, start=self._last[2], extra=extra)  # from the last round's motion
+            # from the last round's motion
+            state, _ = self.solve(g, intact, closed, start=self._last[2], extra=extra, joints=np.flatnonzero(intact))
         state = kept
         self.commit()
         if not cracked:
@@ -914,18 +969,22 @@ class JointModel:
         """The bodies' displacements and rotations ``(6 B,)`` of the last solve (None before any)."""
         return None if self._last is None else self._last[2]
 
-    def corner_motion(self) -> np.ndarray:
+    def corner_motion(self, joints: np.ndarray | None = None) -> np.ndarray:
         """The largest relative displacement ``(J',)`` (m) of each joint's corners in the last
-        committed solve (0 before any)."""
+        committed solve (0 before any); of the ``joints`` (indices) alone if given."""
         if self._U is None or self.n_all == 0:
-            return np.zeros(self.n_all)
-        return self._motion(self._U).copy()
+            return np.zeros(self.n_all if joints is None else len(joints))
+        return self._motion(self._U, joints).copy()
 
-    def _motion(self, U: np.ndarray) -> np.ndarray:
-        """The largest relative displacement ``(J',)`` (m) of each joint's corners under the motion ``U``."""
+    def _motion(self, U: np.ndarray, joints: np.ndarray | None = None) -> np.ndarray:
+        """The largest relative displacement ``(J',)`` (m) of each joint's corners under the motion
+        ``U``; ``(len(joints),)`` of the ``joints`` (indices) alone if given."""
         if self.n_all == 0:
             return np.zeros(0)
-        if self._motion_of is not None and self._motion_of[0] is U:  # the crack rounds' check, then the tracker's
+        if joints is not None:
+            rel = np.einsum("jkab,jb->jka", self._corner_L[joints], U[self.dofs[joints]])
+            return np.linalg.norm(rel, axis=2).max(axis=1, initial=0.0)
+        if self._motion_of is not None and self._motion_of[0] is U:
             return self._motion_of[1]
         rel = np.einsum("jkab,jb->jka", self._corner_L, U[self.dofs])
         out = np.linalg.norm(rel, axis=2).max(axis=1)

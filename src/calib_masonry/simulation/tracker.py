@@ -246,8 +246,8 @@ class CrackTracker:
         self.break_time_s[new] = crack_time_s - self.t0
         self.break_mode[new] = modes
         self.max_utilisation = float(np.where(intact & self.intact, state.utilisation, 0.0).max(initial=0.0))
-        moving = self.model.corner_motion()[: self.model.nj] > self.release_m
-        release = np.flatnonzero(moving & ~self.intact & self.held & ~frozen)
+        candidates = np.flatnonzero(~self.intact & self.held & ~frozen)
+        release = candidates[self.model.corner_motion(candidates) > self.release_m]
         if release.size:
             self.held[release] = False
             self.release_time_s[release] = float(time_s) - self.t0

@@ -7,9 +7,11 @@ For each model and setting it prints
 * a quake sweep (PGA 0.05 to 0.6 g in steps of 0.05, Kanai-Tajimi, two components, per seed):
   joints cracked, bricks set free (no joint Bullet still holds ties them to the plate: the joint
   model's decision) and bricks moved at every PGA run (the verdict's: the freed pieces moved as
-  rigid bodies, simulation/pieces.py; Bullet's animation's beside it), and the collapse PGA (the
-  lowest PGA at which more than half of the bricks move). The sweep climbs the PGAs and stops at the first collapse:
-  the collapse PGA is all a higher PGA could add.
+  rigid bodies, simulation/pieces.py; Bullet's animation's beside it), the bricks in pieces that
+  fell or overturn, and the collapse PGA (the lowest PGA whose verdict is "collapsed": under a
+  ground motion, half of the bricks in pieces that fell or overturn; simulation/results.py
+  ``outcome``). The sweep climbs the PGAs and stops at the first collapse: the collapse PGA is all
+  a higher PGA could add.
 
 Then the collapse PGA of every seed at every setting, and its largest change from the default.
 ``--settings`` also offers "2x fps" (Bullet's frame rate: the joint model checks the joints on a
@@ -45,7 +47,7 @@ sys.path.insert(0, str(ROOT / "src"))
 from calib_masonry.build_folder import build_to_folder  # noqa: E402
 from calib_masonry.simulation.loop import gravity_per_frame, run  # noqa: E402
 from calib_masonry.simulation.pieces import piece_motion  # noqa: E402
-from calib_masonry.simulation.results import metrics  # noqa: E402
+from calib_masonry.simulation.results import metrics, outcome  # noqa: E402
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model  # noqa: E402
 from calib_masonry.simulation.scene import SolverSettings, grounded_bodies  # noqa: E402
 from calib_masonry.simulation.tracker import CrackTracker  # noqa: E402
@@ -86,6 +88,8 @@ def one_run(model: Path, solver: SolverSettings, pga: float, seed: int, duration
         "freed": float(freed),
         "cracked": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
         "moved": float(m.moved_fraction[-1]),
+        "toppled": m.toppled_fraction,
+        "outcome": m.outcome,
         "bullet_moved": float(metrics(scene, out, bullet=True).moved_fraction[-1]),
         "max_disp_mm": float(np.linalg.norm(out.positions[w:] - out.positions[w], axis=2).max() * 1000),
         "seconds": time.perf_counter() - t,
@@ -117,9 +121,15 @@ def verdict_without_bullet(model: Path, solver: SolverSettings, pga: float, seed
         "freed": float(1.0 - grounded_bodies(scene.bonds, len(scene.bodies), held).mean()),
         "cracked": float(np.isfinite(tracker.break_time_s).mean()),
         "moved": float(moved[-1]),
+        "toppled": float(pm.toppled.mean()),
+        "outcome": outcome(float(moved[-1]), float(pm.toppled.mean())),
         "bullet_moved": float("nan"),
         "seconds": time.perf_counter() - t,
     }
+
+
+def _percent(x: float | None) -> str:
+    return f"{'-':>6s}" if x is None else f"{x:6.1%}"
 
 
 def main() -> None:
@@ -172,10 +182,10 @@ def main() -> None:
                         print(
                             f"{label} seed {seed} PGA {pga:4.2f} g: cracked {r['cracked']:6.1%}  set free "
                             f"{r['freed']:6.1%}  moved {r['moved']:6.1%} (Bullet's {r['bullet_moved']:6.1%})  "
-                            f"({r['seconds']:.0f} s)",
+                            f"toppled {_percent(r['toppled'])}: {r['outcome']}  ({r['seconds']:.0f} s)",
                             flush=True,
                         )
-                        if r["moved"] > 0.5:
+                        if r["outcome"] == "collapsed":
                             collapse[(name, setting, seed)] = pga
                             break
 

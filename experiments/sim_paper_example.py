@@ -20,7 +20,7 @@ import numpy as np
 
 from calib_masonry.build_folder import build_to_folder
 from calib_masonry.simulation.loop import run
-from calib_masonry.simulation.results import metrics, outcome
+from calib_masonry.simulation.results import metrics
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model
 from calib_masonry.spec import load_structure
 
@@ -66,7 +66,7 @@ def main() -> None:
                 disp = float(m.max_displacement_m.max())  # largest brick displacement after the warm-up
                 moved = m.moved_fraction[-1]
                 broken = float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0
-                verdict = outcome(float(moved))
+                verdict = m.outcome
                 print(
                     f"{pga:6.2f} {seed:4d} {verdict:>10s} {moved:7.1%} {broken:7.1%} {disp * 1000:12.2f} "
                     f"{m.roof_drift_m.max() * 1000:14.1f} {out.seconds_stepping / (len(out.time) - 1):8.2f} "

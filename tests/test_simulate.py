@@ -927,6 +927,34 @@ def test_collapse_time_agrees_with_the_verdict():
     assert outcome(m.moved_fraction[-1]) == "collapsed" and m.collapse_time_s == pytest.approx(2.0)
 
 
+def test_under_a_ground_motion_the_verdict_is_the_toppled_pieces():
+    """The verdict read where a rocking piece happened to be at the last frame (Stylite seed 2 at
+    0.30 g: 57.7 % of the stones beyond 5 cm at the default, 48.5 % at twice the pieces' steps);
+    under a ground motion it is now the bricks in pieces that fell or overturn, and the moved
+    fraction is reported beside it."""
+    from types import SimpleNamespace
+
+    from calib_masonry.simulation.results import metrics
+
+    scene = SimpleNamespace(solver=SimpleNamespace(warmup_frames=0, moved_threshold_m=0.05), bonds=())
+    t = np.arange(6) * 0.5
+    pos = np.zeros((6, 4, 3))
+    disp = np.zeros((6, 4, 3), dtype=np.float32)
+    disp[3:, :3, 0] = 0.2  # three of four bricks out at the last frames: a swing of a rocking piece
+    pieces = SimpleNamespace(displacement_m=disp, toppled=np.zeros(4, bool))
+    out = SimpleNamespace(time=t, positions=pos, plate=np.zeros((6, 3)), bond_break_time_s=None, pieces=pieces)
+    m = metrics(scene, out)
+    assert m.moved_fraction[-1] == 0.75 and m.toppled_fraction == 0.0
+    assert m.outcome == "damaged" and m.collapse_time_s is None
+    pieces.toppled[:2] = True  # two of four in a piece that overturns: half
+    m = metrics(scene, out)
+    assert m.outcome == "collapsed" and m.collapse_time_s == pytest.approx(1.5)
+    disp[:] = 0.0  # overturning from rest at the end: collapsed, decided at the end
+    m = metrics(scene, out)
+    assert m.outcome == "collapsed" and m.collapse_time_s == pytest.approx(2.5)
+    assert metrics(scene, out, bullet=True).toppled_fraction is None
+
+
 def test_a_flat_history_is_drawn_flat_not_magnified(tmp_path, monkeypatch):
     """histories.png drew a standing run's zero drift on a +-0.04 % axis; each panel now spans at
     least 1 mm or 1 % and says when it stayed at zero."""

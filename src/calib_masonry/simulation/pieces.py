@@ -85,8 +85,9 @@ class PieceSettings:
 class PieceMotion:
     """The freed pieces' motion at the asked times: ``displacement_m`` ``(T, B, 3)`` of every body's
     centroid from its place (0 for a body the joints hold; float32), ``pieces`` how many pieces
-    there were at the end, ``fallen`` ``(B,)`` the bodies of pieces that fell, ``dt_s`` the (last)
-    step, ``steps`` how many were taken and ``seconds`` the wall time."""
+    there were at the end, ``fallen`` ``(B,)`` the bodies of pieces that fell, ``toppled`` ``(B,)``
+    those and the bodies of pieces that overturn from where they are at the last time asked,
+    ``dt_s`` the (last) step, ``steps`` how many were taken and ``seconds`` the wall time."""
 
     time_s: np.ndarray
     displacement_m: np.ndarray
@@ -95,6 +96,9 @@ class PieceMotion:
     dt_s: float
     steps: int
     seconds: float = 0.0
+    # (B,) the bodies of pieces that fell or overturn from their state at the last time asked
+    # (_Pieces.overturns): the verdict's, which does not read where a rocking piece happens to be
+    toppled: np.ndarray | None = None
 
     def distance_m(self) -> np.ndarray:
         """``(T, B)`` every body's displacement's length."""
@@ -378,14 +382,66 @@ class _Pieces:
             out[on] = np.einsum("nij,nj->ni", self.R[i], x - self.c[i]) + self.c[i] + self.d[i] - x
         return out
 
+    def overturns(self, i: int) -> bool | None:
+        """Whether piece ``i`` overturns from its present state with the ground still: its kinetic
+        energy reaches the least work that lifts its centroid over an edge of its support (the plan
+        hull of its contact corners on bed-like faces, within 45 degrees of level, below its
+        centroid; zero work over an edge the centroid is already beyond), plus its weight times
+        the contacts' settling (``settle_fraction`` of its size, what the penalty springs allow).
+        Mechanical energy only falls once the ground is still (the contacts dissipate), so a piece
+        below that bound comes to rest and one above it may overturn: the answer does not depend
+        on where in its rocking the piece is. None where the piece has no such support (three
+        corners not on a line)."""
+        from scipy.spatial import ConvexHull, QhullError
+
+        on = (self.pa == i) | (self.pb == i)
+        if not on.any():
+            return None
+        R, c = self.R[i], self.c[i] + self.d[i]
+        pts = (self.p[on] - self.c[i]) @ R.T + c  # the corners on this piece, where they are now
+        normal_z = (self.fn[on] @ R.T)[:, 2]
+        bed = (np.abs(normal_z) >= np.sqrt(0.5)) & (pts[:, 2] < c[2])
+        support = pts[bed]
+        if len(support) < 3:
+            return None
+        try:
+            hull = ConvexHull(support[:, :2])
+        except QhullError:  # on one line: a knife edge, no support polygon
+            return None
+        g = self.gravity
+        work = np.inf
+        for q in range(len(hull.vertices)):
+            p1 = support[hull.vertices[q]]
+            p2 = support[hull.vertices[(q + 1) % len(hull.vertices)]]
+            axis = p2 - p1
+            if np.linalg.norm(axis) < 1e-12:
+                continue
+            axis = axis / np.linalg.norm(axis)
+            d = c - p1
+            # outward in plan: the hull's vertices run counter-clockwise
+            out = np.array([axis[1], -axis[0]])
+            if float(out @ d[:2]) >= 0.0:
+                work = 0.0  # the centroid is beyond this edge: it falls over it
+                break
+            along = float(d @ axis)
+            r = float(np.linalg.norm(d - along * axis))
+            top = p1[2] + along * axis[2] + r * np.sqrt(max(0.0, 1.0 - axis[2] ** 2))
+            work = min(work, self.M[i] * g * (top - c[2]))
+        Iw = R @ self.I0[i] @ R.T
+        kinetic = 0.5 * self.M[i] * float(self.v[i] @ self.v[i]) + 0.5 * float(self.w[i] @ Iw @ self.w[i])
+        return kinetic >= max(work, 0.0) + self.M[i] * g * self.settings.settle_fraction * self.size[i]
+
     def check_fallen(self) -> bool:
-        """Stop the pieces that have fallen; True if any did (their contacts are dropped)."""
+        """Stop the pieces that have fallen; True if any did (their contacts are dropped). A piece has
+        fallen once a body has moved ``fallen_m`` and it overturns (:meth:`overturns`; by the
+        distance alone where it has no bed support): a tall tower rocking half a metre at its top
+        is a tenth of the way to its tipping angle, not fallen."""
         disp = self.displacement()
         dist = np.linalg.norm(disp, axis=1)
         gone = False
         for i in np.flatnonzero(self.alive):
             idx = self.piece_of == i
-            if dist[idx].max() > self.settings.fallen_m:
+            if dist[idx].max() > self.settings.fallen_m and self.overturns(i) is not False:
                 self.alive[i] = False
                 self.fallen[idx] = True
                 self.final[idx] = disp[idx]
@@ -429,7 +485,7 @@ def piece_motion(
     out = np.zeros((len(times_s), nb, 3), dtype=np.float32)
     release = np.asarray(release_time_s, dtype=np.float64)
     if nb == 0 or len(times_s) == 0:
-        return PieceMotion(times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0)
+        return PieceMotion(times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0, toppled=np.zeros(nb, dtype=bool))
     release = np.where(release <= times_s[-1], release, np.nan)  # let go after the last time asked: no matter
     inertia = np.array([body_inertia(b) for b in scene.bodies])
     state = _Pieces(scene, model, inertia, settings)
@@ -438,7 +494,7 @@ def piece_motion(
     if start_free.any():
         events = np.unique(np.concatenate([[0.0], events]))
     if events.size == 0:
-        return PieceMotion(times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0)
+        return PieceMotion(times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0, toppled=np.zeros(nb, dtype=bool))
     gravity = np.array([0.0, 0.0, -scene.gravity])
     motion = scene.motion
     # the steps run from one release to the next (and on to the last time asked), not from one time
@@ -482,4 +538,10 @@ def piece_motion(
         state.check_fallen()
         steps += n
     read(np.inf)
-    return PieceMotion(times_s, out, int(state.n), state.fallen.copy(), float(dt), steps, time.perf_counter() - clock)
+    toppled = state.fallen.copy()
+    for i in np.flatnonzero(state.alive):
+        if state.overturns(int(i)):
+            toppled[state.piece_of == i] = True
+    return PieceMotion(
+        times_s, out, int(state.n), state.fallen.copy(), float(dt), steps, time.perf_counter() - clock, toppled
+    )

@@ -68,12 +68,28 @@ class Metrics:
     max_displacement_m: np.ndarray  # (B,) over the whole run
     bond_break_time_s: np.ndarray  # (n_bonds,) NaN where intact
     broken_fraction: np.ndarray  # (F,)
-    collapse_time_s: float | None  # from when half the bricks stay moved (None: the run ends not collapsed)
+    collapse_time_s: float | None  # when the run collapsed (None: the run ends not collapsed)
+    # under a ground motion, the bricks in freed pieces that fell or overturn from their state at
+    # the end (simulation/pieces.py: PieceMotion.toppled); None where Bullet's motion is read
+    toppled_fraction: float | None = None
+
+    @property
+    def outcome(self) -> str:
+        """The run's verdict: :func:`outcome` of the final fraction moved and the toppled one."""
+        return outcome(float(self.moved_fraction[-1]) if len(self.moved_fraction) else 0.0, self.toppled_fraction)
 
 
-def outcome(moved_fraction: float) -> str:
-    """The run's verdict from the final fraction of bricks moved: "collapsed" when at least half
-    moved, "damaged" when more than 1 % did, else "standing"."""
+def outcome(moved_fraction: float, toppled_fraction: float | None = None) -> str:
+    """The run's verdict. Under a ground motion (``toppled_fraction`` given): "collapsed" when at
+    least half of the bricks are in pieces that fell or overturn (not where a rocking piece happens
+    to be at the last frame: a freed tower rocking on its base moves most of its stones 5 cm at
+    the top of each swing and none in between), "damaged" when more than 1 % toppled or moved,
+    else "standing". Otherwise from the final fraction of bricks moved: "collapsed" when at least
+    half moved, "damaged" when more than 1 % did, else "standing"."""
+    if toppled_fraction is not None:
+        if toppled_fraction >= 0.5:
+            return "collapsed"
+        return "damaged" if max(moved_fraction, toppled_fraction) > 0.01 else "standing"
     return "collapsed" if moved_fraction >= 0.5 else "damaged" if moved_fraction > 0.01 else "standing"
 
 
@@ -103,10 +119,17 @@ def metrics(scene: Scene, out: RunOutput, *, bullet: bool = False) -> Metrics:
     # the time from which half the bricks stay moved to the end: None unless the run ends collapsed,
     # so that it agrees with the verdict (the first frame with half moved gave 2.24 s to a run whose
     # bricks came back to rest within the threshold: outcome "standing")
+    toppled = None
+    if getattr(out, "pieces", None) is not None and not bullet and out.pieces.toppled is not None:
+        toppled = float(out.pieces.toppled.mean()) if len(out.pieces.toppled) else 0.0
     collapse = None
-    if len(moved) and moved[-1] >= 0.5:
+    if len(moved) and outcome(float(moved[-1]), toppled) == "collapsed":
+        # from when half the bricks stay moved; where the toppled pieces decided it but fewer than
+        # half had moved 5 cm by the end, the end of the run
         below = np.flatnonzero(moved < 0.5)
-        collapse = float(t_rel[below[-1] + 1]) if below.size else float(t_rel[0])
+        collapse = (
+            float(t_rel[-1]) if moved[-1] < 0.5 else float(t_rel[below[-1] + 1]) if below.size else float(t_rel[0])
+        )
     return Metrics(
         start_frame=start,
         moved_fraction=moved,
@@ -115,6 +138,7 @@ def metrics(scene: Scene, out: RunOutput, *, bullet: bool = False) -> Metrics:
         bond_break_time_s=breaks,
         broken_fraction=broken,
         collapse_time_s=collapse,
+        toppled_fraction=toppled,
     )
 
 

@@ -314,7 +314,7 @@ def _spread(values: np.ndarray) -> dict | None:
 
 
 def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) -> dict:
-    from .results import ONSET_DRIFT, failure_mode_counts, mechanism, outcome
+    from .results import ONSET_DRIFT, failure_mode_counts, mechanism
 
     s = scene.solver
     k = scene_joint_stiffness(scene)
@@ -389,7 +389,10 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
         # cracked joints Bullet let go: the rest of the cracked ones it held while they had an equilibrium
         "bonds_released": int(np.isfinite(out.bond_release_time_s).sum()) if out.bond_release_time_s is not None else 0,
         "max_brick_displacement_m": float(m.max_displacement_m.max()),
-        "outcome": outcome(float(m.moved_fraction[-1])),
+        "outcome": m.outcome,
+        # the bricks in freed pieces that fell or overturn from their state at the end (the verdict
+        # under a ground motion: collapsed from half); None where Bullet's motion is read
+        "toppled_fraction": m.toppled_fraction,
         # the bricks the joint model cut off from the ground (no joint Bullet still holds ties them
         # to the plate): its decision, the same whatever Bullet's settings; how far they then move
         # (moved_fraction_final, outcome) is the rigid pieces' motion ("pieces" below), Bullet's

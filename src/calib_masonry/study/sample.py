@@ -324,17 +324,16 @@ def _material(sample: Sample, base: tuple = ()):
 
 def outcome(result) -> dict:
     """What a study keeps of a :class:`~calib_masonry.simulation.run.SimulationResult`."""
-    from ..simulation.results import outcome as verdict
-
     m = result.metrics
     moved = float(m.moved_fraction[-1])
     out = {
         "moved_fraction": moved,
+        "toppled_fraction": m.toppled_fraction,
         "cracked_fraction": float(m.broken_fraction[-1]),
         "roof_drift_m": float(m.roof_drift_m[-1]),
         "max_displacement_m": float(m.max_displacement_m.max()) if len(m.max_displacement_m) else 0.0,
-        "outcome": verdict(moved),
-        "collapsed": int(verdict(moved) == "collapsed"),
+        "outcome": m.outcome,
+        "collapsed": int(m.outcome == "collapsed"),
         "collapse_time_s": m.collapse_time_s,  # None unless the outcome is collapsed
     }
     if result.curve is not None:

@@ -118,13 +118,20 @@ def gravity_per_frame(scene: Scene) -> np.ndarray:
     return g
 
 
-def _ahead(fn: Callable[[int], T], items: range, release: Callable[[], None]) -> Iterator[T]:
+def _ahead(
+    fn: Callable[[int], T],
+    items: range,
+    release: Callable[[], None],
+    then: Callable[[Callable[[], bool]], object] | None = None,
+) -> Iterator:
     """``fn(k)`` for each of ``items``, computed in order on a thread of its own as far ahead as it
-    gets, yielded in order; ``release()`` runs on that thread as it ends (the joint model's LU
-    factors are freed there, on the thread that made them: see
-    :meth:`~calib_masonry.simulation.joints.JointModel.release_factors`). Leaving early (an
-    error, a stop, ``close()``) stops the thread after the item it is on and waits for it, so
-    nothing runs on after the run; an error of ``fn`` is raised here, in its item's turn."""
+    gets, yielded in order; then, if given, ``then(stopped)`` on the same thread, yielded last
+    (``stopped()`` says whether the consumer has left: a long ``then`` checks it). ``release()``
+    runs on that thread as it ends (the joint model's LU factors are freed there, on the thread
+    that made them: see :meth:`~calib_masonry.simulation.joints.JointModel.release_factors`).
+    Leaving early (an error, a stop, ``close()``) stops the thread after the item it is on and
+    waits for it, so nothing runs on after the run; an error of ``fn`` is raised here, in its
+    item's turn."""
     results: queue.SimpleQueue = queue.SimpleQueue()
     stop = threading.Event()
 
@@ -134,6 +141,8 @@ def _ahead(fn: Callable[[int], T], items: range, release: Callable[[], None]) ->
                 if stop.is_set():
                     return
                 results.put((True, fn(k)))
+            if then is not None and not stop.is_set():
+                results.put((True, then(stop.is_set)))
         except BaseException as exc:  # noqa: BLE001 - raised by the consumer in its turn
             results.put((False, exc))
         finally:
@@ -142,7 +151,7 @@ def _ahead(fn: Callable[[int], T], items: range, release: Callable[[], None]) ->
     thread = threading.Thread(target=work, name="calib-masonry-joints", daemon=True)
     thread.start()
     try:
-        for _ in items:
+        for _ in range(len(items) + (then is not None)):
             ok, value = results.get()
             if not ok:
                 raise value
@@ -271,6 +280,23 @@ def steps(
     # joints cracked and let go are those of one check before each step, and the run takes the
     # longer of the two.
     ahead = None
+    ahead_pieces = False  # whether the thread ahead moves the verdict's pieces once its checks are done
+    pieces = None
+    times = (np.arange(warm, frames + 1) - warm) / s.fps  # the recorded frames' times since the ground started
+
+    def move_pieces(stopped=None, progress=False):
+        # the verdict's motion of what the joints set free: rigid pieces, converged (not the engine's)
+        assert tracker is not None
+        return piece_motion(
+            scene,
+            tracker.release_time_s,
+            times,
+            velocity=tracker.free_velocity,
+            model=tracker.model,
+            progress=progress if np.isfinite(tracker.release_time_s).any() else False,
+            stopped=stopped,
+        )
+
     t1 = time.perf_counter()
     eng.step_to(0)
     if record:
@@ -282,7 +308,15 @@ def steps(
             i = f if record else 0
             if tracker is not None:
                 if joints_ahead and ahead is None and not tracker.reads_poses:
-                    ahead = _ahead(lambda k, w=i - 1: check(k, w), range(f, frames + 1), tracker.release_factors)
+                    # under a ground motion the same thread then moves the pieces, while the engine
+                    # is still stepping: they need the checks' releases alone
+                    ahead_pieces = record and scene.motion is not None
+                    ahead = _ahead(
+                        lambda k, w=i - 1: check(k, w),
+                        range(f, frames + 1),
+                        tracker.release_factors,
+                        then=move_pieces if ahead_pieces else None,
+                    )
                 p = i - 1
                 release, utilisation[p] = next(ahead) if ahead is not None else check(f, p)
                 if len(release):
@@ -298,22 +332,17 @@ def steps(
                 n = f + 1
                 break
             yield f
+        else:
+            if ahead_pieces:
+                pieces = next(ahead)  # the thread's last item
     finally:
         if ahead is not None:
             ahead.close()  # a pushover that has run away, an error, a signal: no check runs on after the run
     seconds_stepping = time.perf_counter() - t1
     mats, plate_pos, utilisation = mats[:n], plate_pos[:n], utilisation[:n]
-    pieces = None
-    if record and tracker is not None and scene.motion is not None:
-        # the verdict's motion of what the joints set free: rigid pieces, converged (not the engine's)
-        pieces = piece_motion(
-            scene,
-            tracker.release_time_s,
-            (np.arange(warm, n) - warm) / s.fps,
-            velocity=tracker.free_velocity,
-            model=tracker.model,
-            progress=progress if np.isfinite(tracker.release_time_s).any() else False,
-        )
+    if record and tracker is not None and scene.motion is not None and (pieces is None or n < frames + 1):
+        times = times[: n - warm]
+        pieces = move_pieces(progress=progress)
     if not record:
         grab(0)  # the final state only
     if blend_path is not None:

@@ -44,6 +44,7 @@ Units: metres, kilograms, seconds, radians.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -466,13 +467,16 @@ def piece_motion(
     model=None,
     settings: PieceSettings | None = None,
     progress: bool | None = False,
-) -> PieceMotion:
+    stopped: Callable[[], bool] | None = None,
+) -> PieceMotion | None:
     """The freed pieces' motion (module docstring) at ``times_s`` (T,), seconds since the ground
     began to move, given when the joint model let each joint go (``release_time_s`` (nj,), NaN
     for never; a joint let go at ``t`` is let go before the step from ``t``). ``velocity`` maps
     a release time to every body's elastic velocity (B, 6) at it (None: pieces start from rest).
     ``model``: the run's :class:`~calib_masonry.simulation.joints.JointModel` (else built);
-    ``progress`` as :func:`calib_masonry.progress.progress`."""
+    ``progress`` as :func:`calib_masonry.progress.progress`. ``stopped()``, if given, is asked
+    every 64 steps whether the caller has gone (a run stopped while the pieces moved on a thread
+    of their own): then None at once."""
     from .dynamics import body_inertia
     from .joints import JointModel
 
@@ -533,6 +537,8 @@ def piece_motion(
             state.advance(g, h)
             if (q & 63) == 63:
                 state.check_fallen()
+                if stopped is not None and stopped():
+                    return None
             if k_time < len(times_s) and times_s[k_time] <= grid[q + 1] + 1e-12:
                 read(float(grid[q + 1]))
         state.check_fallen()

@@ -415,7 +415,8 @@ def _cmd_simulate(args) -> int:
         return 0
     print(
         f"simulate: {s['bricks']} bricks, {s['bonds']} bonds, {s['ground_motion']['source']}: {s['outcome']}; "
-        f"moved {s['moved_fraction_final']:.1%} of bricks, {s['bonds_broken_fraction']:.1%} of bonds broken, "
+        + (f"{s['toppled_fraction']:.1%} of bricks toppled, " if s.get("toppled_fraction") is not None else "")
+        + f"moved {s['moved_fraction_final']:.1%} of bricks, {s['bonds_broken_fraction']:.1%} of bonds broken, "
         f"max roof drift {s['max_roof_drift_m'] * 1000:.0f} mm; stepping {s['seconds']['stepping']:.1f} s -> {args.out}"
     )
     return 0

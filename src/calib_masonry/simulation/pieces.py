@@ -31,12 +31,18 @@ The model (small strains, finite motion):
   its bodies' elastic vibration at that moment (zero for a quasi-static run).
 * Symplectic Euler with a step of ``1 / steps_per_period`` of the shortest period of any piece on
   its contact springs (all closed), so the step follows from the structure, not from Bullet's
-  settings. A piece whose any body has moved ``fallen_m`` has fallen: it is no longer integrated
-  (its bodies count as moved), and its contacts with other pieces are dropped.
+  settings. A piece whose any body has moved ``fallen_m`` and that overturns (below) has fallen:
+  it is no longer integrated (its bodies count as moved), and its contacts with other pieces are
+  dropped.
+* A piece *overturns* from its state when its kinetic energy reaches the least work that lifts its
+  centroid over an edge of its support (``_Pieces.overturns``): with the ground still the contacts
+  only dissipate, so this does not depend on where in a swing a rocking piece is.
 
-The displacement of every body's centroid at every frame is what the run's verdict reads (bricks
-moved, collapse time; simulation/results.py); Bullet's own motion of the freed pieces is the
-animation, its count of bricks moved reported beside the verdict.
+The run's verdict reads the bodies in pieces that fell or overturn at the last time asked
+(``PieceMotion.toppled``: collapsed from half of the bricks; simulation/results.py ``outcome``),
+and reports the displacement of every body's centroid at every frame beside it (bricks moved,
+roof drift); Bullet's own motion of the freed pieces is the animation, its count of bricks moved
+reported beside the verdict.
 
 Units: metres, kilograms, seconds, radians.
 """
@@ -435,8 +441,8 @@ class _Pieces:
     def check_fallen(self) -> bool:
         """Stop the pieces that have fallen; True if any did (their contacts are dropped). A piece has
         fallen once a body has moved ``fallen_m`` and it overturns (:meth:`overturns`; by the
-        distance alone where it has no bed support): a tall tower rocking half a metre at its top
-        is a tenth of the way to its tipping angle, not fallen."""
+        distance alone where it has no bed support): the 13.5 m Stylite tower rocking half a metre
+        at its top has turned a fifth of its tipping angle and has 37 % of the energy that tips it."""
         disp = self.displacement()
         dist = np.linalg.norm(disp, axis=1)
         gone = False

@@ -405,7 +405,6 @@ class JointModel:
         self.factorisations = 0  # sparse factorisations (LU or Cholesky), over the model's life
         self._U: np.ndarray | None = None  # the last committed solve's motion
         self._last: tuple | None = None
-        self._motion_of: tuple | None = None  # (U, _motion(U)) of the last call: asked twice per load
         self.newton_iterations = 0  # of the last solve
         self.converged = True  # whether the last solve met ``settings.tol``
         self.n_all = len(bonds)
@@ -834,10 +833,10 @@ class JointModel:
     def state(self, U: np.ndarray, joints: np.ndarray | None = None) -> JointState:
         """Utilisation, governing criterion and forces of every mortar joint for the body motion ``U``
         (6 B,); of the mortar ``joints`` (indices) alone if given, the others' zero."""
+        sel = slice(None, self.nj) if joints is None else joints
+        part = self.state_from_relative(np.einsum("jab,jb->ja", self.L[sel], U[self.dofs[sel]]), joints)
         if joints is None:
-            n = self.nj
-            return self.state_from_relative(np.einsum("jab,jb->ja", self.L[:n], U[self.dofs[:n]]))
-        part = self.state_from_relative(np.einsum("jab,jb->ja", self.L[joints], U[self.dofs[joints]]), joints)
+            return part
         out = JointState(
             utilisation=np.zeros(self.nj),
             mode=np.zeros(self.nj, dtype=part.mode.dtype),
@@ -974,22 +973,16 @@ class JointModel:
         committed solve (0 before any); of the ``joints`` (indices) alone if given."""
         if self._U is None or self.n_all == 0:
             return np.zeros(self.n_all if joints is None else len(joints))
-        return self._motion(self._U, joints).copy()
+        return self._motion(self._U, joints)
 
     def _motion(self, U: np.ndarray, joints: np.ndarray | None = None) -> np.ndarray:
         """The largest relative displacement ``(J',)`` (m) of each joint's corners under the motion
         ``U``; ``(len(joints),)`` of the ``joints`` (indices) alone if given."""
         if self.n_all == 0:
             return np.zeros(0)
-        if joints is not None:
-            rel = np.einsum("jkab,jb->jka", self._corner_L[joints], U[self.dofs[joints]])
-            return np.linalg.norm(rel, axis=2).max(axis=1, initial=0.0)
-        if self._motion_of is not None and self._motion_of[0] is U:
-            return self._motion_of[1]
-        rel = np.einsum("jkab,jb->jka", self._corner_L, U[self.dofs])
-        out = np.linalg.norm(rel, axis=2).max(axis=1)
-        self._motion_of = (U, out)
-        return out
+        sel = slice(None) if joints is None else joints
+        rel = np.einsum("jkab,jb->jka", self._corner_L[sel], U[self.dofs[sel]])
+        return np.linalg.norm(rel, axis=2).max(axis=1, initial=0.0)
 
     def release_factors(self) -> None:
         """Drop the kept LU factors. Call it on the thread that made them: scipy frees a SuperLU

@@ -4,17 +4,7 @@ same in a terminal, a notebook, a thread or a Dask worker. The names mirror pypl
 
 from __future__ import annotations
 
-__all__ = ["figure", "subplots", "save", "close", "get_cmap", "import_matplotlib"]
-
-
-def import_matplotlib() -> None:
-    """Import what drawing and saving a figure import on first use, on the calling thread, before
-    a figure is drawn on another one while this thread goes on importing (two threads importing
-    one package at once can hang or see it half initialised: CPython 3.11, gh-83065)."""
-    import matplotlib.backends.backend_agg  # noqa: F401 - savefig's PNG writer
-    import matplotlib.collections  # noqa: F401
-    import matplotlib.figure  # noqa: F401
-    import mpl_toolkits.mplot3d  # noqa: F401 - the model's 3D view
+__all__ = ["figure", "subplots", "save", "close", "get_cmap"]
 
 
 def figure(figsize=None, **kwargs):

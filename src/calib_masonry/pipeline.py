@@ -16,6 +16,7 @@ from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
 from .io import Photo, read_mask, to_uint8, warn
+from .preload import preload
 from .progress import progress as _progress
 from .spec import StructureSpec, WallSpec
 from .wall2d.trace import TraceConfig, TraceResult, trace_mask
@@ -122,41 +123,6 @@ def _ortho_polygon(cal, poly, shape, width, height) -> np.ndarray:
     return ortho_from_photo(cal, poly, shape, width_m=width, height_m=height)
 
 
-def _import_photo_stage() -> None:
-    """Import what :func:`photo_wall` imports on first use. Two threads importing the same
-    package at once can see it half initialised (seen: matplotlib's ``rcParams`` missing) or
-    deadlock (CPython 3.11, gh-83065), so the threads of :func:`resolve_photo_walls` start with
-    everything loaded (tests/test_thread_imports.py checks that they import nothing)."""
-    import jax
-    from skimage.color import rgb2lab  # noqa: F401 - loads scikit-image's submodule (lazy_loader)
-    from skimage.filters import (
-        frangi,  # noqa: F401 - the joints' segmentation
-        threshold_otsu,  # noqa: F401
-    )
-    from skimage.measure import (
-        approximate_polygon,  # noqa: F401
-        find_contours,  # noqa: F401
-    )
-    from skimage.morphology import (
-        disk,  # noqa: F401
-        h_maxima,  # noqa: F401
-    )
-    from skimage.segmentation import watershed  # noqa: F401
-
-    from .calibrate import fit, rectify
-    from .wall2d import pieces, segment, trace  # noqa: F401
-
-    rectify.import_detection()
-    jax.devices()  # JAX's backends are set up on first use, looking for plugins (imports)
-    fit._solver()  # the camera fit, read from disk (jax.export)
-    try:  # the MLIR dialects its first call lowers to
-        import jaxlib.mlir.dialects.builtin  # noqa: F401
-        import jaxlib.mlir.dialects.mhlo  # noqa: F401
-        import jaxlib.mlir.extras.meta  # noqa: F401
-    except ImportError:  # pragma: no cover - another jaxlib's layout: imported where first needed
-        pass
-
-
 def resolve_photo_walls(
     spec: StructureSpec, *, progress: bool | None = None, trace: bool = False, images: dict[str, Photo] | None = None
 ) -> tuple[StructureSpec, dict]:
@@ -171,7 +137,9 @@ def resolve_photo_walls(
     memory by wall name, read instead of the walls' files."""
     todo = [w for w in spec.walls if w.mask is None and w.image is not None]
     if todo:
-        _import_photo_stage()  # here, not by two threads at once (a half-imported module, seen)
+        # what the threads import, imported here, not by two threads at once (a half-imported
+        # module, seen; tests/test_thread_imports.py checks that they import nothing)
+        preload("photo_stage")
 
     def one(wall: WallSpec) -> PhotoWall:
         pw = photo_wall(wall, spec, (images or {}).get(wall.name))

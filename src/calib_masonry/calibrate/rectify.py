@@ -17,6 +17,7 @@ import numpy as np
 from .._threads import background, thread_map
 from ..errors import FitFailed, InputError
 from ..io import Photo, check_output, read_photo, staged_output, write_json, write_mask, write_rgb
+from ..preload import preload_in_background
 from .camera import CORNERS_FLAG, order_corners, px_per_m
 from .lines import (
     DetectConfig,
@@ -367,7 +368,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             sigma = np.asarray(detection.corner_sigma_px, dtype=np.float64)
         else:
             sigma = np.full(4, 1.0)
-    from .fit import CalibrationInput, calibrate  # JAX loads here (or on import_early's thread)
+    from .fit import CalibrationInput, calibrate  # JAX loads here (or on preload's thread)
 
     lens = None
     lens_source = "fitted (no profile)" if config.fit_distortion else "none (held at 0)"
@@ -789,61 +790,6 @@ def rect_from_wall(width_m: float, height_m: float, shape: tuple[int, int]) -> n
     return np.array([[cols / width_m, 0.0, -0.5], [0.0, -rows / height_m, rows - 0.5], [0.0, 0.0, 1.0]])
 
 
-def import_detection() -> None:
-    """Import the modules the automatic detection imports on first use, in this thread: two
-    threads importing one package at once can see it half initialised (seen with matplotlib)."""
-    import encodings.ascii  # noqa: F401 - EXIF text
-
-    import cv2  # noqa: F401 - the line segment detector and GrabCut
-    import scipy.spatial  # noqa: F401
-    from PIL import Image, ImageOps, TiffImagePlugin  # noqa: F401 - the photo's reader and its EXIF
-    from scipy.sparse.csgraph import connected_components  # noqa: F401 - plumb-line chains
-    from skimage.color import rgb2lab  # noqa: F401 - the outline's appearance model
-    from skimage.draw import polygon  # noqa: F401 - occluders
-
-    # scikit-image loads a submodule when one of its names is first asked for (lazy_loader):
-    # the names the detection asks for, asked for here
-    from skimage.feature import canny, hessian_matrix, hessian_matrix_eigvals  # noqa: F401
-    from skimage.measure import label  # noqa: F401
-    from skimage.transform import probabilistic_hough_line  # noqa: F401
-
-    from .. import labelme  # noqa: F401
-    from . import courses, lens, outline  # noqa: F401
-
-    try:
-        import lensfunpy  # noqa: F401 - lens profiles, where installed
-    except ImportError:
-        pass
-
-    Image.preinit()  # Pillow's common formats' plugins (JPEG, PNG, ...), loaded on the first open
-
-
-def import_early(figures: bool = True) -> None:
-    """Start importing JAX with the camera fit (0.3 s) and loading the fit's compiled code
-    (:func:`~calib_masonry.calibrate.fit.warm_up`, 0.6 s) and, with ``figures``, Pillow's drawing
-    on a second thread, so that it runs while this one reads and searches the photo (mostly in scipy,
-    which releases the GIL). numpy and scipy, which both sides import, are loaded before the
-    thread starts, and so are the detection's modules (:func:`import_detection`); an import that
-    fails there fails again, with its message, where it is needed."""
-    import threading
-
-    import_detection()
-
-    def load() -> None:
-        try:
-            from . import fit
-
-            fit.warm_up()
-            if figures:
-                from .. import _raster
-
-                _raster.font(12)  # the font file is read once, here
-        except Exception:  # noqa: BLE001 - reported by the import where it is needed
-            pass
-
-    threading.Thread(target=load, name="calib-masonry-imports", daemon=True).start()
-
-
 def rectify_image(
     image: np.ndarray,
     wall_from_image: np.ndarray,
@@ -942,7 +888,9 @@ def rectify_to_folder(
     from .figures import plot_calibration
 
     check_output(out, command="rectify", overwrite=overwrite)
-    import_early(figures=figure)
+    # JAX with the camera fit (0.3 s) and its compiled code (0.6 s), and Pillow's drawing, load on a
+    # second thread while this one reads and searches the photo (mostly in scipy, which releases the GIL)
+    preload_in_background("camera_fit", *(("figure_font",) if figure else ()), first=("detection",))
     cal = calibrate_photo(photo_path, config)
     res = cal.result
     if px_per_m is None:  # the photo's own resolution at the wall's centre, rounded

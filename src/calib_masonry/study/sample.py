@@ -349,13 +349,11 @@ def warm_worker(simulate: bool = False) -> None:
     A warning outside a sample's row (which records its own) is one line, as the CLI prints them."""
     import warnings
 
-    from .. import pipeline  # noqa: F401
+    from ..preload import preload
     from ..process import print_warning
 
     warnings.showwarning = print_warning
-    from ..build3d import assemble  # noqa: F401
-    from ..simulation import run  # noqa: F401
-    from ..wall2d import trace  # noqa: F401
+    preload("study")
 
     if simulate:
         from ..simulation.blender import require_bpy

@@ -251,20 +251,6 @@ def _warp_layer_ideal(texture, wall, image_from_wall, ideal):
     return out[..., :3], np.clip(out[..., 3:4], 0, 1)
 
 
-def import_renderer() -> None:
-    """Import what rendering and saving a photo import on first use, on the calling thread:
-    ``synth --photos`` renders two photos at a time, and two threads importing modules of one
-    package at once can hang or see it half initialised in CPython 3.11's import locks
-    (gh-83065)."""
-    import fractions  # noqa: F401
-
-    import torch  # noqa: F401
-    from kornia.geometry.transform import warp_perspective  # noqa: F401
-    from PIL import Image, TiffImagePlugin  # noqa: F401
-
-    Image.preinit()
-
-
 def _warp_layer(texture: np.ndarray, wall: WallSpec, image_from_wall: np.ndarray, size: tuple[int, int]):
     """A wall's texture warped into the photo: (rgb premultiplied by alpha, alpha)."""
     import torch

@@ -210,9 +210,9 @@ def synthesize(
     else:
         # what the threads import, imported here first (two threads importing one package at
         # once can hang in CPython 3.11's import locks, gh-83065)
-        from .photo import import_renderer
+        from ..preload import preload
 
-        import_renderer()
+        preload("renderer")
         with background(beside, structure, pieces) if beside is not None else contextlib.nullcontext() as job:
             truth["photos"], truth["corner_photos"], photo_spec, files = _photograph(spec, pieces, photos, progress)
         if job is not None:
@@ -297,9 +297,9 @@ def synthesize_to_folder(
         (stage / "masks").mkdir()
         (stage / "truth").mkdir()
         if figures and (photos or spec.photos) is not None:
-            from .._figure import import_matplotlib
+            from ..preload import preload
 
-            import_matplotlib()  # before the thread that draws starts (see synthesize)
+            preload("figures")  # before the thread that draws starts (see synthesize)
         result = synthesize(
             spec,
             photos=photos,

@@ -225,3 +225,33 @@ def test_the_loop_drives_any_engine(weak):
     freed = {j for c in calls if c[0] == "free" for j in c[1]}
     lowest = min(scene.bonds[k].a for k in released)
     assert freed == set(range(lowest, len(scene.bodies)))
+
+
+def test_a_wait_for_the_pieces_after_the_engine_shows_its_progress(monkeypatch, capsys):
+    # under a ground motion the joint model's thread moves the verdict's pieces once its checks are
+    # done; when the engine has finished first, the wait for them is a long step like any other: a
+    # log line (here at every update) with the frames the pieces have reached, and a last one
+    import time
+
+    from calib_masonry import progress as progress_module
+    from calib_masonry.simulation import loop
+    from calib_masonry.simulation.scene import Material
+
+    monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)
+    real = loop.piece_motion
+
+    def slow(scene, release, times, *, reached=None, **kw):  # the real motion, reported slowly
+        out = real(scene, release, times, reached=reached, **kw)
+        for t in np.linspace(0.0, times[-1], 4):
+            reached(float(t))
+            time.sleep(0.4)
+        return out
+
+    monkeypatch.setattr(loop, "piece_motion", slow)
+    scene = _shaken_stack(Material(tensile_strength=2e3, shear_strength=2e3))
+    out = loop.drain(loop.steps(scene, progress=None, engine=_StillEngine))
+    assert out.pieces is not None and out.pieces.pieces > 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("pieces:")]
+    frames = len(out.pieces.time_s)
+    assert len(lines) >= 3, lines
+    assert lines[-1].startswith(f"pieces: {frames}/{frames} frames") and lines[-1].endswith("done"), lines

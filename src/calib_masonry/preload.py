@@ -92,6 +92,8 @@ GROUPS: dict[str, tuple[str, ...]] = {
         "mpl_toolkits.mplot3d",  # the model's 3D view
         "._figure",
     ),
+    # the joint model's sparse Cholesky, before the tracker's steps run on a thread of their own
+    "joint_solver": ("cvxopt", "cvxopt.cholmod"),
     # what a study's sample calls, once per Dask worker
     "study": (".pipeline", ".build3d.assemble", ".simulation.run", ".wall2d.trace"),
 }

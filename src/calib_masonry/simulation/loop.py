@@ -123,6 +123,7 @@ def _ahead(
     items: range,
     release: Callable[[], None],
     then: Callable[[Callable[[], bool]], object] | None = None,
+    waiting: Callable[[], None] | None = None,
 ) -> Iterator:
     """``fn(k)`` for each of ``items``, computed in order on a thread of its own as far ahead as it
     gets, yielded in order; then, if given, ``then(stopped)`` on the same thread, yielded last
@@ -131,7 +132,8 @@ def _ahead(
     that made them: see :meth:`~calib_masonry.simulation.joints.JointModel.release_factors`).
     Leaving early (an error, a stop, ``close()``) stops the thread after the item it is on and
     waits for it, so nothing runs on after the run; an error of ``fn`` is raised here, in its
-    item's turn."""
+    item's turn. ``waiting()``, if given, is called about every 0.25 s while the consumer waits
+    for ``then``'s item (to show its progress; an exception it raises, a stop, ends the wait)."""
     results: queue.SimpleQueue = queue.SimpleQueue()
     stop = threading.Event()
 
@@ -151,8 +153,13 @@ def _ahead(
     thread = threading.Thread(target=work, name="calib-masonry-joints", daemon=True)
     thread.start()
     try:
-        for _ in range(len(items) + (then is not None)):
-            ok, value = results.get()
+        for i in range(len(items) + (then is not None)):
+            while True:
+                try:
+                    ok, value = results.get(timeout=None if waiting is None or i < len(items) else 0.25)
+                    break
+                except queue.Empty:
+                    waiting()  # type: ignore[misc]
             if not ok:
                 raise value
             yield value
@@ -284,7 +291,7 @@ def steps(
     pieces = None
     times = (np.arange(warm, frames + 1) - warm) / s.fps  # the recorded frames' times since the ground started
 
-    def move_pieces(stopped=None, progress=False):
+    def move_pieces(stopped=None, progress=False, reached=None):
         # the verdict's motion of what the joints set free: rigid pieces, converged (not the engine's)
         assert tracker is not None
         return piece_motion(
@@ -295,7 +302,26 @@ def steps(
             model=tracker.model,
             progress=progress if np.isfinite(tracker.release_time_s).any() else False,
             stopped=stopped,
+            reached=reached,
         )
+
+    # where the pieces' motion on the thread ahead has got, and its progress shown while this
+    # thread waits for it once the engine is done (the pieces can take longer than Bullet)
+    pieces_at = [0.0]
+    wait_bar: list = []
+
+    def pieces_reached(t: float) -> None:
+        pieces_at[0] = t
+
+    def waiting_for_pieces() -> None:
+        if not wait_bar:
+            wait_bar[:] = [_progress(total=len(times), desc="pieces", unit="frame", enabled=progress), 0]
+        k = int(np.searchsorted(times, pieces_at[0], side="right"))
+        if k > wait_bar[1]:
+            wait_bar[0].update(k - wait_bar[1])
+            wait_bar[1] = k
+        else:
+            wait_bar[0].update(0)  # a stop requested while waiting ends the wait
 
     t1 = time.perf_counter()
     eng.step_to(0)
@@ -315,7 +341,8 @@ def steps(
                         lambda k, w=i - 1: check(k, w),
                         range(f, frames + 1),
                         tracker.release_factors,
-                        then=move_pieces if ahead_pieces else None,
+                        then=(lambda stopped: move_pieces(stopped, reached=pieces_reached)) if ahead_pieces else None,
+                        waiting=waiting_for_pieces if ahead_pieces else None,
                     )
                 p = i - 1
                 release, utilisation[p] = next(ahead) if ahead is not None else check(f, p)
@@ -335,9 +362,14 @@ def steps(
         else:
             if ahead_pieces:
                 pieces = next(ahead)  # the thread's last item
+                if wait_bar:
+                    wait_bar[0].update(len(times) - wait_bar[1])
+                    wait_bar[1] = len(times)
     finally:
         if ahead is not None:
             ahead.close()  # a pushover that has run away, an error, a signal: no check runs on after the run
+        if wait_bar:
+            wait_bar[0].close()
     seconds_stepping = time.perf_counter() - t1
     mats, plate_pos, utilisation = mats[:n], plate_pos[:n], utilisation[:n]
     if record and tracker is not None and scene.motion is not None and (pieces is None or n < frames + 1):

@@ -474,6 +474,7 @@ def piece_motion(
     settings: PieceSettings | None = None,
     progress: bool | None = False,
     stopped: Callable[[], bool] | None = None,
+    reached: Callable[[float], None] | None = None,
 ) -> PieceMotion | None:
     """The freed pieces' motion (module docstring) at ``times_s`` (T,), seconds since the ground
     began to move, given when the joint model let each joint go (``release_time_s`` (nj,), NaN
@@ -482,7 +483,8 @@ def piece_motion(
     ``model``: the run's :class:`~calib_masonry.simulation.joints.JointModel` (else built);
     ``progress`` as :func:`calib_masonry.progress.progress`. ``stopped()``, if given, is asked
     every 64 steps whether the caller has gone (a run stopped while the pieces moved on a thread
-    of their own): then None at once."""
+    of their own): then None at once. ``reached(t)``, if given, is told every 64 steps how far
+    (seconds) the motion has got (a caller waiting for it shows the progress)."""
     from .dynamics import body_inertia
     from .joints import JointModel
 
@@ -545,6 +547,8 @@ def piece_motion(
                 state.check_fallen()
                 if stopped is not None and stopped():
                     return None
+                if reached is not None:
+                    reached(float(grid[q + 1]))
             if k_time < len(times_s) and times_s[k_time] <= grid[q + 1] + 1e-12:
                 read(float(grid[q + 1]))
         state.check_fallen()

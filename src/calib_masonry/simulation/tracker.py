@@ -55,7 +55,9 @@ class CrackTracker:
         # the sparse Cholesky (cvxopt's CHOLMOD) is imported here, on the thread that builds the
         # tracker, not first where its steps may run (a thread of their own beside Bullet's): two
         # threads importing modules of one package at once can hang in CPython 3.11 (gh-83065)
-        from cvxopt import cholmod, matrix, spmatrix  # noqa: F401
+        from ..preload import preload
+
+        preload("joint_solver")
 
         self.model = JointModel(scene, settings=settings, contact_gap_m=scene.solver.contact_gap_m)
         n = self.model.nj

@@ -25,7 +25,7 @@ mortar between stones of a mortared wall, one network of low solidity, is droppe
 
 prints per test: sigma0, measured Vmax (the larger of the two directions), predicted, ratio,
 mechanism (model) and failure type (test); then per series the mean and the coefficient of
-variation of the ratios. Measured on 2026-11-26: see docs/stone_walls.md.
+variation of the ratios. Measured on 2026-11-27 (and 11-26, before the joints took the units in series): see docs/stone_walls.md.
 """
 
 from __future__ import annotations

@@ -219,3 +219,23 @@ def test_walls_figure_has_a_colour_bar_for_dice(make_scenario, tmp_path, monkeyp
     (fig,) = saved
     labels = [ax.get_ylabel() for ax in fig.axes]
     assert len(fig.axes) == 3 and any(label.startswith("Dice") for label in labels)
+
+
+def test_an_overlay_geos_cannot_node_is_done_again_from_valid_inputs():
+    # a brick's face projected on a neighbour's plane can come out self-touching, and GEOS then
+    # raises a TopologyException (seen with shapely 2.2 / GEOS 3.14 building the refined Stylite
+    # tower's contacts); the overlay is done again from valid inputs, only where it failed
+    import shapely
+    from shapely.errors import GEOSException
+
+    from calib_masonry.build3d.contacts import _overlay
+
+    bow = shapely.Polygon([(0, 0), (1, 1), (1, 0), (0, 1)])  # two triangles meeting at (0.5, 0.5), one ring
+    sq = shapely.box(0.2, 0.2, 0.8, 0.8)
+    with pytest.raises(GEOSException):
+        shapely.difference(bow, sq)
+    assert _overlay(shapely.difference, bow, sq).area == pytest.approx(0.5 - 0.18)
+    assert _overlay(shapely.union_all, [bow, sq]).area == pytest.approx(0.5 + 0.36 - 0.18)
+    both = _overlay(shapely.intersection, np.array([bow, sq]), np.array([sq, sq]))
+    assert shapely.area(both) == pytest.approx([0.18, 0.36])
+    assert shapely.equals_exact(both[1], shapely.intersection(sq, sq))  # the element that did not fail: as it was

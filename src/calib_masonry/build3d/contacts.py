@@ -17,6 +17,33 @@ import shapely
 from .assemble import Brick
 from .extrude import Polyhedron, _cross
 
+#: the grid (metres) an overlay is snap-rounded to where GEOS cannot node it in floating point
+#: ("TopologyException: Ring edge missing", seen with shapely 2.2 / GEOS 3.14 on a refined wall of
+#: the Stylite tower, not with GEOS 3.13): a nanometre, far below every tolerance here
+SNAP_M = 1e-9
+
+
+def _overlay(op, *args):
+    """``op(*args)`` (a shapely overlay: union_all, difference, intersection, elementwise over
+    arrays), and where GEOS fails on an element, that element again from valid inputs
+    (``make_valid``: a face projected on a plane at a steep angle can come out self-touching) and,
+    failing that, on the :data:`SNAP_M` grid (snap-rounding); the others are left as they were."""
+    try:
+        return op(*args)
+    except shapely.errors.GEOSException:
+        if op is shapely.union_all or all(np.ndim(a) == 0 for a in args):
+            valid = [shapely.make_valid(a) for a in args]
+            try:
+                return op(*valid)
+            except shapely.errors.GEOSException:
+                return op(*valid, grid_size=SNAP_M)
+    parts = np.broadcast_arrays(*[np.asarray(a, dtype=object) for a in args])
+    out = np.empty(parts[0].shape, dtype=object)
+    for i in np.ndindex(out.shape):
+        out[i] = _overlay(op, *(p[i] for p in parts))
+    return out
+
+
 __all__ = [
     "Interpenetration",
     "max_interpenetration",
@@ -287,7 +314,7 @@ def _planar_faces(solids: Sequence[Polyhedron], angle_tol: float = 1e-3) -> _Fac
     bounds = np.concatenate([[0], np.cumsum(sizes)])
     for g in np.flatnonzero(~convex):
         members = by_group[bounds[g] : bounds[g + 1]]
-        poly[g] = shapely.union_all(tris[members[tri_area[members] > 0]])
+        poly[g] = _overlay(shapely.union_all, tris[members[tri_area[members] > 0]])
     start = np.searchsorted(face_owner, np.arange(len(solids) + 1))
     return _Faces(normal=normal, offset=offset, poly=poly, basis=basis, start=start)
 
@@ -325,7 +352,7 @@ def _claim_once(
                     xy = shapely.get_coordinates(inter[j])
                     p3 = xy @ basis[j] + offset[j] * normal[j]
                     covered.append(shapely.transform(inter[j], lambda _, p3=p3, k=k: p3 @ basis[k].T))
-                inter[k] = shapely.difference(inter[k], shapely.union_all(covered))
+                inter[k] = _overlay(shapely.difference, inter[k], _overlay(shapely.union_all, covered))
                 area[k] = shapely.area(inter[k])
             kept.append(k)
 
@@ -375,7 +402,7 @@ def contact_patches(
     xy, at = shapely.get_coordinates(f.poly[fb], return_index=True)
     p3 = xy[:, :1] * f.basis[fb[at], 0] + xy[:, 1:] * f.basis[fb[at], 1] + (f.offset[fb, None] * f.normal[fb])[at]
     projected = shapely.transform(f.poly[fb], lambda _: np.einsum("ik,ijk->ij", p3, f.basis[fa[at]]))
-    inter = shapely.intersection(f.poly[fa], projected)
+    inter = _overlay(shapely.intersection, f.poly[fa], projected)
     area = shapely.area(inter)
     bar.update()
     # per pair, every face pair whose overlap is at least min_area_m2 (a stone's joint with its

@@ -255,3 +255,32 @@ def test_a_wait_for_the_pieces_after_the_engine_shows_its_progress(monkeypatch, 
     frames = len(out.pieces.time_s)
     assert len(lines) >= 3, lines
     assert lines[-1].startswith(f"pieces: {frames}/{frames} frames") and lines[-1].endswith("done"), lines
+
+
+def test_a_long_check_of_the_joint_model_keeps_the_progress_going(monkeypatch, capsys):
+    # one check of the joint model can take minutes (a crack cascade on thousands of joints): the
+    # frames' progress goes on showing while the loop waits for it (a line every LOG_EVERY_S in a
+    # log, here at every poll), instead of falling silent until the frame is done
+    import re
+    import time
+
+    from calib_masonry import progress as progress_module
+    from calib_masonry.simulation import loop, tracker
+    from calib_masonry.simulation.scene import Material
+
+    monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)
+    real = tracker.CrackTracker.step
+    calls = []
+
+    def slow(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            time.sleep(1.0)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(tracker.CrackTracker, "step", slow)
+    loop.drain(loop.steps(_shaken_stack(Material()), progress=None, engine=_StillEngine))
+    lines = [line for line in capsys.readouterr().err.splitlines() if not line.endswith("done")]
+    done = [int(m.group(1)) for line in lines if (m := re.match(r"simulate: (\d+)/\d+ frames", line))]
+    assert len(calls) > 3
+    assert len(done) > len(set(done)), "no line while a frame waited for its check"

@@ -18,8 +18,8 @@ from .assemble import Brick
 from .extrude import Polyhedron, _cross
 
 #: the grid (metres) an overlay is snap-rounded to where GEOS cannot node it in floating point
-#: ("TopologyException: Ring edge missing", seen with shapely 2.2 / GEOS 3.14 on a refined wall of
-#: the Stylite tower, not with GEOS 3.13): a nanometre, far below every tolerance here
+#: ("TopologyException: Ring edge missing", first seen with shapely 2.2 / GEOS 3.14 on a refined
+#: wall of the Stylite tower): a nanometre, far below every tolerance here
 SNAP_M = 1e-9
 
 

@@ -123,7 +123,7 @@ def _ahead(
     items: range,
     release: Callable[[], None],
     then: Callable[[Callable[[], bool]], object] | None = None,
-    waiting: Callable[[], None] | None = None,
+    waiting: Callable[[bool], None] | None = None,
 ) -> Iterator:
     """``fn(k)`` for each of ``items``, computed in order on a thread of its own as far ahead as it
     gets, yielded in order; then, if given, ``then(stopped)`` on the same thread, yielded last
@@ -132,8 +132,9 @@ def _ahead(
     that made them: see :meth:`~calib_masonry.simulation.joints.JointModel.release_factors`).
     Leaving early (an error, a stop, ``close()``) stops the thread after the item it is on and
     waits for it, so nothing runs on after the run; an error of ``fn`` is raised here, in its
-    item's turn. ``waiting()``, if given, is called about every 0.25 s while the consumer waits
-    for ``then``'s item (to show its progress; an exception it raises, a stop, ends the wait)."""
+    item's turn. ``waiting(last)``, if given, is called about every 0.25 s while the consumer
+    waits for an item (``last``: ``then``'s), to show that the work goes on; an exception it
+    raises (a stop) ends the wait."""
     results: queue.SimpleQueue = queue.SimpleQueue()
     stop = threading.Event()
 
@@ -156,10 +157,10 @@ def _ahead(
         for i in range(len(items) + (then is not None)):
             while True:
                 try:
-                    ok, value = results.get(timeout=None if waiting is None or i < len(items) else 0.25)
+                    ok, value = results.get(timeout=None if waiting is None else 0.25)
                     break
                 except queue.Empty:
-                    waiting()  # type: ignore[misc]
+                    waiting(i == len(items))  # type: ignore[misc]
             if not ok:
                 raise value
             yield value
@@ -313,7 +314,12 @@ def steps(
     def pieces_reached(t: float) -> None:
         pieces_at[0] = t
 
-    def waiting_for_pieces() -> None:
+    def waiting(for_pieces: bool) -> None:
+        # a check of the joint model can take minutes (a crack cascade on a large structure): the
+        # frames' progress goes on showing (a line every 10 s in a log) and a stop ends the wait
+        if not for_pieces:
+            frames_bar.update(0)
+            return
         if not wait_bar:
             wait_bar[:] = [_progress(total=len(times), desc="pieces", unit="frame", enabled=progress), 0]
         k = int(np.searchsorted(times, pieces_at[0], side="right"))
@@ -330,7 +336,8 @@ def steps(
     if warm == 0:
         end_warmup(0)
     try:
-        for f in _progress(range(1, frames + 1), desc="simulate", unit="frame", enabled=progress):
+        frames_bar = _progress(range(1, frames + 1), desc="simulate", unit="frame", enabled=progress)
+        for f in frames_bar:
             i = f if record else 0
             if tracker is not None:
                 if joints_ahead and ahead is None and not tracker.reads_poses:
@@ -342,7 +349,7 @@ def steps(
                         range(f, frames + 1),
                         tracker.release_factors,
                         then=(lambda stopped: move_pieces(stopped, reached=pieces_reached)) if ahead_pieces else None,
-                        waiting=waiting_for_pieces if ahead_pieces else None,
+                        waiting=waiting,
                     )
                 p = i - 1
                 release, utilisation[p] = next(ahead) if ahead is not None else check(f, p)

@@ -348,3 +348,20 @@ def test_the_fixed_pattern_cholesky_solve_is_exact_for_any_subset_of_blocks():
         np.testing.assert_array_equal(x, _Tangent(dofs, n).solve(values, rhs))  # a new analysis changes no bit
     with pytest.raises(ArithmeticError):
         tan.solve(tan.values(np.arange(nj), blocks[:, tan.ROW, tan.COL], diag - 1e3), rhs)
+
+
+def test_a_stop_ends_the_contact_iteration(monkeypatch):
+    # SIGTERM sets the process's stop flag; one check of a large tower's crack rounds can take
+    # minutes on the joint model's thread, and the run waits for that thread before it leaves
+    import threading
+
+    from calib_masonry import process
+    from calib_masonry.errors import Terminated
+
+    sc = _column(2)
+    intact = np.array([False, True])  # the foundation joint cracked: its contact is iterated
+    monkeypatch.setattr(process, "_STOP", threading.Event())
+    JointModel(sc).solve(np.array([0.0, 0.0, -G]), intact)
+    process.request_stop()
+    with pytest.raises(Terminated):
+        JointModel(sc).solve(np.array([0.0, 0.0, -G]), intact)

@@ -128,6 +128,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import InputError
+from ..process import raise_if_stopped
 from .scene import Bond, Material, Scene, footing_patches, joint_axes, plate_linked
 
 __all__ = [
@@ -774,6 +775,9 @@ class JointModel:
         self.converged = False
         history = []
         for it in range(self.settings.max_iter):
+            # a stop (SIGTERM) ends a check at its next iteration: one check of a large tower's
+            # crack rounds can take minutes, and the run waits for its thread before it leaves
+            raise_if_stopped()
             if np.abs(r).max() <= self.settings.tol * scale:
                 self.converged = True
                 break

@@ -27,25 +27,26 @@ def test_entries_import_ask_call_and_skip(monkeypatch):
     monkeypatch.setitem(preload.GROUPS, "_bad", ("_no_such_mod",))
     with pytest.raises(ImportError):
         preload.preload("_bad")
+    monkeypatch.setitem(preload.GROUPS, "_missing_name", ("_preload_probe:g",))
     with pytest.raises(AttributeError):
-        preload.preload("_preload_probe:g")
+        preload.preload("_missing_name")
 
 
-def test_a_background_load_is_joined_and_its_failure_is_silent(monkeypatch):
+def test_a_background_load_runs_on_its_thread_and_its_failure_is_silent(monkeypatch):
     import threading
 
     monkeypatch.setattr(preload, "_LOADED", set())
-    monkeypatch.setattr(preload, "_PENDING", {})
+    monkeypatch.setattr(preload, "_STARTED", set())
     seen = []
     mod = type(sys)("_preload_probe2")
     mod.slow = lambda: (seen.append(threading.current_thread().name), threading.Event().wait(0.2))
     monkeypatch.setitem(sys.modules, "_preload_probe2", mod)
     monkeypatch.setitem(preload.GROUPS, "_slow", ("_preload_probe2:slow()",))
     monkeypatch.setitem(preload.GROUPS, "_fails", ("_no_such_mod",))
-    preload.preload_in_background("_slow", "_fails")
-    preload.wait("_slow")
+    thread = preload.preload_in_background("_slow", "_fails")
+    assert preload.preload_in_background("_slow") is None  # started already: not twice
+    thread.join()  # nothing raised for the one that failed
     assert seen == ["calib-masonry-imports"] and "_slow" in preload._LOADED
-    preload.wait()  # every group; nothing raised for the one that failed
     assert "_fails" not in preload._LOADED
 
 

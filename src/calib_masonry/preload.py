@@ -23,7 +23,7 @@ import ast
 import importlib
 import threading
 
-__all__ = ["GROUPS", "preload", "preload_in_background", "wait"]
+__all__ = ["GROUPS", "preload", "preload_in_background"]
 
 GROUPS: dict[str, tuple[str, ...]] = {
     # the photo's automatic detection (calibrate.rectify, its threads in pipeline.resolve_photo_walls)
@@ -99,17 +99,15 @@ GROUPS: dict[str, tuple[str, ...]] = {
 }
 
 _LOADED: set[str] = set()  # groups loaded (on any thread), so a second preload costs nothing
-_THREAD_NAME = "calib-masonry-imports"
-_PENDING: dict[str, threading.Event] = {}  # groups loading on a background thread: set when ended
+_STARTED: set[str] = set()  # groups handed to a background thread
 
 
 def preload(*groups: str) -> None:
-    """Load ``groups`` on this thread: each a name of :data:`GROUPS` or one entry (as a group's,
-    e.g. ``".wall2d.refine:warm_up(12)"``). An import that fails raises."""
+    """Load ``groups`` (names of :data:`GROUPS`) on this thread. An import that fails raises."""
     for group in groups:
         if group in _LOADED:
             continue
-        for entry in GROUPS.get(group, (group,)):
+        for entry in GROUPS[group]:
             _load(entry)
         _LOADED.add(group)
 
@@ -135,38 +133,23 @@ def _load(entry: str) -> None:
         value(*ast.literal_eval(f"({args[:-1]},)") if args[:-1].strip() else ())
 
 
-def preload_in_background(*groups: str, first: tuple[str, ...] = ()) -> None:
-    """Load ``groups``, one after the other, on a daemon thread, after loading ``first`` on this
-    one (what this thread will import while the other runs). :func:`wait` waits for a group. A
-    failure on the thread is silent: the import fails again, with its message, where it is
-    needed."""
+def preload_in_background(*groups: str, first: tuple[str, ...] = ()) -> threading.Thread | None:
+    """Load ``groups``, one after the other, on a daemon thread (returned; None if there is nothing
+    to load), after loading ``first`` on this one (what this thread will import while the other
+    runs). A failure on the thread is silent: the import fails again, with its message, where it
+    is needed."""
     preload(*first)
-    todo = tuple(g for g in groups if g not in _LOADED and g not in _PENDING)
+    todo = tuple(g for g in groups if g not in _LOADED and g not in _STARTED)
     if not todo:
-        return
-    done = {g: threading.Event() for g in todo}
+        return None
 
     def run() -> None:
         try:
-            for g in todo:
-                preload(g)
-                done[g].set()
+            preload(*todo)
         except Exception:  # noqa: BLE001 - reported by the import where it is needed
             pass
-        finally:
-            for event in done.values():
-                event.set()
 
-    _PENDING.update(done)
-    threading.Thread(target=run, name=_THREAD_NAME, daemon=True).start()
-
-
-def wait(*groups: str) -> None:
-    """Wait until the background loading of ``groups`` has ended (of every group, if none is
-    named; at once where none was started, and on the loading thread itself)."""
-    if threading.current_thread().name == _THREAD_NAME:
-        return
-    for g in groups or tuple(_PENDING):
-        event = _PENDING.get(g)
-        if event is not None:
-            event.wait()
+    _STARTED.update(todo)
+    thread = threading.Thread(target=run, name="calib-masonry-imports", daemon=True)
+    thread.start()
+    return thread

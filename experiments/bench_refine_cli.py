@@ -4,9 +4,10 @@ with scipy's Powell (the naive peer of experiments/bench_refine.py) beside them.
 What a user pays: each `calib-masonry trace MASK --refine` is a new process, which imports JAX and
 optimistix, loads the exported refinement (jax.export, on disk) and its compiled program (JAX's
 persistent compilation cache) before it refines. The refinement's cost from the command line is the
-call minus a plain `trace` of the same mask (median of ``--repeats`` runs of each, alternated); the
-warm cost is the same two commands called again and again through `calib_masonry.cli.main` in one
-process (the first call of each left out). Issue 39 asks for the command line at most 1.2x the warm
+call minus a plain `trace` of the same mask (median of ``--repeats`` runs of each); the warm cost
+is the same two commands called again and again through `calib_masonry.cli.main` in one process
+(the first call of each left out). The command line's pairs and the warm process's pairs are
+alternated, so that a machine whose speed drifts (another job starting) weighs on both alike. Issue 39 asks for the command line at most 1.2x the warm
 call. The peer refines a seeded subset of the stones, one at a time, and its time is scaled to all.
 
     .venv/bin/python experiments/bench_refine_cli.py [--mask PATH] [--repeats 3] [--peer 8]
@@ -37,16 +38,17 @@ WARM_CHILD = r"""
 import json, sys, time
 from pathlib import Path
 from calib_masonry.cli import main
-mask, out, repeats = sys.argv[1], sys.argv[2], int(sys.argv[3])
-times = {"plain": [], "refine": []}
-for k in range(repeats + 1):
+mask, out = sys.argv[1], sys.argv[2]
+# one pair (plain, refine) per line read, timed, its times written back: the parent alternates the
+# command line's pairs with these, so that both see the machine as it is at the time
+for line in sys.stdin:
+    times = {}
     for name, extra in (("plain", []), ("refine", ["--refine"])):
         Path(out).unlink(missing_ok=True)
         t0 = time.perf_counter()
         assert main(["trace", mask, "--vertices", "8", "--no-figures", "--out", out, *extra]) == 0
-        if k:
-            times[name].append(time.perf_counter() - t0)
-print("RESULT " + json.dumps(times))
+        times[name] = time.perf_counter() - t0
+    print("RESULT " + json.dumps(times), flush=True)
 """
 
 
@@ -80,17 +82,31 @@ def main() -> None:
         tmp = Path(tmp)
         mask = _synthetic_mask(tmp) if a.mask == "synthetic" else a.mask
         cli = {"plain": [], "refine": []}
+        warm = {"plain": [], "refine": []}
         _cli(mask, tmp / "o.json", True)  # the compilation cache filled, as on any machine after one run
-        for _ in range(a.repeats):
-            cli["plain"].append(_cli(mask, tmp / "o.json", False))
-            cli["refine"].append(_cli(mask, tmp / "o.json", True))
-        r = subprocess.run(
-            [sys.executable, "-c", WARM_CHILD, mask, str(tmp / "w.json"), str(a.repeats)],
-            check=True,
-            capture_output=True,
+        child = subprocess.Popen(
+            [sys.executable, "-c", WARM_CHILD, mask, str(tmp / "w.json")],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
             text=True,
         )
-        warm = json.loads(r.stdout.split("RESULT ", 1)[1])
+        try:
+            for k in range(a.repeats + 1):
+                child.stdin.write("go\n")
+                child.stdin.flush()
+                line = child.stdout.readline()
+                while line and not line.startswith("RESULT "):  # the command's own output
+                    line = child.stdout.readline()
+                pair = json.loads(line.split("RESULT ", 1)[1])
+                if k == 0:  # the warm process's first pair: its own first call, left out
+                    continue
+                for name in warm:
+                    warm[name].append(pair[name])
+                cli["plain"].append(_cli(mask, tmp / "o.json", False))
+                cli["refine"].append(_cli(mask, tmp / "o.json", True))
+        finally:
+            child.stdin.close()
+            child.wait()
         labels, tr, _ = _job(read_mask(mask), 8)
     n = len(tr.bricks)
     med = {k: statistics.median(v) for k, v in cli.items()}

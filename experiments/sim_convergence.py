@@ -64,6 +64,7 @@ SETTINGS = {
     # the joint model's checks of the joints twice as often (scene.SolverSettings.check_interval_s)
     "1/2 check interval": replace(DEFAULT, check_interval_s=DEFAULT.check_interval_s / 2),
     "2x check interval": replace(DEFAULT, check_interval_s=DEFAULT.check_interval_s * 2),  # coarser: 0.01 s
+    "1/4 check interval": replace(DEFAULT, check_interval_s=DEFAULT.check_interval_s / 4),
     "4x iterations": replace(DEFAULT, iterations=4 * DEFAULT.iterations),
     "4x both": replace(DEFAULT, substeps=4 * DEFAULT.substeps, iterations=4 * DEFAULT.iterations),
 }

@@ -13,6 +13,10 @@ has the same constraints and contacts to solve in both. The
 method reports about 2 minutes for this job on an i7-9700; the aim is under 1 minute on 2 cores
 and an overhead ratio <= 1.15.
 
+Each pair is followed by the same call without Bullet (``simulate --no-bullet``: the joint model
+and the verdict's rigid pieces alone, the frames showing those pieces), with whether its verdict
+is the same.
+
     .venv/bin/python experiments/bench_simulate.py [--pga 0.3] [--duration 10] [--repeats 5]
 """
 
@@ -21,6 +25,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -59,7 +64,8 @@ def main() -> None:
         scene_geometry(*load_model(model)[:3])  # what a call on a model without the stored geometry adds
         t_geometry = time.perf_counter() - t0
         require_bpy()
-        t_ours, t_bare, step_ours, step_bare, t_joints = [], [], [], [], []
+        t_ours, t_bare, step_ours, step_bare, t_joints, t_still = [], [], [], [], [], []
+        still_config = replace(config, bullet=False)
         for r in range(args.repeats):  # pairs in turn: a single pair moves by 10-15 % from run to run
             t0 = time.perf_counter()
             summary = simulate_to_folder(model, Path(tmp) / f"sim{r}", config, progress=False)
@@ -72,6 +78,13 @@ def main() -> None:
             bare = run(scene, progress=False, record=False, switch_off_s=released)
             t_bare.append(time.perf_counter() - t0)
             step_bare.append(bare.seconds_stepping)
+            # the same call without Bullet (--no-bullet): the verdict's pieces in the frames
+            t0 = time.perf_counter()
+            nb = simulate_to_folder(model, Path(tmp) / f"nob{r}", still_config, progress=False)
+            t_still.append(time.perf_counter() - t0)
+            same = all(
+                nb[k] == summary[k] for k in ("outcome", "toppled_fraction", "moved_fraction_final", "bonds_broken")
+            )
         t0 = time.perf_counter()
         metrics(scene, run(scene, progress=False))
         t_rec = time.perf_counter() - t0
@@ -98,6 +111,11 @@ def main() -> None:
     print(
         f"{'our whole simulate call (no figures)':40s} {np.median(t_ours):8.1f} s   median of {args.repeats} "
         f"({', '.join(f'{t:.1f}' for t in t_ours)}; aim < 60 s; the method: ~120 s)"
+    )
+    print(
+        f"{'our simulate call without Bullet':40s} {np.median(t_still):8.1f} s   median of {args.repeats} "
+        f"({', '.join(f'{t:.1f}' for t in t_still)}; --no-bullet: the same verdict: {same}; "
+        f"{np.median(t_ours) / np.median(t_still):.1f}x faster than with Bullet)"
     )
     print(
         f"overhead ratio ours / bare: median {np.median(ratios):.3f} (pairs: {', '.join(f'{x:.3f}' for x in ratios)}; "
@@ -135,11 +153,18 @@ def main() -> None:
             t0 = time.perf_counter()
             pe = simulate_to_folder(model, Path(tmp) / "sim", config, progress=False)
             t_pe = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            pe_nb = simulate_to_folder(model, Path(tmp) / "nob", replace(config, bullet=False), progress=False)
+            t_pe_nb = time.perf_counter() - t0
         print(
             f"paper example: {pe['bricks']} bricks, {pe['bonds']} joints, {args.duration:g} s at PGA {args.pga:g} g: "
             f"our whole simulate call {t_pe:.1f} s (aim <= 120 s; joint model {pe['joints']['seconds']:.1f} s, "
             f"stepping {pe['seconds']['stepping']:.1f} s); {pe['outcome']}, moved {pe['moved_fraction_final']:.1%}, "
             f"{pe['bonds_broken_fraction']:.1%} of joints cracked"
+        )
+        print(
+            f"paper example without Bullet (--no-bullet): {t_pe_nb:.1f} s, {pe_nb['outcome']}, moved "
+            f"{pe_nb['moved_fraction_final']:.1%}, {pe_nb['bonds_broken_fraction']:.1%} of joints cracked"
         )
 
 

@@ -13,6 +13,7 @@ from .conftest import need_bpy
 
 need_bpy(module_level=True)
 
+from calib_masonry.errors import InputError  # noqa: E402
 from calib_masonry.simulation.ground_motion import G, constant_acceleration  # noqa: E402
 from calib_masonry.simulation.loop import run  # noqa: E402
 from calib_masonry.simulation.results import collapse_multiplier, metrics, pushover_stop  # noqa: E402
@@ -257,16 +258,12 @@ def test_the_verdict_does_not_read_bullets_substeps_or_iterations():
         np.testing.assert_array_equal(m.moved_fraction, m0.moved_fraction)
 
 
-def test_the_verdict_does_not_read_the_frame_rate():
-    # the stack above under a broadband record: the joint model checks the joints on a grid of its
-    # own (SolverSettings.check_interval_s) from the ground's start, at the record's samples, and
-    # the pieces step from one release to the next, so that at 25 and at 50 frames a second the
-    # cracks, the releases, the freed pieces' motion and the verdict are the same, bit for bit
+def _stack_under_a_broadband_record() -> Scene:
+    """The shaken stack of the tests above under a 2 s synthetic record at 0.5 g (seed 3)."""
     from calib_masonry.simulation.ground_motion import synthetic_motion
-    from calib_masonry.simulation.results import metrics
 
     bodies, bonds = _stack_of_six()
-    base = Scene(
+    return Scene(
         bodies=bodies,
         bonds=bonds,
         duration_s=2.0,
@@ -274,6 +271,16 @@ def test_the_verdict_does_not_read_the_frame_rate():
         material=Material(tensile_strength=2e3, shear_strength=2e3),
         motion=synthetic_motion(0.5, 2.0, seed=3),
     )
+
+
+def test_the_verdict_does_not_read_the_frame_rate():
+    # the stack above under a broadband record: the joint model checks the joints on a grid of its
+    # own (SolverSettings.check_interval_s) from the ground's start, at the record's samples, and
+    # the pieces step from one release to the next, so that at 25 and at 50 frames a second the
+    # cracks, the releases, the freed pieces' motion and the verdict are the same, bit for bit
+    from calib_masonry.simulation.results import metrics
+
+    base = _stack_under_a_broadband_record()
     runs = []
     for fps in (25, 50):
         scene = replace(base, solver=replace(base.solver, fps=fps))
@@ -287,6 +294,69 @@ def test_the_verdict_does_not_read_the_frame_rate():
     np.testing.assert_array_equal(b.pieces.time_s[::2], a.pieces.time_s)
     np.testing.assert_array_equal(b.pieces.displacement_m[::2], a.pieces.displacement_m)
     np.testing.assert_array_equal(mb.moved_fraction[::2], ma.moved_fraction)
+
+
+def test_a_run_without_bullet_gives_the_verdict_and_shows_its_pieces():
+    # the shaken stack above, let go at its base: without Bullet (loop.StillEngine) the joint
+    # model's cracks and releases, the pieces' motion, the metrics and the mechanism are those of
+    # the run with Bullet, bit for bit; the frames are the pieces' poses (still through the warm-up)
+    from calib_masonry.simulation.results import mechanism, metrics, rotations
+
+    scene = _stack_under_a_broadband_record()
+    bodies = scene.bodies
+    a, b = run(scene, progress=False), run(scene, progress=False, bullet=False)
+    assert np.isfinite(a.bond_release_time_s).any() and a.pieces.pieces >= 1
+    for name in ("bond_break_time_s", "bond_break_mode", "bond_release_time_s", "max_utilisation"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    np.testing.assert_array_equal(a.pieces.displacement_m, b.pieces.displacement_m)
+    ma, mb = metrics(scene, a), metrics(scene, b)
+    np.testing.assert_array_equal(ma.moved_fraction, mb.moved_fraction)
+    assert mechanism(scene, a, ma) == mechanism(scene, b, mb)
+    # the frames: the pieces' motion (Bullet's animation of the freed top differs from it)
+    warm = scene.solver.warmup_frames
+    x0 = np.array([bd.location for bd in scene.bodies])
+    np.testing.assert_allclose(b.positions[: warm + 1], np.broadcast_to(x0, b.positions[: warm + 1].shape), atol=1e-6)
+    np.testing.assert_allclose(b.positions[warm:] - x0, b.pieces.displacement_m, atol=1e-5)
+    R = rotations(b.quaternions[-1])
+    np.testing.assert_allclose(
+        R, b.pieces.rotation[-1] @ rotations(np.array([bd.rotation for bd in bodies])), atol=1e-5
+    )
+
+
+def test_poses_from_pieces_turn_each_brick_about_its_centroid():
+    # a brick whose origin is off its centroid, in a piece turned a quarter about z and moved
+    from types import SimpleNamespace
+
+    from calib_masonry.simulation.loop import _poses_from_pieces
+
+    mats = np.zeros((3, 1, 4, 4), dtype=np.float32)
+    mats[:, 0] = np.eye(4)
+    mats[:, 0, :3, 3] = [1.0, 0.0, 0.0]  # the origin
+    centroid = np.array([[1.0, 0.5, 0.0]])
+    rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    pieces = SimpleNamespace(
+        time_s=np.array([0.0, 0.1]),
+        displacement_m=np.array([[[0.0, 0.0, 0.0]], [[0.2, 0.0, -0.1]]], dtype=np.float32),
+        rotation=np.array([[np.eye(3)], [rz]], dtype=np.float32),
+    )
+    _poses_from_pieces(mats, 1, pieces, centroid)
+    np.testing.assert_allclose(mats[1, 0, :3, 3], [1.0, 0.0, 0.0])
+    # the origin, half a metre from the centroid along -y, turns to +x of it; then the move
+    np.testing.assert_allclose(mats[2, 0, :3, 3], [1.0 + 0.5 + 0.2, 0.5, -0.1], atol=1e-6)
+    np.testing.assert_allclose(mats[2, 0, :3, :3], rz, atol=1e-7)
+
+
+def test_a_run_without_bullet_is_refused_where_the_verdict_needs_bullets_poses():
+    from calib_masonry.simulation.run import SimulationConfig
+
+    bodies, bonds = _stack_of_six()
+    with pytest.raises(InputError, match="--no-bullet: only for a ground motion"):
+        scene = Scene(bodies=bodies, bonds=bonds, pushover=Pushover(), duration_s=1.0, solver=_solver(warmup=0.2))
+        run(scene, progress=False, bullet=False)
+    with pytest.raises(InputError, match="--no-bullet: only for a ground motion"):
+        SimulationConfig(pushover=Pushover(), bullet=False)
+    with pytest.raises(InputError, match="--no-foundation"):
+        SimulationConfig(foundation=False, bullet=False)
 
 
 def _pushover(bodies, bonds=(), rate=0.01, max_g=0.6, material=Material(), mu=0.6, direction=0.0, solver=None):

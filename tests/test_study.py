@@ -215,6 +215,23 @@ def _rows_of(folder: Path) -> dict[int, dict]:
 
 
 @pytest.mark.slow
+def test_a_fragility_study_without_bullet_gives_the_same_samples(tmp_path):
+    # its outputs are the verdict's (the joint model and the rigid pieces it sets free), which no
+    # pose of Bullet's enters: [simulate] bullet = false skips Bullet's animation and keeps them
+    with_bullet = load_study(_fragility_study(tmp_path))
+    without = load_study(_study(tmp_path, _fragility_study(tmp_path).read_text() + "bullet = false\n", "nob.toml"))
+    assert with_bullet.simulate.bullet and not without.simulate.bullet
+    a, _, _ = study_to_folder(with_bullet, tmp_path / "a", workers=0, progress=False)
+    b, _, _ = study_to_folder(without, tmp_path / "b", workers=0, progress=False)
+    strip = [
+        sorted(({k: v for k, v in row.items() if k not in BOOKKEEPING} for row in rows), key=lambda r: r["sample"])
+        for rows in (a, b)
+    ]
+    assert all(row["status"] == "ok" for row in strip[0]) and strip[0] == strip[1]
+    assert any(row["cracked_fraction"] > 0 for row in strip[1])  # the strongest record cracks joints
+
+
+@pytest.mark.slow
 def test_fragility_study_resumes_after_a_kill_and_matches_a_separate_scheduler_and_worker(tmp_path):
     path = _fragility_study(tmp_path)
     out = tmp_path / "out"
@@ -350,6 +367,8 @@ BAD = {
     "nothing varies": ("", "nothing varies"),
     "two laws": ("[inputs.w0]\nwidth_m = { sigma = 0.01, range = [1, 2] }\n", "exactly one of"),
     "pga units": ("[simulate]\npga_g = [300]\n", "not an earthquake"),
+    "pushover without bullet": ("[simulate]\npushover = true\nbullet = false\n", "bullet = false: only for ground"),
+    "bullet flag": ("[simulate]\npga_g = [0.1]\nbullet = 0\n", "bullet = 0: give true or false"),
     "material key": ("[inputs.material]\nfricton = { range = [0.5, 0.8] }\n", "did you mean friction"),
     "material range": ("[inputs.material]\nfriction = { range = [-0.5, 0.8] }\n", "friction = -0.5: must be >= 0"),
 }

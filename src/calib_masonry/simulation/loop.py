@@ -20,12 +20,13 @@ from typing import Protocol, TypeVar
 
 import numpy as np
 
+from ..errors import InputError
 from ..progress import progress as _progress
 from .pieces import piece_motion
 from .scene import Scene, grounded_bodies, quaternions_from_matrices
 from .tracker import CrackTracker
 
-__all__ = ["Engine", "RunOutput", "drain", "gravity_per_frame", "run", "steps"]
+__all__ = ["Engine", "RunOutput", "StillEngine", "drain", "gravity_per_frame", "run", "steps"]
 
 T = TypeVar("T")
 
@@ -81,6 +82,59 @@ class Engine(Protocol):
 
     def save(self, path: Path, frames: int, freed_at: np.ndarray) -> None:
         """Save the run's first ``frames`` frames, the bodies set free keyed at ``freed_at``."""
+
+
+class StillEngine:
+    """An engine that moves nothing: every body stays where the scene puts it, the plate at the
+    origin. For a run without Bullet (:func:`steps` with ``bullet=False``): under a ground motion
+    the joint model decides every check from the load and its own state (where no body bears on
+    the plate without a joint), the verdict moves the pieces it sets free, and the run's frames
+    are those pieces' poses, put in once the run is done."""
+
+    def __init__(self, scene: Scene, fixed: np.ndarray, gravity: np.ndarray) -> None:
+        from scipy.spatial.transform import Rotation
+
+        nb = len(scene.bodies)
+        self.mats = np.zeros((nb, 4, 4), dtype=np.float32)
+        if nb:
+            q = np.array([b.rotation for b in scene.bodies], dtype=np.float64)
+            self.mats[:, :3, :3] = Rotation.from_quat(q, scalar_first=True).as_matrix()
+            self.mats[:, :3, 3] = [b.location for b in scene.bodies]
+        self.mats[:, 3, 3] = 1.0
+
+    def step_to(self, frame: int) -> None:
+        pass
+
+    def read_poses(self, out: np.ndarray) -> np.ndarray:
+        out[:] = self.mats
+        return np.zeros(3)
+
+    def end_warmup(self) -> None:
+        pass
+
+    def switch_off(self, bonds: Sequence[int]) -> None:
+        pass
+
+    def set_free(self, bodies: np.ndarray, bonds: np.ndarray) -> None:
+        pass
+
+    def save(self, path: Path, frames: int, freed_at: np.ndarray) -> None:
+        pass
+
+
+def _poses_from_pieces(mats: np.ndarray, warm: int, pieces, centroids: np.ndarray) -> None:
+    """Put the verdict's pieces' motion into the frames ``mats`` ``(F, B, 4, 4)`` from frame ``warm``
+    on (frame ``warm + k`` is the pieces' time ``k``): each body turned by its piece's rotation
+    about its centroid ``centroids`` (B, 3) and moved by the centroid's displacement."""
+    n = min(len(mats) - warm, len(pieces.time_s))
+    if n <= 0:
+        return
+    R0 = mats[warm, :, :3, :3].astype(np.float64)
+    L0 = mats[warm, :, :3, 3].astype(np.float64)
+    R = pieces.rotation[:n].astype(np.float64)  # (n, B, 3, 3)
+    d = pieces.displacement_m[:n].astype(np.float64)
+    mats[warm : warm + n, :, :3, :3] = R @ R0
+    mats[warm : warm + n, :, :3, 3] = centroids + d + np.einsum("tbij,bj->tbi", R, L0 - centroids)
 
 
 def gravity_per_frame(scene: Scene) -> np.ndarray:
@@ -199,6 +253,7 @@ def steps(
     stop=None,
     joints_ahead: bool = True,
     engine: Callable[[Scene, np.ndarray, np.ndarray], Engine] = _blender_engine,
+    bullet: bool = True,
 ) -> Generator[int, None, RunOutput]:
     """Simulate ``scene`` in one pass, yielding each frame's number once it is stepped, and return
     the :class:`RunOutput` (a caller that drives it from an event loop lets the loop run between
@@ -221,7 +276,21 @@ def steps(
     after every recorded frame whether the run may end there (a pushover ends once it has run
     away); the output then holds the frames up to that one. ``engine(scene, held fixed (B,),
     gravity per frame)`` builds the engine (default: Blender's).
+
+    ``bullet=False`` (a ground motion only) steps no engine (:class:`StillEngine`): the joint model
+    and the verdict's rigid pieces run as they do beside Bullet, and the frames are the pieces'
+    poses (the structure the joints hold stays in place): the same verdict, cracks and releases
+    bit for bit, without Bullet's animation of the freed pieces (most of a quake's time once a
+    tower is free). A structure with bodies that bear on the plate without a joint needs Bullet's
+    poses for them, and is refused.
     """
+    if not bullet:
+        if scene.motion is None or scene.pushover is not None or not record:
+            raise InputError(
+                "--no-bullet: only for a ground motion (a pushover or a shear test ends where Bullet's poses "
+                "run away, and gravity alone moves no piece); run it with Bullet"
+            )
+        engine = StillEngine
     t0 = time.perf_counter()
     nb = len(scene.bodies)
     fixed = grounded_bodies(scene.bonds, nb)
@@ -247,6 +316,11 @@ def steps(
             eng.end_warmup()
         if record and scene.bonds:
             tracker = CrackTracker(scene, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i], (i) / s.fps)
+            if not bullet and tracker.reads_poses:
+                raise InputError(
+                    "--no-bullet: some bricks stand on the plate without a joint (a model without its footing, "
+                    "--no-foundation): where they touch it is Bullet's to say; run it with Bullet"
+                )
 
     schedule: dict[int, list[int]] = {}
     if not record and switch_off_s is not None:
@@ -304,6 +378,7 @@ def steps(
             progress=progress if np.isfinite(tracker.release_time_s).any() else False,
             stopped=stopped,
             reached=reached,
+            rotations=not bullet,
         )
 
     # where the pieces' motion on the thread ahead has got, and its progress shown while this
@@ -382,6 +457,8 @@ def steps(
     if record and tracker is not None and scene.motion is not None and (pieces is None or n < frames + 1):
         times = times[: n - warm]
         pieces = move_pieces(progress=progress)
+    if not bullet and pieces is not None and tracker is not None:
+        _poses_from_pieces(mats, warm, pieces, tracker.model.x)
     if not record:
         grab(0)  # the final state only
     if blend_path is not None:

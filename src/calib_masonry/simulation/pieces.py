@@ -106,6 +106,10 @@ class PieceMotion:
     # (B,) the bodies of pieces that fell or overturn from their state at the last time asked
     # (_Pieces.overturns): the verdict's, which does not read where a rocking piece happens to be
     toppled: np.ndarray | None = None
+    # (T, B, 3, 3) every body's rotation from its place (the identity for a body the joints hold;
+    # float32), if asked for (``piece_motion(..., rotations=True)``): with ``displacement_m`` the
+    # bodies' poses, for a run whose frames show the verdict's motion (no Bullet)
+    rotation: np.ndarray | None = None
 
     def distance_m(self) -> np.ndarray:
         """``(T, B)`` every body's displacement's length."""
@@ -379,6 +383,14 @@ class _Pieces:
         self._count += 1
         self.R[live] = _rotate(self.R[live], dt * self.w[live], exact=self._count % 64 == 0)
 
+    def rotation(self) -> np.ndarray:
+        """(B, 3, 3) every body's rotation from its place: its piece's (a fallen piece's as it fell,
+        its state is no longer advanced), the identity for a body the joints hold."""
+        out = np.broadcast_to(np.eye(3), (len(self.piece_of), 3, 3)).copy()
+        on = self.piece_of >= 0
+        out[on] = self.R[self.piece_of[on]]
+        return out
+
     def displacement(self) -> np.ndarray:
         """(B, 3) every body's centroid displacement (fallen ones as they fell)."""
         out = self.final.copy()
@@ -475,6 +487,7 @@ def piece_motion(
     progress: bool | None = False,
     stopped: Callable[[], bool] | None = None,
     reached: Callable[[float], None] | None = None,
+    rotations: bool = False,
 ) -> PieceMotion | None:
     """The freed pieces' motion (module docstring) at ``times_s`` (T,), seconds since the ground
     began to move, given when the joint model let each joint go (``release_time_s`` (nj,), NaN
@@ -484,7 +497,8 @@ def piece_motion(
     ``progress`` as :func:`calib_masonry.progress.progress`. ``stopped()``, if given, is asked
     every 64 steps whether the caller has gone (a run stopped while the pieces moved on a thread
     of their own): then None at once. ``reached(t)``, if given, is told every 64 steps how far
-    (seconds) the motion has got (a caller waiting for it shows the progress)."""
+    (seconds) the motion has got (a caller waiting for it shows the progress). ``rotations``: also
+    record every body's rotation at each time (:attr:`PieceMotion.rotation`)."""
     from .dynamics import body_inertia
     from .joints import JointModel
 
@@ -495,9 +509,18 @@ def piece_motion(
     times_s = np.asarray(times_s, dtype=np.float64)
     nb = model.nb
     out = np.zeros((len(times_s), nb, 3), dtype=np.float32)
+    rot = np.zeros((len(times_s), nb, 3, 3), dtype=np.float32) if rotations else None
+    if rot is not None:
+        rot[:] = np.eye(3, dtype=np.float32)
     release = np.asarray(release_time_s, dtype=np.float64)
+
+    def still() -> PieceMotion:
+        return PieceMotion(
+            times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0, toppled=np.zeros(nb, dtype=bool), rotation=rot
+        )
+
     if nb == 0 or len(times_s) == 0:
-        return PieceMotion(times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0, toppled=np.zeros(nb, dtype=bool))
+        return still()
     release = np.where(release <= times_s[-1], release, np.nan)  # let go after the last time asked: no matter
     inertia = np.array([body_inertia(b) for b in scene.bodies])
     state = _Pieces(scene, model, inertia, settings)
@@ -506,7 +529,7 @@ def piece_motion(
     if start_free.any():
         events = np.unique(np.concatenate([[0.0], events]))
     if events.size == 0:
-        return PieceMotion(times_s, out, 0, np.zeros(nb, dtype=bool), np.inf, 0, toppled=np.zeros(nb, dtype=bool))
+        return still()
     gravity = np.array([0.0, 0.0, -scene.gravity])
     motion = scene.motion
     # the steps run from one release to the next (and on to the last time asked), not from one time
@@ -521,6 +544,8 @@ def piece_motion(
         nonlocal k_time
         while k_time < len(times_s) and times_s[k_time] <= t_now + 1e-12:
             out[k_time] = state.displacement()
+            if rot is not None:
+                rot[k_time] = state.rotation()
             k_time += 1
 
     read(float(events[0]) - 1e-9)  # before the first release nothing has moved
@@ -559,5 +584,5 @@ def piece_motion(
         if state.overturns(int(i)):
             toppled[state.piece_of == i] = True
     return PieceMotion(
-        times_s, out, int(state.n), state.fallen.copy(), float(dt), steps, time.perf_counter() - clock, toppled
+        times_s, out, int(state.n), state.fallen.copy(), float(dt), steps, time.perf_counter() - clock, toppled, rot
     )

@@ -93,6 +93,17 @@ def outcome(moved_fraction: float, toppled_fraction: float | None = None) -> str
     return "collapsed" if moved_fraction >= 0.5 else "damaged" if moved_fraction > 0.01 else "standing"
 
 
+def _motion(out: RunOutput, start: int, *, bullet: bool = False) -> np.ndarray:
+    """``(F, B, 3)`` every brick's displacement from frame ``start`` (zero before it): the verdict's
+    pieces' (``out.pieces``) where a ground motion ran with the joint model, else (or with
+    ``bullet``) the frames' poses relative to the plate."""
+    if getattr(out, "pieces", None) is not None and not bullet:
+        rel = np.zeros(out.positions.shape)
+        rel[start:] = out.pieces.displacement_m[: len(out.time) - start]
+        return rel
+    return out.positions - out.positions[start] - (out.plate - out.plate[start])[:, None, :]
+
+
 def metrics(scene: Scene, out: RunOutput, *, bullet: bool = False) -> Metrics:
     """The run's metrics from the bricks' motion: under a ground motion with the joint model, the
     motion of the pieces it set free moved as rigid bodies to convergence (``out.pieces``,
@@ -100,11 +111,7 @@ def metrics(scene: Scene, out: RunOutput, *, bullet: bool = False) -> Metrics:
     their joints converges; ``bullet=True`` reads Bullet's (the animation's) instead."""
     s = scene.solver
     start = min(s.warmup_frames, len(out.time) - 1)
-    if getattr(out, "pieces", None) is not None and not bullet:
-        rel = np.zeros(out.positions.shape)
-        rel[start:] = out.pieces.displacement_m[: len(out.time) - start]
-    else:
-        rel = out.positions - out.positions[start] - (out.plate - out.plate[start])[:, None, :]
+    rel = _motion(out, start, bullet=bullet)
     dist = np.linalg.norm(rel, axis=2)
     dist[:start] = 0.0
     moved = (dist > s.moved_threshold_m).mean(axis=1)
@@ -226,7 +233,8 @@ MECHANISM_SHARE = 0.25
 def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
     """How the structure failed, from the joints that let go where the collapse has begun: the
     first frame after the warm-up at which a brick has moved by the run-away displacement
-    (:func:`_runaway_m`). The joints taking part are those Bullet let go by then (the joint model
+    (:func:`_runaway_m`; under a ground motion in the verdict's motion of the freed pieces, as the
+    metrics read it). The joints taking part are those Bullet let go by then (the joint model
     found no equilibrium with them); each opened (it cracked in tension) or slid (in shear or
     crushing). Without any (a run the joint model did not watch), they are those whose two sides moved
     apart by at least :data:`MECHANISM_SHARE` of the largest such motion (and 1 mm), opened where
@@ -238,7 +246,8 @@ def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
         return None
     start = m.start_frame
     w = _watched(scene)
-    rel = out.positions[start:, w] - out.positions[start, w] - (out.plate[start:] - out.plate[start])[:, None, :]
+    # the verdict's motion where it has one (a ground motion: the rigid pieces), not the animation's
+    rel = _motion(out, start)[start:, w]
     moved = np.flatnonzero(np.linalg.norm(rel, axis=2).max(axis=1) > _runaway_m(scene))
     if moved.size == 0:
         return None

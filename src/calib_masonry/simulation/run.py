@@ -95,6 +95,9 @@ class SimulationConfig:
     # accelerogram and components are not used)
     pushover: Pushover | None = None
     shear_test: ShearTest | None = None  # the laboratory shear-compression test instead of a load
+    # False: no Bullet (a ground motion only): the verdict as with it, the frames the verdict's
+    # rigid pieces (no scene.blend)
+    bullet: bool = True
 
     def __post_init__(self) -> None:
         if self.pga_g is None and self.accelerogram is None:
@@ -131,6 +134,16 @@ class SimulationConfig:
             raise InputError(f"--gif-frames {self.gif_frames}: must lie in 0..{MAX_FRAMES_PNG}")
         if self.frames_png > MAX_FRAMES_PNG:
             raise InputError(f"--frames {self.frames_png}: at most {MAX_FRAMES_PNG} collapse frames are rendered")
+        if not self.bullet and (self.pushover is not None or self.shear_test is not None):
+            raise InputError(
+                "--no-bullet: only for a ground motion (a pushover or a shear test ends where Bullet's poses run "
+                "away); run it with Bullet"
+            )
+        if not self.bullet and not self.foundation:
+            raise InputError(
+                "--no-bullet with --no-foundation: the bricks stand on the plate without a joint, and where they "
+                "touch it is Bullet's to say; keep the footing or run it with Bullet"
+            )
 
 
 @dataclass(frozen=True)
@@ -436,15 +449,29 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
 
 
 def _run_scene(
-    scene: Scene, name: str, *, progress: bool | None, blend_path: Path | None, joints_ahead: bool = True
+    scene: Scene,
+    name: str,
+    *,
+    progress: bool | None,
+    blend_path: Path | None,
+    joints_ahead: bool = True,
+    bullet: bool = True,
 ) -> SimulationResult:
     from .loop import drain
 
-    return drain(_scene_steps(scene, name, progress=progress, blend_path=blend_path, joints_ahead=joints_ahead))
+    return drain(
+        _scene_steps(scene, name, progress=progress, blend_path=blend_path, joints_ahead=joints_ahead, bullet=bullet)
+    )
 
 
 def _scene_steps(
-    scene: Scene, name: str, *, progress: bool | None, blend_path: Path | None, joints_ahead: bool = True
+    scene: Scene,
+    name: str,
+    *,
+    progress: bool | None,
+    blend_path: Path | None,
+    joints_ahead: bool = True,
+    bullet: bool = True,
 ) -> Generator[int, None, SimulationResult]:
     """The run of ``scene``, yielding after every frame (:func:`calib_masonry.simulation.loop.steps`),
     returning its :class:`SimulationResult`."""
@@ -463,23 +490,29 @@ def _scene_steps(
             RuntimeWarning,
             stacklevel=5,
         )
-    require_bpy()
+    if bullet:
+        require_bpy()
     stop = pushover_stop(scene) if scene.pushover is not None else None
     # one BLAS thread for the joint model's solves, whatever the process's setting (a dask worker,
     # a notebook): a threaded BLAS splits a sum by its thread count, and so rounds it another way
     with threadpool_limits(limits=1, user_api="blas"):
-        out = yield from steps(scene, progress=progress, blend_path=blend_path, stop=stop, joints_ahead=joints_ahead)
+        out = yield from steps(
+            scene,
+            progress=progress,
+            blend_path=blend_path if bullet else None,
+            stop=stop,
+            joints_ahead=joints_ahead,
+            bullet=bullet,
+        )
     m = metrics(scene, out)
     curve = collapse_multiplier(scene, out, m) if scene.pushover is not None else None
     shear = shear_curve(scene, out, m, curve) if "shear_test" in scene.notes and curve is not None else None
-    return SimulationResult(
-        scene=scene,
-        output=out,
-        metrics=m,
-        curve=curve,
-        summary=_summary(scene, out, m, curve, name, shear),
-        shear=shear,
-    )
+    summary = _summary(scene, out, m, curve, name, shear)
+    # what moved the freed pieces in the frames: Bullet, or the verdict's rigid pieces (--no-bullet)
+    summary["engine"] = "bullet" if bullet else "pieces"
+    if not bullet and isinstance(summary.get("pieces"), dict):
+        summary["pieces"]["bullet_moved_fraction_final"] = None  # no Bullet ran
+    return SimulationResult(scene=scene, output=out, metrics=m, curve=curve, summary=summary, shear=shear)
 
 
 def _scene(model, load, settings, material, foundation, duration_s) -> tuple[Scene, str]:
@@ -509,6 +542,7 @@ def simulate(
     progress: bool | None = None,
     blend_path: Path | None = None,
     joints_ahead: bool = True,
+    bullet: bool = True,
 ) -> SimulationResult:
     """Simulate a built model in Bullet under a ground motion, a pushover or (``load`` None, for
     ``duration_s`` seconds) gravity alone; in memory (writes ``blend_path`` only if given).
@@ -524,9 +558,13 @@ def simulate(
     ``joints_ahead`` (where no brick bears on the plate without a joint) runs the joint model ahead
     of Bullet on a thread of its own, on the second core; ``False`` runs it before each step on
     this thread, with the same poses bit for bit, for a process whose cores are busy anyway (a
-    study's workers)."""
+    study's workers).
+
+    ``bullet=False`` (a ground motion only): no Bullet and no Blender; the same verdict, cracks and
+    releases bit for bit, the frames showing the verdict's rigid pieces instead of Bullet's
+    animation of them (:func:`calib_masonry.simulation.loop.steps`)."""
     scene, name = _scene(model, load, settings, material, foundation, duration_s)
-    return _run_scene(scene, name, progress=progress, blend_path=blend_path, joints_ahead=joints_ahead)
+    return _run_scene(scene, name, progress=progress, blend_path=blend_path, joints_ahead=joints_ahead, bullet=bullet)
 
 
 async def simulate_async(
@@ -538,6 +576,7 @@ async def simulate_async(
     foundation: bool = True,
     duration_s: float | None = None,
     progress: bool | None = None,
+    bullet: bool = True,
 ) -> SimulationResult:
     """:func:`simulate` on the running event loop's thread, handing the loop back between frames.
 
@@ -555,7 +594,7 @@ async def simulate_async(
     scene, name = await asyncio.to_thread(_scene, model, load, settings, material, foundation, duration_s)
     # one Blender per process: two runs on one loop (a dask worker with two threads) take turns, whole
     async with loop_lock("blender"):
-        gen = _scene_steps(scene, name, progress=progress, blend_path=None, joints_ahead=False)
+        gen = _scene_steps(scene, name, progress=progress, blend_path=None, joints_ahead=False, bullet=bullet)
         try:
             while True:
                 try:
@@ -639,14 +678,21 @@ def simulate_to_folder(
     scene.blend, figures and frames/ into ``out`` (all or nothing, replacing ``out`` as a whole)."""
     from .blender import require_bpy
 
-    require_bpy()
+    if config.bullet:
+        require_bpy()
     check_output(out, command="simulate", overwrite=overwrite)
     _out_beside_model(out, model_dir)
     t0 = time.perf_counter()
     scene = scene_for_model(model_dir, config)
     t_scene = time.perf_counter() - t0
     with staged_output(out, "simulate", overwrite=overwrite, keep=[config.accelerogram]) as stage:
-        result = _run_scene(scene, str(model_dir), progress=progress, blend_path=stage / "scene.blend")
+        result = _run_scene(
+            scene,
+            str(model_dir),
+            progress=progress,
+            blend_path=stage / "scene.blend" if config.bullet else None,
+            bullet=config.bullet,
+        )
         result.summary["seconds"]["scene"] = round(t_scene, 3)
         summary = write_simulation(
             result,

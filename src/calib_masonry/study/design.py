@@ -162,6 +162,9 @@ class SimulateSpec:
     direction_deg: float = 0.0
     pushover_rate_g_per_s: float = 0.05
     pushover_max_g: float = 5.0
+    # False: each run without Bullet (simulate's bullet=False): the same outputs, which the verdict's
+    # pieces decide, without Bullet's animation of the freed pieces (most of a run's time)
+    bullet: bool = True
 
     @property
     def loads(self) -> tuple[dict, ...]:
@@ -440,9 +443,17 @@ def parse_study(data: dict, path: Path) -> Study:
             path,
             "simulate",
             s,
-            ("pga_g", "records", "duration_s", "pushover", "direction_deg", "rate_g_per_s", "max_g"),
+            ("pga_g", "records", "duration_s", "pushover", "direction_deg", "rate_g_per_s", "max_g", "bullet"),
         )
         pushover = s.get("pushover", False)
+        bullet = s.get("bullet", True)
+        if not isinstance(bullet, bool):
+            raise InputError(f"{path}: [simulate] bullet = {bullet!r}: give true or false")
+        if pushover and not bullet:
+            raise InputError(
+                f"{path}: [simulate] bullet = false: only for ground motions (a pushover ends where Bullet's "
+                "poses run away); drop it or run the pushover with Bullet"
+            )
         if not isinstance(pushover, bool):
             raise InputError(f"{path}: [simulate] pushover = {pushover!r}: give true or false")
         pga = s.get("pga_g", [])
@@ -465,6 +476,7 @@ def parse_study(data: dict, path: Path) -> Study:
             direction_deg=_number(path, "[simulate] direction_deg", s.get("direction_deg", 0.0)),
             pushover_rate_g_per_s=_number(path, "[simulate] rate_g_per_s", s.get("rate_g_per_s", 0.05), positive=True),
             pushover_max_g=_number(path, "[simulate] max_g", s.get("max_g", 5.0), positive=True),
+            bullet=bullet,
         )
         if sim.duration_s > 600:
             raise InputError(f"{path}: [simulate] duration_s = {sim.duration_s:g}: at most 600 s per run")

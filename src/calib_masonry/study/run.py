@@ -153,7 +153,7 @@ def run_study(
         check_scheduler(scheduler)
     _check_workers(workers)
     rows: dict[int, dict] = {}
-    with dask_client(scheduler, workers, study_.simulate is not None) as client:
+    with dask_client(scheduler, workers, study_.simulate is not None and study_.simulate.bullet) as client:
         execute_samples(study_, samples(study_), lambda r: rows.__setitem__(r["sample"], r), client, progress=progress)
     ordered = [rows[i] for i in sorted(rows)]
     return ordered, summarize(study_, ordered)
@@ -251,7 +251,7 @@ def study_to_folder(
     _check_workers(workers)
     check_output(out, command="study", overwrite=overwrite)
     # an unreachable scheduler is refused before --out is touched
-    with dask_client(scheduler, workers, study_.simulate is not None) as client:
+    with dask_client(scheduler, workers, study_.simulate is not None and study_.simulate.bullet) as client:
         return _run_into(study_, Path(out), client, progress=progress, overwrite=overwrite, figures=figures)
 
 

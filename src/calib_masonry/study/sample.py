@@ -407,7 +407,18 @@ def run_sample(study: Study, sample: Sample) -> dict:
         outputs, job = evaluate_sample(study, sample)
         if job is not None:
             geometry, load, material = job
-            outputs.update(outcome(simulate(geometry, load, material=material, progress=False, joints_ahead=False)))
+            outputs.update(
+                outcome(
+                    simulate(
+                        geometry,
+                        load,
+                        material=material,
+                        progress=False,
+                        joints_ahead=False,
+                        bullet=study.simulate.bullet,
+                    )
+                )
+            )
         row.update(outputs)
     return row
 
@@ -430,6 +441,12 @@ async def run_sample_async(study: Study, sample: Sample) -> dict:
             outputs, job = await asyncio.to_thread(evaluate_sample, study, sample)
             if job is not None:
                 geometry, load, material = job
-                outputs.update(outcome(await simulate_async(geometry, load, material=material, progress=False)))
+                outputs.update(
+                    outcome(
+                        await simulate_async(
+                            geometry, load, material=material, progress=False, bullet=study.simulate.bullet
+                        )
+                    )
+                )
             row.update(outputs)
     return row

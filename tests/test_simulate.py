@@ -312,6 +312,14 @@ def test_a_run_without_bullet_gives_the_verdict_and_shows_its_pieces():
     ma, mb = metrics(scene, a), metrics(scene, b)
     np.testing.assert_array_equal(ma.moved_fraction, mb.moved_fraction)
     assert mechanism(scene, a, ma) == mechanism(scene, b, mb)
+    # a piece that fell is followed no further: the frames draw it grey from the frame it fell at
+    from calib_masonry.simulation.results import _FramePainter
+
+    assert b.frames_of == "pieces" and a.frames_of == "bullet" and b.pieces.fallen.any()
+    at = _FramePainter(scene, b).fallen_at[b.pieces.fallen]
+    assert (at > scene.solver.warmup_frames).all() and (at < len(b.time)).all()
+    moved_after = b.positions[at.min() :, b.pieces.fallen] - b.positions[-1, b.pieces.fallen]
+    assert np.abs(moved_after[at.max() - at.min() :]).max() < 1e-9
     # the frames: the pieces' motion (Bullet's animation of the freed top differs from it)
     warm = scene.solver.warmup_frames
     x0 = np.array([bd.location for bd in scene.bodies])

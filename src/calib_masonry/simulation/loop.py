@@ -56,6 +56,8 @@ class RunOutput:
     # the pieces the joint model set free, moved as rigid bodies to convergence (simulation/pieces.py):
     # the verdict's motion; None where no ground motion ran with the joint model
     pieces: object | None = None
+    # what the poses are: Bullet's ("bullet"), or the verdict's pieces' in a run without it ("pieces")
+    frames_of: str = "bullet"
 
 
 class Engine(Protocol):
@@ -477,6 +479,7 @@ def steps(
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
         pieces=pieces,
+        frames_of="bullet" if bullet else "pieces",
     )
 
 

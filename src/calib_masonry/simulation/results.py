@@ -398,6 +398,17 @@ class _FramePainter:
         self.pad = 0.3 * float((self.hi - self.lo)[:2].max())
         light = np.array([0.4, -0.6, 0.7])
         self.light = light / np.linalg.norm(light)
+        self.body_of_tri = np.repeat(np.arange(len(scene.bodies)), [len(b.faces) for b in scene.bodies])
+        # frames that show the verdict's pieces (a run without Bullet): a piece that fell is followed
+        # no further, so its bricks stay where it fell, drawn grey from that frame on
+        self.fallen_at = np.full(len(scene.bodies), np.iinfo(np.int64).max)
+        p = getattr(out, "pieces", None)
+        if getattr(out, "frames_of", "bullet") == "pieces" and p is not None and p.fallen.any():
+            start = min(scene.solver.warmup_frames, len(out.time) - 1)
+            d = p.displacement_m
+            moving = np.any(d != d[-1], axis=2)  # (T, B): not yet where it ends
+            last = np.where(moving.any(axis=0), len(d) - np.argmax(moving[::-1], axis=0), 0)
+            self.fallen_at[p.fallen] = start + last[p.fallen]
 
     def figure(self, f: int, size_in: float = 6.0):
         from mpl_toolkits.mplot3d.art3d import Poly3DCollection
@@ -413,10 +424,10 @@ class _FramePainter:
         n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         sh = 0.35 + 0.6 * np.clip(n @ self.light, 0, 1)
+        fell = (self.fallen_at <= f)[self.body_of_tri]
+        base = np.where(fell[:, None], [0.55, 0.55, 0.58], [0.75, 0.45, 0.32])
         ax.add_collection3d(
-            Poly3DCollection(
-                tri, facecolors=np.column_stack([0.75 * sh, 0.45 * sh, 0.32 * sh, np.ones_like(sh)]), linewidths=0
-            )
+            Poly3DCollection(tri, facecolors=np.column_stack([base * sh[:, None], np.ones_like(sh)]), linewidths=0)
         )
         # the joints cracked by this frame, red, where they have moved with their first body
         start = min(scene.solver.warmup_frames, len(out.time) - 1)
@@ -438,9 +449,11 @@ class _FramePainter:
         ax.view_init(elev=20, azim=-60)
         ax.tick_params(labelsize=7)
         # the time origin of histories.png: the end of the warm-up, when the ground starts moving
+        fallen = int((self.fallen_at <= f).sum())
         ax.set_title(
             f"t = {since:.2f} s since the ground started moving; {cracked} joint{'' if cracked == 1 else 's'} "
-            "cracked (red)",
+            "cracked (red)"
+            + (f"\n{fallen} bricks in pieces that fell (grey, shown where they were judged fallen)" if fallen else ""),
             fontsize=9,
         )
         fig.tight_layout()

@@ -724,7 +724,7 @@ def _parser() -> argparse.ArgumentParser:
         "--no-bullet",
         action="store_true",
         help="a ground motion without Blender's Bullet: the same verdict, cracks and releases, the frames showing "
-        "the verdict's rigid pieces (no scene.blend); faster once a tower is set free",
+        "the verdict's rigid pieces (scene.blend keyed from them); faster once a tower is set free",
     )
     m.add_argument("--no-figures", action="store_true")
     m.add_argument("--out", default="out/simulate", help="the folder to write (default out/simulate)")

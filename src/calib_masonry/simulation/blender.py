@@ -172,6 +172,48 @@ def write_model_blend(walls, path: str | Path) -> None:
     _reset(bpy)
 
 
+def write_animation_blend(scene: Scene, positions: np.ndarray, quaternions: np.ndarray, fps: int, path) -> None:
+    """Save a run's frames as a .blend without physics: one mesh object per body, its location and
+    rotation keyed at every frame (``positions`` ``(F, B, 3)``, ``quaternions`` ``(F, B, 4)`` w, x,
+    y, z; our frame f is Blender's f + 1, linear in between), played at ``fps``. For a run without
+    Bullet, whose frames are the verdict's pieces (open it in Blender and press play). Blender's
+    state is reset before and after."""
+    from bpy_extras import anim_utils
+
+    bpy = require_bpy()
+    _reset(bpy)
+    sc = bpy.context.scene
+    col = bpy.data.collections.new("Bricks")  # as in a run's scene.blend with Bullet
+    sc.collection.children.link(col)
+    n = len(positions)
+    co = np.empty(2 * n)
+    co[0::2] = np.arange(1, n + 1)
+    linear = np.full(n, bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["LINEAR"].value, np.int32)
+    for j, b in enumerate(scene.bodies):
+        ob = _mesh_object(bpy, b.name or f"body_{j}", np.asarray(b.vertices), np.asarray(b.faces), b.location, col)
+        ob.rotation_mode = "QUATERNION"
+        ob.animation_data_create()
+        action = bpy.data.actions.new(ob.name)
+        slot = action.slots.new(id_type="OBJECT", name=ob.name)
+        ob.animation_data.action = action
+        ob.animation_data.action_slot = slot
+        bag = anim_utils.action_ensure_channelbag_for_slot(action, slot)
+        for data_path, values in (("location", positions[:, j]), ("rotation_quaternion", quaternions[:, j])):
+            for i in range(values.shape[1]):
+                fc = bag.fcurves.new(data_path, index=i)
+                fc.keyframe_points.add(n)
+                co[1::2] = values[:, i]
+                fc.keyframe_points.foreach_set("co", co)
+                fc.keyframe_points.foreach_set("interpolation", linear)
+                fc.update()
+    sc.render.fps = int(fps)
+    sc.frame_start, sc.frame_end = 1, n
+    sc.frame_set(1)
+    with _signals_held(), _stdout_quiet():
+        bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
+    _reset(bpy)
+
+
 def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:
     """Quaternion (w, x, y, z) of the joint frame (:func:`~calib_masonry.simulation.scene.joint_axes`)
     whose z axis is ``normal``."""

@@ -96,7 +96,7 @@ class SimulationConfig:
     pushover: Pushover | None = None
     shear_test: ShearTest | None = None  # the laboratory shear-compression test instead of a load
     # False: no Bullet (a ground motion only): the verdict as with it, the frames the verdict's
-    # rigid pieces (no scene.blend)
+    # rigid pieces (scene.blend keyed from them)
     bullet: bool = True
 
     def __post_init__(self) -> None:
@@ -694,6 +694,8 @@ def simulate_to_folder(
             bullet=config.bullet,
         )
         result.summary["seconds"]["scene"] = round(t_scene, 3)
+        if not config.bullet:
+            _write_pieces_blend(result, stage / "scene.blend")
         summary = write_simulation(
             result,
             stage,
@@ -703,6 +705,20 @@ def simulate_to_folder(
             progress=progress,
         )
     return summary
+
+
+def _write_pieces_blend(result: SimulationResult, path: Path) -> None:
+    """scene.blend of a run without Bullet: every brick keyed at every frame where the verdict's
+    pieces put it, when Blender's bpy is installed (the run itself needs none)."""
+    from ..errors import BackendMissing
+    from .blender import require_bpy, write_animation_blend
+
+    try:
+        require_bpy()
+    except BackendMissing:
+        return
+    r = result.output
+    write_animation_blend(result.scene, r.positions, r.quaternions, result.scene.solver.fps, path)
 
 
 def model_modes(model_dir: str | Path, n: int = 6, material: Material | None = None):

@@ -45,12 +45,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from calib_masonry.build_folder import build_to_folder  # noqa: E402
-from calib_masonry.simulation.loop import gravity_per_frame, run  # noqa: E402
-from calib_masonry.simulation.pieces import piece_motion  # noqa: E402
-from calib_masonry.simulation.results import metrics, outcome  # noqa: E402
+from calib_masonry.simulation.loop import run  # noqa: E402
+from calib_masonry.simulation.results import metrics  # noqa: E402
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model  # noqa: E402
 from calib_masonry.simulation.scene import SolverSettings, grounded_bodies  # noqa: E402
-from calib_masonry.simulation.tracker import CrackTracker  # noqa: E402
 from calib_masonry.spec import load_structure  # noqa: E402
 
 DEFAULT = SolverSettings()
@@ -72,14 +70,17 @@ SETTINGS = {
 DOUBLED = ["default", "2x substeps", "2x iterations", "2x both"]
 
 
-def one_run(model: Path, solver: SolverSettings, pga: float, seed: int, duration: float) -> dict:
+def one_run(
+    model: Path, solver: SolverSettings, pga: float, seed: int, duration: float, *, bullet: bool = True
+) -> dict:
+    """One run and what the sweep prints of it; ``bullet=False``: :func:`verdict_without_bullet`."""
     scene = scene_for_model(
         model, SimulationConfig(pga_g=pga, duration_s=duration, seed=seed, solver=solver, figures=False)
     )
     if pga == 0.0:
         scene = replace(scene, motion=None)
     t = time.perf_counter()
-    out = run(scene, progress=False)
+    out = run(scene, progress=False, bullet=bullet)
     m = metrics(scene, out)
     w = m.start_frame
     # the stones no joint Bullet still held ties to the plate at the end: the joint model's doing
@@ -91,42 +92,18 @@ def one_run(model: Path, solver: SolverSettings, pga: float, seed: int, duration
         "moved": float(m.moved_fraction[-1]),
         "toppled": m.toppled_fraction,
         "outcome": m.outcome,
-        "bullet_moved": float(metrics(scene, out, bullet=True).moved_fraction[-1]),
+        "bullet_moved": float(metrics(scene, out, bullet=True).moved_fraction[-1]) if bullet else float("nan"),
         "max_disp_mm": float(np.linalg.norm(out.positions[w:] - out.positions[w], axis=2).max() * 1000),
         "seconds": time.perf_counter() - t,
     }
 
 
 def verdict_without_bullet(model: Path, solver: SolverSettings, pga: float, seed: int, duration: float) -> dict:
-    """The verdict of a quake run from the joint model and the freed pieces alone, Bullet left out:
-    the same cracks, releases and pieces' motion as :func:`one_run` wherever the joint model reads
-    no pose (every body on a joint: the tracker's ``reads_poses`` False), in a third of the time."""
-    scene = scene_for_model(
-        model, SimulationConfig(pga_g=pga, duration_s=duration, seed=seed, solver=solver, figures=False)
-    )
-    t = time.perf_counter()
-    g = gravity_per_frame(scene)
-    x = np.array([b.location for b in scene.bodies])
-    R = np.repeat(np.eye(3)[None], len(x), axis=0)
-    warm = solver.warmup_frames
-    tracker = CrackTracker(scene, x, R, np.zeros(3), warm / solver.fps)
-    if tracker.reads_poses:
-        raise SystemExit(f"{model}: some body stands on the plate without a joint; run it with Bullet")
-    for f in range(warm + 1, len(g)):
-        tracker.step((f - 1) / solver.fps, g[f], x, R, np.zeros(3))
-    times = (np.arange(warm, len(g)) - warm) / solver.fps
-    pm = piece_motion(scene, tracker.release_time_s, times, velocity=tracker.free_velocity, model=tracker.model)
-    moved = (pm.distance_m() > solver.moved_threshold_m).mean(axis=1)
-    held = ~np.isfinite(tracker.release_time_s)
-    return {
-        "freed": float(1.0 - grounded_bodies(scene.bonds, len(scene.bodies), held).mean()),
-        "cracked": float(np.isfinite(tracker.break_time_s).mean()),
-        "moved": float(moved[-1]),
-        "toppled": float(pm.toppled.mean()),
-        "outcome": outcome(float(moved[-1]), float(pm.toppled.mean())),
-        "bullet_moved": float("nan"),
-        "seconds": time.perf_counter() - t,
-    }
+    """The verdict of a quake run from the joint model and the freed pieces alone, Bullet left out
+    (``simulate --no-bullet``: ``run(..., bullet=False)``): the same cracks, releases and pieces'
+    motion as :func:`one_run` wherever the joint model reads no pose (every body on a joint), in a
+    fraction of the time."""
+    return one_run(model, solver, pga, seed, duration, bullet=False)
 
 
 def _percent(x: float | None) -> str:

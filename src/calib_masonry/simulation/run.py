@@ -481,7 +481,7 @@ def _scene_steps(
     from .loop import steps
     from .results import collapse_multiplier, metrics, pushover_stop, shear_curve
 
-    if threading.current_thread() is not threading.main_thread():
+    if bullet and threading.current_thread() is not threading.main_thread():
         warnings.warn(
             "simulate: called from a thread other than the main one; Blender driven so, beside other "
             "busy Python threads, gave other poses from the same inputs and crashed at times "

@@ -136,6 +136,12 @@ def _reset(bpy) -> None:
         bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
+def _save(bpy, path) -> None:
+    """Save Blender's scene as ``path`` (compressed), the signals held and Blender's own line quiet."""
+    with _signals_held(), _stdout_quiet():
+        bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
+
+
 def _mesh_object(bpy, name: str, vertices: np.ndarray, faces: np.ndarray, location, collection):
     me = bpy.data.meshes.new(name)
     me.from_pydata([tuple(v) for v in vertices.tolist()], [], [tuple(f) for f in faces.tolist()])
@@ -167,8 +173,7 @@ def write_model_blend(walls, path: str | Path) -> None:
             ob = _mesh_object(bpy, brick_name, np.asarray(vertices) - centre, np.asarray(faces), centre, col)
             ob.data.materials.append(mat)
             ob.color = tuple(float(x) for x in rgba)  # the viewport's object colour
-    with _signals_held(), _stdout_quiet():
-        bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
+    _save(bpy, path)
     _reset(bpy)
 
 
@@ -209,8 +214,7 @@ def write_animation_blend(scene: Scene, positions: np.ndarray, quaternions: np.n
     sc.render.fps = int(fps)
     sc.frame_start, sc.frame_end = 1, n
     sc.frame_set(1)
-    with _signals_held(), _stdout_quiet():
-        bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
+    _save(bpy, path)
     _reset(bpy)
 
 
@@ -420,5 +424,4 @@ class BlenderEngine:
             rb.keyframe_insert("kinematic", frame=int(freed_at[j]) + 1)  # our frame f is Blender's f + 1
         sc.frame_end = frames
         sc.frame_set(1)
-        with _signals_held(), _stdout_quiet():
-            bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False, compress=True)
+        _save(bpy, path)

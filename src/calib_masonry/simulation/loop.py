@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import InputError
 from ..progress import progress as _progress
 from .pieces import piece_motion
-from .scene import Scene, grounded_bodies, quaternions_from_matrices
+from .scene import Scene, grounded_bodies, quaternions_from_matrices, rotations
 from .tracker import CrackTracker
 
 __all__ = ["Engine", "RunOutput", "StillEngine", "drain", "gravity_per_frame", "run", "steps"]
@@ -94,13 +94,10 @@ class StillEngine:
     are those pieces' poses, put in once the run is done."""
 
     def __init__(self, scene: Scene, fixed: np.ndarray, gravity: np.ndarray) -> None:
-        from scipy.spatial.transform import Rotation
-
         nb = len(scene.bodies)
         self.mats = np.zeros((nb, 4, 4), dtype=np.float32)
         if nb:
-            q = np.array([b.rotation for b in scene.bodies], dtype=np.float64)
-            self.mats[:, :3, :3] = Rotation.from_quat(q, scalar_first=True).as_matrix()
+            self.mats[:, :3, :3] = rotations(np.array([b.rotation for b in scene.bodies]))
             self.mats[:, :3, 3] = [b.location for b in scene.bodies]
         self.mats[:, 3, 3] = 1.0
 

@@ -26,7 +26,7 @@ import numpy as np
 from .ground_motion import G
 from .joints import FAILURE_MODES
 from .loop import RunOutput
-from .scene import Scene
+from .scene import Scene, rotations
 
 ONSET_DRIFT = 1e-3  # a pushover's onset of collapse: a brick moves faster than this fraction of the height per second
 ONSET_WINDOW_S = 0.2  # ... measured over this window
@@ -47,17 +47,6 @@ __all__ = [
     "ONSET_WINDOW_S",
     "failure_mode_counts",
 ]
-
-
-def rotations(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (w, x, y, z) (scipy's Rotation)."""
-    from scipy.spatial.transform import Rotation
-
-    q = np.asarray(q, dtype=np.float64)
-    flat = q.reshape(-1, 4)
-    if len(flat) == 0:
-        return np.zeros((*q.shape[:-1], 3, 3))
-    return Rotation.from_quat(flat, scalar_first=True).as_matrix().reshape(*q.shape[:-1], 3, 3)
 
 
 @dataclass(frozen=True)

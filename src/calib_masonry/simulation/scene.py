@@ -72,6 +72,7 @@ __all__ = [
     "grounded_bodies",
     "plate_linked",
     "quaternions_from_matrices",
+    "rotations",
     "box_mesh",
 ]
 
@@ -991,6 +992,18 @@ def quaternions_from_matrices(r: np.ndarray) -> np.ndarray:
     q = Rotation.from_matrix(flat).as_quat(scalar_first=True)
     q *= np.where(q[:, :1] < 0, -1.0, 1.0)
     return q.reshape(*m.shape[:-2], 4)
+
+
+def rotations(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)`` (w, x, y, z) (scipy's
+    Rotation): :func:`quaternions_from_matrices`' inverse."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q, dtype=np.float64)
+    flat = q.reshape(-1, 4)
+    if len(flat) == 0:
+        return np.zeros((*q.shape[:-1], 3, 3))
+    return Rotation.from_quat(flat, scalar_first=True).as_matrix().reshape(*q.shape[:-1], 3, 3)
 
 
 def box_mesh(size) -> tuple[np.ndarray, np.ndarray]:

@@ -3,6 +3,7 @@ import os
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -221,6 +222,45 @@ def test_sigterm_stops_build_and_leaves_nothing(tmp_path):
     _, err = p.communicate(timeout=30)  # how fast is measured in the note, not asserted
     assert p.returncode == 2 and "terminated; nothing was written" in err
     assert not out.exists() and _staging(tmp_path) == []
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.slow
+def test_sigterm_stops_trace_refine_and_its_solver_process(tmp_path):
+    # trace --refine solves in a forked process: SIGTERM to the command stops both, writes nothing
+    import time
+
+    out = tmp_path / "p.json"
+    cmd = [sys.executable, "-m", "calib_masonry", "trace", str(SWAT), "--refine", "--no-figures", "--out", str(out)]
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for _ in range(300):
+        kids = _children(p.pid)
+        if kids or p.poll() is not None:
+            break
+        time.sleep(0.02)
+    assert kids, "no solver process was started"
+    time.sleep(2.5)  # into the refinement (the SWAT wall's takes about 8 s)
+    assert p.poll() is None, "the refinement ended before it could be killed; use a larger mask"
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 2 and "terminated" in err, err
+    assert not out.exists() and _staging(tmp_path) == []
+    for _ in range(100):  # the solver process is gone too (killed or left on its own)
+        if not any(Path(f"/proc/{k}").exists() for k in kids):
+            break
+        time.sleep(0.05)
+    assert not any(Path(f"/proc/{k}").exists() for k in kids)
 
 
 @pytest.mark.slow

@@ -1,5 +1,7 @@
 """Soft-Dice refinement: the soft rasteriser against analytic facts, and the fit's guarantees."""
 
+import json
+
 import numpy as np
 import pytest
 import shapely
@@ -7,7 +9,8 @@ import shapely
 from calib_masonry._jax import jax, jnp
 from calib_masonry.io import read_mask
 from calib_masonry.wall2d.dice import rasterise_polygon
-from calib_masonry.wall2d.refine import RefineConfig, hard_dice_points, soft_dice
+from calib_masonry.wall2d.refine import RefineConfig
+from calib_masonry.wall2d.refine_kernel import hard_dice_points, soft_dice
 from calib_masonry.wall2d.segment import label_bricks
 from calib_masonry.wall2d.trace import TraceConfig, trace_mask
 
@@ -177,7 +180,7 @@ def _pooled(rng, lanes, sizes, block, length):
 def test_pooled_loss_and_gradient_are_the_direct_soft_dice_loss():
     # the block loop (any brick size, one program) and its written-out Jacobian must give the
     # loss of the whole band at once and the gradient reverse-mode differentiation gives
-    import calib_masonry.wall2d.refine as refine
+    import calib_masonry.wall2d.refine_kernel as refine
 
     rng = np.random.default_rng(5)
     p0, pool_pts, pool_coef, off, nblk, m = _pooled(rng, 2, [700, 300], 128, 2048)
@@ -200,19 +203,21 @@ def test_pooled_loss_and_gradient_are_the_direct_soft_dice_loss():
     assert np.abs(g).max() > 1e-3  # not a trivially flat start
 
 
-def test_the_exported_batch_solver_is_the_jitted_function_bit_for_bit(tmp_path, monkeypatch):
-    # the refinement calls its batch solver exported once for any batch and pool size (and kept
-    # on disk); for two shapes and from the file, it must give exactly what jit gives
+def test_the_precompiled_batch_solver_is_the_jitted_function_bit_for_bit(tmp_path, monkeypatch):
+    # the refinement calls its batch solver exported once for any batch and pool size, through
+    # programs compiled ahead of time per shape and kept on disk; for two shapes, compiled here
+    # and read back from the files (in a fresh solver object), it must give exactly what jit gives
     from functools import partial
 
-    import calib_masonry.wall2d.refine as refine
+    import calib_masonry.wall2d.refine_kernel as refine
 
     monkeypatch.setenv("CALIB_MASONRY_CACHE", str(tmp_path))
     refine._batch_solver.cache_clear()
     rng = np.random.default_rng(3)
     taus = jnp.asarray([1.5, 0.35])
     direct = jax.jit(partial(refine._refine_batch, max_steps=12, rtol=1e-6, atol=1e-4, block=64))
-    for lanes, sizes, length in [(2, [96, 150], 512), (3, [160, 40, 0], 1024)]:
+    shapes = [(2, [96, 150], 512), (3, [160, 40, 0], 1024)]
+    for lanes, sizes, length in shapes:
         p0, pool_pts, pool_coef, off, nblk, m = _pooled(rng, lanes, sizes, 64, length)
         args = (
             jnp.asarray(p0),
@@ -230,9 +235,63 @@ def test_the_exported_batch_solver_is_the_jitted_function_bit_for_bit(tmp_path, 
         expect = [np.asarray(a) for a in direct(*args)]
         assert np.abs(expect[0] - p0).max() > 0.1  # the solver moved the vertices
         for fresh in (False, True):
-            if fresh:  # from the file written by the first export
+            if fresh:  # from the files written by the first call
                 refine._batch_solver.cache_clear()
-            got = refine._batch_solver(6, 2, 12, 1e-6, 1e-4, "float64", 64)(*args)
+            solver = refine._batch_solver(6, 2, 12, 1e-6, 1e-4, "float64", 64)
+            got = solver(*args)
             assert all(np.array_equal(np.asarray(g), e) for g, e in zip(got, expect))
+            assert solver._jitted is None or not fresh  # read from disk: nothing exported or lowered
     assert len(list(tmp_path.glob("refine-*.jaxexport"))) == 1
+    programs = sorted(tmp_path.glob("refine-*.xlaexe"))
+    assert len(programs) == len(shapes)
+    # a broken program file (here: the other shape's program) is compiled anew, and still exact
+    blobs = [p.read_bytes() for p in programs]
+    programs[0].write_bytes(blobs[1])
+    programs[1].write_bytes(blobs[0])
     refine._batch_solver.cache_clear()
+    got = refine._batch_solver(6, 2, 12, 1e-6, 1e-4, "float64", 64)(*args)
+    assert all(np.array_equal(np.asarray(g), e) for g, e in zip(got, expect))
+    now = {p.name: p.read_bytes() for p in programs}
+    assert sum(now[p.name] not in blobs for p in programs) == 1  # the one read was compiled anew
+    refine._batch_solver.cache_clear()
+
+
+_IN_SOLVER_PROCESS = r"""
+import json, sys
+from calib_masonry.io import read_mask
+from calib_masonry.wall2d import refine
+from calib_masonry.wall2d.trace import TraceConfig, trace_mask
+with refine.solver_process(refine.RefineConfig(), 5):
+    assert refine._HELPER is not None, "no solver process"
+    if sys.argv[2] == "killed":  # the solver process dies: the refinement is solved here instead
+        refine._HELPER._proc.kill()
+    res = trace_mask(read_mask(sys.argv[1]), TraceConfig(vertices=5, refine=refine.RefineConfig()))
+    assert ("jax" in sys.modules) == (sys.argv[2] == "killed"), "solved in the wrong process"
+print(json.dumps([b.vertices_xy.tolist() for b in res.bricks]))
+"""
+
+
+def test_the_solver_process_gives_the_local_refinement_bit_for_bit(stone_wall):
+    # trace --refine forks a process that loads JAX while this one traces and prepares: the
+    # polygons must be exactly those of the refinement solved in this process, and if that
+    # process dies, the refinement is solved here, with the same polygons
+    import subprocess
+    import sys
+
+    mask = DATA / "stylite" / "masks" / "north.png"
+    here = trace_mask(stone_wall[0], TraceConfig(vertices=5, refine=RefineConfig()))
+    for how in ("there", "killed"):
+        cmd = [sys.executable, "-c", _IN_SOLVER_PROCESS, str(mask), how]
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        there = json.loads(r.stdout.splitlines()[-1])
+        assert len(there) == len(here.bricks)
+        assert all(np.array_equal(np.asarray(v), b.vertices_xy) for v, b in zip(there, here.bricks))
+
+
+def test_no_solver_process_where_jax_is_loaded_or_threads_run():
+    # a fork copies only the calling thread, and JAX's own threads would not survive it
+    from calib_masonry.wall2d import refine
+
+    with refine.solver_process():
+        assert refine._HELPER is None  # this test process has JAX loaded

@@ -59,17 +59,12 @@ def exported(name: str, fn, args, *, sources=(), settings=()):
     equinox and optimistix, so a change to any of them exports anew. A file that cannot be read
     is exported anew and replaced, atomically (workers may export at once); where the cache
     cannot be written the export is kept in memory only."""
-    import hashlib
     import os
-    from importlib.metadata import version
-    from pathlib import Path
 
     from jax import export
 
-    key = repr((name, tuple(settings), jax.__version__, version("equinox"), version("optimistix")))
-    key += "".join(Path(s).read_text(encoding="utf-8") for s in sources)
     folder = cache_dir()
-    path = None if folder is None else folder / f"{name}-{hashlib.sha256(key.encode()).hexdigest()[:32]}.jaxexport"
+    path = None if folder is None else folder / f"{_export_stem(name, sources, settings)}.jaxexport"
     _initialise_lapack()
     if path is not None and path.is_file():
         try:
@@ -86,6 +81,141 @@ def exported(name: str, fn, args, *, sources=(), settings=()):
         except (ImportError, OSError):  # no flatbuffers, or a read-only cache: in memory only
             pass
     return result
+
+
+def _export_stem(name: str, sources, settings) -> str:
+    """``name`` and a hash of what an export of it depends on (:func:`exported`)."""
+    import hashlib
+    from importlib.metadata import version
+    from pathlib import Path
+
+    key = repr((name, tuple(settings), jax.__version__, version("equinox"), version("optimistix")))
+    key += "".join(Path(s).read_text(encoding="utf-8") for s in sources)
+    return f"{name}-{hashlib.sha256(key.encode()).hexdigest()[:32]}"
+
+
+def _machine() -> str:
+    """What a compiled CPU program depends on besides its code: jaxlib, the backend and the
+    processor (its model and instruction-set flags, where /proc/cpuinfo tells them)."""
+    import platform
+
+    import jaxlib
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            lines = [ln for ln in f.read().splitlines() if ln.startswith(("model name", "flags", "Features"))]
+        cpu += "".join(dict.fromkeys(lines))  # the first of each (every core repeats them)
+    except OSError:
+        pass
+    backend = jax.devices()[0].client
+    return repr((jaxlib.__version__, backend.platform, backend.platform_version, cpu))
+
+
+def _fresh() -> dict:
+    """Compiler options that make a compile fresh: a GPU-only option (no effect on a CPU program)
+    set to a value never used before, so that the compilation cache's key is new and the program
+    is compiled, not loaded from that cache (a loaded one serializes without its code: see
+    :class:`Precompiled`)."""
+    import uuid
+
+    # (not xla_gpu_cuda_data_dir: JAX leaves that one out of the key)
+    return {"xla_gpu_per_fusion_autotune_cache_dir": f"calib-masonry-aot-{uuid.uuid4().hex}"}
+
+
+class Precompiled:
+    """An exported function (:func:`exported`) called through programs compiled ahead of time,
+    one per concrete shape of its arguments, kept in memory and on disk
+    (``jax.experimental.serialize_executable``) beside the export.
+
+    Why: a new process that calls an export jitted lowers the call and looks its program up in
+    JAX's compilation cache, about 0.25 s a shape for the refinement's batch solver (four
+    shapes on a stone wall: a second of each ``trace --refine``); loading a serialized program
+    takes about 0.05 s and lowers nothing, and the export itself is read only when a program
+    must be compiled. The programs are bit for bit the jitted export's (the same lowering and
+    options, but a GPU-only one: :func:`_fresh`; test).
+
+    A program is compiled anew, never taken from JAX's compilation cache: an executable that
+    came from that cache does not serialize whole with jax 0.6 (the loaded copy fails on its
+    first call, "Function ... not found"). It is written atomically, keyed by the export's hash,
+    the shapes and :func:`_machine`. A program read from disk is tried once on zeros; one that
+    cannot be read or run is compiled anew and replaced. Where the cache cannot be written the
+    programs live in memory only. Arguments without a shape and a dtype (Python numbers) go
+    through the jitted export."""
+
+    def __init__(self, name: str, fn, args, *, sources=(), settings=()):
+        import threading
+
+        self._export_args = (name, fn, args, tuple(sources), tuple(settings))
+        self._stem = _export_stem(name, sources, settings)
+        self._jitted = None
+        self._programs: dict = {}
+        self._lock = threading.Lock()
+
+    def jitted(self):
+        """The export, jitted (read or exported on first use)."""
+        with self._lock:
+            if self._jitted is None:
+                name, fn, args, sources, settings = self._export_args
+                self._jitted = jax.jit(exported(name, fn, args, sources=sources, settings=settings).call)
+            return self._jitted
+
+    def __call__(self, *args):
+        try:
+            shapes = tuple((tuple(a.shape), str(a.dtype)) for a in args)
+        except AttributeError:
+            return self.jitted()(*args)
+        program = self._programs.get(shapes)
+        if program is None:
+            program = self._program(shapes)
+        return program(*args)
+
+    def load(self, *args) -> None:
+        """Load (or compile) the program for the shapes of ``args`` (arrays), without calling it."""
+        shapes = tuple((tuple(a.shape), str(a.dtype)) for a in args)
+        if shapes not in self._programs:
+            self._program(shapes)
+
+    def _program(self, shapes):
+        import hashlib
+        import os
+        import pickle
+
+        import numpy as np
+        from jax.experimental import serialize_executable as se
+
+        with self._lock:
+            if shapes in self._programs:
+                return self._programs[shapes]
+        folder = cache_dir()
+        key = hashlib.sha256(repr((self._stem, shapes, _machine())).encode()).hexdigest()[:32]
+        path = None if folder is None else folder / f"{self._stem}-{key}.xlaexe"
+        program = None
+        _initialise_lapack()
+        if path is not None and path.is_file():
+            try:
+                program = se.deserialize_and_load(*pickle.loads(path.read_bytes()))
+                # a trial on zeros: a program that loads but cannot run fails here (its errors
+                # surface only when a result is read), not in the caller's solve
+                jax.block_until_ready(program(*(np.zeros(s, d) for s, d in shapes)))
+            except Exception:  # noqa: BLE001 - a partial, foreign or broken file: compile anew, replace it
+                program = None
+        if program is None:
+            specs = [jax.ShapeDtypeStruct(s, d) for s, d in shapes]
+            lowered = self.jitted().lower(*specs)
+            if path is None:
+                program = lowered.compile()
+            else:
+                program = lowered.compile(compiler_options=_fresh())
+                try:
+                    blob = pickle.dumps(se.serialize(program))
+                    tmp = path.with_suffix(f".{os.getpid()}.tmp")
+                    tmp.write_bytes(blob)
+                    os.replace(tmp, path)  # whole or not at all
+                except (ValueError, OSError, pickle.PicklingError):  # not serializable, or read-only
+                    pass
+        with self._lock:
+            return self._programs.setdefault(shapes, program)
 
 
 def _initialise_lapack() -> None:

@@ -40,15 +40,19 @@ def _cmd_synth(args) -> int:
 
 
 def _cmd_trace(args) -> int:
-    from .wall2d.trace import TraceConfig, trace_to_file
+    import contextlib
 
-    refine = None
+    refine, solver = None, contextlib.nullcontext()
     if args.refine:
-        from .wall2d.refine import RefineConfig
+        from .wall2d.refine import RefineConfig, solver_process
 
         refine = RefineConfig()
-    config = TraceConfig(vertices=args.vertices, target_dice=args.target_dice, refine=refine)
-    result, seconds, _ = trace_to_file(args.mask, args.out, config, figure=args.figure, figures=not args.no_figures)
+        solver = solver_process(refine, args.vertices)  # JAX loads there while this process traces
+    with solver:
+        from .wall2d.trace import TraceConfig, trace_to_file
+
+        config = TraceConfig(vertices=args.vertices, target_dice=args.target_dice, refine=refine)
+        result, seconds, _ = trace_to_file(args.mask, args.out, config, figure=args.figure, figures=not args.no_figures)
     out = Path(args.out)
     before = f"splitting {result.mean_dice_splitting:.4f} -> refined " if result.refined else ""
     print(

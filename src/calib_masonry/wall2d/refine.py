@@ -6,9 +6,9 @@ distance ``d`` to the polygon's boundary (positive inside, by crossing count), s
 differentiable in the vertex positions. Each brick's pixels are those of a band around its
 outline in a crop around it (so the cost follows the outline, not the image or the crop): they
 are laid out in whole blocks in a pool of fixed size, which the loss sums block by block, with
-its Jacobian written out (:func:`_block_sums`), so that one compiled program per schedule serves
-bricks of every size (the batch solver exported once, :func:`_batch_solver`, and called once a
-brick, asynchronously); optimistix's BFGS minimises, over a
+its Jacobian written out, so that one compiled program per schedule serves bricks of every size
+(the batch solver of :mod:`calib_masonry.wall2d.refine_kernel`, compiled ahead of time and
+called once a brick, asynchronously); optimistix's BFGS minimises, over a
 temperature schedule from smooth to sharp, the number of misclassified pixels
 ``sum(m) (1 - softDice) + penalty x sum(p over forbidden pixels)``. The smooth temperatures see
 the pixels at half resolution (``coarse_stages``), the sharp ones every pixel.
@@ -26,28 +26,31 @@ Convention: image coordinates (x = column, y = row, pixel centres at integers).
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass, replace
-from functools import cache, partial
 
 import numpy as np
 import shapely
 from scipy import ndimage
 
-from .._jax import jax, jnp
 from ..calibrate.fitresult import FitStatus
 from ..progress import progress as _progress
 from .dice import rasterise_polygon
 
-__all__ = [
-    "RefineConfig",
-    "RefinedPolygon",
-    "soft_inside",
-    "soft_dice",
-    "hard_dice_points",
-    "refine_polygons",
-    "signed_distance",
-]
+__all__ = ["RefineConfig", "RefinedPolygon", "refine_polygons", "solver_process"]
+
+_KERNEL = ("signed_distance", "soft_inside", "soft_dice", "hard_dice_points")
+
+
+def __getattr__(name: str):
+    # the JAX side's public names (the soft rasteriser's: refine_kernel.__all__), still found here,
+    # imported (with JAX) when first asked for
+    if name in _KERNEL:
+        from . import refine_kernel
+
+        return getattr(refine_kernel, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)
@@ -98,207 +101,6 @@ class RefinedPolygon:
 
 #: the refinement's per-stage solver codes (see _refine_batch)
 _SOLVER_STATUS = (FitStatus.CONVERGED, FitStatus.STEP_LIMIT, FitStatus.DIVERGED)
-
-
-# ----------------------------------------------------------------------------------------------
-# the soft rasteriser (pure JAX)
-
-
-def signed_distance(points: jnp.ndarray, verts: jnp.ndarray) -> jnp.ndarray:
-    """Signed distance ``(P,)`` of ``points`` ``(P, 2)`` to the polygon ``verts`` ``(N, 2)``; > 0 inside.
-
-    Inside is decided by the even-odd crossing rule (half-open in y), which is piecewise constant
-    in the vertices, so gradients flow through the distance only. Zero-length edges (repeated
-    vertices, used for padding) are harmless.
-    """
-    _, closest = _closest_on_edges(points, verts)
-    d2 = jnp.min(jnp.sum(closest * closest, axis=-1), axis=1)
-    dist = jnp.sqrt(d2 + 1e-12)
-    return jnp.where(_inside(points, verts), dist, -dist)
-
-
-def _closest_on_edges(points: jnp.ndarray, verts: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """For each point and each edge ``a -> b`` of the polygon: the parameter ``t`` ``(P, N)`` of
-    the edge's point ``q = a + t (b - a)`` closest to it, and ``p - q`` ``(P, N, 2)``."""
-    a = verts
-    ab = jnp.roll(verts, -1, axis=0) - a  # (N, 2)
-    ap = points[:, None, :] - a[None, :, :]  # (P, N, 2)
-    len2 = jnp.sum(ab * ab, axis=-1)  # (N,)
-    safe = jnp.where(len2 > 0, len2, 1.0)
-    t = jnp.clip(jnp.sum(ap * ab[None], axis=-1) / safe, 0.0, 1.0)
-    return t, ap - t[..., None] * ab[None]
-
-
-def _inside(points: jnp.ndarray, verts: jnp.ndarray) -> jnp.ndarray:
-    """Whether each point is inside the polygon: the even-odd crossing rule, half-open in y."""
-    a = verts
-    b = jnp.roll(verts, -1, axis=0)
-    py = points[:, 1:2]
-    px = points[:, 0:1]
-    ay, by = a[None, :, 1], b[None, :, 1]
-    straddle = (ay <= py) != (by <= py)
-    dy = jnp.where(by != ay, by - ay, 1.0)
-    xint = a[None, :, 0] + (py - ay) * (b[None, :, 0] - a[None, :, 0]) / dy
-    crossings = jnp.sum(straddle & (px < xint), axis=1)
-    return (crossings % 2) == 1
-
-
-def soft_inside(points: jnp.ndarray, verts: jnp.ndarray, tau: float) -> jnp.ndarray:
-    """Inside probability ``(P,)`` of each point: ``sigmoid(signed distance / tau)``."""
-    return jax.nn.sigmoid(signed_distance(points, verts) / tau)
-
-
-def soft_dice(verts, points, target, weight, tau) -> jnp.ndarray:
-    """Soft Dice of the polygon against the 0/1 ``target`` over weighted ``points``."""
-    p = soft_inside(points, verts, tau)
-    tp = jnp.sum(weight * target * p)
-    return 2.0 * tp / (jnp.sum(weight * p) + jnp.sum(weight * target))
-
-
-def hard_dice_points(verts, points, target, weight) -> jnp.ndarray:
-    inside = (signed_distance(points, verts) > 0).astype(points.dtype)
-    tp = jnp.sum(weight * target * inside)
-    return 2.0 * tp / (jnp.sum(weight * inside) + jnp.sum(weight * target))
-
-
-def _vertices(params, n):
-    idx = jnp.minimum(jnp.arange(params.shape[0]), n - 1)
-    return params[idx]
-
-
-def _block_sums(verts, pts, coef, tau):
-    """``coef @ p`` ``(3,)`` for one block of points ``(S, 2)``, the rows of ``coef`` ``(3, S)`` being
-    ``w t``, ``w`` and ``w f`` (weight, target, forbidden), and its Jacobian ``(3, N, 2)`` in the
-    vertices.
-
-    The Jacobian is written out: a point's signed distance moves only with the two vertices of
-    its nearest edge, ``d|p - q| / da = -u (1 - t)`` and ``d|p - q| / db = -u t`` for the closest
-    point ``q = a + t (b - a)`` and the unit vector ``u`` from ``q`` to ``p`` (the derivative
-    through ``t`` vanishes: ``t`` is optimal, or clipped and constant). It is what reverse-mode
-    differentiation of :func:`signed_distance` gives (a test checks), at the cost of one pass."""
-    t, closest = _closest_on_edges(pts, verts)  # (S, N), (S, N, 2)
-    d2 = jnp.sum(closest * closest, axis=-1)
-    nearest = jnp.argmin(d2, axis=1)
-    onehot = (jnp.arange(verts.shape[0])[None, :] == nearest[:, None]).astype(pts.dtype)  # (S, N)
-    dist = jnp.sqrt(jnp.min(d2, axis=1) + 1e-12)
-    sign = jnp.where(_inside(pts, verts), 1.0, -1.0).astype(pts.dtype)
-    p = jax.nn.sigmoid(sign * dist / tau)
-    g = coef * (sign * p * (1.0 - p) / tau)[None, :]  # (3, S): d(sum)/d(dist) per point
-    te = jnp.sum(onehot * t, axis=1)
-    u = jnp.einsum("sn,snd->sd", onehot, closest) / dist[:, None]
-    ga = jnp.einsum("ks,sn,sd->knd", g, onehot, -u * (1.0 - te)[:, None])
-    gb = jnp.einsum("ks,sn,sd->knd", g, onehot, -u * te[:, None])
-    return coef @ p, ga + jnp.roll(gb, 1, axis=1)
-
-
-def _pool_sums_and_jacobian(verts, pool_pts, pool_coef, off, nblk, tau, block):
-    """The band sums of one brick whose points are the ``nblk`` blocks of ``block`` points from
-    ``off`` in the pool, with their Jacobian in the vertices: a loop over blocks, so that one
-    compiled program serves any brick size (its cost follows the brick's points, not the pool's)."""
-
-    def body(carry):
-        i, s, j = carry
-        start = off + i * block
-        pts = jax.lax.dynamic_slice_in_dim(pool_pts, start, block, 0)
-        coef = jax.lax.dynamic_slice_in_dim(pool_coef, start, block, 1)
-        v, g = _block_sums(verts, pts, coef, tau)
-        return i + 1, s + v, j + g
-
-    init = (jnp.zeros((), nblk.dtype), jnp.zeros(3, pool_pts.dtype), jnp.zeros((3, *verts.shape), pool_pts.dtype))
-    _, s, j = jax.lax.while_loop(lambda c: c[0] < nblk, body, init)
-    return s, j
-
-
-@partial(jax.custom_jvp, nondiff_argnums=(6,))
-def _pool_sums(verts, pool_pts, pool_coef, off, nblk, tau, block):
-    """``(sum w t p, sum w p, sum w f p)`` over the brick's band, ``p`` the soft inside
-    probability. Its derivative is the Jacobian the block loop accumulates (a loop has no reverse
-    derivative of its own); only the vertices are differentiated."""
-    return _pool_sums_and_jacobian(verts, pool_pts, pool_coef, off, nblk, tau, block)[0]
-
-
-@_pool_sums.defjvp
-def _pool_sums_jvp(block, primals, tangents):
-    s, jac = _pool_sums_and_jacobian(*primals, block)
-    return s, jnp.tensordot(jac, tangents[0].astype(jac.dtype), axes=2)
-
-
-def _loss(params, args):
-    n, pool_pts, pool_coef, off, nblk, m, const, box, tau, penalty, block = args
-    verts = _vertices(params, n)
-    wtp, wp, wfp = _pool_sums(verts, pool_pts, pool_coef, off, nblk, tau, block)
-    dice = 2.0 * (wtp + const) / (wp + const + m)
-    # a barrier keeps every vertex inside the crop, where the pixels that judge it are
-    outside = jnp.maximum(jnp.abs(verts) - box, 0.0)
-    return m * (1.0 - dice) + penalty * wfp + 100.0 * penalty * jnp.sum(outside**2)
-
-
-def _refine_batch(
-    params0, n, pool_pts, pool_coef, off, nblk, m, const, box, penalty, taus, *, max_steps, rtol, atol, block
-):
-    """Every brick of a batch through the temperatures ``taus``, ``max_steps`` BFGS steps each
-    (vmap over bricks of a scan over temperatures). Brick ``b``'s band is the ``nblk[b]`` blocks of
-    ``block`` points from ``off[b]`` in the pool shared by the batch: ``pool_pts`` ``(L, 2)`` and
-    ``pool_coef`` ``(3, L)`` (weight x target, weight, weight x forbidden); ``m`` is the brick's
-    region in pixels and ``const`` the pixels inside both it and the polygon that the band leaves
-    out. Called through :func:`_batch_solver`."""
-    import optimistix as optx
-
-    def one(p0, n_, o, nb, m_, c, bx):
-        def stage(y, tau):
-            sol = optx.minimise(
-                _loss,
-                optx.BFGS(rtol=rtol, atol=atol),
-                y,
-                args=(n_, pool_pts, pool_coef, o, nb, m_, c, bx, tau, penalty, block),
-                max_steps=max_steps,
-                throw=False,
-            )
-            finite = jnp.all(jnp.isfinite(sol.value))
-            # 0 converged, 1 step limit, 2 non-finite (the stage's start is kept)
-            code = jnp.where(finite, jnp.where(sol.result == optx.RESULTS.successful, 0, 1), 2)
-            return jnp.where(finite, sol.value, y), code
-
-        y, codes = jax.lax.scan(stage, p0, taus)
-        return _vertices(y, n_), codes[-1]
-
-    return jax.vmap(one)(params0, n, off, nblk, m, const, box)
-
-
-@cache
-def _batch_solver(n_max: int, n_taus: int, max_steps: int, rtol: float, atol: float, dtype: str, block: int):
-    """:func:`_refine_batch` for these settings, exported once for any batch and pool size (JAX
-    shape polymorphism), kept on disk beside the compilation cache and in memory
-    (:func:`calib_masonry._jax.exported`).
-
-    Why: tracing it (vmap of a scan of optimistix's BFGS) takes about a second, far more than
-    most solves; exported, it is traced once per settings and machine. The refinement calls it
-    with one batch size and one pool size (:func:`_run_jobs`), so a process compiles it once per
-    schedule, or finds it in the persistent compilation cache. Its results are bit for bit those
-    of the jitted function. Returned jitted, for jit's fast dispatch: a wall makes a call per
-    brick."""
-    from jax import export
-
-    from .._jax import exported
-
-    b, length = export.symbolic_shape("b, L", constraints=[f"L >= {block}"])
-    dt = jnp.dtype(dtype)
-
-    def spec(*shape, t=dt):
-        return jax.ShapeDtypeStruct(shape, t)
-
-    i32 = jnp.int32
-    args = (spec(b, n_max, 2), spec(b, t=i32), spec(length, 2), spec(3, length), spec(b, t=i32), spec(b, t=i32))
-    args += (spec(b), spec(b), spec(b, 2), spec(), spec(n_taus))
-    return jax.jit(
-        exported(
-            "refine",
-            partial(_refine_batch, max_steps=max_steps, rtol=rtol, atol=atol, block=block),
-            args,
-            sources=[__file__],
-            settings=(n_max, n_taus, max_steps, rtol, atol, dtype, block),
-        ).call
-    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -438,10 +240,9 @@ def refine_polygons(
     bricks = [
         _prepare(labels, owner, ids[i], slices[ids[i] - 1], config.margin_px, s, config.band_px) for i, s, _ in jobs
     ]
-    temps = tuple(config.temperatures)
-    k = config.coarse_stages if 0 < config.coarse_stages < len(temps) else 0
-    easy_schedule = (tuple(config.easy_temperatures), config.easy_steps)
-    first = [easy_schedule if e else (temps[:k] if k else temps, config.max_steps) for _, _, e in jobs]
+    easy_schedule, hard_first, *hard_then = _schedules(config)
+    k = len(hard_then)  # coarse stages first, then the sharp ones (1), or all at once (0)
+    first = [easy_schedule if e else hard_first for _, _, e in jobs]
     fits, statuses = _run_jobs(
         [b if e or not k else _coarse(b) for b, (_, _, e) in zip(bricks, jobs)],
         [s for _, s, _ in jobs],
@@ -461,7 +262,7 @@ def refine_polygons(
         sharp, sharp_status = _run_jobs(
             [bricks[j] for j in hard],
             again,
-            [(temps[k:], config.max_steps)] * len(hard),
+            hard_then * len(hard),
             config,
             desc="refine, sharp stages",
         )
@@ -498,66 +299,244 @@ def _run_jobs(
     desc: str,
 ) -> tuple[list[np.ndarray | None], list[FitStatus]]:
     """The BFGS solution of every job under its schedule (temperatures, steps per temperature) and
-    its solver's status at the last temperature.
+    its solver's status at the last temperature: in the solver process when one runs
+    (:func:`solver_process`), else here."""
+    bar = _progress(total=len(bricks), desc=desc, unit="brick")
+    try:
+        if _HELPER is not None and not _HELPER.broken:
+            slim = [replace(b, region=None, allowed=None) for b in bricks]  # what the solver reads
+            out = _HELPER.run(slim, starts, schedules, config, bar.update)
+            if out is not None:
+                return out
+            _HELPER.broken = True  # from now on, here
+        return _solve_jobs(bricks, starts, schedules, config, bar.update)
+    finally:
+        bar.close()
+
+
+def _call_arrays(
+    bricks: list[_Brick], starts: list[np.ndarray], sizes: list[int], n_max: int, config: RefineConfig
+) -> tuple[np.ndarray, ...]:
+    """The batch solver's arguments but its penalty and temperatures for ``bricks`` (at most
+    ``config.chunk``; none gives a call of unused lanes, for loading its program)."""
+    f = np.dtype(config.dtype).type  # numpy arrays of the solver's dtype: no conversion on the way in
+    blk, lanes = config.block, config.chunk
+    total = sum(sizes)
+    length = config.pool_points if total <= config.pool_points else 1 << math.ceil(math.log2(total))
+    pool_pts = np.full((length, 2), 1e4, f)  # padding: far outside every polygon, weight 0
+    pool_coef = np.zeros((3, length), f)
+    off = np.zeros(lanes, dtype=np.int32)
+    nblk = np.zeros(lanes, dtype=np.int32)
+    m = np.ones(lanes, f)  # an unused lane: no points, a constant loss (0/0 would be NaN)
+    const = np.zeros(lanes, f)
+    box = np.ones((lanes, 2), f)
+    p0 = np.zeros((lanes, n_max, 2), f)
+    n = np.ones(lanes, dtype=np.int32)
+    at = 0
+    for r, (b, start, size) in enumerate(zip(bricks, starts, sizes)):
+        k = len(b.points)
+        w = np.ones(k) if b.weight is None else b.weight
+        pool_pts[at : at + k] = b.points
+        pool_coef[:, at : at + k] = w * b.target, w, w * b.forbid
+        off[r], nblk[r] = at, size // blk
+        at += size
+        m[r] = float(np.sum(w * b.target)) + b.const
+        const[r] = b.const
+        box[r] = b.centre - 0.5  # half the crop, less half a pixel
+        s = start - b.origin - b.centre
+        p0[r, : len(s)] = s
+        p0[r, len(s) :] = s[-1]
+        n[r] = len(s)
+    return p0, n, pool_pts, pool_coef, off, nblk, m, const, box
+
+
+def _n_max(vertices: int) -> int:
+    return 4 * math.ceil(vertices / 4)  # few vertex-count shapes to compile
+
+
+def _schedules(config: RefineConfig) -> list[tuple[tuple[float, ...], int]]:
+    """The schedules (temperatures, steps per temperature) :func:`refine_polygons` solves with:
+    the easy bricks', then the others' (their coarse stages and their sharp ones, or all)."""
+    temps = tuple(config.temperatures)
+    k = config.coarse_stages if 0 < config.coarse_stages < len(temps) else 0
+    out = [(tuple(config.easy_temperatures), config.easy_steps)]
+    return out + ([(temps[:k], config.max_steps), (temps[k:], config.max_steps)] if k else [(temps, config.max_steps)])
+
+
+def _solver(config: RefineConfig, schedule: tuple[tuple[float, ...], int], n_max: int):
+    from .refine_kernel import _batch_solver
+
+    taus, steps = schedule
+    return _batch_solver(n_max, len(taus), steps, config.rtol, config.atol, np.dtype(config.dtype).name, config.block)
+
+
+def _solve_jobs(
+    bricks: list[_Brick],
+    starts: list[np.ndarray],
+    schedules: list[tuple[tuple[float, ...], int]],
+    config: RefineConfig,
+    advance=lambda n: None,
+) -> tuple[list[np.ndarray | None], list[FitStatus]]:
+    """:func:`_run_jobs` in this process; ``advance(n)`` after each ``n`` bricks solved.
 
     Every call of the batch solver has the same shapes: ``config.chunk`` bricks (unused lanes have
     no points) and a pool of ``config.pool_points`` points (more only for a brick larger than
     that), each brick's band padded to whole blocks of ``config.block`` points. So one compiled
     program per schedule serves every wall, whatever its bricks' sizes."""
-    n_max = 4 * math.ceil(max(len(s) for s in starts) / 4)  # few vertex-count shapes to compile
+    n_max = _n_max(max(len(s) for s in starts))
     results: list[np.ndarray | None] = [None] * len(bricks)
     statuses: list[FitStatus] = [FitStatus.DIVERGED] * len(bricks)
     groups: dict[tuple[tuple[float, ...], int], list[int]] = {}
     for i in range(len(bricks)):
         groups.setdefault(schedules[i], []).append(i)
-    dt = jnp.dtype(config.dtype)
-    f = dt.type  # numpy arrays of the solver's dtype: no conversion on the way in
-    blk, lanes = config.block, config.chunk
+    dt = np.dtype(config.dtype)
+    blk = config.block
     sizes = [blk * math.ceil(len(b.points) / blk) for b in bricks]
-    bar = _progress(total=len(bricks), desc=desc, unit="brick")
     pending = []
     for (taus, steps), members in sorted(groups.items()):
-        solver = _batch_solver(n_max, len(taus), steps, config.rtol, config.atol, dt.name, blk)
+        solver = _solver(config, (taus, steps), n_max)
         penalty, taus_arr = np.asarray(config.penalty, dt), np.asarray(taus, dt)
-        for run in _chunks([sizes[i] for i in members], lanes, config.pool_points):
+        for run in _chunks([sizes[i] for i in members], config.chunk, config.pool_points):
             chunk = [members[r] for r in run]
-            total = sum(sizes[i] for i in chunk)
-            length = config.pool_points if total <= config.pool_points else 1 << math.ceil(math.log2(total))
-            pool_pts = np.full((length, 2), 1e4, f)  # padding: far outside every polygon, weight 0
-            pool_coef = np.zeros((3, length), f)
-            off = np.zeros(lanes, dtype=np.int32)
-            nblk = np.zeros(lanes, dtype=np.int32)
-            m = np.ones(lanes, f)  # an unused lane: no points, a constant loss (0/0 would be NaN)
-            const = np.zeros(lanes, f)
-            box = np.ones((lanes, 2), f)
-            p0 = np.zeros((lanes, n_max, 2), f)
-            n = np.ones(lanes, dtype=np.int32)
-            at = 0
-            for r, i in enumerate(chunk):
-                b = bricks[i]
-                k = len(b.points)
-                w = np.ones(k) if b.weight is None else b.weight
-                pool_pts[at : at + k] = b.points
-                pool_coef[:, at : at + k] = w * b.target, w, w * b.forbid
-                off[r], nblk[r] = at, sizes[i] // blk
-                at += sizes[i]
-                m[r] = float(np.sum(w * b.target)) + b.const
-                const[r] = b.const
-                box[r] = b.centre - 0.5  # half the crop, less half a pixel
-                s = starts[i] - b.origin - b.centre
-                p0[r, : len(s)] = s
-                p0[r, len(s) :] = s[-1]
-                n[r] = len(s)
-            out = solver(p0, n, pool_pts, pool_coef, off, nblk, m, const, box, penalty, taus_arr)
-            pending.append((chunk, out))
+            arrays = _call_arrays(
+                [bricks[i] for i in chunk], [starts[i] for i in chunk], [sizes[i] for i in chunk], n_max, config
+            )
+            pending.append((chunk, solver(*arrays, penalty, taus_arr)))
     for chunk, out in pending:  # dispatched above, asynchronously: collected as they finish
         out, codes = (np.asarray(a) for a in out)
         for r, i in enumerate(chunk):
             results[i] = out[r, : len(starts[i])] + bricks[i].centre + bricks[i].origin
             statuses[i] = _SOLVER_STATUS[int(codes[r])]
-        bar.update(len(chunk))
-    bar.close()
+        advance(len(chunk))
     return results, statuses
+
+
+def _load_programs(config: RefineConfig, vertices: int | None) -> None:
+    """Import JAX and the solver and load (or compile once) the batch solver's programs for every
+    schedule of ``config`` at its usual shapes, for polygons of up to ``vertices`` vertices (None:
+    not known yet; they load when first called)."""
+    from . import refine_kernel  # noqa: F401 - JAX
+
+    if vertices is None:
+        return
+    n_max = _n_max(vertices)
+    dt = np.dtype(config.dtype)
+    for taus, steps in _schedules(config):
+        arrays = _call_arrays([], [], [], n_max, config)
+        _solver(config, (taus, steps), n_max).load(*arrays, np.asarray(config.penalty, dt), np.asarray(taus, dt))
+
+
+# ----------------------------------------------------------------------------------------------
+# the solver process
+
+
+class _SolverProcess:
+    """A process forked before the caller prepares its walls: it imports JAX and loads the batch
+    solver's programs (about a second, on the other core) while the caller traces and prepares,
+    then solves the jobs it is sent (:func:`_solve_jobs`). Results are bit for bit the local
+    solve's (the same programs, the same arrays)."""
+
+    def __init__(self, config: RefineConfig, vertices: int | None):
+        import multiprocessing
+
+        self.broken = False
+        ctx = multiprocessing.get_context("fork")
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(
+            target=_serve, args=(child, self._conn, config, vertices), daemon=True, name="refine-solver"
+        )
+        self._proc.start()
+        child.close()
+
+    def run(self, bricks, starts, schedules, config, advance):
+        """The jobs' results, solved there; None if the process cannot solve them (it ended, or
+        its solve raised): the caller then solves here, where an error shows as it would."""
+        from ..process import raise_if_stopped
+
+        done = 0
+        try:
+            self._conn.send((bricks, starts, schedules, config))
+            while True:
+                while not self._conn.poll(0.1):
+                    raise_if_stopped()
+                    if not self._proc.is_alive():
+                        raise EOFError
+                kind, value = self._conn.recv()
+                if kind == "done":
+                    return value
+                if kind != "progress":
+                    raise EOFError
+                done += value
+                advance(value)
+        except (OSError, EOFError):  # the pipe broke, the process is gone, or its solve raised
+            advance(-done)  # the caller's solve counts them again
+            return None
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self._conn.close()  # an idle solver process reads end of file and leaves
+        self._proc.terminate()  # a busy one (the caller stopped, or failed early) is stopped
+        self._proc.join()
+
+
+def _serve(conn, caller_end, config: RefineConfig, vertices: int | None) -> None:
+    import os
+    import signal
+
+    caller_end.close()  # the fork's copy of the caller's end: the caller closing its own ends the loop
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the caller stops it (Ctrl-C reaches both)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:
+        try:
+            _load_programs(config, vertices)
+        except Exception:  # noqa: BLE001 - a head start only: what fails here fails again, and is reported, on use
+            pass
+        while True:
+            try:
+                bricks, starts, schedules, cfg = conn.recv()
+            except EOFError:  # the caller is done (or gone)
+                break
+            try:
+                out = _solve_jobs(bricks, starts, schedules, cfg, lambda n: conn.send(("progress", n)))
+            except Exception as exc:  # noqa: BLE001 - reported by the caller, on its side
+                conn.send(("error", f"{type(exc).__name__}: {exc}"))
+            else:
+                conn.send(("done", out))
+    except (EOFError, OSError, BrokenPipeError):
+        pass
+    finally:
+        os._exit(0)  # none of the caller's exit handlers
+
+
+_HELPER: _SolverProcess | None = None
+
+
+@contextlib.contextmanager
+def solver_process(config: RefineConfig = RefineConfig(), vertices: int | None = None):
+    """Within the block, :func:`refine_polygons` solves in a process forked on entry, which loads
+    JAX and the solver's programs (about a second) while this one traces and prepares: a command
+    that refines once (``trace --refine``) then pays about the warm refinement's time. Where
+    processes cannot be forked (or within another such block), the refinement runs here, as
+    without the block. Enter it before importing JAX or starting threads (a fork copies only the
+    calling thread)."""
+    global _HELPER
+    import sys
+    import threading
+
+    if _HELPER is not None or "jax" in sys.modules or threading.active_count() > 1:
+        yield
+        return
+    try:
+        helper = _SolverProcess(config, vertices)
+    except (ValueError, OSError):  # no fork on this platform, or no process to be had
+        yield
+        return
+    _HELPER = helper
+    try:
+        yield
+    finally:
+        _HELPER = None
+        helper.close()
 
 
 def _check(b: _Brick, v: np.ndarray, d0: float) -> tuple[str, float]:

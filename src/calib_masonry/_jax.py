@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 from .errors import BackendMissing
 
 try:
@@ -94,6 +96,7 @@ def _export_stem(name: str, sources, settings) -> str:
     return f"{name}-{hashlib.sha256(key.encode()).hexdigest()[:32]}"
 
 
+@cache
 def _machine() -> str:
     """What a compiled CPU program depends on besides its code: jaxlib, the backend and the
     processor (its model and instruction-set flags, where /proc/cpuinfo tells them)."""
@@ -162,7 +165,7 @@ class Precompiled:
 
     def __call__(self, *args):
         try:
-            shapes = tuple((tuple(a.shape), str(a.dtype)) for a in args)
+            shapes = _shapes(args)
         except AttributeError:
             return self.jitted()(*args)
         program = self._programs.get(shapes)
@@ -172,9 +175,7 @@ class Precompiled:
 
     def load(self, *args) -> None:
         """Load (or compile) the program for the shapes of ``args`` (arrays), without calling it."""
-        shapes = tuple((tuple(a.shape), str(a.dtype)) for a in args)
-        if shapes not in self._programs:
-            self._program(shapes)
+        self._program(_shapes(args))
 
     def _program(self, shapes):
         import hashlib
@@ -216,6 +217,11 @@ class Precompiled:
                     pass
         with self._lock:
             return self._programs.setdefault(shapes, program)
+
+
+def _shapes(args) -> tuple:
+    """The shapes and dtypes of ``args`` (arrays), a program's key."""
+    return tuple((tuple(a.shape), str(a.dtype)) for a in args)
 
 
 def _initialise_lapack() -> None:

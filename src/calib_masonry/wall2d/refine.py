@@ -315,10 +315,15 @@ def _run_jobs(
 
 
 def _call_arrays(
-    bricks: list[_Brick], starts: list[np.ndarray], sizes: list[int], n_max: int, config: RefineConfig
+    bricks: list[_Brick],
+    starts: list[np.ndarray],
+    sizes: list[int],
+    n_max: int,
+    config: RefineConfig,
+    taus: tuple[float, ...],
 ) -> tuple[np.ndarray, ...]:
-    """The batch solver's arguments but its penalty and temperatures for ``bricks`` (at most
-    ``config.chunk``; none gives a call of unused lanes, for loading its program)."""
+    """The batch solver's arguments for ``bricks`` (at most ``config.chunk``; none gives a call of
+    unused lanes, for loading its program) at the temperatures ``taus``."""
     f = np.dtype(config.dtype).type  # numpy arrays of the solver's dtype: no conversion on the way in
     blk, lanes = config.block, config.chunk
     total = sum(sizes)
@@ -347,7 +352,7 @@ def _call_arrays(
         p0[r, : len(s)] = s
         p0[r, len(s) :] = s[-1]
         n[r] = len(s)
-    return p0, n, pool_pts, pool_coef, off, nblk, m, const, box
+    return p0, n, pool_pts, pool_coef, off, nblk, m, const, box, np.asarray(config.penalty, f), np.asarray(taus, f)
 
 
 def _n_max(vertices: int) -> int:
@@ -389,19 +394,22 @@ def _solve_jobs(
     groups: dict[tuple[tuple[float, ...], int], list[int]] = {}
     for i in range(len(bricks)):
         groups.setdefault(schedules[i], []).append(i)
-    dt = np.dtype(config.dtype)
     blk = config.block
     sizes = [blk * math.ceil(len(b.points) / blk) for b in bricks]
     pending = []
-    for (taus, steps), members in sorted(groups.items()):
-        solver = _solver(config, (taus, steps), n_max)
-        penalty, taus_arr = np.asarray(config.penalty, dt), np.asarray(taus, dt)
+    for schedule, members in sorted(groups.items()):
+        solver = _solver(config, schedule, n_max)
         for run in _chunks([sizes[i] for i in members], config.chunk, config.pool_points):
             chunk = [members[r] for r in run]
             arrays = _call_arrays(
-                [bricks[i] for i in chunk], [starts[i] for i in chunk], [sizes[i] for i in chunk], n_max, config
+                [bricks[i] for i in chunk],
+                [starts[i] for i in chunk],
+                [sizes[i] for i in chunk],
+                n_max,
+                config,
+                schedule[0],
             )
-            pending.append((chunk, solver(*arrays, penalty, taus_arr)))
+            pending.append((chunk, solver(*arrays)))
     for chunk, out in pending:  # dispatched above, asynchronously: collected as they finish
         out, codes = (np.asarray(a) for a in out)
         for r, i in enumerate(chunk):
@@ -420,10 +428,8 @@ def _load_programs(config: RefineConfig, vertices: int | None) -> None:
     if vertices is None:
         return
     n_max = _n_max(vertices)
-    dt = np.dtype(config.dtype)
-    for taus, steps in _schedules(config):
-        arrays = _call_arrays([], [], [], n_max, config)
-        _solver(config, (taus, steps), n_max).load(*arrays, np.asarray(config.penalty, dt), np.asarray(taus, dt))
+    for schedule in _schedules(config):
+        _solver(config, schedule, n_max).load(*_call_arrays([], [], [], n_max, config, schedule[0]))
 
 
 # ----------------------------------------------------------------------------------------------

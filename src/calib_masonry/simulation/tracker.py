@@ -36,7 +36,9 @@ class CrackTracker:
     creep apart at a speed the solver chooses. Without an equilibrium the model's motion runs
     away (the weak inertia-relief springs hold a mechanism at ``g / eps``, metres); the cracked
     joints that then move by more than ``release_m`` are let go, and Bullet's contacts carry the
-    mechanism from there.
+    mechanism from there; what the held joints still tie to the ground is solved again under the
+    same load, cracking and letting go until it stands, so that a check lets go at once all that
+    its load lets go (not one run-away a check: the damage then grew as the checks came more often).
 
     While no joint has cracked (and no body merely stands on the plate), the joint forces are
     linear in ``g``: the three unit-load solutions are computed once and combined, so a structure
@@ -237,23 +239,39 @@ class CrackTracker:
             if self.model.n_all > self.model.nj:
                 gaps = self.model.corner_gaps(positions, rotations, plate, *self.ref)
                 closed[self.model.nj :] = gaps[self.model.nj :] < self.model.contact_gap_m
-        frozen = self._frozen(held_bodies)
-        intact = self.intact & ~frozen
-        if frozen.any() and closed is not None:
-            closed[: self.model.nj][frozen] = False
-        new, modes, state = self.model.crack(g, intact, closed, runaway_m=self.release_m, extra=extra, start=start)
-        self.intact[new] = False
-        if self.elastic is not None:
-            self._record(crack_time_s, g, extra, held_bodies)
-        self.break_time_s[new] = crack_time_s - self.t0
-        self.break_mode[new] = modes
-        self.max_utilisation = float(np.where(intact & self.intact, state.utilisation, 0.0).max(initial=0.0))
-        candidates = np.flatnonzero(~self.intact & self.held & ~frozen)
-        release = candidates[self.model.corner_motion(candidates) > self.release_m]
-        if release.size:
+        released: list[np.ndarray] = []
+        for _ in range(self.model.nj + 1):
+            # a check cracks and lets go until what held joints still tie to the ground has an
+            # equilibrium (or nothing more lets go): the joints a run-away lets go leave the model,
+            # and what is left is solved again under the same load. Letting go one run-away a check
+            # made a cascade over checks, whose damage grew as the checks came more often (Stylite,
+            # 0.3 g: 7.0 / 9.4 / 12.9 / 14.9 % of the bonds broken at 5 / 2.5 / 1.25 / 0.625 ms)
+            frozen = self._frozen(held_bodies)
+            intact = self.intact & ~frozen
+            if frozen.any() and closed is not None:
+                closed[: self.model.nj][frozen] = False
+            new, modes, state = self.model.crack(g, intact, closed, runaway_m=self.release_m, extra=extra, start=start)
+            self.intact[new] = False
+            self.break_time_s[new] = crack_time_s - self.t0
+            self.break_mode[new] = modes
+            self.max_utilisation = float(np.where(intact & self.intact, state.utilisation, 0.0).max(initial=0.0))
+            candidates = np.flatnonzero(~self.intact & self.held & ~frozen)
+            release = candidates[self.model.corner_motion(candidates) > self.release_m]
+            if not release.size:
+                break
+            released.append(release)
             self.held[release] = False
             self.release_time_s[release] = float(time_s) - self.t0
             self.model.forget(release)
             if self.elastic is not None:
                 self.free_velocity[float(time_s) - self.t0] = self.elastic.v.reshape(-1, 6).copy()
-        return release
+            start = None
+            if closed is None:
+                closed = np.repeat(self.model._pad(self.held)[:, None], self.model.outline.shape[1], axis=1)
+            closed[release] = False
+            if extra is not None:
+                held_bodies = self.model.grounded(self.held)
+                extra.reshape(-1, 6)[~held_bodies] = 0.0
+        if self.elastic is not None:
+            self._record(crack_time_s, g, extra, held_bodies)
+        return np.concatenate(released) if released else np.zeros(0, dtype=np.int64)

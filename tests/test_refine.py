@@ -256,6 +256,49 @@ def test_the_precompiled_batch_solver_is_the_jitted_function_bit_for_bit(tmp_pat
     refine._batch_solver.cache_clear()
 
 
+def test_the_cache_folder_is_kept_under_its_size(tmp_path, monkeypatch):
+    # every change to a traced module or a version bump leaves a new export and new programs, and
+    # every program compiled leaves an entry in JAX's compilation cache under a key never used
+    # again: the folder grew without end (8.5 MB and 12 programs after one session's work). Past
+    # its size the files used longest ago go (a file of ours is touched when read), the one just
+    # written never; a .tmp an hour old (a process killed while writing) goes at once
+    import os
+    import time
+
+    from calib_masonry import _jax
+
+    now = time.time()
+    ages = {"a.xlaexe": 3000, "b-cache": 2000, "c.jaxexport": 1000, "d.xlaexe": 10, "kept.xlaexe": 9000}
+    for name, age in ages.items():
+        (tmp_path / name).write_bytes(b"x" * 600_000)
+        os.utime(tmp_path / name, (now - age, now - age))
+    for name, age in (("old.123.tmp", 7200), ("new.124.tmp", 10)):
+        (tmp_path / name).write_bytes(b"")
+        os.utime(tmp_path / name, (now - age, now - age))
+    # 3.0 MB in five files, a cap of 2.4 MB: down to 1.8 MB, the oldest first, "kept" kept
+    assert _jax.tidy(tmp_path, 2.4 / 1.048576, keep=(tmp_path / "kept.xlaexe",)) == 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.jaxexport", "d.xlaexe", "kept.xlaexe", "new.124.tmp"]
+    assert _jax.tidy(tmp_path, 100.0) == 0  # under the cap: nothing goes
+
+    # a program read from the folder is marked used (so that tidy keeps it over older ones)
+    import calib_masonry.wall2d.refine_kernel as refine
+
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("CALIB_MASONRY_CACHE", str(cache))
+    refine._batch_solver.cache_clear()
+    rng = np.random.default_rng(4)
+    p0, pool_pts, pool_coef, off, nblk, m = _pooled(rng, 2, [96, 150], 64, 512)
+    args = [p0, np.full(2, 6, dtype=np.int32), pool_pts, pool_coef, off, nblk, m]
+    args += [np.zeros(2), np.full((2, 2), 12.0), np.asarray(1.0), np.asarray([1.5, 0.35])]
+    refine._batch_solver(6, 2, 12, 1e-6, 1e-4, "float64", 64).load(*args)
+    (program,) = cache.glob("refine-*.xlaexe")
+    os.utime(program, (now - 86400, now - 86400))
+    refine._batch_solver.cache_clear()
+    refine._batch_solver(6, 2, 12, 1e-6, 1e-4, "float64", 64).load(*args)
+    assert program.stat().st_mtime > now - 60
+    refine._batch_solver.cache_clear()
+
+
 _IN_SOLVER_PROCESS = r"""
 import json, sys
 from calib_masonry.io import read_mask

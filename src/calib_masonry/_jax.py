@@ -70,7 +70,9 @@ def exported(name: str, fn, args, *, sources=(), settings=()):
     _initialise_lapack()
     if path is not None and path.is_file():
         try:
-            return export.deserialize(bytearray(path.read_bytes()))
+            result = export.deserialize(bytearray(path.read_bytes()))
+            _used(path)
+            return result
         except Exception:  # noqa: BLE001 - a partial or foreign file: export anew and replace it
             pass
     result = export.export(jax.jit(fn))(*args)
@@ -80,9 +82,74 @@ def exported(name: str, fn, args, *, sources=(), settings=()):
             tmp = path.with_suffix(f".{os.getpid()}.tmp")
             tmp.write_bytes(blob)
             os.replace(tmp, path)  # whole or not at all
+            tidy(folder, keep=(path,))
         except (ImportError, OSError):  # no flatbuffers, or a read-only cache: in memory only
             pass
     return result
+
+
+# the cache folder's size past which :func:`tidy` deletes the files used longest ago
+CACHE_MAX_MB = 512.0
+
+
+def tidy(folder, max_mb: float | None = None, *, keep=()) -> int:
+    """Keep the cache ``folder`` under ``max_mb`` megabytes (default ``$CALIB_MASONRY_CACHE_MB`` or
+    :data:`CACHE_MAX_MB`): past it, delete the files used longest ago (by modification time: a file
+    of ours is touched when it is read) down to three quarters of it, never those in ``keep``; and
+    delete a ``.tmp`` file an hour old (a process killed while writing). Called after each new
+    export or program is written, so the folder does not grow for ever: every change to a traced
+    module or a version bump leaves a new set of files, and each program compiled here leaves an
+    entry in JAX's compilation cache under a key never used again. A file deleted that a process
+    then looks for is exported or compiled anew. Returns the number of files deleted."""
+    import os
+    import time
+
+    if max_mb is None:
+        try:
+            max_mb = float(os.environ.get("CALIB_MASONRY_CACHE_MB", CACHE_MAX_MB))
+        except ValueError:
+            max_mb = CACHE_MAX_MB
+    now = time.time()
+    keep = {str(k) for k in keep}
+    files, total, deleted = [], 0, 0
+    for path in folder.iterdir():
+        try:
+            st = path.stat()
+            if not path.is_file():
+                continue
+            if path.suffix == ".tmp" and now - st.st_mtime > 3600.0:
+                path.unlink()
+                deleted += 1
+                continue
+        except OSError:
+            continue
+        files.append((st.st_mtime, str(path), st.st_size))
+        total += st.st_size
+    limit = max_mb * 2**20
+    if total <= limit:
+        return deleted
+    for _, name, size in sorted(files):
+        if total <= 0.75 * limit:
+            break
+        if name in keep:
+            continue
+        try:
+            os.unlink(name)
+        except OSError:
+            continue
+        total -= size
+        deleted += 1
+    return deleted
+
+
+def _used(path) -> None:
+    """Mark a cache file as just used (its modification time: :func:`tidy` deletes the oldest)."""
+    import os
+
+    try:
+        os.utime(path)
+    except OSError:  # a read-only cache
+        pass
 
 
 def _export_stem(name: str, sources, settings) -> str:
@@ -199,6 +266,7 @@ class Precompiled:
                 # a trial on zeros: a program that loads but cannot run fails here (its errors
                 # surface only when a result is read), not in the caller's solve
                 jax.block_until_ready(program(*(np.zeros(s, d) for s, d in shapes)))
+                _used(path)
             except Exception:  # noqa: BLE001 - a partial, foreign or broken file: compile anew, replace it
                 program = None
         if program is None:
@@ -213,6 +281,7 @@ class Precompiled:
                     tmp = path.with_suffix(f".{os.getpid()}.tmp")
                     tmp.write_bytes(blob)
                     os.replace(tmp, path)  # whole or not at all
+                    tidy(folder, keep=(path,))
                 except (ValueError, OSError, pickle.PicklingError):  # not serializable, or read-only
                     pass
         with self._lock:

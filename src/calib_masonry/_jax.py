@@ -102,6 +102,7 @@ def tidy(folder, max_mb: float | None = None, *, keep=()) -> int:
     entry in JAX's compilation cache under a key never used again. A file deleted that a process
     then looks for is exported or compiled anew. Returns the number of files deleted."""
     import os
+    import stat
     import time
 
     if max_mb is None:
@@ -115,7 +116,7 @@ def tidy(folder, max_mb: float | None = None, *, keep=()) -> int:
     for path in folder.iterdir():
         try:
             st = path.stat()
-            if not path.is_file():
+            if not stat.S_ISREG(st.st_mode):
                 continue
             if path.suffix == ".tmp" and now - st.st_mtime > 3600.0:
                 path.unlink()

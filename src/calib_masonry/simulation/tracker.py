@@ -243,7 +243,7 @@ class CrackTracker:
         else:
             # the cracked joints Bullet holds are contacts in the model; those it has let go
             # are Bullet's alone; bodies standing on the plate bear where Bullet says they touch
-            closed = np.repeat(self.model._pad(self.held)[:, None], self.model.outline.shape[1], axis=1)
+            closed = self._held_corners()
             if self.model.n_all > self.model.nj:
                 gaps = self.model.corner_gaps(positions, rotations, plate, *self.ref)
                 closed[self.model.nj :] = gaps[self.model.nj :] < self.model.contact_gap_m
@@ -272,17 +272,22 @@ class CrackTracker:
             self.held[release] = False
             self.release_time_s[release] = float(time_s) - self.t0
             self.model.forget(release)
-            if self.elastic is not None:
-                self.free_velocity[float(time_s) - self.t0] = self.elastic.v.reshape(-1, 6).copy()
             if not self.cascade:
                 break
             start = None
             if closed is None:
-                closed = np.repeat(self.model._pad(self.held)[:, None], self.model.outline.shape[1], axis=1)
+                closed = self._held_corners()
             closed[release] = False
             if extra is not None:
                 held_bodies = self.model.grounded(self.held)
                 extra.reshape(-1, 6)[~held_bodies] = 0.0
         if self.elastic is not None:
+            if released:
+                self.free_velocity[float(time_s) - self.t0] = self.elastic.v.reshape(-1, 6).copy()
             self._record(crack_time_s, g, extra, held_bodies)
         return np.concatenate(released) if released else np.zeros(0, dtype=np.int64)
+
+    def _held_corners(self) -> np.ndarray:
+        """``(J', K)`` the contact corners of the joints Bullet still holds (every corner of each):
+        those the model may let touch; the plate contacts' rows are the caller's to fill."""
+        return np.repeat(self.model._pad(self.held)[:, None], self.model.outline.shape[1], axis=1)

@@ -365,6 +365,7 @@ def contact_patches(
     angle_deg: float = 10.0,
     min_gap_m: float = -1e-4,
     progress: bool | None = None,
+    groups: Sequence[int] | np.ndarray | None = None,
 ) -> list[ContactPatch]:
     """Patches where two bricks' faces face each other across at most ``max_gap_m``.
 
@@ -374,17 +375,30 @@ def contact_patches(
     each less what the pair's larger patches already cover, so no area is counted twice. Faces that overlap by
     more than ``-min_gap_m`` are not a joint. ``progress``: see
     :func:`calib_masonry.progress.progress` (None: a bar on a terminal, log lines otherwise).
+    ``groups``: a label per brick (its wall, say); if given, only bricks of different groups are
+    paired (each pair's patches are the same as without it: a pair's faces are matched on their
+    own), and only the bricks in such pairs have their faces found.
     """
     from ..progress import progress as _progress
 
     if not bricks:
         return []
     bar = _progress(total=3, desc="joint patches", unit="step", enabled=progress)
-    f = _planar_faces([b.solid for b in bricks])
-    bar.update()
     lo = np.array([b.solid.vertices.min(axis=0) for b in bricks]) - max_gap_m
     hi = np.array([b.solid.vertices.max(axis=0) for b in bricks]) + max_gap_m
     pairs = np.array(list(box_pairs(lo, hi, -1e-12)), dtype=np.int64).reshape(-1, 2)
+    if groups is not None:
+        g = np.asarray(groups)
+        pairs = pairs[g[pairs[:, 0]] != g[pairs[:, 1]]]
+        # the bricks in such pairs, in their order (so a pair's a and b keep their sides)
+        used = np.unique(pairs)
+        bricks = [bricks[k] for k in used.tolist()]
+        pairs = np.searchsorted(used, pairs)
+        if not bricks:
+            bar.close()
+            return []
+    f = _planar_faces([b.solid for b in bricks])
+    bar.update()
     # every face of a against every face of b, pair by pair (a's faces outer)
     na = np.diff(f.start)[pairs[:, 0]]
     nb = np.diff(f.start)[pairs[:, 1]]

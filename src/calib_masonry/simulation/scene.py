@@ -677,15 +677,31 @@ class SceneGeometry:
 MIN_SHARED_M = 0.01
 
 
+def _walls_on_threads(fn, walls: list) -> list:
+    """``[fn(w) for w in walls]``, two walls at a time: Qhull's Voronoi, the distance transform
+    and the rasters' array work let the other thread run (the geometry of an 8,190-brick tower:
+    43 s one wall after the other, 33 s so). What the threads use is imported here first (no
+    module is imported for the first time on a thread: tests/test_thread_imports.py)."""
+    import scipy.ndimage  # noqa: F401
+    import scipy.spatial  # noqa: F401
+    import shapely.ops  # noqa: F401
+
+    from .._threads import thread_map
+    from ..wall2d import dice  # noqa: F401
+
+    return thread_map(fn, walls, workers=2)
+
+
 def wall_segments(bricks: Sequence[Brick], reach: float) -> list[tuple]:
     """The straight pieces of every wall's joints (:func:`~calib_masonry.simulation.mortar.wall_joints`)
     as ``(a, b, P0, P1, n, wall)``: brick indices a < b, the piece's ends in wall metres (x, z)
     and its unit normal there, from a toward b."""
     rows = []
-    for w in sorted({b.wall for b in bricks}):
-        members = [i for i, b in enumerate(bricks) if b.wall == w]
+    walls = sorted({b.wall for b in bricks})
+    member_lists = [[i for i, b in enumerate(bricks) if b.wall == w] for w in walls]
+    joints = _walls_on_threads(lambda m: wall_joints([bricks[i].polygon_m for i in m], reach), member_lists)
+    for w, members, found in zip(walls, member_lists, joints):
         polys = [bricks[i].polygon_m for i in members]
-        found = wall_joints(polys, reach)
         if not found:
             continue
         seg = np.concatenate([sg for _, _, sg in found])
@@ -840,21 +856,29 @@ def scene_geometry(
     raise_if_stopped()
     several_walls = len(set(wall_of.tolist())) > 1  # a single wall has no corner joints to look for
     corner_patches = (
-        across(contact_patches(bricks, max_gap_m=max_gap_m, angle_deg=15.0), ids=True) if several_walls else []
+        across(contact_patches(bricks, max_gap_m=max_gap_m, angle_deg=15.0, groups=wall_of), ids=True)
+        if several_walls
+        else []
     )
     bonded = {(int(r[0]), int(r[1])) for r in segments} | {(min(p.a, p.b), max(p.a, p.b)) for p in corner_patches}
     outlines: list[np.ndarray | None] = [None] * len(bricks)
     labels = {}  # each wall's nearest-brick raster: the mortar cells' and the coverage's
-    for w in sorted({b.wall for b in bricks}):
+
+    def wall_cells(w: int) -> tuple[list[int], tuple | None, list | None]:
         raise_if_stopped()  # a stop request (SIGTERM) ends the work here, wall by wall and brick by brick
         members = [i for i, b in enumerate(bricks) if b.wall == w]
         polys = [bricks[i].polygon_m for i in members]
         if len(polys) < 2:
-            continue
-        labels[w] = nearest_labels(polys, reach, 0.005)
-        if mortar_fill:
-            for i, cell in zip(members, mortar_cells(polys, reach, pixel=0.005, labels=labels[w])):
-                outlines[i] = cell
+            return members, None, None
+        found = nearest_labels(polys, reach, 0.005)
+        return members, found, mortar_cells(polys, reach, pixel=0.005, labels=found) if mortar_fill else None
+
+    walls = sorted({b.wall for b in bricks})
+    for w, (members, found, cells) in zip(walls, _walls_on_threads(wall_cells, walls)):
+        if found is not None:
+            labels[w] = found
+        for i, cell in zip(members, cells or []):
+            outlines[i] = cell
 
     def make_body(i: int, outline: np.ndarray | None) -> Body:
         raise_if_stopped()
@@ -875,7 +899,8 @@ def scene_geometry(
             # so, overlap up to a joint's reach)
             cells = [_Solid(id=i, solid=Polyhedron(bd.vertices + bd.location, bd.faces)) for i, bd in enumerate(bodies)]
             corner_patches = across(
-                contact_patches(cells, max_gap_m=reach, angle_deg=10.0, min_gap_m=-max_gap_m), ids=False
+                contact_patches(cells, max_gap_m=reach, angle_deg=10.0, min_gap_m=-max_gap_m, groups=wall_of),
+                ids=False,
             )
             if ungrown:
                 # a stone left bare (its cell's hull would overlap a neighbour) faces its neighbours
@@ -883,7 +908,12 @@ def scene_geometry(
                 have = {(p.a, p.b) for p in corner_patches}
                 near = sorted(ungrown | {j for i, j in bonded if i in ungrown} | {i for i, j in bonded if j in ungrown})
                 extra = contact_patches(
-                    [cells[k] for k in near], max_gap_m=max_gap_m, angle_deg=15.0, min_gap_m=-max_gap_m, progress=False
+                    [cells[k] for k in near],
+                    max_gap_m=max_gap_m,
+                    angle_deg=15.0,
+                    min_gap_m=-max_gap_m,
+                    progress=False,
+                    groups=wall_of[near],
                 )
                 corner_patches += [
                     p for p in across(extra, ids=False) if (p.a in ungrown or p.b in ungrown) and (p.a, p.b) not in have

@@ -237,6 +237,42 @@ def _children(pid: int) -> list[int]:
 
 
 @pytest.mark.slow
+def test_sigterm_stops_build_and_its_geometry_process(tmp_path):
+    # build computes the simulation geometry in a process of its own (_worker.py): SIGTERM to the
+    # command while that runs stops both and writes nothing
+    import time
+
+    out = tmp_path / "model"
+    cmd = [sys.executable, "-m", "calib_masonry", "build", str(DATA / "paper_example" / "structure.toml")]
+    p = subprocess.Popen([*cmd, "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    kids: list[int] = []
+    for _ in range(3000):
+        kids = [k for k in _children(p.pid) if b"calib_masonry._worker" in _cmdline(k)]
+        if kids or p.poll() is not None:
+            break
+        time.sleep(0.01)
+    assert kids, "no geometry process was started"
+    time.sleep(0.5)  # into its work (the paper example's geometry takes about 6 s)
+    assert p.poll() is None, "the build ended before it could be killed; use a larger structure"
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 2 and "terminated; nothing was written" in err, err
+    assert not out.exists() and _staging(tmp_path) == []
+    for _ in range(100):
+        if not any(Path(f"/proc/{k}").exists() for k in kids):
+            break
+        time.sleep(0.05)
+    assert not any(Path(f"/proc/{k}").exists() for k in kids)
+
+
+def _cmdline(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
+
+
+@pytest.mark.slow
 def test_sigterm_stops_trace_refine_and_its_solver_process(tmp_path):
     # trace --refine solves in a forked process: SIGTERM to the command stops both, writes nothing
     import time

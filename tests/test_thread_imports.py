@@ -55,3 +55,28 @@ def test_threads_import_nothing(tmp_path):
     for command, got in result.items():
         assert got["rc"] == 0, (command, r.stderr[-3000:])
         assert got["off_main"] == [], f"{command}: imported on a worker thread first: {got['off_main'][:20]}"
+    # the command line's build computes the simulation geometry in a process of its own; the
+    # library's computes it in this one, its walls on two threads: in a fresh interpreter that
+    # does only that, nothing is imported first on those threads either
+    r = subprocess.run([sys.executable, "-c", GEOMETRY_CHILD, str(built)], capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    got = json.loads(r.stdout.split("RESULT ", 1)[1])
+    assert got["bodies"] > 0
+    assert got["off_main"] == [], f"geometry: imported on a worker thread first: {got['off_main'][:20]}"
+
+
+GEOMETRY_CHILD = r"""
+import json, sys, threading
+from calib_masonry.build_folder import read_build, simulation_geometry
+
+structure = read_build(sys.argv[1])
+log = []
+
+def hook(event, args):
+    if event == "import" and threading.current_thread() is not threading.main_thread():
+        log.append([threading.current_thread().name, args[0]])
+
+sys.addaudithook(hook)
+g = simulation_geometry(structure)
+print("RESULT " + json.dumps({"bodies": len(g.names), "off_main": log}))
+"""

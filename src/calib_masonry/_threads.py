@@ -10,13 +10,14 @@ the order in which the threads run: each piece of work is a pure function of its
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-__all__ = ["background", "cpu_count", "loop_lock", "thread_imap", "thread_map"]
+__all__ = ["background", "background_process", "cpu_count", "loop_lock", "thread_imap", "thread_map"]
 
 
 def cpu_count() -> int:
@@ -66,6 +67,108 @@ def background(fn: Callable, *args, **kwargs) -> _Background:
     """Start ``fn(*args, **kwargs)`` on a thread of its own; ``.result()`` waits for it, and so
     does leaving a ``with background(...)`` block, by an error or not."""
     return _Background(fn, args, kwargs)
+
+
+class _BackgroundProcess:
+    """``fn(*args)`` in ``python -m calib_masonry._worker`` (see that module), with
+    :class:`_Background`'s interface. Where the process cannot be started, or ends without a value
+    (killed, out of memory, or the function raised there), ``result()`` calls the function here:
+    an error then shows as it would, and a value is the one the process would have sent (the same
+    function of the same pickled inputs)."""
+
+    def __init__(self, fn: Callable, args: tuple) -> None:
+        import pickle
+        import subprocess
+        import sys
+
+        self._fn, self._args = fn, args
+        self._value: Any = None
+        self._done = False
+        self._reply: Any = None
+        self._proc: subprocess.Popen | None = None
+        try:
+            payload = pickle.dumps((fn, args), protocol=pickle.HIGHEST_PROTOCOL)
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "calib_masonry._worker"], stdin=subprocess.PIPE, stdout=subprocess.PIPE
+            )
+        except (OSError, pickle.PicklingError, TypeError, AttributeError):  # no process, or inputs it cannot take
+            self._proc = None
+            return
+        # the call is sent and the reply read on a thread: either is larger than a pipe holds
+        self._talker = threading.Thread(target=self._talk, args=(payload,), name="calib-masonry-worker", daemon=True)
+        self._talker.start()
+
+    def _talk(self, payload: bytes) -> None:
+        """Send the call and read the reply's bytes (unpickled by ``result()``, on the caller's
+        thread: this one touches no module and no array, only a pipe)."""
+        assert self._proc is not None and self._proc.stdin is not None and self._proc.stdout is not None
+        try:
+            self._proc.stdin.write(payload)
+            self._proc.stdin.flush()  # stdin stays open: the process ends when it closes
+            self._reply = self._proc.stdout.read()  # to end of file: the process leaves once it has sent
+        except Exception:  # noqa: BLE001 - no reply: result() computes here
+            self._reply = None
+
+    def _end(self) -> None:
+        """Close the process's stdin (it leaves at end of file) and make sure it is gone."""
+        import subprocess
+
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        with contextlib.suppress(OSError):
+            proc.stdin.close()  # type: ignore[union-attr]
+        try:
+            proc.wait(timeout=1.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        self._talker.join()
+        with contextlib.suppress(OSError):
+            proc.stdout.close()  # type: ignore[union-attr]
+
+    def result(self) -> Any:
+        """The function's value: the process's, or, if it sent none, computed here. A stop
+        request (:func:`calib_masonry.process.request_stop`) ends the wait with ``Terminated``."""
+        if not self._done:
+            import pickle
+
+            from .process import raise_if_stopped
+
+            if self._proc is not None:
+                while self._talker.is_alive():
+                    self._talker.join(0.1)
+                    raise_if_stopped()
+                self._end()
+            try:
+                reply = pickle.loads(self._reply) if self._reply else None
+            except Exception:  # noqa: BLE001 - cut short (the process was killed while sending)
+                reply = None
+            self._value = reply[1] if isinstance(reply, tuple) and reply[0] == "done" else self._fn(*self._args)
+            self._done = True
+        return self._value
+
+    def wait(self) -> None:
+        with contextlib.suppress(Exception):
+            self.result()
+
+    def __enter__(self) -> _BackgroundProcess:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        """However the block ends, the process is gone after it (killed if it still works: the
+        block ended by an error or a stop before it needed the value)."""
+        if self._proc is not None and self._proc.poll() is None and not self._done:
+            self._proc.kill()
+        self._end()
+
+
+def background_process(fn: Callable, *args) -> _BackgroundProcess:
+    """Start ``fn(*args)`` in a process of its own (a fresh interpreter; ``fn`` and ``args`` are
+    pickled, ``fn`` by its module and name): for pure-Python work that would hold the GIL against
+    the caller's thread. ``.result()`` waits for its value; leaving a ``with`` block ends the
+    process. See :class:`_BackgroundProcess` for what happens when no process can do it."""
+    return _BackgroundProcess(fn, args)
 
 
 def thread_imap(fn: Callable, items: Iterable, *, workers: int | None = None, name: str = "work") -> Iterator:

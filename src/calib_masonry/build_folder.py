@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ._threads import background
+from ._threads import background, background_process
 from .build3d.assemble import Structure3D
 from .build3d.contacts import max_interpenetration
 from .build3d.export import bricks_from_json, bricks_json_bytes, export_mesh, plot_model, plot_walls, write_bricks_json
@@ -161,8 +161,10 @@ def build_to_folder(
     progress: bool | None = None,
     simulation_geometry: bool = True,
     overwrite: bool = False,
+    geometry_process: bool = False,
 ) -> dict:
-    """:func:`build` and :func:`write_build`: what ``calib-masonry build`` calls."""
+    """:func:`build` and :func:`write_build`: what ``calib-masonry build`` calls (with
+    ``geometry_process``: see :func:`write_build`)."""
     check_output(out, command="build", overwrite=overwrite)  # before the work, not after it
     from .pipeline import build
 
@@ -172,6 +174,7 @@ def build_to_folder(
         figures=figures,
         simulation_geometry=simulation_geometry,
         overwrite=overwrite,
+        geometry_process=geometry_process,
     )
 
 
@@ -212,6 +215,7 @@ def write_build(
     simulation_geometry: bool = True,
     overwrite: bool = False,
     blend: bool = True,
+    geometry_process: bool = False,
 ) -> dict:
     """Write a build into the folder ``out`` (all or nothing, replacing ``out`` as a whole: an
     existing ``out`` must be an earlier build or empty, unless ``overwrite``; the structure's own
@@ -219,24 +223,25 @@ def write_build(
     ``summary.json``, ``material.toml`` (the structure's [material], if it has one), figures, the
     photo walls' calibrations and (with ``simulation_geometry``) the
     bodies and contact patches ``simulate`` starts from (``sim_geometry.npz``), computed from the
-    structure in memory. Returns the summary."""
+    structure in memory, on a thread while the rest is written, or (``geometry_process``: what the
+    command line asks for) in a process of its own (:mod:`calib_masonry._worker`; the same
+    geometry, without the GIL between it and the writing: an 8,190-brick tower's build took 50 s
+    so, 69 s on a thread). Returns the summary."""
     spec = result.spec
     s = result.structure
-    t0 = time.perf_counter()
-    inter = max_interpenetration(s.bricks)
-    result.seconds["interpenetration_check"] = time.perf_counter() - t0
     inputs = [spec.source, *(w.mask for w in spec.walls), *(w.image for w in spec.walls)]
     want_geometry = simulation_geometry and bool(s.bricks)
-    # the geometry's thread imports nothing: its modules (simulation.scene, mortar) are imported
-    # at this module's top, not on that thread while this one imports bpy, trimesh's exporters and
-    # matplotlib (two threads importing modules of one package at once can deadlock in CPython
-    # 3.11's import locks, gh-83065: a CI run hung in the demo's build, where this was the one
-    # place two threads imported at once)
-    if want_geometry and blend:
-        # and Blender loaded before that thread starts: loading bpy's libraries (USD's static
-        # initialisers take the GIL while the loader's lock is held) beside a thread in numpy
-        # (whose temporaries' elision asks the loader, dladdr) deadlocked a build of a 1000 px/m
-        # stone wall (both threads' stacks seen in gdb)
+    if want_geometry and blend and not geometry_process:
+        # the geometry's thread imports nothing: its modules (simulation.scene, mortar) are
+        # imported at this module's top, not on that thread while this one imports bpy, trimesh's
+        # exporters and matplotlib (two threads importing modules of one package at once can
+        # deadlock in CPython 3.11's import locks, gh-83065: a CI run hung in the demo's build,
+        # where this was the one place two threads imported at once); and Blender is loaded
+        # before that thread starts: loading bpy's libraries (USD's static initialisers take the
+        # GIL while the loader's lock is held) beside a thread in numpy (whose temporaries'
+        # elision asks the loader, dladdr) deadlocked a build of a 1000 px/m stone wall (both
+        # threads' stacks seen in gdb). A process has neither problem (its helper thread here
+        # only moves bytes through a pipe).
         from .errors import BackendMissing
         from .simulation.blender import require_bpy
 
@@ -245,12 +250,16 @@ def write_build(
         except BackendMissing:
             pass
     # the simulation's bodies and contact patches, computed once here rather than in every
-    # `simulate` run of this model, on a second core while the meshes, model.blend and figures are
-    # written (joined however the block ends)
+    # `simulate` run of this model, on a second core while the meshes, model.blend and figures
+    # are written (joined, or the process ended, however the block ends)
+    job = background_process if geometry_process else background
     with (
         staged_output(out, "build", overwrite=overwrite, keep=inputs) as stage,
-        background(_timed_geometry, s) if want_geometry else contextlib.nullcontext() as geometry,
+        job(_timed_geometry, s) if want_geometry else contextlib.nullcontext() as geometry,
     ):
+        t0 = time.perf_counter()
+        inter = max_interpenetration(s.bricks)
+        result.seconds["interpenetration_check"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         export_mesh(s, stage / "model.stl")
         export_mesh(s, stage / "model.glb")  # one node per brick: opens in Blender, three.js, any glTF viewer

@@ -106,3 +106,14 @@ def test_background_process_leaves_when_its_caller_dies():
     r = subprocess.run([sys.executable, "-c", parent], capture_output=True, text=True, timeout=60)
     assert r.returncode == -9, r.stderr
     assert _gone(int(r.stdout.split()[0]))  # its stdin closed with the caller: it left on its own
+
+
+def test_background_process_that_ends_without_a_result_is_computed_here_with_a_warning(monkeypatch):
+    from calib_masonry._threads import _BackgroundProcess, background_process
+
+    # a process that reads a little and dies (as one killed for its memory would)
+    crash = ("-c", "import os, sys; sys.stdin.buffer.read(1); os._exit(3)")
+    monkeypatch.setattr(_BackgroundProcess, "command", crash)
+    a = np.arange(5.0)
+    with pytest.warns(RuntimeWarning, match=r"ended without a result \(exit code 3\)"):
+        assert background_process(np.multiply, a, 2.0).result().tolist() == (2 * a).tolist()

@@ -76,12 +76,16 @@ class _BackgroundProcess:
     an error then shows as it would, and a value is the one the process would have sent (the same
     function of the same pickled inputs)."""
 
+    #: the process's command (a test stands a failing one in)
+    command: tuple[str, ...] = ("-m", "calib_masonry._worker")
+
     def __init__(self, fn: Callable, args: tuple) -> None:
         import pickle
         import subprocess
         import sys
 
         self._fn, self._args = fn, args
+        self._code: int | None = None
         self._value: Any = None
         self._done = False
         self._reply: Any = None
@@ -89,7 +93,7 @@ class _BackgroundProcess:
         try:
             payload = pickle.dumps((fn, args), protocol=pickle.HIGHEST_PROTOCOL)
             self._proc = subprocess.Popen(
-                [sys.executable, "-m", "calib_masonry._worker"], stdin=subprocess.PIPE, stdout=subprocess.PIPE
+                [sys.executable, *self.command], stdin=subprocess.PIPE, stdout=subprocess.PIPE
             )
         except (OSError, pickle.PicklingError, TypeError, AttributeError):  # no process, or inputs it cannot take
             self._proc = None
@@ -126,6 +130,7 @@ class _BackgroundProcess:
         self._talker.join()
         with contextlib.suppress(OSError):
             proc.stdout.close()  # type: ignore[union-attr]
+        self._code = proc.returncode
 
     def result(self) -> Any:
         """The function's value: the process's, or, if it sent none, computed here. A stop
@@ -135,7 +140,8 @@ class _BackgroundProcess:
 
             from .process import raise_if_stopped
 
-            if self._proc is not None:
+            started = self._proc is not None
+            if started:
                 while self._talker.is_alive():
                     self._talker.join(0.1)
                     raise_if_stopped()
@@ -144,6 +150,16 @@ class _BackgroundProcess:
                 reply = pickle.loads(self._reply) if self._reply else None
             except Exception:  # noqa: BLE001 - cut short (the process was killed while sending)
                 reply = None
+            if started and not isinstance(reply, tuple):
+                import warnings
+
+                name = getattr(self._fn, "__qualname__", "the work")
+                warnings.warn(
+                    f"the process computing {name} ended without a result (exit code {self._code}); "
+                    "computing it here instead",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
             self._value = reply[1] if isinstance(reply, tuple) and reply[0] == "done" else self._fn(*self._args)
             self._done = True
         return self._value

@@ -338,3 +338,25 @@ def test_no_solver_process_where_jax_is_loaded_or_threads_run():
 
     with refine.solver_process():
         assert refine._HELPER is None  # this test process has JAX loaded
+
+
+def test_a_cache_size_that_is_no_size_is_named_once_and_the_default_used(monkeypatch):
+    import warnings
+
+    from calib_masonry import _jax
+
+    monkeypatch.setattr(_jax, "_WARNED_LIMIT", set())
+    for raw, want in (("1024", 1024.0), ("0", 0.0), ("", _jax.CACHE_MAX_MB)):
+        monkeypatch.setenv("CALIB_MASONRY_CACHE_MB", raw)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # a good value warns of nothing
+            assert _jax.cache_limit_mb() == want
+    monkeypatch.delenv("CALIB_MASONRY_CACHE_MB")
+    assert _jax.cache_limit_mb() == _jax.CACHE_MAX_MB
+    for raw in ("1 GB", "-5", "nan"):
+        monkeypatch.setenv("CALIB_MASONRY_CACHE_MB", raw)
+        with pytest.warns(RuntimeWarning, match=r"CALIB_MASONRY_CACHE_MB=.* is not a size in megabytes"):
+            assert _jax.cache_limit_mb() == _jax.CACHE_MAX_MB
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # named once
+            assert _jax.cache_limit_mb() == _jax.CACHE_MAX_MB

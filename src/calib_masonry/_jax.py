@@ -92,6 +92,37 @@ def exported(name: str, fn, args, *, sources=(), settings=()):
 CACHE_MAX_MB = 512.0
 
 
+_WARNED_LIMIT: set[str] = set()
+
+
+def cache_limit_mb() -> float:
+    """``$CALIB_MASONRY_CACHE_MB`` (megabytes, 0 or more: 0 keeps only the file just written), or
+    :data:`CACHE_MAX_MB` when it is unset; a value that is not such a number is named in a
+    warning (once) and the default used."""
+    import math
+    import os
+    import warnings
+
+    raw = os.environ.get("CALIB_MASONRY_CACHE_MB")
+    if raw is None or raw.strip() == "":
+        return CACHE_MAX_MB
+    try:
+        value = float(raw)
+    except ValueError:
+        value = math.nan
+    if math.isfinite(value) and value >= 0:
+        return value
+    if raw not in _WARNED_LIMIT:
+        _WARNED_LIMIT.add(raw)
+        warnings.warn(
+            f"CALIB_MASONRY_CACHE_MB={raw!r} is not a size in megabytes (0 or more); the cache "
+            f"folder is kept under {CACHE_MAX_MB:g} MB instead: set it to a number such as 1024, or unset it",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    return CACHE_MAX_MB
+
+
 def tidy(folder, max_mb: float | None = None, *, keep=()) -> int:
     """Keep the cache ``folder`` under ``max_mb`` megabytes (default ``$CALIB_MASONRY_CACHE_MB`` or
     :data:`CACHE_MAX_MB`): past it, delete the files used longest ago (by modification time: a file
@@ -106,10 +137,7 @@ def tidy(folder, max_mb: float | None = None, *, keep=()) -> int:
     import time
 
     if max_mb is None:
-        try:
-            max_mb = float(os.environ.get("CALIB_MASONRY_CACHE_MB", CACHE_MAX_MB))
-        except ValueError:
-            max_mb = CACHE_MAX_MB
+        max_mb = cache_limit_mb()
     now = time.time()
     keep = {str(k) for k in keep}
     files, total, deleted = [], 0, 0

@@ -1,4 +1,5 @@
-"""Work on a second core by threads: NumPy's large array operations and SciPy's ndimage filters,
+"""Work on a second core by threads (and, for pure-Python work that would hold the GIL, by a process
+of its own: :func:`background_process`): NumPy's large array operations and SciPy's ndimage filters,
 interpolation and labelling release the GIL (two threads of ``gaussian_filter``,
 ``map_coordinates`` or ``grey_opening`` ran 1.7-1.9x faster than one after the other on this
 project's 2-core machines, measured), so independent image operations overlap.
@@ -99,17 +100,18 @@ class _BackgroundProcess:
             self._proc = None
             return
         # the call is sent and the reply read on a thread: either is larger than a pipe holds
-        self._talker = threading.Thread(target=self._talk, args=(payload,), name="calib-masonry-worker", daemon=True)
+        self._talker = threading.Thread(
+            target=self._talk, args=(self._proc, payload), name="calib-masonry-worker", daemon=True
+        )
         self._talker.start()
 
-    def _talk(self, payload: bytes) -> None:
+    def _talk(self, proc, payload: bytes) -> None:
         """Send the call and read the reply's bytes (unpickled by ``result()``, on the caller's
         thread: this one touches no module and no array, only a pipe)."""
-        assert self._proc is not None and self._proc.stdin is not None and self._proc.stdout is not None
         try:
-            self._proc.stdin.write(payload)
-            self._proc.stdin.flush()  # stdin stays open: the process ends when it closes
-            self._reply = self._proc.stdout.read()  # to end of file: the process leaves once it has sent
+            proc.stdin.write(payload)
+            proc.stdin.flush()  # stdin stays open: the process ends when it closes
+            self._reply = proc.stdout.read()  # to end of file: the process leaves once it has sent
         except Exception:  # noqa: BLE001 - no reply: result() computes here
             self._reply = None
 

@@ -262,8 +262,9 @@ def test_no_subprocess_in_the_library():
     # workers' own processes, on their event loops (their main threads): nothing in src/ starts a
     # process of its own, but the refinement's solver process, which only the command line asks
     # for (`trace --refine`: JAX loads there while the command traces), and only around a trace
-    # and the build's geometry process (_threads.background_process), which again only the command
-    # line asks for (`build`, `demo`: geometry_process=True)
+    # and the build's processes (_threads.background_process: half of the mask walls' traces, the
+    # simulation geometry), which again only the command line asks for (`build`, `demo`:
+    # processes=True)
     src = ROOT / "src" / "calib_masonry"
     refine, threads, cli = src / "wall2d" / "refine.py", src / "_threads.py", src / "cli.py"
     allowed = {refine: {"multiprocessing"}, threads: {"subprocess", "Popen"}}
@@ -273,17 +274,17 @@ def test_no_subprocess_in_the_library():
             assert word not in text or word in allowed.get(path, ()), (path, word)
         if path not in (refine, cli):
             assert "solver_process(" not in text, path
-        if path not in (threads, src / "build_folder.py"):
+        if path not in (threads, src / "build_folder.py", src / "pipeline.py"):
             assert "background_process" not in text, path
     assert "solver_process(refine" in cli.read_text()
     assert "if geometry_process else background" in (src / "build_folder.py").read_text()
-    assert cli.read_text().count("geometry_process=True") == 2  # build and demo
+    assert cli.read_text().count("processes=True") == 2  # build and demo
     import inspect
 
-    from calib_masonry import build_to_folder, write_build
+    from calib_masonry import build, build_to_folder, write_build
 
-    for fn in (write_build, build_to_folder):
-        assert inspect.signature(fn).parameters["geometry_process"].default is False
+    for fn, name in ((write_build, "geometry_process"), (build_to_folder, "processes"), (build, "trace_process")):
+        assert inspect.signature(fn).parameters[name].default is False
 
 
 def test_build_writes_the_simulation_geometry_without_reading_what_it_wrote(built, tmp_path, monkeypatch):

@@ -237,9 +237,9 @@ def _children(pid: int) -> list[int]:
 
 
 @pytest.mark.slow
-def test_sigterm_stops_build_and_its_geometry_process(tmp_path):
-    # build computes the simulation geometry in a process of its own (_worker.py): SIGTERM to the
-    # command while that runs stops both and writes nothing
+def test_sigterm_stops_build_and_its_worker_processes(tmp_path):
+    # build traces half of its walls, and computes the simulation geometry, in processes of their
+    # own (_worker.py): SIGTERM to the command while one runs stops all and writes nothing
     import time
 
     out = tmp_path / "model"
@@ -251,8 +251,8 @@ def test_sigterm_stops_build_and_its_geometry_process(tmp_path):
         if kids or p.poll() is not None:
             break
         time.sleep(0.01)
-    assert kids, "no geometry process was started"
-    time.sleep(0.5)  # into its work (the paper example's geometry takes about 6 s)
+    assert kids, "no worker process was started"
+    time.sleep(0.5)  # into its work (the paper example's trace and geometry take seconds)
     assert p.poll() is None, "the build ended before it could be killed; use a larger structure"
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=30)

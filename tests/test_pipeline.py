@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -126,9 +127,27 @@ def test_build_is_deterministic(make_scenario, tmp_path):
     data = make_scenario([(2.0, 1.0, 0), (1.2, 1.0, 90), (2.0, 1.0, 180), (1.2, 1.0, 270)])
     spec = load_structure(data / "structure.toml")
     build_to_folder(spec, tmp_path / "a", figures=False, progress=False)
-    build_to_folder(spec, tmp_path / "b", figures=False, progress=False)
-    for f in ("model.stl", "bricks.json"):
+    # the command line's way: half of the walls traced, and the simulation geometry computed, in
+    # processes of their own; the same files
+    build_to_folder(spec, tmp_path / "b", figures=False, progress=False, processes=True)
+    for f in ("model.stl", "bricks.json", "sim_geometry.npz"):
         assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+
+
+def test_a_bad_mask_traced_in_the_other_process_is_named_as_here(make_scenario, tmp_path):
+    from calib_masonry.errors import InputError
+    from calib_masonry.pipeline import build
+
+    data = make_scenario([(2.0, 1.0, 0), (1.2, 1.0, 90), (2.0, 1.0, 180), (1.2, 1.0, 270)])
+    spec = load_structure(data / "structure.toml")
+    bad = spec.walls[1]  # the first wall the command line traces in the other process
+    Path(bad.mask).write_bytes(b"not an image")
+    errors = []
+    for flag in (False, True):
+        with pytest.raises(InputError) as exc:
+            build(spec, progress=False, trace_process=flag)
+        errors.append(str(exc.value))
+    assert errors[0] == errors[1] and str(bad.mask) in errors[1]
 
 
 @pytest.mark.parametrize("seed", [11, 12])

@@ -161,20 +161,21 @@ def build_to_folder(
     progress: bool | None = None,
     simulation_geometry: bool = True,
     overwrite: bool = False,
-    geometry_process: bool = False,
+    processes: bool = False,
 ) -> dict:
-    """:func:`build` and :func:`write_build`: what ``calib-masonry build`` calls (with
-    ``geometry_process``: see :func:`write_build`)."""
+    """:func:`build` and :func:`write_build`: what ``calib-masonry build`` calls (``processes``:
+    half of the mask walls traced, and the simulation geometry computed, in processes of their
+    own: ``trace_process`` of :func:`build`, ``geometry_process`` of :func:`write_build`)."""
     check_output(out, command="build", overwrite=overwrite)  # before the work, not after it
     from .pipeline import build
 
     return write_build(
-        build(spec, progress=progress),
+        build(spec, progress=progress, trace_process=processes),
         out,
         figures=figures,
         simulation_geometry=simulation_geometry,
         overwrite=overwrite,
-        geometry_process=geometry_process,
+        geometry_process=processes,
     )
 
 

@@ -72,9 +72,7 @@ def _cmd_build(args) -> int:
     spec = load_structure(args.structure)
     if args.refine:
         spec = replace(spec, refine=True, walls=tuple(replace(w, refine=True) for w in spec.walls))
-    summary = build_to_folder(
-        spec, args.out, figures=not args.no_figures, overwrite=args.overwrite, geometry_process=True
-    )
+    summary = build_to_folder(spec, args.out, figures=not args.no_figures, overwrite=args.overwrite, processes=True)
     _print_build(summary, args.out)
     return 0
 
@@ -185,7 +183,7 @@ def demo(out: str | Path, data: str | Path | None = None, *, overwrite: bool = F
     data = find_demo_data(data)
     check_output(out, command="build", overwrite=overwrite)
     summary = build_to_folder(
-        load_structure(data / "structure.toml"), out, figures=True, overwrite=overwrite, geometry_process=True
+        load_structure(data / "structure.toml"), out, figures=True, overwrite=overwrite, processes=True
     )
     metrics = compare_dirs(out, data / "truth")
     write_json(Path(out) / "compare.json", metrics)

@@ -72,7 +72,7 @@ def background(fn: Callable, *args, **kwargs) -> _Background:
 
 class _BackgroundProcess:
     """``fn(*args)`` in ``python -m calib_masonry._worker`` (see that module), with
-    :class:`_Background`'s interface. Where the process cannot be started, or ends without a value
+    :class:`_Background`'s ``result()`` and ``with`` block. Where the process cannot be started, or ends without a value
     (killed, out of memory, or the function raised there), ``result()`` calls the function here:
     an error then shows as it would, and a value is the one the process would have sent (the same
     function of the same pickled inputs)."""
@@ -165,10 +165,6 @@ class _BackgroundProcess:
             self._value = reply[1] if isinstance(reply, tuple) and reply[0] == "done" else self._fn(*self._args)
             self._done = True
         return self._value
-
-    def wait(self) -> None:
-        with contextlib.suppress(Exception):
-            self.result()
 
     def __enter__(self) -> _BackgroundProcess:
         return self

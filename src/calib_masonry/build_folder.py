@@ -226,8 +226,8 @@ def write_build(
     bodies and contact patches ``simulate`` starts from (``sim_geometry.npz``), computed from the
     structure in memory, on a thread while the rest is written, or (``geometry_process``: what the
     command line asks for) in a process of its own (:mod:`calib_masonry._worker`; the same
-    geometry, without the GIL between it and the writing: an 8,190-brick tower's build took 50 s
-    so, 69 s on a thread). Returns the summary."""
+    geometry, without the GIL between it and the writing: an 8,190-brick tower's build took 49 s
+    so, 58 s with the thread, in the same run). Returns the summary."""
     spec = result.spec
     s = result.structure
     inputs = [spec.source, *(w.mask for w in spec.walls), *(w.image for w in spec.walls)]

@@ -845,3 +845,33 @@ def test_an_end_face_in_the_outline_is_cut_at_the_crease():
     xz = back[:, :2] / back[:, 2:3]
     assert xz[[0, 3], 0] == pytest.approx(crease, abs=1e-6) and xz[[1, 2], 0] == pytest.approx(w, abs=1e-6)
     assert front_face_ends(result(1.0), segments) is None  # in front of the wall: no end face to see
+
+
+def test_a_shaded_rim_is_carried_but_a_lighter_cast_shadow_at_the_foot_is_not():
+    """Below a wall's base the lightness falls gradually into shade (a laboratory wall on its
+    footing): the base moves to where the ramp ends, and the corners' sigma takes the move on. A
+    dark brick wall whose cast shadow on the ground is lighter than the wall and brightens away
+    from it (Blender renders: the base was carried 42 px onto the shadow's far edge, H 22 % short
+    and its sigma 76 %) keeps its base: lighter beyond the side is no rim of the wall."""
+    from calib_masonry.calibrate.lines import carry_soft_sides
+
+    rows, cols = 600, 300
+    rng = np.random.default_rng(3)
+    y0, y1, x0, x1 = 50, 450, 60, 240  # the wall: rows y0..y1, columns x0..x1
+    quad = np.array([[x0, y1], [x1, y1], [x1, y0], [x0, y0]], dtype=float) - 0.5
+
+    def photo(below):  # a textured wall on the sky, with the profile ``below`` under its base
+        g = np.full((rows, cols), 0.8, dtype=np.float32)
+        g[y0:y1, x0:x1] = 0.3 + 0.08 * rng.standard_normal((y1 - y0, x1 - x0))
+        g[y1:, x0 - 40 : x1 + 40] = below[: rows - y1, None]
+        return np.repeat(g[..., None], 3, axis=-1)
+
+    d = np.arange(rows - y1, dtype=np.float32)
+    shade = np.where(d < 15, 0.3 - 0.2 * d / 15, 0.1)  # the wall's base fading into shade over 15 px
+    moved_quad, moved = carry_soft_sides(photo(shade), quad)
+    assert 12.0 < moved_quad[0, 1] - quad[0, 1] < 17.0 and 12.0 < moved[0] < 17.0
+    assert np.allclose(moved_quad[2:], quad[2:], atol=0.5)  # the top and the sides stay
+
+    cast = np.where(d < 12, 0.38 + 0.004 * d, 0.7).astype(np.float32)  # a lighter shadow, then lit ground
+    kept, moved = carry_soft_sides(photo(cast), quad)
+    assert np.allclose(kept, quad, atol=0.5) and np.all(moved == 0.0)

@@ -472,8 +472,9 @@ def _ramp_end(prof: np.ndarray, offs: np.ndarray) -> float:
     crisp there): see :func:`carry_soft_sides`."""
     i0 = int(np.argmin(np.abs(offs)))
     inside = float(prof[max(0, i0 - 2)])
-    sign = 1.0 if inside > prof[min(len(prof) - 1, i0 + 2)] else -1.0  # the fall's direction, outward
-    fall = sign * (inside - prof)  # grows outward while lightness falls away from the wall's
+    if inside <= prof[min(len(prof) - 1, i0 + 2)]:
+        return 0.0  # lighter beyond the side: no shaded rim of the wall (see SOFT_MIN_FALL)
+    fall = inside - prof  # grows outward while lightness falls away from the wall's
     k = i0
     run_max = fall[i0]
     for j in range(i0 + 1, len(fall)):
@@ -500,8 +501,12 @@ def carry_soft_sides(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> tup
     its footing (measured on the laboratory photos: 10-20 px ramps at the top and the base, which
     the database's height includes). Across a side, the lightness profile (the photo blurred by a
     pixel, averaged over each quarter of the side's middle 70 %) is followed outward from the side
-    while it keeps falling (or rising) towards its extreme within :data:`SOFT_REACH` of the wall's
-    extent; a quarter is soft when its own step (2 px either side) is less than
+    while it keeps falling towards its least within :data:`SOFT_REACH` of the wall's extent. Only a
+    fall: a wall's rim in shade is darker than its face, while what is lighter beyond a side is not
+    the wall's (a dark brick wall's cast shadow on a pale ground, lighter than the wall and
+    brightening away from it, was carried across: Blender-rendered walls lost 10-22 % of their
+    height to a base moved 42 px onto the shadow's far edge). A quarter is soft when its own step
+    (2 px either side) is less than
     :data:`SOFT_STEP_SHARE` of the whole fall. A side soft in at least three quarters moves to
     where their falls end (the profile within 10 % of its extreme; the median of the quarters). A
     crisp side stays, also one that a lens bends (each quarter steps at once, at its own offset,

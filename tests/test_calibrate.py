@@ -846,6 +846,37 @@ def test_an_end_face_in_the_outline_is_cut_at_the_crease():
     assert xz[[0, 3], 0] == pytest.approx(crease, abs=1e-6) and xz[[1, 2], 0] == pytest.approx(w, abs=1e-6)
     assert front_face_ends(result(1.0), segments) is None  # in front of the wall: no end face to see
 
+    # an end face too narrow for its courses to be found (a yaw of 10-20 degrees): its crease is
+    # found by its shading, where the front face's bricks (head joints, grain) step elsewhere
+    cols, rows = 2800, size[1]  # the photo drawn wider than the fit's frame: the wall lies at x 1700-2600 px
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    q = np.c_[xx.ravel(), yy.ravel(), np.ones(xx.size)] @ np.linalg.inv(res.image_from_wall).T
+    wx, wz = q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]
+    rng = np.random.default_rng(7)
+    course = np.floor(wz / 0.075)
+    joint = ((wx - 0.05 - 0.1125 * (course % 2)) % 0.225 < 0.01) | (wz % 0.075 < 0.01)  # perpends in line
+    face = np.where(joint, 0.5, 0.3 + 0.05 * rng.standard_normal(xx.size))
+    on = (wx >= 0.0) & (wx <= w) & (wz >= 0.0) & (wz <= h)
+
+    # stack bond: a perpend at the same x all the way up, a line that steps in and out again
+    stack = np.where(((wx - 0.05) % 0.225 < 0.01) | (wz % 0.075 < 0.01), 0.5, face)
+
+    def photo(end_face: bool, bricks: np.ndarray = face) -> np.ndarray:
+        g = np.where(on, bricks, 0.8)
+        if end_face:
+            g = np.where(on & (wx < crease), 0.45, g)
+        return np.repeat(g.reshape(rows, cols, 1), 3, axis=-1).astype(np.float32)
+
+    found = front_face_ends(res, np.zeros((0, 4)), photo(True))
+    assert found is not None and found[1] == ["left"]
+    back = np.c_[found[0], np.ones(4)] @ np.linalg.inv(res.image_from_wall).T
+    xz = back[:, :2] / back[:, 2:3]
+    px_per_m = np.linalg.norm(np.diff(project(res.image_from_wall, np.array([[0.0, h / 2], [1.0, h / 2]])), axis=0))
+    assert np.abs(xz[[0, 3], 0] - crease).max() * px_per_m < 1.5 and xz[[1, 2], 0] == pytest.approx(w, abs=1e-6)
+    assert front_face_ends(res, np.zeros((0, 4)), photo(False)) is None  # bricks to the end: nothing moves
+    assert front_face_ends(res, np.zeros((0, 4)), photo(False, stack)) is None
+    assert front_face_ends(result(1.0), np.zeros((0, 4)), photo(True)) is None  # no end face to see from here
+
 
 def test_a_shaded_rim_is_carried_but_a_lighter_cast_shadow_at_the_foot_is_not():
     """Below a wall's base the lightness falls gradually into shade (a laboratory wall on its

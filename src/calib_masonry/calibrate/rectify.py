@@ -456,7 +456,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     # a wall's end face (its thickness, seen at a yaw) taken into the outline: the sides moved in
     # to the front face's crease, found from the end face's own courses
     if detection is not None and detection.segments is not None and config.corners_px is None:
-        found = front_face_ends(result, detection.segments)
+        found = front_face_ends(result, detection.segments, photo.rgb)
         if found is not None:
             corners = found[0]
             detection = replace(detection, corners_px=corners)
@@ -533,22 +533,45 @@ END_FACE_SEGMENTS = 4
 END_FACE_SPAN = 0.3
 
 
-def front_face_ends(result, segments: np.ndarray) -> tuple[np.ndarray, list[str]] | None:
+def front_face_ends(result, segments: np.ndarray, rgb: np.ndarray | None = None) -> tuple[np.ndarray, list[str]] | None:
     """The corners moved in to the front face's ends where the outline took a wall's end face (its
     thickness, seen at a yaw) into the wall: the end face's courses are segments pointing at the
     vanishing point of the wall's normal (not at the bed or head joints'), only at an end the camera
     stands beyond, and their inner ends lie on the crease between the two faces, on the wall's plane, so the fitted camera maps them to the
-    crease's x exactly. ``segments`` ``(n, 4)``: the photo's segments inside the outline. Returns
-    the four corners (photo pixels) and the ends moved (``"left"``, ``"right"``), or None.
+    crease's x exactly. ``segments`` ``(n, 4)``: the photo's segments inside the outline. Where an
+    end face is too narrow for its courses to be found (a few pixels at a yaw of 10-20 degrees) and
+    the photo ``rgb`` is given, the crease is found by its shading instead
+    (:func:`crease_by_shading`). Returns the four corners (photo pixels) and the ends moved
+    (``"left"``, ``"right"``), or None.
 
     Measured on tall walls rendered by Blender as 0.4 m thick boxes: W came out 2.3-7.9 % wide
     with the end face in the outline (experiments/bench_tall_walls_blender.py)."""
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    w, ht = result.width_m, result.height_m
+    x_new = [(0.0, 0.0), (w, w)]  # each end's x at the base and at the top
+    moved: list[str] = []
+    courses = _ends_by_courses(result, seg) if len(seg) >= END_FACE_SEGMENTS else {}
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        crease = (courses[side],) * 2 if side in courses else None
+        if crease is None and rgb is not None:
+            crease = crease_by_shading(rgb, result, sign)
+        if crease is None:
+            continue
+        x_new[0 if sign > 0 else 1] = crease if sign > 0 else (w - crease[0], w - crease[1])
+        moved.append(side)
+    if not moved:
+        return None
+    (x0, x0t), (x1, x1t) = x_new
+    corners = result.photo_from_wall(np.array([[x0, 0.0], [x1, 0.0], [x1t, ht], [x0t, ht]]))
+    return corners, moved
+
+
+def _ends_by_courses(result, seg: np.ndarray) -> dict[str, float]:
+    """``front_face_ends``'s first cue: per end the camera stands beyond, the crease's distance in
+    from that end (m) where the end face's courses give it."""
     from .camera import intrinsics, principal_point, wall_from_camera_rotation
     from .segments import dist_to_vp
 
-    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
-    if len(seg) < END_FACE_SEGMENTS:
-        return None
     ideal = result.undistort(seg.reshape(-1, 2)).reshape(-1, 4)
     length = np.hypot(ideal[:, 2] - ideal[:, 0], ideal[:, 3] - ideal[:, 1])
     p = result.params
@@ -564,14 +587,13 @@ def front_face_ends(result, segments: np.ndarray) -> tuple[np.ndarray, list[str]
         & (dist_to_vp(ideal, h[:, 1]) > tol)
     )
     if course.sum() < END_FACE_SEGMENTS:
-        return None
+        return {}
     inv = np.linalg.inv(h)
     ends = ideal[course].reshape(-1, 2)
     q = np.c_[ends, np.ones(len(ends))] @ inv.T
     xz = (q[:, :2] / q[:, 2:3]).reshape(-1, 2, 2)  # (segments, 2 ends, x z)
     w, ht = result.width_m, result.height_m
-    x_new = [0.0, w]
-    moved = []
+    found = {}
     cx = float(p[4])  # the camera's x along the wall: an end face shows only to a camera beyond that end
     for side, sign in (("left", 1.0), ("right", -1.0)):
         if (sign > 0 and cx >= 0.0) or (sign < 0 and cx <= w):
@@ -589,13 +611,93 @@ def front_face_ends(result, segments: np.ndarray) -> tuple[np.ndarray, list[str]
         spread = float(np.median(np.abs(inner - crease)))
         if crease < 0.015 * w or spread > 0.02 * w:
             continue
-        x_new[0 if sign > 0 else 1] = crease if sign > 0 else w - crease
-        moved.append(side)
-    if not moved:
+        found[side] = crease
+    return found
+
+
+#: the thickest end face looked for by its shading (m): a single-wythe wall's is under a metre
+END_FACE_MAX_THICKNESS_M = 1.0
+#: the crease must stand out of the band's texture by this factor (its step of colour against the
+#: band's median step), and hold in this many of the eight height slabs
+CREASE_CONTRAST = 3.0
+CREASE_SLABS = 6
+
+
+def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, float] | None:
+    """The crease between a wall's front face and its end face, found by its shading: its distance
+    (m, on the wall's plane) in from the left (``sign`` 1) or right (-1) end of the fitted outline,
+    at the base and at the top (the same: a crease that slants across the outline's side was tried
+    and took a texture edge for a crease on one wall in twenty), or None.
+
+    An end face shows only to a camera beyond that end; on the wall's plane it takes at most
+    ``b t / (|y| + t)`` of the outline (``b`` how far beyond the end the camera stands, ``y`` its
+    distance from the wall's plane, ``t`` up to :data:`END_FACE_MAX_THICKNESS_M`). Over that band
+    the photo is sampled along the wall's x in eight slabs of its height (each the mean of 32
+    rows); in each slab the crease is the largest step of colour (2 px either side) in the band, at
+    least 3 px in from the outline's side (its own edge). Faces lit from different directions step where
+    they meet, at the same x all the way up; the front face's texture (head joints, stones' ends)
+    steps at other x in each slab. The crease is taken where at least :data:`CREASE_SLABS` slabs
+    agree within 1.5 px, its step is :data:`CREASE_CONTRAST` times the median step of the face
+    beside it (sampled to twice the band, or 16 px, in from the side; more than 4 px from the
+    crease), and the band's level differs from the face's beyond by at least half that step (a
+    perpend of a regular bond is a line at the same x in every other course: it steps in and out)."""
+    from .lines import _blurred_samples
+
+    p = result.params
+    w, ht = float(result.width_m), float(result.height_m)
+    cx, cy = float(p[4]), float(p[5])
+    beyond = -cx if sign > 0 else cx - w
+    if beyond <= 0.0:
         return None
-    x0, x1 = x_new
-    corners = result.photo_from_wall(np.array([[x0, 0.0], [x1, 0.0], [x1, ht], [x0, ht]]))
-    return corners, moved
+    t = END_FACE_MAX_THICKNESS_M
+    reach = min(END_FACE_REACH * w, beyond * t / (abs(cy) + t))
+    x_end = 0.0 if sign > 0 else w
+    a, b = result.photo_from_wall(np.array([[x_end, 0.5 * ht], [x_end + sign * reach, 0.5 * ht]]))
+    ppm = float(np.linalg.norm(b - a)) / reach  # photo pixels per metre across the side
+    if not np.isfinite(ppm) or reach * ppm < 8.0:
+        return None
+    # sampled twice as far in, or 16 px: the front face's texture beyond the band is the contrast
+    # the crease must stand out of
+    span = min(END_FACE_REACH * w, max(2.0 * reach, reach + 16.0 / ppm))
+    n = int(2.0 * span * ppm) + 1  # two samples a pixel
+    d = np.linspace(0.0, span, n)
+    z = np.linspace(0.1, 0.9, 256) * ht
+    xx, zz = np.meshgrid(x_end + sign * d, z)
+    pts = result.photo_from_wall(np.c_[xx.ravel(), zz.ravel()])
+    vals = _blurred_samples(rgb, pts[:, 1], pts[:, 0]).reshape(8, 32, n, 3).mean(axis=1)
+    k = 4  # 2 px
+    c = np.concatenate([np.zeros((8, 1, 3)), np.cumsum(vals, axis=1)], axis=1)
+    i = np.arange(k, n - k + 1)
+    left = (c[:, i] - c[:, i - k]) / k
+    right = (c[:, i + k] - c[:, i]) / k
+    step = np.linalg.norm(left - right, axis=-1)  # (8, len(i)): the step at d[i]
+    di = d[i]
+    inner = di >= 3.0 / ppm
+    valid = inner & (di <= reach)
+    if valid.sum() < 3:
+        return None
+    at = np.argmax(np.where(valid, step, -1.0), axis=1)
+    ds = di[at]
+    crease = float(np.median(ds))
+    agree = np.abs(ds - crease) <= 1.5 / ppm
+    if agree.sum() < CREASE_SLABS:
+        return None
+    texture = inner & (np.abs(di - crease) > 4.0 / ppm)
+    if texture.sum() < 3:
+        return None
+    strength = float(np.median(step[np.arange(8), at][agree]))
+    if not strength > CREASE_CONTRAST * float(np.median(step[:, texture])):
+        return None  # (also where nothing steps at all)
+    # a step between two faces, not a line on one (a perpend of a regular bond, at the same x in
+    # every course of its kind, steps in and out again): the band's level differs from the face's
+    band = (d >= 1.5 / ppm) & (d <= crease - 1.0 / ppm)
+    beside = (d >= crease + 1.0 / ppm) & (d <= crease + max(crease, 4.0 / ppm))
+    if not band.any() or not beside.any():
+        return None
+    level = np.linalg.norm(vals[:, band].mean(axis=1) - vals[:, beside].mean(axis=1), axis=-1)
+    if not float(np.median(level[agree])) >= 0.5 * strength:
+        return None
+    return crease, crease
 
 
 def scene_plumb(rgb: np.ndarray, corners: np.ndarray, occluders=()) -> dict:

@@ -672,7 +672,7 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, floa
     right = (c[:, i + k] - c[:, i]) / k
     step = np.linalg.norm(left - right, axis=-1)  # (8, len(i)): the step at d[i]
     di = d[i]
-    inner = di >= 3.0 / ppm
+    inner = di >= 4.5 / ppm  # the 2-px windows clear of the side's own edge and its blur
     valid = inner & (di <= reach)
     if valid.sum() < 3:
         return None

@@ -906,3 +906,40 @@ def test_a_shaded_rim_is_carried_but_a_lighter_cast_shadow_at_the_foot_is_not():
     cast = np.where(d < 12, 0.38 + 0.004 * d, 0.7).astype(np.float32)  # a lighter shadow, then lit ground
     kept, moved = carry_soft_sides(photo(cast), quad)
     assert np.allclose(kept, quad, atol=0.5) and np.all(moved == 0.0)
+
+
+def test_a_base_that_tilts_into_a_cast_shadow_is_put_back_through_the_bed_vanishing_point():
+    """A base refined partly onto a cast shadow's far edge (its left corner 30 px low, the right
+    one right) misses the bed joints' vanishing point: it goes back onto the line through that point
+    that steps along its whole length, the outermost such (not a bed joint inside), and the moved
+    corner's sigma grows by half its move. Where the side lies on a strong edge, a vanishing point
+    known badly (5 degrees off) finds no line that steps as much as the side did, and nothing
+    moves."""
+    from calib_masonry.calibrate.lines import sides_through_bed_vp
+
+    rows, cols = 700, 500
+    rng = np.random.default_rng(11)
+    y0, y1, x0, x1 = 100, 600, 100, 400
+    g = np.full((rows, cols), 0.75, dtype=np.float32)  # pale ground and sky
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    wall = (yy >= y0) & (yy < y1) & (xx >= x0) & (xx < x1)
+    bed = (yy - y0) % 25 < 3
+    g[wall] = np.where(bed, 0.6, 0.25 + 0.03 * rng.standard_normal((rows, cols)))[wall]
+    shadow = (yy >= y1) & (yy < y1 + 30 + (x0 - xx) * 0.3) & (xx < 260)  # dark, widening to the left
+    g[shadow] = 0.3
+    rgb = np.repeat(g[..., None], 3, axis=-1)
+    quad = np.array([[x0, y1 + 30], [x1, y1], [x1, y0], [x0, y0]], dtype=float) - 0.5  # LL on the shadow
+    sigma = np.full(4, 0.4)
+    fixed, grown = sides_through_bed_vp(rgb, quad, sigma, np.array([1.0, 0.0, 0.0]))
+    truth = np.array([[x0, y1], [x1, y1], [x1, y0], [x0, y0]], dtype=float) - 0.5
+    assert np.abs(fixed - truth).max() < 1.5
+    assert grown[0] > 10.0 and np.allclose(grown[2:], sigma[2:])
+    # a base on a strong edge along its whole length (a plinth's, say) and a vanishing point 5
+    # degrees off: every line through that point crosses the edge, none steps as much, none is taken
+    g2 = np.full((rows, cols), 0.75, dtype=np.float32)
+    g2[wall] = g[wall]
+    g2[(yy >= y1) & (yy < y1 + 30 - (xx - x0) * 0.1) & (xx >= x0) & (xx < x1)] = 0.05  # under the whole base
+    rgb2 = np.repeat(g2[..., None], 3, axis=-1)
+    off = np.array([math.cos(math.radians(5.0)), math.sin(math.radians(5.0)), 0.0])
+    kept, same = sides_through_bed_vp(rgb2, quad, sigma, off)
+    assert np.array_equal(kept, quad) and np.array_equal(same, sigma)

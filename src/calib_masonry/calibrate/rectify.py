@@ -621,6 +621,10 @@ END_FACE_MAX_THICKNESS_M = 1.0
 #: band's median step), and hold in this many of the eight height slabs
 CREASE_CONTRAST = 3.0
 CREASE_SLABS = 6
+#: and step by at least this much (the colour's step, RGB of 1): faces lit from different
+#: directions stepped by 0.063-0.27 on the Blender walls; a brick wall's half-bats in every other
+#: course, seen through a barrel lens, by 0.018 (a false crease, W 4.5 % short)
+CREASE_MIN_STEP = 0.04
 
 
 def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, float] | None:
@@ -639,7 +643,7 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, floa
     steps at other x in each slab. The crease is taken where at least :data:`CREASE_SLABS` slabs
     agree within 1.5 px, its step is :data:`CREASE_CONTRAST` times the median step of the face
     beside it (sampled to twice the band, or 16 px, in from the side; more than 4 px from the
-    crease), and the band's level differs from the face's beyond by at least half that step (a
+    crease) and at least :data:`CREASE_MIN_STEP`, and the band's level differs from the face's beyond by at least half that step (a
     perpend of a regular bond is a line at the same x in every other course: it steps in and out)."""
     from .lines import _blurred_samples
 
@@ -686,8 +690,8 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, floa
     if texture.sum() < 3:
         return None
     strength = float(np.median(step[np.arange(8), at][agree]))
-    if not strength > CREASE_CONTRAST * float(np.median(step[:, texture])):
-        return None  # (also where nothing steps at all)
+    if not strength > max(CREASE_MIN_STEP, CREASE_CONTRAST * float(np.median(step[:, texture]))):
+        return None
     # a step between two faces, not a line on one (a perpend of a regular bond, at the same x in
     # every course of its kind, steps in and out again): the band's level differs from the face's
     band = (d >= 1.5 / ppm) & (d <= crease - 1.0 / ppm)

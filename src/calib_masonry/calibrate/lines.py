@@ -367,98 +367,6 @@ def refine_quad(
     return (quad, sigma) if with_sigma else quad
 
 
-#: a refined base or top that misses the bed joints' vanishing point by more than this (px at its
-#: ends, and three of its corners' sigmas) is sought again along lines through that point
-VP_SIDE_MISS_PX = 3.0
-
-
-def sides_through_bed_vp(rgb: np.ndarray, quad: np.ndarray, sigma: np.ndarray, vp_bed) -> tuple[np.ndarray, np.ndarray]:
-    """The base and the top of the outline ``quad`` (LL, LR, UR, UL) put on lines through the bed
-    joints' vanishing point ``vp_bed`` (homogeneous pixels; None where too few bed segments gave
-    one) where the refined side misses it; ``sigma`` (4,) the corners' (px).
-
-    A wall's base and top are bed lines: they point at the vanishing point of its bed joints. A
-    side that tilts away from it has followed something else for part of its length (a cast shadow
-    at the wall's foot taken for wall: Blender-rendered tall walls had a base corner 10-77 px low,
-    the other one right). Such a side is sought again among the lines through the vanishing point
-    within the reach of its ends' miss (and 8 px): the colour step across each line (3 px apart),
-    its median over the side's middle 80 %, and of the lines that step at least half as much as the
-    strongest, the outermost (bed joints step as strongly along their whole length, but lie inside;
-    a shadow's edge does not point at the vanishing point, so it steps across a line through it at
-    one place only). The line found replaces the side only where it steps at least as much as the
-    side did (a vanishing point known badly, as irregular stone courses give it, tilts every line
-    through it off the wall's edge: none steps along its whole length; without this test the
-    laboratory photos' bases turned by 60 px onto a loading rig's lines). Returns the corners and
-    their sigma, grown by half of each corner's move: the fit then leans on the joints there (a
-    corner moved onto its place but with its old sigma turned a refused fit into a confident one
-    26 % short on a wall whose other end was off). (The ends through the head joints' vanishing
-    point were tried too: a tall wall's is far up and known less well, and it moved a laboratory
-    wall's good end by 10 px.)"""
-    if vp_bed is None:
-        return quad, sigma
-    vp = np.asarray(vp_bed, dtype=np.float64)
-    quad = np.asarray(quad, dtype=np.float64).copy()
-    centre = quad.mean(axis=0)
-    lines = {}
-    for i in (0, 2):  # base LL -> LR, top UR -> UL
-        a, b = quad[i], quad[(i + 1) % 4]
-        m = (a + b) / 2
-        # the direction at m of the line through the vanishing point (a point at infinity: its own)
-        d = vp[:2] - m * vp[2]
-        d = d / max(np.linalg.norm(d), 1e-300)
-        n = np.array([-d[1], d[0]])
-        if (m - centre) @ n < 0:
-            n = -n  # outward
-        miss = np.array([(a - m) @ n, (b - m) @ n])
-        tol = max(VP_SIDE_MISS_PX, 3.0 * float(max(sigma[i], sigma[(i + 1) % 4])))
-        if np.abs(miss).max() <= tol:
-            continue
-        reach = float(np.abs(miss).max()) + 8.0
-        offs = np.arange(-reach, reach + 1e-9, 0.5)
-        ta, tb = (a - m) @ d, (b - m) @ d
-        ts = np.linspace(min(ta, tb), max(ta, tb), 64)[6:-6]
-        # each candidate line through the vanishing point and m + o n, at the points m + t d + o n
-        # (near enough: over a side the lines through a far point are parallel to within a pixel)
-        pts = m[None, None, :] + ts[None, :, None] * d[None, None, :] + offs[:, None, None] * n[None, None, :]
-        step = _median_step(rgb, pts.reshape(-1, 2), n).reshape(len(offs), len(ts))
-        step = np.median(step, axis=1)
-        peak = np.zeros(len(offs), dtype=bool)
-        peak[1:-1] = (step[1:-1] >= step[:-2]) & (step[1:-1] >= step[2:])
-        strong = np.flatnonzero(peak & (step >= 0.5 * step.max()))
-        if len(strong) == 0:
-            continue
-        k = strong.max()  # the outermost
-        # the side as refined, its own step measured the same way
-        e = (b - a) / max(np.linalg.norm(b - a), 1e-300)
-        ns = np.array([-e[1], e[0]])
-        if (m - centre) @ ns < 0:
-            ns = -ns
-        own = a[None, :] + np.linspace(0.1, 0.9, len(ts))[:, None] * (b - a)[None, :]
-        if step[k] < float(np.median(_median_step(rgb, own, ns))):
-            continue
-        lines[i] = (m + float(offs[k]) * n, d)
-    if not lines:
-        return quad, sigma
-    sides = [lines.get(i, (quad[i], quad[(i + 1) % 4] - quad[i])) for i in range(4)]
-    sides = [(c, dd / np.linalg.norm(dd)) for c, dd in sides]
-    try:
-        corners = np.array([_intersect(sides[(i - 1) % 4], sides[i]) for i in range(4)])
-    except np.linalg.LinAlgError:
-        return quad, sigma
-    if not np.all(np.isfinite(corners)):
-        return quad, sigma
-    moved = np.linalg.norm(corners - quad, axis=1)
-    return corners, np.sqrt(np.asarray(sigma, dtype=np.float64) ** 2 + (0.5 * moved) ** 2)
-
-
-def _median_step(rgb: np.ndarray, pts: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """The colour step ``(len(pts),)`` across the direction ``n`` at the points ``(k, 2)`` (x, y): the
-    blurred photo 1.5 px out less 1.5 px in."""
-    out = _blurred_samples(rgb, pts[:, 1] + 1.5 * n[1], pts[:, 0] + 1.5 * n[0])
-    inn = _blurred_samples(rgb, pts[:, 1] - 1.5 * n[1], pts[:, 0] - 1.5 * n[0])
-    return np.linalg.norm(out - inn, axis=-1)
-
-
 def _in_convex(points: np.ndarray, quad: np.ndarray) -> np.ndarray:
     """``(n,)`` whether the points ``(n, 2)`` lie strictly inside the convex quadrilateral ``quad``."""
     a, b = quad, np.roll(quad, -1, axis=0)
@@ -504,7 +412,6 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
     quad, sigma = refine_quad(
         rgb, outline.corners_px, (config.refine_halfwidth_px or 6.0 / s, 2.5 / s), with_sigma=True, curved=True
     )
-    quad, sigma = sides_through_bed_vp(rgb, quad, sigma, outline.vp_bed)
     rows, cols = rgb.shape[:2]
     slack = 0.02 * max(rows, cols)
     if np.any(quad < -slack) or np.any(quad[:, 0] > cols - 1 + slack) or np.any(quad[:, 1] > rows - 1 + slack):

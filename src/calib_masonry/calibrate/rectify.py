@@ -645,7 +645,8 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, floa
     beside it (sampled to twice the band, or 16 px, in from the side; more than 4 px from the
     crease) and at least :data:`CREASE_MIN_STEP`, and the band's level differs from the face's
     beyond by three quarters of that step (a perpend of a regular bond is a line at the same x in
-    every other course: it steps in and out)."""
+    every other course: it steps in and out), and as much from the background 3 px outside the
+    side (the band is a face of its own)."""
     from .lines import _blurred_samples
 
     p = result.params
@@ -702,6 +703,15 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, floa
         return None
     level = np.linalg.norm(vals[:, band].mean(axis=1) - vals[:, beside].mean(axis=1), axis=-1)
     if not float(np.median(level[agree])) >= 0.75 * strength:
+        return None
+    # and a face of its own, not the background: beyond the side (3 px out) the band's level
+    # differs as much (a side that a lens left a few pixels off the wall's edge has the background
+    # in its band, which steps to the face as a crease would: a planar wall through k1 -0.1)
+    xo = np.c_[np.full(256, x_end - sign * 3.0 / ppm), z]
+    po = result.photo_from_wall(xo)
+    outside = _blurred_samples(rgb, po[:, 1], po[:, 0]).reshape(8, 32, 3).mean(axis=1)
+    apart = np.linalg.norm(vals[:, band].mean(axis=1) - outside, axis=-1)
+    if not float(np.median(apart[agree])) >= 0.75 * strength:
         return None
     return crease, crease
 

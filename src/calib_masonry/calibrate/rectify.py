@@ -548,21 +548,21 @@ def front_face_ends(result, segments: np.ndarray, rgb: np.ndarray | None = None)
     with the end face in the outline (experiments/bench_tall_walls_blender.py)."""
     seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
     w, ht = result.width_m, result.height_m
-    x_new = [(0.0, 0.0), (w, w)]  # each end's x at the base and at the top
+    x_new = [0.0, w]
     moved: list[str] = []
     courses = _ends_by_courses(result, seg) if len(seg) >= END_FACE_SEGMENTS else {}
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        crease = (courses[side],) * 2 if side in courses else None
+        crease = courses.get(side)
         if crease is None and rgb is not None:
             crease = crease_by_shading(rgb, result, sign)
         if crease is None:
             continue
-        x_new[0 if sign > 0 else 1] = crease if sign > 0 else (w - crease[0], w - crease[1])
+        x_new[0 if sign > 0 else 1] = crease if sign > 0 else w - crease
         moved.append(side)
     if not moved:
         return None
-    (x0, x0t), (x1, x1t) = x_new
-    corners = result.photo_from_wall(np.array([[x0, 0.0], [x1, 0.0], [x1t, ht], [x0t, ht]]))
+    x0, x1 = x_new
+    corners = result.photo_from_wall(np.array([[x0, 0.0], [x1, 0.0], [x1, ht], [x0, ht]]))
     return corners, moved
 
 
@@ -627,11 +627,11 @@ CREASE_SLABS = 6
 CREASE_MIN_STEP = 0.04
 
 
-def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, float] | None:
+def crease_by_shading(rgb: np.ndarray, result, sign: float) -> float | None:
     """The crease between a wall's front face and its end face, found by its shading: its distance
     (m, on the wall's plane) in from the left (``sign`` 1) or right (-1) end of the fitted outline,
-    at the base and at the top (the same: a crease that slants across the outline's side was tried
-    and took a texture edge for a crease on one wall in twenty), or None.
+    or None. (A crease let slant across the outline's side was tried: it took a texture edge for
+    a crease on one wall in twenty.)
 
     An end face shows only to a camera beyond that end; on the wall's plane it takes at most
     ``b t / (|y| + t)`` of the outline (``b`` how far beyond the end the camera stands, ``y`` its
@@ -640,13 +640,13 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, floa
     rows); in each slab the crease is the largest step of colour (2 px either side) in the band, at
     least 4.5 px in from the outline's side (clear of its own edge and blur). Faces lit from
     different directions step where they meet, at the same x all the way up; the front face's
-    texture (head joints, stones' ends) steps at other x in each slab. The crease is taken where at least :data:`CREASE_SLABS` slabs
-    agree within 1.5 px, its step is :data:`CREASE_CONTRAST` times the median step of the face
-    beside it (sampled to twice the band, or 16 px, in from the side; more than 4 px from the
-    crease) and at least :data:`CREASE_MIN_STEP`, and the band's level differs from the face's
-    beyond by three quarters of that step (a perpend of a regular bond is a line at the same x in
-    every other course: it steps in and out), and as much from the background 3 px outside the
-    side (the band is a face of its own)."""
+    texture (head joints, stones' ends) steps at other x in each slab. The crease is taken where at
+    least :data:`CREASE_SLABS` slabs agree within 1.5 px, its step is :data:`CREASE_CONTRAST` times
+    the median step of the face beside it (sampled to twice the band, or 16 px, in from the side;
+    more than 4 px from the crease) and at least :data:`CREASE_MIN_STEP`, and the band's level
+    differs from the face's beyond by three quarters of that step (a perpend of a regular bond is
+    a line at the same x in every other course: it steps in and out), and as much from the
+    background 3 px outside the side (the band is a face of its own)."""
     from .lines import _blurred_samples
 
     p = result.params
@@ -713,7 +713,7 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> tuple[float, floa
     apart = np.linalg.norm(vals[:, band].mean(axis=1) - outside, axis=-1)
     if not float(np.median(apart[agree])) >= 0.75 * strength:
         return None
-    return crease, crease
+    return crease
 
 
 def scene_plumb(rgb: np.ndarray, corners: np.ndarray, occluders=()) -> dict:

@@ -184,6 +184,33 @@ def test_side_profiles_sample_exactly_the_blurred_photo():
         assert np.array_equal(_blurred_samples(rgb, rows, cols), expect)
 
 
+def test_the_ridge_hessian_is_scikit_images_value_for_value_without_scipy_stats():
+    # lines.hessian_rc / hessian_eigvals stand in for skimage.feature's hessian_matrix and
+    # hessian_matrix_eigvals (whose module imports scipy.stats, 0.3 s of a rectify's start): the
+    # same numbers, bit for bit, on noise and on a photo-like float32 image at the ridge scale
+    import subprocess
+    import sys
+
+    from skimage.feature import hessian_matrix, hessian_matrix_eigvals
+
+    from calib_masonry.calibrate.lines import hessian_eigvals, hessian_rc
+
+    rng = np.random.default_rng(11)
+    yy, xx = np.mgrid[0:64, 0:80]
+    photo_like = (0.5 + 0.3 * np.sin(xx / 3.0) * (yy % 9 > 1) + 0.05 * rng.random((64, 80))).astype(np.float32)
+    for img, sigma in ((rng.random((50, 70)), 1.5), (photo_like, 1.5), (photo_like, 2.7)):
+        ours = hessian_rc(img, sigma)
+        theirs = hessian_matrix(img, sigma=sigma, order="rc", use_gaussian_derivatives=False)
+        for a, b in zip(ours, theirs, strict=True):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
+        for a, b in zip(hessian_eigvals(*ours), hessian_matrix_eigvals(list(theirs)), strict=True):
+            assert np.array_equal(a, b)
+    # the detection's imports (loaded before a rectify's first step) leave scipy.stats out
+    code = "import sys; from calib_masonry.preload import preload; preload('detection'); print('scipy.stats' in sys.modules)"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert r.stdout.strip() == "False"
+
+
 def test_covariance_shrinks_as_observations_are_added():
     truth = _camera(yaw=0.25, pitch=0.15)
     corners, bed, head = _observations(truth, rng=np.random.default_rng(5), noise=1.0)

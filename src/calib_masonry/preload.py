@@ -38,8 +38,6 @@ GROUPS: dict[str, tuple[str, ...]] = {
         "skimage.color:rgb2lab",  # the outline's appearance model
         "skimage.draw:polygon",  # occluders
         "skimage.feature:canny",
-        "skimage.feature:hessian_matrix",
-        "skimage.feature:hessian_matrix_eigvals",
         "skimage.measure:label",
         "skimage.transform:probabilistic_hough_line",
         ".labelme",

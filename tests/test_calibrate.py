@@ -211,6 +211,44 @@ def test_the_ridge_hessian_is_scikit_images_value_for_value_without_scipy_stats(
     assert r.stdout.strip() == "False"
 
 
+def test_an_orthophoto_inside_the_photo_is_known_from_its_edge_pixels():
+    # valid_ortho skips rectifying a photo of ones where the orthophoto's outermost pixels all
+    # sample the photo a pixel inside its edges: wherever it says so, every pixel of the full
+    # computation is valid; and it does say so for walls well inside a photo, with and without a
+    # lens, and not for one that runs out of it
+    from calib_masonry.calibrate.fit import homography_dlt
+    from calib_masonry.calibrate.rectify import _ortho_inside_photo, rectify_image
+
+    rng = np.random.default_rng(3)
+    size = (300, 200)  # cols, rows
+    ones = np.ones(size[::-1], dtype=np.float32)
+    said = {True: 0, False: 0}
+    lensed = 0
+    for case in range(60):
+        w_m, h_m, ppm = rng.uniform(1.0, 3.0), rng.uniform(1.0, 3.0), rng.uniform(20.0, 60.0)
+        inside = case % 3 != 2
+        lo, hi = (
+            (np.array([5.0, 5.0]), np.array(size) - 6.0)
+            if inside
+            else (np.array([-20.0, -20.0]), np.array(size) + 20.0)
+        )
+        quad = np.array([[lo[0], hi[1]], [hi[0], hi[1]], [hi[0], lo[1]], [lo[0], lo[1]]])  # LL LR UR UL
+        quad += rng.uniform(-4, 4, (4, 2)) if inside else rng.uniform(-10, 10, (4, 2))
+        wall = np.array([[0, 0], [w_m, 0], [w_m, h_m], [0, h_m]], dtype=np.float64)
+        wall_from_image = homography_dlt(quad, wall)
+        lens = None if case % 2 else (250.0, (149.5, 99.5), rng.uniform(-0.2, 0.1), 0.0)
+        shape = (max(2, round(h_m * ppm)), max(2, round(w_m * ppm)))
+        full = rectify_image(ones, wall_from_image, w_m, h_m, ppm, nearest=True, lens=lens) > 0.5
+        fast = _ortho_inside_photo(wall_from_image, w_m, h_m, shape, lens, size)
+        if fast:
+            assert full.all()
+        said[fast] += 1
+        lensed += bool(fast and lens is not None)
+        if not inside:
+            assert not fast
+    assert said[True] >= 20 and said[False] >= 20 and lensed >= 10
+
+
 def test_covariance_shrinks_as_observations_are_added():
     truth = _camera(yaw=0.25, pitch=0.15)
     corners, bed, head = _observations(truth, rng=np.random.default_rng(5), noise=1.0)

@@ -870,14 +870,55 @@ def valid_ortho(calibration: PhotoCalibration, px_per_m: float, *, width_m=None,
     height = res.height_m if height_m is None else float(height_m)
     stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
     rows, cols = calibration.photo.rgb.shape[:2]
-    ones = np.ones((rows, cols), dtype=np.float32)
-    valid = rectify_image(ones, stretch @ res.wall_from_image, width, height, px_per_m, nearest=True, lens=lens_of(res))
-    valid = valid > 0.5
+    wall_from_image = stretch @ res.wall_from_image
+    lens = lens_of(res)
+    shape = (max(2, round(height * px_per_m)), max(2, round(width * px_per_m)))
+    if _ortho_inside_photo(wall_from_image, width, height, shape, lens, (cols, rows)):
+        valid = np.ones(shape, dtype=bool)
+    else:
+        ones = np.ones((rows, cols), dtype=np.float32)
+        valid = rectify_image(ones, wall_from_image, width, height, px_per_m, nearest=True, lens=lens) > 0.5
     for poly in calibration.occluders:
         valid &= ~polygon_mask(
             valid.shape, ortho_from_photo(calibration, poly, valid.shape, width_m=width, height_m=height)
         )
     return valid
+
+
+def _ortho_inside_photo(wall_from_image, width_m, height_m, shape, lens, size) -> bool:
+    """Whether every pixel of :func:`rectify_image`'s orthophoto ``shape`` samples the photo of
+    ``size`` (cols, rows) at least a pixel inside its edges, found from its outermost pixels
+    alone: the homography maps the orthophoto's rectangle onto a convex quadrilateral, a lens that
+    does not fold the image (its radial map increasing out to the quadrilateral's farthest corner)
+    maps that onto the region its boundary encloses, and a region whose boundary lies inside the
+    photo's (convex) rectangle lies inside it. (:func:`valid_ortho` rectified a photo of ones for
+    this: 0.2 s of a rectify's segmentation, measured; the answer is the same where this holds.)"""
+    rows, cols = shape
+    image_from_ortho = np.linalg.inv(rect_from_wall(width_m, height_m, shape) @ wall_from_image)
+    xs, ys = np.arange(cols, dtype=np.float64), np.arange(rows, dtype=np.float64)
+    edge = np.concatenate(
+        [
+            np.stack([xs, np.zeros(cols)], -1),
+            np.stack([xs, np.full(cols, rows - 1.0)], -1),
+            np.stack([np.zeros(rows), ys], -1),
+            np.stack([np.full(rows, cols - 1.0), ys], -1),
+        ]
+    )
+    q = image_from_ortho @ np.c_[edge, np.ones(len(edge))].T
+    if np.any(q[2] <= 0):
+        return False
+    xy = np.stack([q[0] / q[2], q[1] / q[2]], axis=-1)
+    if lens is not None:
+        from .camera import distort
+
+        focal, pp, k1, k2 = lens
+        r_max = float(np.max(np.linalg.norm((xy - np.asarray(pp)) / focal, axis=1)))
+        r2 = np.linspace(0.0, r_max, 257) ** 2
+        if np.any(1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2 * r2 <= 0.0):  # the lens folds the image there
+            return False
+        xy = distort(xy, focal, pp, k1, k2)
+    w, h = size
+    return bool(np.all((xy[:, 0] >= 1.0) & (xy[:, 0] <= w - 2.0) & (xy[:, 1] >= 1.0) & (xy[:, 1] <= h - 2.0)))
 
 
 def _course_ortho(photo, result) -> np.ndarray:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy import ndimage
@@ -289,20 +290,24 @@ class Segmentation:
     pieces: object | None = None  # wall2d.pieces.Pieces, for the "joints" method
     note: str = ""  # why the method was chosen
 
-    @property
+    @cached_property
     def labels(self) -> np.ndarray:
         """The pieces labelled ``(rows, cols)`` int32, 0 mortar: each piece its own label even where
-        two touch (the joints' partition), for :func:`~calib_masonry.wall2d.trace.trace_labels`."""
+        two touch (the joints' partition), for :func:`~calib_masonry.wall2d.trace.trace_labels`.
+        Computed once (the LabelMe polygons and the summary both ask), and read-only, as it is
+        shared."""
         if self.pieces is not None:
-            return np.where(self.mask, self.pieces.labels, 0).astype(np.int32)
-        return label_bricks(self.mask)
+            out = np.where(self.mask, self.pieces.labels, 0).astype(np.int32)
+        else:
+            out = label_bricks(self.mask)
+        out.setflags(write=False)
+        return out
 
     def summary(self) -> dict:
         if self.pieces is not None:
             doc = self.pieces.summary()
         else:
-            labels = label_bricks(self.mask)
-            a = np.bincount(labels.ravel())[1:]
+            a = np.bincount(self.labels.ravel())[1:]
             a = a[a > 0] / self.px_per_m**2
             n = len(a)
             side = float(np.sqrt(np.median(a))) if n else 0.0

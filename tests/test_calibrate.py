@@ -249,6 +249,31 @@ def test_an_orthophoto_inside_the_photo_is_known_from_its_edge_pixels():
     assert said[True] >= 20 and said[False] >= 20 and lensed >= 10
 
 
+def test_the_working_image_and_its_lsd_are_kept_for_the_same_photo_only():
+    # the joints' detection and the lens's straight lines share the last photo's working image
+    # and LSD segments: the same values as computing them, and computed anew for another photo
+    # or for the same array written to since
+    from calib_masonry.calibrate.lines import _working_gray, working_gray, working_lsd
+    from calib_masonry.calibrate.outline import lsd_segments
+
+    rng = np.random.default_rng(8)
+    yy, xx = np.mgrid[0:600, 0:900]
+    rgb = np.repeat(((np.sin(xx / 9.0) > 0.2) ^ (yy % 40 < 4)).astype(np.float32)[..., None], 3, -1) * 0.6 + 0.2
+    rgb += rng.normal(0, 0.01, rgb.shape).astype(np.float32)
+    gray, s = working_gray(rgb, 500)
+    assert working_gray(rgb, 500)[0] is gray and not gray.flags.writeable
+    fresh, s2 = _working_gray(rgb, 500)
+    assert s == s2 and np.array_equal(gray, fresh)
+    seg, s3 = working_lsd(rgb, 500, 8.0)
+    assert s3 == s and len(seg) > 10 and np.array_equal(seg, lsd_segments(fresh, min_length_px=8.0))
+    rgb[:] = rgb[:, ::-1]  # written in place: a new image
+    again, _ = working_gray(rgb, 500)
+    assert again is not gray and np.array_equal(again, _working_gray(rgb, 500)[0])
+    other = rgb.copy()
+    assert working_gray(other, 500)[0] is not again
+    assert working_gray(other, 400)[0].shape != again.shape
+
+
 def test_covariance_shrinks_as_observations_are_added():
     truth = _camera(yaw=0.25, pitch=0.15)
     corners, bed, head = _observations(truth, rng=np.random.default_rng(5), noise=1.0)

@@ -274,6 +274,27 @@ def test_the_working_image_and_its_lsd_are_kept_for_the_same_photo_only():
     assert working_gray(other, 400)[0].shape != again.shape
 
 
+def test_piece_polygons_keep_each_pieces_largest_part():
+    # the LabelMe polygons: a piece in two parts (a bigger and a smaller square) gives the bigger
+    # one's outline, a piece in one part its own, a piece touching another stays apart
+    from calib_masonry.calibrate.rectify import piece_polygons
+
+    labels = np.zeros((40, 60), dtype=np.int32)
+    labels[2:12, 2:12] = 1  # piece 1: 10 x 10 ...
+    labels[20:24, 30:34] = 1  # ... and a 4 x 4 part away from it
+    labels[2:12, 12:30] = 2  # piece 2 touches piece 1 (a partition)
+    labels[30:38, 40:55] = 4  # piece 3 is absent
+    polys = piece_polygons(labels, tolerance_px=0.1)
+    assert len(polys) == 3
+
+    def box(p):
+        return (p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max())
+
+    assert box(polys[0]) == (1.5, 1.5, 11.5, 11.5)  # pixel edges of the 10 x 10 part
+    assert box(polys[1]) == (11.5, 1.5, 29.5, 11.5)
+    assert box(polys[2]) == (39.5, 29.5, 54.5, 37.5)
+
+
 def test_covariance_shrinks_as_observations_are_added():
     truth = _camera(yaw=0.25, pitch=0.15)
     corners, bed, head = _observations(truth, rng=np.random.default_rng(5), noise=1.0)

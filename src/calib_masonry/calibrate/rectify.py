@@ -1148,13 +1148,22 @@ def piece_polygons(labels: np.ndarray, *, tolerance_px: float = 1.5) -> list[np.
 
     from ..wall2d.trace import trace_outline
 
+    from skimage.measure import label
+
+    # how many 4-connected parts each piece has, from one labelling of the whole image (labelling
+    # each piece's crop took 0.08 s of a wall's 326 pieces, measured): only pieces in parts are
+    # labelled again, to keep their largest
+    parts_of = label(labels, connectivity=1, background=0)
+    first = np.zeros(int(parts_of.max()) + 1, dtype=labels.dtype)
+    first[parts_of.ravel()] = labels.ravel()
+    n_parts = np.bincount(first[1:], minlength=int(labels.max()) + 1)
     out = []
     for k, sl in enumerate(ndimage.find_objects(labels), start=1):
         if sl is None:
             continue
         region = labels[sl] == k
-        parts, n = ndimage.label(region)
-        if n > 1:
+        if n_parts[k] > 1:
+            parts, _ = ndimage.label(region)
             region = parts == 1 + int(np.argmax(np.bincount(parts.ravel())[1:]))
         outline = trace_outline(region)
         # OpenCV's Douglas-Peucker on the closed outline (scikit-image's took 2 ms a piece)

@@ -1145,10 +1145,9 @@ def piece_polygons(labels: np.ndarray, *, tolerance_px: float = 1.5) -> list[np.
     (Douglas-Peucker), so that an engineer drags a few vertices, not hundreds."""
     import cv2
     from scipy import ndimage
+    from skimage.measure import label
 
     from ..wall2d.trace import trace_outline
-
-    from skimage.measure import label
 
     # how many 4-connected parts each piece has, from one labelling of the whole image (labelling
     # each piece's crop took 0.08 s of a wall's 326 pieces, measured): only pieces in parts are

@@ -236,10 +236,11 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
     src = np.asarray(rgb, dtype=np.float32)
     img = np.empty(src.shape[:2] + (3,), dtype=np.float32)
 
-    def smooth(c: int) -> None:
-        img[..., c] = ndimage.gaussian_filter(np.ascontiguousarray(src[..., c]), config.smooth_px)
+    def smooth(job) -> None:
+        c, out = job
+        out[..., c] = ndimage.gaussian_filter(np.ascontiguousarray(src[..., c]), config.smooth_px)
 
-    thread_map(smooth, range(3))
+    thread_map(smooth, [(c, img) for c in range(3)])
     np.clip(img, 0, 1, out=img)
     lab = np.empty_like(img)
     for rows in _row_chunks(img.shape, 1 << 18):  # rgb2lab's temporaries are 5x its input: a band at a time

@@ -440,7 +440,10 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     # ideal image (a barrel lens bows a wall's base by tens of pixels, and a straight side through
     # the bow put the corners 10-40 px off, measured), then a soft side carried across its ramp
     if config.snap_corners or config.corners_px is None:
-        corners, sigma, again = _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mode)
+        straight = detection.straight if detection is not None and config.corner_sigma_px is None else None
+        corners, sigma, again = _outline_through_lens(
+            photo, result, corners, sigma, first_sigma, config, mode, straight=straight
+        )
         if again:
             inp = replace(inp, corners_px=corners, corner_sigma_px=tuple(float(v) for v in sigma))
             if detection is not None:
@@ -751,12 +754,18 @@ def scene_plumb(rgb: np.ndarray, corners: np.ndarray, occluders=()) -> dict:
     }
 
 
-def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mode):
+def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mode, *, straight=None):
     """Corners snapped again (and soft sides carried, :func:`carry_soft_sides`) along sides
     straight in the ideal image of a first fit's lens; returns the corners, their sigmas and
     whether they changed. A corner that moves more than twice its first sigma from where the
     first fit put it has snapped onto another edge (seen under a strong lens: a brick's edge
-    34 px off): the first fit's corner is kept there, with that sigma."""
+    34 px off): the first fit's corner is kept there, with that sigma.
+
+    Where the fit found no lens, ``straight`` (the detection's corners and sigmas of straight
+    sides, :attr:`~calib_masonry.calibrate.lines.Detection.straight`) replaces corners put on a
+    bowed side's tangents: with no lens to bow it, the side's bow was its edge's own (a cast
+    shadow's edge along part of a Blender wall's base: the tangent put the far corner 4 px low,
+    W 2.4 % short, where the straight side is within half a pixel)."""
     w, h = photo.size
     s = min(1.0, config.detect.work_long_side_px / max(w, h))
     ideal = result.undistort(corners)
@@ -765,6 +774,8 @@ def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mo
         snapped, snap_sigma = refine_quad(
             photo.rgb, ideal, (6.0 / s, 2.5 / s), with_sigma=True, to_photo=lens, curved=True
         )
+    elif straight is not None:
+        snapped, snap_sigma = np.asarray(straight[0], dtype=np.float64), np.asarray(straight[1], dtype=np.float64)
     else:
         snapped, snap_sigma = ideal, np.asarray(sigma, dtype=np.float64)
     if mode != "automatic":  # a click's own uncertainty stays the floor
@@ -774,7 +785,9 @@ def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mo
     if np.array_equal(new, corners):
         return corners, sigma, False
     new_sigma = np.sqrt(np.asarray(snap_sigma) ** 2 + shift**2)
-    predicted = result.corners_px()
+    # straight sides are the detection's own corners, not a re-snap that may have jumped: they
+    # are checked against themselves (the carry's shift allowed), not against the first fit's
+    predicted = snapped if lens is None and straight is not None else result.corners_px()
     astray = np.linalg.norm(new - predicted, axis=1) > 2.0 * np.asarray(first_sigma) + shift
     new = np.where(astray[:, None], predicted, new)
     new_sigma = np.where(astray, first_sigma, new_sigma)

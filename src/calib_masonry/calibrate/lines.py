@@ -365,6 +365,7 @@ def refine_quad(
     with_sigma: bool = False,
     to_photo=None,
     curved: bool = False,
+    bowed: list | None = None,
 ):
     """Snap a quadrilateral (LL, LR, UR, UL) to the wall's outline edges in the full photo.
 
@@ -377,7 +378,8 @@ def refine_quad(
     the photo's so (:func:`_refine_side`); the result is too. ``curved``: a side whose edge bows
     significantly (an unknown lens) meets its neighbours along its tangents at the ends
     (:func:`_bowed`), not along its chord, which put the corners of a barrel-distorted wall 10-15 px
-    off (measured at k1 = -0.15)."""
+    off (measured at k1 = -0.15); ``bowed``, a list given, gets the index of each side found bowed
+    in each pass (none: the result is that of straight sides)."""
     sigma = np.full(4, 2.0)
     for half in halfwidths:
         pts: list = []
@@ -390,6 +392,8 @@ def refine_quad(
                 bow = _bowed(pts[i], sides[i], quad[i], quad[(i + 1) % 4])
                 if bow is not None:
                     ends[i] = bow
+                    if bowed is not None:
+                        bowed.append(i)
         try:
             refined = np.array([_intersect(ends[(i - 1) % 4][1], ends[i][0]) for i in range(4)])
         except np.linalg.LinAlgError:
@@ -488,10 +492,13 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
     outline = detect_outline(rgb, occluders=occluders, config=config.outline)
     s = _work_scale(rgb.shape, config.work_long_side_px)
     halfwidths = (config.refine_halfwidth_px or 6.0 / s, 2.5 / s)
-    quad, sigma = refine_quad(rgb, outline.corners_px, halfwidths, with_sigma=True, curved=True)
-    straight = refine_quad(rgb, outline.corners_px, halfwidths, with_sigma=True, curved=False)
-    if np.array_equal(straight[0], quad):
-        straight = None
+    bowed: list = []
+    quad, sigma = refine_quad(rgb, outline.corners_px, halfwidths, with_sigma=True, curved=True, bowed=bowed)
+    straight = None
+    if bowed:
+        straight = refine_quad(rgb, outline.corners_px, halfwidths, with_sigma=True, curved=False)
+        if np.array_equal(straight[0], quad):
+            straight = None
     rows, cols = rgb.shape[:2]
     slack = 0.02 * max(rows, cols)
     if np.any(quad < -slack) or np.any(quad[:, 0] > cols - 1 + slack) or np.any(quad[:, 1] > rows - 1 + slack):

@@ -327,6 +327,22 @@ def test_a_cast_shadow_under_part_of_the_base_leaves_the_base_straight():
     assert abs(c[1] + (300 - c[0]) / d[0] * d[1] - 8.0) < 0.3
 
 
+def test_the_outline_rectangle_takes_no_rows_without_evidence():
+    # the outline's rectangle on a probability map whose region above the wall is a flat fill
+    # (0.5: no evidence, as a uniform sky touching the border is treated): of equal sums the
+    # tightest box and sides, so the top stays on the wall's (the first of equal tops, and each
+    # tilt's first of equal ends, took it up the fill: 15 rows above, and on a Blender wall 320 px)
+    from calib_masonry.calibrate.outline import _fit_rectangle
+
+    prob = np.zeros((120, 100))
+    prob[:40] = 0.5
+    prob[40:90, 30:60] = 1.0
+    quad = _fit_rectangle(prob, np.eye(3), prob > 0.75, 48)
+    assert np.abs(np.sort(quad[:, 1])[:2] - 39.5).max() < 0.6  # the top
+    assert np.abs(np.sort(quad[:, 1])[2:] - 89.5).max() < 0.6  # the base
+    assert np.abs(np.sort(quad[:, 0]) - [29.5, 29.5, 59.5, 59.5]).max() < 0.6
+
+
 def test_covariance_shrinks_as_observations_are_added():
     truth = _camera(yaw=0.25, pitch=0.15)
     corners, bed, head = _observations(truth, rng=np.random.default_rng(5), noise=1.0)

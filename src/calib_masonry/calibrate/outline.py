@@ -286,6 +286,11 @@ def _project(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return q[:, :2] / q[:, 2:3]
 
 
+def _last_argmax(a: np.ndarray) -> int:
+    """The index of the last of the largest values of ``a``."""
+    return len(a) - 1 - int(np.argmax(a[::-1]))
+
+
 def _fit_rectangle(
     prob: np.ndarray,
     rect_from_px: np.ndarray,
@@ -347,9 +352,12 @@ def _fit_rectangle(
         for _ in range(20):
             old = list(box)
             r0, r1, c0, c1 = box
-            box[0] = r0 = int(np.argmax(energy(k[:r1], r1, c0, c1)))
+            # of equal sums the tightest box: rows and columns that carry no evidence (a
+            # photo's flat fill, or an occluder: 0.5, so 0 here) are not taken in (the first
+            # of equal tops took a Blender wall's uniform sky, 320 px above its top)
+            box[0] = r0 = _last_argmax(energy(k[:r1], r1, c0, c1))
             box[1] = r1 = r0 + 1 + int(np.argmax(energy(r0, k[r0 + 1 :], c0, c1)))
-            box[2] = c0 = int(np.argmax(energy(r0, r1, k[:c1], c1)))
+            box[2] = c0 = _last_argmax(energy(r0, r1, k[:c1], c1))
             box[3] = c0 + 1 + int(np.argmax(energy(r0, r1, c0, k[c0 + 1 :])))
             if box == old:
                 break
@@ -398,7 +406,9 @@ def _fit_rectangle(
                 pos = ca + (cb - ca) * t[None, None, :]  # (k, k, len(idx))
                 near = interp(cum, pos, idx[None, None, :], horizontal)
                 total = (sign * (near - far[None, None, :])).sum(axis=-1)
-                i, j = np.unravel_index(int(np.argmax(total)), total.shape)
+                # of equal sums the side's position farthest in (as for the box above)
+                ties = np.argwhere(total == total.max())
+                i, j = ties[np.argmin(sign * (steps[ties[:, 0]] + steps[ties[:, 1]]))]
                 sides[name] = [e0 + steps[i], e1 + steps[j]]
 
     def grid_to_px(points):  # (row, col) grid positions -> photo pixels

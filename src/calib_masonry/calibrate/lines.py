@@ -106,7 +106,8 @@ def _subpixel(points: np.ndarray, strength: np.ndarray, nx: np.ndarray, ny: np.n
 def hessian_rc(gray: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The Hessian ``(H_rr, H_rc, H_cc)`` of ``gray`` smoothed at ``sigma`` (a Gaussian, edges
     zero beyond, 4 sigma wide), by central differences: the arithmetic of scikit-image's
-    ``hessian_matrix(order="rc", use_gaussian_derivatives=False)``, value for value. Its
+    ``hessian_matrix(order="rc", use_gaussian_derivatives=False)``, value for value on a float
+    image (the working image always is; scikit-image would rescale an integer one to [0, 1]). Its
     ``skimage.feature`` imports ``scipy.stats``, 0.3 s of a rectify's start (measured) for one
     filter and two gradients."""
     img = np.asarray(gray)

@@ -148,8 +148,8 @@ def tests() -> list[dict]:
     return out
 
 
-def run(test: dict, folder: Path, boundary: str = "cantilever") -> dict:
-    """Mask, structure, build and shear test of one wall in ``folder``; the simulate summary."""
+def build_wall(test: dict, folder: Path) -> Path:
+    """Mask, structure and build of one wall in ``folder``; the model folder."""
     from PIL import Image
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -161,20 +161,24 @@ def run(test: dict, folder: Path, boundary: str = "cantilever") -> dict:
         f'[[wall]]\nname = "w"\nmask = "mask.png"\nwidth_m = {test["L"]}\nheight_m = {test["H"]}\ntheta_deg = 0\n\n'
         f"[material]\n{material}\n"
     )
-    cli = [sys.executable, "-m", "calib_masonry"]
+    call([*CLI, "build", str(folder / "structure.toml"), "--out", str(folder / "model"), "--overwrite"])
+    return folder / "model"
 
-    def call(args: list[str]) -> None:
-        r = subprocess.run(args, capture_output=True, text=True)
-        if r.returncode != 0:
-            raise RuntimeError(f"{' '.join(args[2:5])}: exit {r.returncode}: {r.stderr.strip()[-2000:]}")
 
-    subprocess.run(
-        [*cli, "build", str(folder / "structure.toml"), "--out", str(folder / "model"), "--overwrite"],
-        check=True,
-        capture_output=True,
-    )
+CLI = [sys.executable, "-m", "calib_masonry"]
+
+
+def call(args: list[str]) -> None:
+    r = subprocess.run(args, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"{' '.join(args[2:5])}: exit {r.returncode}: {r.stderr.strip()[-2000:]}")
+
+
+def run(test: dict, folder: Path, boundary: str = "cantilever") -> dict:
+    """Mask, structure, build and shear test of one wall in ``folder``; the simulate summary."""
+    build_wall(test, folder)
     call(
-        [*cli, "simulate", str(folder / "model"), "--shear-test", "--precompression-mpa", str(test["sigma0"])]
+        [*CLI, "simulate", str(folder / "model"), "--shear-test", "--precompression-mpa", str(test["sigma0"])]
         + ["--boundary", boundary]
         + (["--shear-span-ratio", str(test["H0"] / test["L"])] if boundary == "cantilever" else [])
         + ["--out", str(folder / "shear"), "--overwrite", "--gif-frames", "0"]

@@ -305,6 +305,69 @@ def test_a_block_on_a_cracked_joint_tips_or_slides_where_statics_says(size, dire
     assert onset == pytest.approx(expected, abs=0.0101)
 
 
+@pytest.mark.parametrize("ratio", [0.3, 0.5, 0.7])
+def test_a_sticking_contact_does_not_creep_from_one_load_step_to_the_next(ratio):
+    # a squat block on a dry footing (tips at 3 g, slides at mu = 0.6) under a steady sideways load
+    # below Coulomb's limit, solved and committed 300 times (300 load steps of the same load): each
+    # corner sticks, so the block stays where the first solve put it (within the law's rounding,
+    # the last 5 % below the limit, a corner slides a little at each step). The friction law before
+    # 2026-11-28 carried less than the elastic trial force at any load, and every commit turned the
+    # difference into slip: the block crept at every load step (its displacement after the 300
+    # steps 14, 40 and 84 times the first at 0.3, 0.5 and 0.7 of the limit), so a pushover's
+    # capacity fell with its number of load steps
+    mu = 0.6
+    size = (1.0, 0.6, 0.3)
+    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=mu)
+    sc = Scene(
+        bodies=(_block("b", size, (0, 0, size[2] / 2)),),
+        bonds=(Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, size[0], size[1]),),
+        material=dry,
+    )
+    jm = JointModel(sc)
+    g = np.array([ratio * mu * G, 0.0, -G])
+    intact = np.zeros(1, bool)
+    jm.solve(g, intact)
+    jm.commit()
+    first = jm.motion[0]
+    assert jm.converged and first > 0
+    for _ in range(300):
+        jm.solve(g, intact)
+        jm.commit()
+    assert jm.converged
+    assert jm.motion[0] == pytest.approx(first, rel=1e-6, abs=1e-12)
+
+
+def test_the_contact_laws_tangent_is_its_derivative():
+    # the contact corners' forces and the tangent Newton's method uses, against central finite
+    # differences, over sticking, sliding, in-between and open corners
+    rng = np.random.default_rng(7)
+    sc = _column(1, material=Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6))
+    jm = JointModel(sc)
+    n = 2000
+    jc = np.zeros(n, dtype=np.int64)
+    kc = rng.choice(np.flatnonzero(jm.corner_mask[0]), n)  # (outlines are padded by repeats)
+    jm.slip[0] = rng.normal(0.0, 2e-7, jm.slip[0].shape)
+    k = jm._corner_k[jc, kc]
+    # normal gaps from open to pressed, shear trials from 0 to 3x Coulomb's limit
+    dn = rng.uniform(-2e-6, 5e-10, n)
+    gap = np.column_stack([rng.normal(0.0, 1.0, (n, 2)) * (-dn * k[:, 2] * 0.6 / k[:, 0])[:, None], dn])
+    gap[:, :2] += jm.slip[jc, kc]
+    F, T = jm._contact_forces(jc, kc, gap)
+    limit = 0.6 * -F[:, 2]
+    assert np.all(np.hypot(F[:, 0], F[:, 1]) <= limit * (1 + 1e-12) + 1e-300)
+    for j in range(3):
+        h = 1e-13
+        up, down = gap.copy(), gap.copy()
+        up[:, j] += h
+        down[:, j] -= h
+        fd = (jm._contact_forces(jc, kc, up)[0] - jm._contact_forces(jc, kc, down)[0]) / (2 * h)
+        scale = np.abs(T).max(axis=(1, 2))
+        # the law's slope is continuous, its curvature jumps at the band's edges: a central
+        # difference there errs by about h / band
+        bad = np.abs(fd - T[:, :, j]).max(axis=1) > 1e-5 * scale
+        assert bad.mean() < 0.01
+
+
 @pytest.mark.parametrize("load", [1.5, 3.0])
 def test_nothing_cracks_from_a_run_away(load):
     # a column loaded past the lateral load at which its cracked base lets it rock: the base cracks

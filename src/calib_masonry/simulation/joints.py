@@ -165,11 +165,26 @@ class ContactSettings:
     smooth_m: float = 1e-10  # the width over which the contacts' no-tension kink is rounded, m
     tol: float = 1e-3  # out-of-balance force at convergence, as a fraction of the heaviest body's load
     max_iter: int = 50  # Newton iterations per solve
+    # the friction law's rounding: a contact corner sticks (its shear force is its elastic trial force)
+    # up to 1 - slip_band of Coulomb's limit mu N, slides at that limit from 1 + slip_band, and bends
+    # smoothly between (so that Newton's method converges on it)
+    slip_band: float = 0.05
+    stall_iter: int = 10  # a solve stops when this many iterations neither halved the out-of-balance force nor grew the motion tenfold
     max_rounds: int = 40  # crack rounds per load
     release_m: float = 1e-3  # a joint whose corners move further than this in a solve has run away, m
 
     def __post_init__(self) -> None:
-        for name in ("eps_per_s2", "step_m", "smooth_m", "tol", "max_iter", "max_rounds", "release_m"):
+        for name in (
+            "eps_per_s2",
+            "step_m",
+            "smooth_m",
+            "slip_band",
+            "tol",
+            "max_iter",
+            "stall_iter",
+            "max_rounds",
+            "release_m",
+        ):
             if not getattr(self, name) > 0:
                 raise InputError(f"contact settings: {name} = {getattr(self, name)} must be > 0")
 
@@ -626,10 +641,17 @@ class JointModel:
           tension, with its kink rounded over ``delta`` (a corner that just touches carries
           ``k_n delta ln 2``: with the default mortar and 1e-10 m, 0.1 N on a corner of a 0.3 x 0.2 m
           bed, under a thousandth of that brick's weight);
-        * shear: the trial force ``T* = k_s (d_t - s)`` and ``T = mu N T* / sqrt(|T*|^2 + (mu N)^2)``:
-          elastic (``T = T*``) while ``|T*| << mu N``, and tending to Coulomb's limit ``mu N`` as
-          the corner slides: a regularised Coulomb friction (smooth, so that Newton's method
-          converges on it; the limit it carries is Coulomb's).
+        * shear: the trial force ``T* = k_s (d_t - s)`` and ``T = mu N f(|T*| / (mu N)) T* / |T*|``
+          with ``f(x) = x`` up to ``1 - h``, ``1`` from ``1 + h`` and a parabola between
+          (``h`` = :attr:`ContactSettings.slip_band`): exactly elastic (``T = T*``) while the corner
+          sticks, exactly Coulomb's limit ``mu N`` while it slides, and with a continuous slope (so
+          that Newton's method converges on it). A corner that sticks keeps its slip at
+          :meth:`commit` (``s = d_t - T / k_s`` is unchanged when ``T = T*``). (The law before
+          2026-11-28, ``T = mu N T* / sqrt(|T*|^2 + (mu N)^2)``, was below ``T*`` at any load, so
+          every commit turned part of a sticking corner's elastic displacement into slip: a
+          loaded contact crept by a step at every load step, and the laboratory walls' shear-test
+          peaks fell with the load step, 47 -> 36 kN from 25 to 200 checks a second on WI1.175,
+          ``experiments/shear_test_convergence.py``.)
 
         Units: m, N, N/m."""
         k = self._corner_k[jc, kc]
@@ -641,17 +663,32 @@ class JointModel:
         dN = -k[:, 2] * 0.5 * (1.0 + np.tanh(0.5 * x))  # dN / d d_n
         trial = k[:, :2] * (gap[:, :2] - s)
         L = mu * N
-        t2 = (trial**2).sum(axis=1)
-        m = np.sqrt(t2 + L**2)
-        live = m > 0.0  # else the corner is open and unloaded: no force, no stiffness
-        w = np.where(live, 1.0 / np.where(live, m, 1.0), 0.0)  # 1 / m
+        a = np.sqrt((trial**2).sum(axis=1))  # |T*|
+        live = (a > 0.0) | (L > 0.0)  # else the corner is open and unloaded: no force, no stiffness
+        # the shear force's size L f(a / L): f(x) = x (sticking, T = T* exactly) up to 1 - h, 1
+        # (sliding at Coulomb's limit) from 1 + h, a parabola between (continuous slope)
+        h = self.settings.slip_band
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            xr = np.where(L > 0.0, a / np.where(L > 0.0, L, 1.0), np.inf)
+        lo = 1.0 - h
+        xc = np.clip(xr, lo, 1.0 + h)
+        f = np.where(xr <= lo, xr, xc - (xc - lo) ** 2 / (4.0 * h))
+        df = np.where(xr <= lo, 1.0, 1.0 - (xc - lo) / (2.0 * h))
+        # f(x) / x: 1 while sticking (and at a = 0)
+        ratio = np.where(xr <= lo, 1.0, L * f / np.where(a > 0.0, a, 1.0))
+        ratio = np.where(live, ratio, 0.0)
+        e = np.where(a[:, None] > 0.0, trial / np.where(a > 0.0, a, 1.0)[:, None], 0.0)  # unit T*
         F = np.empty_like(gap)
-        F[:, :2] = (L * w)[:, None] * trial
+        F[:, :2] = ratio[:, None] * trial
         F[:, 2] = -N
         T = np.zeros((len(jc), 3, 3))
-        e = trial * w[:, None]  # T* / m: |e| <= 1, as are L / m and |T*|^2 / m^2 below
-        T[:, :2, :2] = (L * w)[:, None, None] * (np.eye(2) - e[:, :, None] * e[:, None, :]) * k[:, None, :2]
-        T[:, :2, 2] = e * ((e**2).sum(axis=1) * mu * dN)[:, None]
+        ee = e[:, :, None] * e[:, None, :]
+        T[:, :2, :2] = (ratio[:, None, None] * (np.eye(2) - ee) + np.where(live, df, 0.0)[:, None, None] * ee) * k[
+            :, None, :2
+        ]
+        # through L = mu N: d(L f(a / L)) / dL = f - x f' (0 while sticking)
+        dl = np.where(live, f - np.where(df > 0.0, xr, 0.0) * df, 0.0)
+        T[:, :2, 2] = e * (dl * mu * dN)[:, None]
         T[:, 2, 2] = -dN
         return F, T
 
@@ -750,8 +787,8 @@ class JointModel:
     def _contact_newton(self, intact, jc, kc, rhs, start: np.ndarray | None = None) -> np.ndarray:
         """The motion ``U`` (6 B,) that balances ``rhs`` with the contact corners ``jc, kc``, from
         ``start`` or the last committed motion (see the module docstring, "Cracked joints"). Stops
-        without convergence when ten iterations have neither halved the out-of-balance force nor
-        grown the motion tenfold (a mechanism's run-away)."""
+        without convergence when ``settings.stall_iter`` (ten) iterations have neither halved the
+        out-of-balance force nor grown the motion tenfold (a mechanism's run-away)."""
         self.converged = True
         if jc.size == 0:
             return self._solve(intact, np.zeros((self.n_all, self.outline.shape[1]), bool), rhs)
@@ -782,8 +819,9 @@ class JointModel:
                 self.converged = True
                 break
             history.append((np.linalg.norm(r), float(np.abs(U).max())))
-            if len(history) > 10:
-                (r10, u10), (rn, un) = history[-11], history[-1]
+            stall = self.settings.stall_iter
+            if len(history) > stall:
+                (r10, u10), (rn, un) = history[-stall - 1], history[-1]
                 if rn > 0.5 * r10 and un < 10.0 * u10:
                     break  # stalled
             gap, T = st

@@ -1,0 +1,133 @@
+"""Experiment: is a laboratory wall's shear-test peak a converged output of the joint model?
+
+Why: the brief judges physics by physics (an outcome must not change when the solver is made more
+accurate), and the laboratory walls' predicted peaks (experiments/lab_walls.py) moved by tens of
+per cent when the joints' stiffness model changed (docs/stone_walls.md). Here the joint model's
+own numerical settings and the load step are varied instead, with nothing else changed.
+
+A shear test's wall stands on a footing, so its joint model reads no pose (simulation/tracker.py):
+which joints crack and which Bullet lets go, and at what load, follow from the load history
+alone. This runs the CrackTracker over the shear test's loads frame by frame, without Bullet
+(as experiments/joint_solver_settings.py does for a quake), and prints per setting:
+
+- ``first release``: the lateral force (kN, the test's top force) at which the model first found
+  no equilibrium and handed joints to Bullet;
+- ``beam free``: the force at which no held joint ties the loading beam to the ground any more (Bullet
+  then moves the beam, and the peak Bullet's poses give lies between the two);
+- the joints cracked by then, the solves that did not converge, and the seconds.
+
+The settings: the load step (frames per second of the ramp at 0.01 of the vertical load per second:
+25 is the default), the release displacement ``release_m`` (1 mm default), and the contact iteration's
+limits (``max_iter`` 50 and ``stall_iter`` 10 by default; no stall and 400 iterations let a solve
+that stalled at 10 run on). The rigid cantilever's rocking bound ``(N + W) L / (2 H0)`` is printed
+beside the measured Vmax.
+
+    .venv/bin/python experiments/shear_test_convergence.py [--only WI1.175 WI3.175 SW.30.1] [--variants ...]
+
+Measured on 2026-11-28: see docs/stone_walls.md ("Is the peak converged?").
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import lab_walls
+import numpy as np
+
+from calib_masonry.simulation.joints import ContactSettings
+from calib_masonry.simulation.loop import gravity_per_frame
+from calib_masonry.simulation.run import SimulationConfig, scene_for_model
+from calib_masonry.simulation.scene import ShearTest, SolverSettings
+from calib_masonry.simulation.tracker import CrackTracker
+
+VARIANTS = {
+    "default (25 fps)": (25, {}),
+    "50 fps": (50, {}),
+    "100 fps": (100, {}),
+    "200 fps": (200, {}),
+    "release 3 mm": (25, {"release_m": 3e-3}),
+    "release 10 mm": (25, {"release_m": 1e-2}),
+    "release 30 mm": (25, {"release_m": 3e-2}),
+    "50 fps, release 10 mm": (50, {"release_m": 1e-2}),
+    "100 fps, release 10 mm": (100, {"release_m": 1e-2}),
+    "100 fps, release 30 mm": (100, {"release_m": 3e-2}),
+    "tol 1e-5": (25, {"tol": 1e-5}),
+    "100 fps, tol 1e-5": (100, {"tol": 1e-5}),
+    "no stall, 400 iterations": (25, {"max_iter": 400, "stall_iter": 400}),
+    "100 fps, no stall, 400 it.": (100, {"max_iter": 400, "stall_iter": 400}),
+}
+
+
+def replay(scene, settings: ContactSettings) -> dict:
+    """The tracker alone over a shear test's loads: the loads of the first release and of the beam's
+    release, in g."""
+    s = scene.solver
+    gravity = gravity_per_frame(scene)
+    warm = s.warmup_frames
+    pos = np.array([b.location for b in scene.bodies], dtype=np.float64).reshape(-1, 3)
+    rot = np.broadcast_to(np.eye(3), (len(pos), 3, 3)).copy()
+    plate = np.zeros(3)
+    tracker = CrackTracker(scene, pos, rot, plate, warm / s.fps, settings=settings)
+    if tracker.reads_poses:
+        raise SystemExit("this model has bodies bearing on the plate without a joint: its joint model reads poses")
+    beam = scene.notes["shear_test"]["beam"]
+    first = free = None
+    stalled = 0
+    t0 = time.perf_counter()
+    for f in range(warm + 1, scene.frames + 1):
+        lam = float(np.hypot(*gravity[f, :2]) / scene.gravity)
+        released = tracker.step((f - 1) / s.fps, gravity[f], pos, rot, plate)
+        stalled += not tracker.model.converged
+        if released.size and first is None:
+            first = (lam, int((~tracker.intact).sum()))
+        if not tracker.model.grounded(tracker.held)[beam]:
+            free = (lam, int((~tracker.intact).sum()))
+            break
+    return {"first": first, "free": free, "stalled": stalled, "seconds": time.perf_counter() - t0}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", nargs="+", default=["WI1.175", "WI3.175", "SW.30.1"], help="test units")
+    ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    ap.add_argument("--out", default=None, help="keep each wall's mask and model here (default: a temporary folder)")
+    args = ap.parse_args()
+    base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="shear_convergence_"))
+    for test in lab_walls.tests():
+        if test["unit"] not in args.only:
+            continue
+        model = lab_walls.build_wall(test, base / test["unit"])
+        st = None
+        for name in args.variants:
+            fps, over = VARIANTS[name]
+            config = SimulationConfig(
+                shear_test=ShearTest(precompression_pa=test["sigma0"] * 1e6, shear_span_ratio=test["H0"] / test["L"]),
+                solver=SolverSettings(fps=fps),
+            )
+            scene = scene_for_model(model, config)
+            st = scene.notes["shear_test"]
+            if name == args.variants[0]:
+                bound = (st["vertical_load_kn"] + st["wall_weight_kn"]) * st["length_m"] / (2 * st["shear_span_m"])
+                print(
+                    f"{test['unit']}: sigma0 {test['sigma0']:.3f} MPa, measured Vmax {test['vmax']:.1f} kN, rigid "
+                    f"rocking bound {bound:.1f} kN; {len(scene.bodies) - 1} stones, {len(scene.bonds)} joints",
+                    flush=True,
+                )
+            r = replay(scene, ContactSettings(**over))
+            kn = st["force_per_g_kn"]
+
+            def at(x):
+                return "never" if x is None else f"{x[0] * kn:6.1f} kN ({x[1]} cracked)"
+
+            print(
+                f"  {name:>28}: first release {at(r['first'])}, beam free {at(r['free'])}; "
+                f"{r['stalled']} solves unconverged, {r['seconds']:.1f} s",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()

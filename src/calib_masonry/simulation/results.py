@@ -189,7 +189,8 @@ def pushover_stop(scene: Scene, settle_s: float = 1.0):
 def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float | None, np.ndarray, np.ndarray]:
     """The pushover's collapse multiplier (g), or None if the structure (a shear test's loading beam)
     did not run away within the ramp; and the lateral acceleration (g) and roof displacement (m) at every frame from the
-    end of the warm-up (the pushover curve)."""
+    end of the warm-up (the pushover curve). A shear test's multiplier is at most the last load
+    before the joint model set its beam free (:func:`_beam_set_free`)."""
     p = scene.pushover
     start = m.start_frame
     t = out.time[start:] - out.time[start]
@@ -570,7 +571,8 @@ def shear_curve(scene: Scene, out: RunOutput, m: Metrics, curve, levels: int = 4
     the push over the wall's height). Up to the peak, at ``levels`` loads, the drift is the joint
     model's elastic one with the joints cracked by then (:func:`_elastic_drift`); after it, that plus
     the beam's motion in Bullet. The peak force is the force at the collapse multiplier (the last
-    load before the wall ran away), None if the ramp ended first."""
+    load before the joint model set the beam free, or before the beam ran away in Bullet if that
+    came first: :func:`collapse_multiplier`), None if the ramp ended first."""
     st = scene.notes["shear_test"]
     value, lam, _ = curve
     start = m.start_frame

@@ -44,6 +44,7 @@ __all__ = [
     "collapse_multiplier",
     "plot_pushover",
     "ONSET_DRIFT",
+    "runaway_m",
     "ONSET_WINDOW_S",
     "failure_mode_counts",
 ]
@@ -149,7 +150,7 @@ def structure_height(scene: Scene) -> float:
     return float(z.max() - z.min())
 
 
-def _runaway_m(scene: Scene) -> float:
+def runaway_m(scene: Scene) -> float:
     """A displacement that only a mechanism reaches: the moved threshold, or ten times the onset
     drift of the structure's height if that is more."""
     return max(scene.solver.moved_threshold_m, 10 * ONSET_DRIFT * structure_height(scene))
@@ -169,7 +170,7 @@ def pushover_stop(scene: Scene, settle_s: float = 1.0):
     brick displacement (from the end of the warm-up, relative to the plate; a shear test's beam's)
     has run away."""
     s = scene.solver
-    limit = _runaway_m(scene)
+    limit = runaway_m(scene)
     state = {"ref": None, "since": None}
     watched = _watched(scene)
 
@@ -203,7 +204,7 @@ def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float
     )
     dmax = np.linalg.norm(rel, axis=2).max(axis=1)
     height = structure_height(scene)
-    limit = _runaway_m(scene)
+    limit = runaway_m(scene)
     w = max(1, int(round(ONSET_WINDOW_S * scene.solver.fps)))
     speed = np.zeros(len(rel))
     speed[w:] = np.linalg.norm(rel[w:] - rel[:-w], axis=2).max(axis=1) / (w / scene.solver.fps)
@@ -246,7 +247,7 @@ MECHANISM_SHARE = 0.25
 def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
     """How the structure failed, from the joints that let go where the collapse has begun: the
     first frame after the warm-up at which a brick has moved by the run-away displacement
-    (:func:`_runaway_m`; under a ground motion in the verdict's motion of the freed pieces, as the
+    (:func:`runaway_m`; under a ground motion in the verdict's motion of the freed pieces, as the
     metrics read it). The joints taking part are those Bullet let go by then (the joint model
     found no equilibrium with them); each opened (it cracked in tension) or slid (in shear or
     crushing). Without any (a run the joint model did not watch), they are those whose two sides moved
@@ -261,7 +262,7 @@ def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
     w = _watched(scene)
     # the verdict's motion where it has one (a ground motion: the rigid pieces), not the animation's
     rel = _motion(out, start)[start:, w]
-    moved = np.flatnonzero(np.linalg.norm(rel, axis=2).max(axis=1) > _runaway_m(scene))
+    moved = np.flatnonzero(np.linalg.norm(rel, axis=2).max(axis=1) > runaway_m(scene))
     if moved.size == 0:
         return None
     f = start + int(moved[0])

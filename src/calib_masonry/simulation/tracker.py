@@ -62,6 +62,8 @@ class CrackTracker:
 
         preload("joint_solver")
 
+        if settings is None:
+            settings = self.default_settings(scene)
         self.model = JointModel(scene, settings=settings, contact_gap_m=scene.solver.contact_gap_m)
         n = self.model.nj
         self.t0 = float(time_s)
@@ -116,6 +118,24 @@ class CrackTracker:
                 self._phi1 = mass @ first.shapes[0].ravel()  # q_1 = phi_1^T M u
                 z = self.model.x[:, 2]
                 self._top = np.flatnonzero(z >= z.max() - 0.05 * max(float(np.ptp(z)), 1e-9))
+
+    @staticmethod
+    def default_settings(scene: Scene) -> ContactSettings:
+        """The joint model's settings for a run of ``scene``: :class:`ContactSettings`'s defaults under
+        a ground motion; in a pushover or a shear test (a load that rises slowly, each check from the
+        last one's equilibrium) a contact iteration that runs on until it converges or runs away
+        (``max_iter`` 400, no stall window) and a release displacement of the run-away the verdict
+        reads (:func:`~calib_masonry.simulation.results.runaway_m`: the moved threshold, or 1 % of
+        the height if more). Under a laboratory precompression (0.9-1.3 MPa) an equilibrium's elastic
+        and frictional motions reach a millimetre, and a stalled iteration is often no mechanism: at
+        1 mm and 10 stalled iterations the laboratory walls' peaks moved by 15-70 % with the load step
+        and the release displacement; with these, WI1.175's is 65.2 kN at 25, 50 and 100 checks a
+        second (docs/stone_walls.md, experiments/shear_test_convergence.py)."""
+        if scene.motion is not None:
+            return ContactSettings()
+        from .results import runaway_m
+
+        return ContactSettings(max_iter=400, stall_iter=400, release_m=max(ContactSettings.release_m, runaway_m(scene)))
 
     def release_factors(self) -> None:
         """The joint model's :meth:`JointModel.release_factors`: on the thread that stepped it."""

@@ -78,7 +78,10 @@ numerical settings are :class:`ContactSettings`); an iteration that has stalled
 such equilibrium: the iteration then runs away along the mechanism (held only by the weak springs
 below), and the joints that move by more than
 ``release_m`` (1 mm; an equilibrium moves them by microns) are the ones Bullet lets go (see
-:class:`CrackTracker`). Against rigid-block limit analysis (experiments/joint_statics.py, dry
+:class:`CrackTracker`; a pushover or a shear test, whose load rises slowly from one equilibrium to
+the next, lets go at the verdict's run-away displacement and iterates to convergence instead:
+under a laboratory precompression an equilibrium moves its joints by a millimetre,
+``CrackTracker.default_settings``). Against rigid-block limit analysis (experiments/joint_statics.py, dry
 panels with Coulomb friction 0.6) the model finds its mechanism within 6 % below the static
 programme's load (Coulomb friction is non-associative, so the real collapse load is at most the
 programme's).

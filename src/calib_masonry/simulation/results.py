@@ -26,9 +26,8 @@ import numpy as np
 from .ground_motion import G
 from .joints import FAILURE_MODES
 from .loop import RunOutput
-from .scene import Scene, grounded_bodies, rotations
+from .scene import ONSET_DRIFT, Scene, grounded_bodies, rotations, runaway_m, structure_height
 
-ONSET_DRIFT = 1e-3  # a pushover's onset of collapse: a brick moves faster than this fraction of the height per second
 ONSET_WINDOW_S = 0.2  # ... measured over this window
 
 __all__ = [
@@ -143,17 +142,6 @@ def failure_mode_counts(out: RunOutput) -> dict:
     """How many joints cracked by each criterion (tension, compression, shear)."""
     modes = out.bond_break_mode if out.bond_break_mode is not None else np.zeros(0, dtype=int)
     return {name: int((modes == k).sum()) for k, name in enumerate(FAILURE_MODES)}
-
-
-def structure_height(scene: Scene) -> float:
-    z = np.concatenate([b.vertices[:, 2] + b.location[2] for b in scene.bodies])
-    return float(z.max() - z.min())
-
-
-def runaway_m(scene: Scene) -> float:
-    """A displacement that only a mechanism reaches: the moved threshold, or ten times the onset
-    drift of the structure's height if that is more."""
-    return max(scene.solver.moved_threshold_m, 10 * ONSET_DRIFT * structure_height(scene))
 
 
 def _watched(scene: Scene) -> slice:

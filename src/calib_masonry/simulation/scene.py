@@ -49,6 +49,9 @@ from .ground_motion import G, GroundMotion
 from .mortar import mortar_cells, nearest_labels, shared_boundary_lengths, wall_joints
 
 __all__ = [
+    "ONSET_DRIFT",
+    "runaway_m",
+    "structure_height",
     "Material",
     "SolverSettings",
     "Body",
@@ -1163,3 +1166,19 @@ def shear_test_scene(
         held_rotation=(k,) if test.boundary == "double-fixed" else (),
         notes=notes,
     )
+
+
+#: a pushover's onset of collapse: a brick moves faster than this fraction of the height per second
+#: (simulation/results.py)
+ONSET_DRIFT = 1e-3
+
+
+def structure_height(scene: Scene) -> float:
+    z = np.concatenate([b.vertices[:, 2] + b.location[2] for b in scene.bodies])
+    return float(z.max() - z.min())
+
+
+def runaway_m(scene: Scene) -> float:
+    """A displacement that only a mechanism reaches: the moved threshold, or ten times the onset
+    drift of the structure's height if that is more."""
+    return max(scene.solver.moved_threshold_m, 10 * ONSET_DRIFT * structure_height(scene))

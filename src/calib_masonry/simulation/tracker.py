@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import InputError
 from .dynamics import ElasticResponse, mass_matrix, modes, record_load
 from .joints import ContactSettings, JointModel, JointState
-from .scene import Scene
+from .scene import Scene, runaway_m
 
 __all__ = ["CrackTracker"]
 
@@ -125,7 +125,7 @@ class CrackTracker:
         a ground motion; in a pushover or a shear test (a load that rises slowly, each check from the
         last one's equilibrium) a contact iteration that runs on until it converges or runs away
         (``max_iter`` 400, no stall window) and a release displacement of the run-away the verdict
-        reads (:func:`~calib_masonry.simulation.results.runaway_m`: the moved threshold, or 1 % of
+        reads (:func:`~calib_masonry.simulation.scene.runaway_m`: the moved threshold, or 1 % of
         the height if more). Under a laboratory precompression (0.9-1.3 MPa) an equilibrium's elastic
         and frictional motions reach a millimetre, and a stalled iteration is often no mechanism: at
         1 mm and 10 stalled iterations the laboratory walls' peaks moved by 15-70 % with the load step
@@ -133,8 +133,6 @@ class CrackTracker:
         second (docs/stone_walls.md, experiments/shear_test_convergence.py)."""
         if scene.motion is not None:
             return ContactSettings()
-        from .results import runaway_m
-
         return ContactSettings(max_iter=400, stall_iter=400, release_m=max(ContactSettings.release_m, runaway_m(scene)))
 
     def release_factors(self) -> None:

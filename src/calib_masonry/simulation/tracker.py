@@ -122,8 +122,8 @@ class CrackTracker:
     @staticmethod
     def default_settings(scene: Scene) -> ContactSettings:
         """The joint model's settings for a run of ``scene``: :class:`ContactSettings`'s defaults under
-        a ground motion; in a pushover or a shear test (a load that rises slowly, each check from the
-        last one's equilibrium) a contact iteration that runs on until it converges or runs away
+        a ground motion; without one (a pushover or a shear test, whose load rises slowly, each check
+        from the last one's equilibrium; gravity alone) a contact iteration that runs on until it converges or runs away
         (``max_iter`` 400, no stall window) and a release displacement of the run-away the verdict
         reads (:func:`~calib_masonry.simulation.scene.runaway_m`: the moved threshold, or 1 % of
         the height if more). Under a laboratory precompression (0.9-1.3 MPa) an equilibrium's elastic

@@ -41,19 +41,27 @@ VARIANTS = {
 }
 
 
-def replay(scene, settings: ContactSettings):
-    """Crack and release times of every joint over the run's loads (the tracker alone)."""
+def pose_free_tracker(scene, settings: ContactSettings | None):
+    """A CrackTracker for a run of ``scene`` that reads no pose (every body on a joint), with the
+    bodies at rest where the scene puts them; and the run's per-frame loads and those poses,
+    ``(tracker, gravity, positions, rotations, plate)``: ``tracker.step((f - 1) / fps, gravity[f],
+    positions, rotations, plate)`` for each frame ``f`` after the warm-up replays the run's joints."""
     s = scene.solver
-    gravity = gravity_per_frame(scene)
-    warm = s.warmup_frames
     pos = np.array([b.location for b in scene.bodies], dtype=np.float64).reshape(-1, 3)
     rot = np.broadcast_to(np.eye(3), (len(pos), 3, 3)).copy()
     plate = np.zeros(3)
-    tracker = CrackTracker(scene, pos, rot, plate, warm / s.fps, settings=settings)
-    if tracker.model.n_all > tracker.model.nj:
+    tracker = CrackTracker(scene, pos, rot, plate, s.warmup_frames / s.fps, settings=settings)
+    if tracker.reads_poses:
         raise SystemExit("this model has bodies bearing on the plate without a joint: its joint model reads poses")
+    return tracker, gravity_per_frame(scene), pos, rot, plate
+
+
+def replay(scene, settings: ContactSettings):
+    """Crack and release times of every joint over the run's loads (the tracker alone)."""
+    s = scene.solver
+    tracker, gravity, pos, rot, plate = pose_free_tracker(scene, settings)
     t0 = time.perf_counter()
-    for f in range(warm + 1, scene.frames + 1):
+    for f in range(s.warmup_frames + 1, scene.frames + 1):
         tracker.step((f - 1) / s.fps, gravity[f], pos, rot, plate)
     return tracker, time.perf_counter() - t0
 

@@ -39,9 +39,9 @@ from pathlib import Path
 
 import lab_walls
 import numpy as np
+from joint_solver_settings import pose_free_tracker
 
 from calib_masonry.simulation.joints import ContactSettings
-from calib_masonry.simulation.loop import gravity_per_frame
 from calib_masonry.simulation.run import SimulationConfig, scene_for_model
 from calib_masonry.simulation.scene import ShearTest, SolverSettings
 from calib_masonry.simulation.tracker import CrackTracker
@@ -69,19 +69,12 @@ def replay(scene, settings: ContactSettings) -> dict:
     """The tracker alone over a shear test's loads: the loads of the first release and of the beam's
     release, in g."""
     s = scene.solver
-    gravity = gravity_per_frame(scene)
-    warm = s.warmup_frames
-    pos = np.array([b.location for b in scene.bodies], dtype=np.float64).reshape(-1, 3)
-    rot = np.broadcast_to(np.eye(3), (len(pos), 3, 3)).copy()
-    plate = np.zeros(3)
-    tracker = CrackTracker(scene, pos, rot, plate, warm / s.fps, settings=settings)
-    if tracker.reads_poses:
-        raise SystemExit("this model has bodies bearing on the plate without a joint: its joint model reads poses")
+    tracker, gravity, pos, rot, plate = pose_free_tracker(scene, settings)
     beam = scene.notes["shear_test"]["beam"]
     first = free = None
     stalled = 0
     t0 = time.perf_counter()
-    for f in range(warm + 1, scene.frames + 1):
+    for f in range(s.warmup_frames + 1, scene.frames + 1):
         lam = float(np.hypot(*gravity[f, :2]) / scene.gravity)
         released = tracker.step((f - 1) / s.fps, gravity[f], pos, rot, plate)
         stalled += not tracker.model.converged

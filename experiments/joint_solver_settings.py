@@ -38,6 +38,10 @@ VARIANTS = {
     "tol 1e-5": {"tol": 1e-5},
     "30 iterations": {"max_iter": 30},
     "100 iterations": {"max_iter": 100},
+    "release 1 cm": {"release_m": 0.01},
+    "release 5 cm": {"release_m": 0.05},
+    "no stall, 400 iterations": {"max_iter": 400, "stall_iter": 400},
+    "pushover's settings": {"max_iter": 400, "stall_iter": 400, "release_m": 0.05},
 }
 
 

@@ -58,6 +58,13 @@ VARIANTS = {
     "release 100 mm": (25, {"release_m": 0.1}),
     "800 iterations": (25, {"max_iter": 800, "stall_iter": 800}),
     "tol 1e-4": (25, {"tol": 1e-4}),
+    "tol 1e-5": (25, {"tol": 1e-5}),
+    "tol 1e-5, 100 fps": (100, {"tol": 1e-5}),
+    "tol per body": (25, {"tol_per_body": True}),
+    "tol per body, 50 fps": (50, {"tol_per_body": True}),
+    "tol per body, 100 fps": (100, {"tol_per_body": True}),
+    "tol per body, 200 fps": (200, {"tol_per_body": True}),
+    "tol 1e-4 per body": (25, {"tol": 1e-4, "tol_per_body": True}),
     # a ground motion's settings (ContactSettings' defaults): release at 1 mm, a solve stops after
     # 10 iterations without progress or 50 in all
     "quake settings": (25, "quake"),

@@ -113,18 +113,23 @@ def _solve(A_eq, b_eq, A_ub, b_ub, nc: int, gravity_only: bool, *, central: bool
     cost = np.zeros(3 * nc + 1)
     cost[-1] = -1.0
     bounds = [(0, None), (None, None), (None, None)] * nc + [(0, 0) if gravity_only else (0, None)]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", OptimizeWarning)  # run_crossover goes to HiGHS verbatim
-        res = linprog(
-            cost,
-            A_ub=A_ub,
-            b_ub=b_ub,
-            A_eq=A_eq,
-            b_eq=b_eq,
-            bounds=bounds,
-            method="highs-ipm" if central else "highs",
-            options={"run_crossover": "off"} if central else {},
-        )
+    # the interior point method without crossover may stop short of its tolerances on an ill-scaled
+    # programme (HiGHS's model status "unknown"): then the same method with crossover, a vertex
+    for options in [{"run_crossover": "off"}, {"run_crossover": "on"}] if central else [None]:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OptimizeWarning)  # run_crossover goes to HiGHS verbatim
+            res = linprog(
+                cost,
+                A_ub=A_ub,
+                b_ub=b_ub,
+                A_eq=A_eq,
+                b_eq=b_eq,
+                bounds=bounds,
+                method="highs-ipm" if central else "highs",
+                options=options or {},
+            )
+        if res.success or res.status == 2:
+            break
     if res.status == 2:  # infeasible
         return None
     assert res.success, res.message

@@ -428,3 +428,43 @@ def test_a_stop_ends_the_contact_iteration(monkeypatch):
     process.request_stop()
     with pytest.raises(Terminated):
         JointModel(sc).solve(np.array([0.0, 0.0, -G]), intact)
+
+
+def test_a_per_body_tolerance_balances_a_light_stone_under_a_heavy_beam():
+    # a shear test's loading beam weighs tens to hundreds of stones: an out-of-balance force of a
+    # thousandth of its load is a third of a stone's weight. With ``tol_per_body`` every body is
+    # balanced to a thousandth of its own load (its moments times its size), which the check here
+    # recomputes from the solve's motion and contact forces
+    from calib_masonry.simulation.joints import ContactSettings
+
+    mu = 0.6
+    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=mu)
+    stone = _block("stone", (0.2, 0.2, 0.1), (0, 0, 0.05))
+    beam = _block("beam", (0.2, 0.2, 0.2), (0, 0, 0.2), density=1800.0 * 200)
+    sc = Scene(
+        bodies=(stone, beam),
+        bonds=(
+            Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, 0.2, 0.2),
+            Bond.rectangle(0, 1, (0, 0, 0.1), UP, X, 0.2, 0.2),
+        ),
+        material=dry,
+    )
+    g = np.array([0.3 * mu * G, 0.0, -G])
+    intact = np.zeros(2, bool)
+    for per_body in (False, True):
+        jm = JointModel(sc, settings=ContactSettings(tol_per_body=per_body))
+        jm.solve(g, intact)
+        jc, kc, U = jm._last
+        K0 = jm._joint_matrix(jm._pad(intact))
+        rhs = jm._load(g)
+        r, _ = jm._residual(K0, jm._corner_operator(jc, kc), jc, kc, U, rhs)
+        r = np.abs(r.reshape(2, 6))
+        own = np.abs(rhs.reshape(2, 6)[:, :3]).max(axis=1)
+        assert jm.converged
+        assert r[1, :3].max() <= 1e-3 * own[1]  # the beam, either way
+        limit = np.broadcast_to(jm._tolerance(rhs), (12,)).reshape(2, 6)
+        # the stone's limit: a thousandth of the beam's load (a fifth of its own weight here), or of its own
+        assert limit[0, 0] == pytest.approx(1e-3 * (own[0] if per_body else own[1]))
+        if per_body:
+            assert r[0, :3].max() <= 1e-3 * own[0]
+            assert r[0, 3:].max() <= 1e-3 * own[0] * jm._size[0]

@@ -21,7 +21,10 @@ Two flow rules:
   (zero dilatancy, as the joint model's contacts and Bullet's do), and the programme is solved
   again with the capacities relaxed towards ``mu n`` of each new solution until the load factor
   settles. Its result is a load at which a non-associative mechanism exists with every corner
-  inside Coulomb's cone, not a bound; where the bodies' forces are statically indeterminate it
+  inside Coulomb's cone, not a bound (two 0.2 x 1 m blocks side by side at mu 5: 0.40 g, the pair
+  tipping as one, where each can tip about its own toe at b/h = 0.2, sliding along the head joint
+  without opening, which builds no normal force there: experiments/joint_statics.py); where the
+  bodies' forces are statically indeterminate it
   can lie far below the associative load (a stone that can slide out only by dilating: on the
   SWAT wall pushed along -X, 0.054 g against 0.29 g). The programme is solved by HiGHS's interior
   point method without crossover, whose solution lies inside the optimal face (the normal forces

@@ -9,7 +9,7 @@ import shapely
 
 from calib_masonry.build3d.contacts import OUTLINE_POINTS, joint_axes, patch_section
 from calib_masonry.simulation.ground_motion import G
-from calib_masonry.simulation.joints import FAILURE_MODES, JointModel, joint_stiffness
+from calib_masonry.simulation.joints import FAILURE_MODES, ContactSettings, JointModel, joint_stiffness
 from calib_masonry.simulation.results import rotations
 from calib_masonry.simulation.scene import Body, Bond, Material, Scene, box_mesh, quaternions_from_matrices
 
@@ -435,7 +435,6 @@ def test_a_per_body_tolerance_balances_a_light_stone_under_a_heavy_beam():
     # thousandth of its load is a third of a stone's weight. With ``tol_per_body`` every body is
     # balanced to a thousandth of its own load (its moments times its size), which the check here
     # recomputes from the solve's motion and contact forces
-    from calib_masonry.simulation.joints import ContactSettings
 
     mu = 0.6
     dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=mu)
@@ -468,3 +467,27 @@ def test_a_per_body_tolerance_balances_a_light_stone_under_a_heavy_beam():
         if per_body:
             assert r[0, :3].max() <= 1e-3 * own[0]
             assert r[0, 3:].max() <= 1e-3 * own[0] * jm._size[0]
+
+
+@pytest.mark.parametrize("lateral", [0.59, 0.62])
+def test_a_let_go_block_does_not_change_how_far_a_step_may_move_the_others(lateral):
+    # a Newton step may move nothing further than step_m or three times the motion so far; a let-go
+    # block floats a kilometre away (g / eps) and once counted in "the motion so far" it lifted the
+    # cap for every held body: a shear test whose sliver had just been let go then diverged to
+    # 1e11 N and let its whole wall go. With it counted out, the held blocks' iteration is the same,
+    # step for step, with or without the floating block, below (0.59 g) and past (0.62 g: 142
+    # capped steps; 4 uncapped ones before) the top joint's sliding limit mu = 0.6
+    g = np.array([lateral * G, 0.0, -G])
+    intact = np.array([True, False, False])
+    settings = ContactSettings(max_iter=400, stall_iter=400)
+    ref = JointModel(_column(3, material=WEAK_MORTAR), settings=settings)
+    ref.solve(g, intact)
+    model = JointModel(_column(4, material=WEAK_MORTAR), settings=settings)
+    closed = np.ones((4, OUTLINE_POINTS), bool)
+    closed[3] = False
+    model.solve(g, np.append(intact, False), closed)
+    assert model.converged and ref.converged
+    assert model.newton_iterations == ref.newton_iterations
+    U = model._last[2].reshape(-1, 6)
+    assert U[:3] == pytest.approx(ref._last[2].reshape(-1, 6), rel=1e-12, abs=1e-15)
+    assert U[3, :3] == pytest.approx(g / settings.eps_per_s2, rel=1e-12)

@@ -93,13 +93,14 @@ def _equilibrium(scene: Scene, corners, direction, gravity_only: bool):
     return coo_matrix((vals, (rows, cols)), shape=(6 * nb, nv)).tocsr(), b_eq
 
 
-def _friction(nc: int, mu: float, capacity: np.ndarray | None):
-    """A_ub, b_ub of the friction pyramids: +-t_u +-t_v - mu n <= 0, or +-t_u +-t_v <= capacity."""
+def _friction(nc: int, mu: float | None):
+    """A_ub of the friction pyramids, four rows a corner: +-t_u +-t_v - mu n <= 0 (b_ub zero), or with
+    ``mu`` None +-t_u +-t_v <= b_ub (a fixed capacity per corner, repeated four times)."""
     ur, uc, uv = [], [], []
     for c in range(nc):
         for q, (su, sv) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
             row = 4 * c + q
-            if capacity is None:
+            if mu is not None:
                 ur += [row, row, row]
                 uc += [3 * c, 3 * c + 1, 3 * c + 2]
                 uv += [-mu, su, sv]
@@ -107,8 +108,7 @@ def _friction(nc: int, mu: float, capacity: np.ndarray | None):
                 ur += [row, row]
                 uc += [3 * c + 1, 3 * c + 2]
                 uv += [su, sv]
-    A_ub = coo_matrix((uv, (ur, uc)), shape=(4 * nc, 3 * nc + 1)).tocsr()
-    return A_ub, np.zeros(4 * nc) if capacity is None else np.repeat(capacity, 4)
+    return coo_matrix((uv, (ur, uc)), shape=(4 * nc, 3 * nc + 1)).tocsr()
 
 
 def _solve(A_eq, b_eq, A_ub, b_ub, nc: int, gravity_only: bool, *, central: bool = False):
@@ -154,13 +154,14 @@ def limit_load(
     corners = _corners(scene)
     nc = len(corners)
     A_eq, b_eq = _equilibrium(scene, corners, direction, gravity_only)
-    x = _solve(A_eq, b_eq, *_friction(nc, mu, None), nc, gravity_only)
+    x = _solve(A_eq, b_eq, _friction(nc, mu), np.zeros(4 * nc), nc, gravity_only)
     if x is None or associative:
         return None if x is None else float(x[-1])
     capacity = mu * x[0::3][:nc]
+    A_cap = _friction(nc, None)  # the same rows every step: only the capacities change
     history = []
     for _ in range(MAX_STEPS):
-        x = _solve(A_eq, b_eq, *_friction(nc, mu, capacity), nc, gravity_only, central=True)
+        x = _solve(A_eq, b_eq, A_cap, np.repeat(capacity, 4), nc, gravity_only, central=True)
         if x is None:
             return None
         history.append(float(x[-1]))

@@ -827,7 +827,9 @@ class JointModel:
             if np.all(np.abs(r) <= limit):
                 self.converged = True
                 break
-            history.append((np.linalg.norm(r), float(np.abs(U[~free]).max(initial=0.0))))
+            # the motion of the bodies something holds (a free body's place, g / eps, is a kilometre)
+            moved = float(np.abs(U[~free]).max(initial=0.0))
+            history.append((np.linalg.norm(r), moved))
             stall = self.settings.stall_iter
             if len(history) > stall:
                 (r10, u10), (rn, un) = history[-stall - 1], history[-1]
@@ -839,10 +841,10 @@ class JointModel:
             # a step that would move anything by more than ``step_m`` (or three times the largest
             # motion so far) is shortened: a free body's full step is g / eps, metres; then halved
             # while it does not lower the out-of-balance force
-            # (over the bodies something holds: a free body's place, g / eps, is a kilometre, and
-            # measured with it the cap let a step throw held stones as far: a shear test whose
-            # sliver had just been let go diverged to 1e11 N and let the whole wall go)
-            cap = max(self.settings.step_m, 3.0 * float(np.abs(U[~free]).max(initial=0.0)))
+            # (over the bodies something holds: measured with a free one the cap let a step throw
+            # held stones a kilometre: a shear test whose sliver had just been let go diverged to
+            # 1e11 N and let the whole wall go)
+            cap = max(self.settings.step_m, 3.0 * moved)
             a = min(1.0, cap / max(float(np.abs(dU).max()), 1e-300))
             for _ in range(6):
                 r_new, st_new = self._residual(K0, P, jc, kc, U + a * dU, rhs)
@@ -874,9 +876,7 @@ class JointModel:
         f = np.abs(rhs.reshape(-1, 6)[:, :3]).max(axis=1)
         heaviest = max(float(f.max()), 1e-300)
         own = self.settings.tol * np.maximum(f, 1e-3 * heaviest)
-        return np.column_stack(
-            [np.repeat(own[:, None], 3, axis=1), np.repeat((own * self._size)[:, None], 3, axis=1)]
-        ).ravel()
+        return np.repeat(np.column_stack([own, own * self._size]), 3, axis=1).ravel()
 
     def _free_bodies(self, intact: np.ndarray, jc: np.ndarray) -> np.ndarray:
         """``(B,)`` True for the bodies that no chain of intact joints and contact corners ``jc``

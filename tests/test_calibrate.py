@@ -1022,7 +1022,7 @@ def test_an_end_face_in_the_outline_is_cut_at_the_crease():
     edge made W 2.3-7.9 % wide (Blender renders). The end face's courses point at the vanishing
     point of the wall's normal and end on the crease, which front_face_ends maps back to its x on
     the wall: the left side moves there, the right stays, and a camera in front of the wall (which
-    sees no end face) moves nothing."""
+    sees no end face) moves nothing; nor does an outline whose side is on the crease already."""
     from types import SimpleNamespace
 
     from calib_masonry.calibrate.camera import (
@@ -1100,6 +1100,12 @@ def test_an_end_face_in_the_outline_is_cut_at_the_crease():
     assert front_face_ends(res, np.zeros((0, 4)), photo(False)) is None  # bricks to the end: nothing moves
     assert front_face_ends(res, np.zeros((0, 4)), photo(False, stack)) is None
     assert front_face_ends(result(1.0), np.zeros((0, 4)), photo(True)) is None  # no end face to see from here
+    # an outline already on the crease, the end face beyond its side: a step in from it (here the
+    # same band as above, on a Blender wall a bond's perpends 0.35 m in) is no second crease
+    beyond = (wx < 0.0) & (wx >= -0.1) & (wz >= 0.0) & (wz <= h)
+    outside_face = photo(True)
+    outside_face[beyond.reshape(rows, cols)] = 0.6
+    assert front_face_ends(res, np.zeros((0, 4)), outside_face) is None
 
 
 def test_a_shaded_rim_is_carried_but_a_lighter_cast_shadow_at_the_foot_is_not():

@@ -649,7 +649,9 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> float | None:
     more than 4 px from the crease) and at least :data:`CREASE_MIN_STEP`, and the band's level
     differs from the face's beyond by three quarters of that step (a perpend of a regular bond is
     a line at the same x in every other course: it steps in and out), and as much from the
-    background 3 px outside the side (the band is a face of its own)."""
+    background 3 px outside the side (the band is a face of its own); and where what lies 3 px
+    outside the side differs as much from what lies beyond the widest end face, the side is on a
+    crease already (the end face outside it), and None."""
     from .lines import _blurred_samples
 
     p = result.params
@@ -707,14 +709,24 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> float | None:
     level = np.linalg.norm(vals[:, band].mean(axis=1) - vals[:, beside].mean(axis=1), axis=-1)
     if not float(np.median(level[agree])) >= 0.75 * strength:
         return None
+
     # and a face of its own, not the background: beyond the side (3 px out) the band's level
     # differs as much (a side that a lens left a few pixels off the wall's edge has the background
     # in its band, which steps to the face as a crease would: a planar wall through k1 -0.1)
-    xo = np.c_[np.full(256, x_end - sign * 3.0 / ppm), z]
-    po = result.photo_from_wall(xo)
-    outside = _blurred_samples(rgb, po[:, 1], po[:, 0]).reshape(8, 32, 3).mean(axis=1)
-    apart = np.linalg.norm(vals[:, band].mean(axis=1) - outside, axis=-1)
+    def outside(out_m: float) -> np.ndarray:  # (8, 3): each slab's colour ``out_m`` beyond the side
+        po = result.photo_from_wall(np.c_[np.full(256, x_end - sign * out_m), z])
+        return _blurred_samples(rgb, po[:, 1], po[:, 0]).reshape(8, 32, 3).mean(axis=1)
+
+    near = outside(3.0 / ppm)
+    apart = np.linalg.norm(vals[:, band].mean(axis=1) - near, axis=-1)
     if not float(np.median(apart[agree])) >= 0.75 * strength:
+        return None
+    # and the outline's side is not a crease already: where the outline left the end face out,
+    # the end face lies beyond its side, unlike the background beyond the widest end face (on a
+    # Blender wall the outline stood on the crease, and the search in from it took a bond's
+    # perpends 0.35 m in for another crease: W 11 % short)
+    far = outside(reach + 3.0 / ppm)
+    if float(np.median(np.linalg.norm(near - far, axis=-1)[agree])) >= 0.75 * strength:
         return None
     return crease
 

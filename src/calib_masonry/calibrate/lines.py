@@ -438,9 +438,7 @@ def base_off_shadow(
             best = (spread, line)
     if best is None:
         return quad, sigma
-    lines = [best[1]] + [
-        (quad[j], (quad[(j + 1) % 4] - quad[j]) / np.linalg.norm(quad[(j + 1) % 4] - quad[j])) for j in (1, 2, 3)
-    ]
+    lines = [best[1]] + [(quad[j], quad[(j + 1) % 4] - quad[j]) for j in (1, 2, 3)]
     try:
         new = np.array([_intersect(lines[(j - 1) % 4], lines[j]) for j in range(4)])
     except np.linalg.LinAlgError:
@@ -452,17 +450,22 @@ def base_off_shadow(
         length = float(np.linalg.norm(new[(j + 1) % 4] - new[j]))
         ends_sigma.append(_side_sigma(pts[0], line, length) if line is not None else float(sigma[j]))
     sigma = sigma.copy()
-    sigma[0] = math.sqrt((ends_sigma[1] ** 2 + best[0] ** 2) / 2)  # LL: the left end and the base
-    sigma[1] = math.sqrt((best[0] ** 2 + ends_sigma[0] ** 2) / 2)  # LR: the base and the right end
+    sigma[0] = _corner_sigma(ends_sigma[1], best[0])  # LL: the left end and the base
+    sigma[1] = _corner_sigma(best[0], ends_sigma[0])  # LR: the base and the right end
     return new, sigma
 
 
+def _corner_sigma(before: float, after: float) -> float:
+    """A corner's uncertainty (px, isotropic) from the edge evidence of its two sides, the one
+    ending at it and the one starting there (:func:`_side_sigma`)."""
+    return math.sqrt((before**2 + after**2) / 2)
+
+
 def _vp_direction(p: np.ndarray, vp: np.ndarray) -> np.ndarray:
-    """The unit direction from the point ``p`` towards the vanishing point ``vp`` (homogeneous)."""
-    if abs(vp[2]) < 1e-12 * max(1.0, float(np.abs(vp[:2]).max())):
-        to = np.asarray(vp[:2], dtype=np.float64)
-    else:
-        to = np.asarray(vp[:2], dtype=np.float64) / vp[2] - p
+    """A unit direction along the line from the point ``p`` through the vanishing point ``vp``
+    (homogeneous, so one at infinity needs no case of its own; as
+    :func:`~calib_masonry.calibrate.segments.dist_to_vps` takes it)."""
+    to = np.asarray(vp[:2], dtype=np.float64) - np.asarray(p, dtype=np.float64) * vp[2]
     return to / max(float(np.linalg.norm(to)), 1e-300)
 
 
@@ -525,7 +528,7 @@ def refine_quad(
             _side_sigma(pts[i], sides[i], float(np.linalg.norm(quad[(i + 1) % 4] - quad[i]))) for i in range(4)
         ]
         # the corner i is where sides i - 1 and i meet; isotropic, from the two sides' normals
-        sigma = np.array([math.sqrt((side_sigma[(i - 1) % 4] ** 2 + side_sigma[i] ** 2) / 2) for i in range(4)])
+        sigma = np.array([_corner_sigma(side_sigma[(i - 1) % 4], side_sigma[i]) for i in range(4)])
         quad = order_corners(refined, where="outline refinement")
     return (quad, sigma) if with_sigma else quad
 

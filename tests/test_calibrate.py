@@ -384,12 +384,33 @@ def test_a_narrow_wall_against_a_flat_sky_is_found():
     rgb[150:1050, 345:455] = np.stack([1.4 * wall, 0.8 * wall, 0.7 * wall], -1)
     rgb = np.clip(ndimage.gaussian_filter(rgb, (0.8, 0.8, 0)), 0, 1)
     corners = detect_outline(rgb).corners_px
-    # the outline found covers the wall: the base within 3 px; the ends' tops lean out into the
-    # sky by 15-25 px (the sky carries no evidence either way: left for the snapping and the fit)
+    # the outline found is the wall's, every corner within 3 px: the sky is no wall for the
+    # outline's second pass (while it was neutral there, the tops leant out into it by 17-21 px)
     truth = np.array([[344.5, 1049.5], [454.5, 1049.5], [454.5, 149.5], [344.5, 149.5]])
-    assert np.abs(corners[:2] - truth[:2]).max() < 3.0
-    assert np.abs(corners[2:, 1] - truth[2:, 1]).max() < 3.0
-    assert np.all(corners[2, 0] >= truth[2, 0] - 2.0) and np.all(corners[3, 0] <= truth[3, 0] + 2.0)
+    assert np.abs(corners - truth).max() < 3.0
+
+
+@pytest.mark.parametrize("name", ["tall12055.jpg", "tall12093.jpg", "tall12094.jpg"])
+def test_head_on_blender_walls_against_a_flat_sky(name):
+    # walls rendered by Blender, seen almost head on against a uniform sky (data_external/blender_walls):
+    # the strip along the sky broke 12093's region at a third of its height and 12094's top
+    # corner pivoted 26 px into the sky (both refused: RMS 12 and 6 px); 12055's base went 7.6 px
+    # down its cast shadow under a first version of the mend. Focal length and eye height given,
+    # as the benchmark gives them: W and H within 2 %, each corner within 3 px of Blender's.
+    from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
+    from calib_masonry.io import read_photo
+
+    folder = ROOT / "data_external" / "blender_walls"
+    truth = next(p for p in json.loads((folder / "truth.json").read_text())["photos"] if p["name"] == name)
+    config = CalibrateConfig(
+        camera_height_m=truth["eye_height_m"], camera_height_sigma_m=0.02, focal_px=truth["focal_px"]
+    )
+    cal = calibrate_photo(read_photo(folder / name), config)
+    res = cal.result
+    assert res.status == FitStatus.CONVERGED
+    assert abs(res.width_m / truth["width_m"] - 1.0) < 0.02
+    assert abs(res.height_m / truth["height_m"] - 1.0) < 0.02
+    assert np.abs(res.corners_px() - truth["front_corners_px"]).max() < 3.0
 
 
 def test_the_outline_rectangle_takes_no_rows_without_evidence():

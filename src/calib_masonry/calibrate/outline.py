@@ -145,7 +145,7 @@ def segments_outside(seg: np.ndarray, occluded: np.ndarray | None, scale: float 
 LIGHT_WEIGHT = 1.0
 
 
-def _features(rgb_small: np.ndarray) -> list[np.ndarray]:
+def _features(rgb_small: np.ndarray) -> list[tuple[np.ndarray, float]]:
     """Per-pixel appearance of a (shrunk) photo: CIELAB lightness (and, in a colour photo, a* and
     b*) smoothed by 2 px; the log of the local contrast (the lightness's standard deviation in a
     Gaussian window of 3 px); and the relative contrast (that deviation over the mean, in a window

@@ -204,16 +204,16 @@ def wall_probability(
     fill: np.ndarray | None = None,
     config: OutlineConfig = OutlineConfig(),
     fill_band: bool = True,
-    features: list | None = None,
+    binned: list[tuple[np.ndarray, float]] | None = None,
 ) -> np.ndarray:
     """The probability ``(rows, cols)`` that each pixel of a (shrunk) photo ``(rows, cols, 3)`` is
     the wall's, learnt from the pixels ``seed`` (the wall's) against the photo's border strip (and
     the strip along a filled margin ``fill``, which is itself no one's surroundings, unless
     ``fill_band`` is False), then twice from the regions that result (eroded and dilated by 5 px).
-    ``occluded`` pixels teach nothing and are given 0.5 (neither). ``features``: the photo's
+    ``occluded`` pixels teach nothing and are given 0.5 (neither). ``binned``: the photo's
     features as :func:`_binned` gives them, if computed already."""
     rows, cols = seed.shape
-    feats = _binned(_features(rgb_small), config.bins) if features is None else features
+    feats = _binned(_features(rgb_small), config.bins) if binned is None else binned
     m = max(2, round(config.border_fraction * max(rows, cols)))
     outer = np.zeros((rows, cols), dtype=bool)
     outer[:m] = outer[-m:] = True
@@ -569,8 +569,9 @@ def detect_outline(
     half = config.seed_fraction / 2 * min(srows, scols)
     seed = (np.abs(xx - (scols - 1) / 2) < half) & (np.abs(yy - (srows - 1) / 2) < half)
     feats = _binned(_features(small), config.bins)
-    prob = wall_probability(small, seed, occluded=occluded, fill=fill, config=config, features=feats)
+    prob = wall_probability(small, seed, occluded=occluded, fill=fill, config=config, binned=feats)
     region = _component_of(prob > 0.5, seed)
+    small_wall = 0.02 * region.size  # a region under this is no wall found
     if fill is not None:
         # a wall against a uniform sky (flat, so taken for a fill): the strip along the fill's edge
         # is the wall's own rim, learnt as surroundings. On a narrow wall it took the seed with it
@@ -582,13 +583,12 @@ def detect_outline(
         # with it 0.65-1.0 of the region without it on the other 93 of 100 Blender walls and on
         # the 3 laboratory photos; none on 6 walls, the narrow ones above).
         prob_nb = wall_probability(
-            small, seed, occluded=occluded, fill=fill, config=config, fill_band=False, features=feats
+            small, seed, occluded=occluded, fill=fill, config=config, fill_band=False, binned=feats
         )
         region_nb = _component_of(prob_nb > 0.5, seed)
-        small_wall = 0.02 * region.size
         if region_nb.sum() > 2.0 * region.sum() or region.sum() < small_wall <= region_nb.sum():
             prob, region = prob_nb, region_nb
-    if region.sum() < 0.02 * region.size:
+    if region.sum() < small_wall:
         raise FitFailed(
             "automatic mode: no wall found (no region at the photo's centre looks unlike its surroundings); "
             f"click the wall's corners with {CORNERS_FLAG}"

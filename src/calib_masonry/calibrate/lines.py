@@ -206,8 +206,16 @@ OUTER_EDGE_FRACTION = 0.35
 #: again (:func:`base_off_shadow`)
 SIDE_TURN_RAD = math.radians(1.0)
 #: and the corner it moves goes at most this fraction of the wall's extent along the side it moves
-#: on (a cast shadow's far edge below a base: 1.2-1.5 % of the height on Blender-rendered walls)
+#: on (a cast shadow's far edge below a base: 1.2-1.5 % of the height on Blender-rendered walls;
+#: a stone wall's courses 14 degrees off a laboratory photo's base asked for 25 %)
 SIDE_MOVE_FRACTION = 0.03
+#: where the base turns more than this, up to this fraction: a base held at one end by an end
+#: face's foot and at the other by a long shadow's far edge turned 8-14 degrees and asked for
+#: 3.1-5.1 % (Blender-rendered walls 12102-12140); a turn of 2 degrees is a vanishing point a
+#: stone wall's courses leave that uncertain (an augmented laboratory view, whose base went 4.4 %
+#: up into the wall)
+STEEP_TURN_RAD = math.radians(5.0)
+STEEP_MOVE_FRACTION = 0.06
 
 
 #: the outline's edges are sought on the photo blurred by this sigma (px)
@@ -394,7 +402,8 @@ def base_off_shadow(
 
     A base more than :data:`SIDE_TURN_RAD` off is tried again on the line from each of its ends
     towards the vanishing point (that end kept), where that takes the outline in by at most
-    :data:`SIDE_MOVE_FRACTION` of the wall's height: snapped to the innermost strong edge within
+    :data:`SIDE_MOVE_FRACTION` of the wall's height (:data:`STEEP_MOVE_FRACTION` where the base
+    turns more than :data:`STEEP_TURN_RAD`): snapped to the innermost strong edge within
     ``half`` px, and kept where that edge runs towards the vanishing point (within a third of the
     first turn); of two, the one whose edge points scatter least. Only the base: a top moved so
     followed a stone wall's ragged plaster on the laboratory photos (H 2 % shorter, measured),
@@ -424,7 +433,8 @@ def base_off_shadow(
         moved = other - end
         # only in, and not far: a stone wall's bed joints, cracks among them, put the vanishing
         # point 14 degrees off its base, which moved a corner 114 px (a quarter of H) up
-        if not 1.0 <= float(np.linalg.norm(moved)) <= SIDE_MOVE_FRACTION * float(np.linalg.norm(side[1])):
+        cap = STEEP_MOVE_FRACTION if turn > STEEP_TURN_RAD else SIDE_MOVE_FRACTION
+        if not 1.0 <= float(np.linalg.norm(moved)) <= cap * float(np.linalg.norm(side[1])):
             continue
         if moved @ (centre - end) <= 0:
             continue

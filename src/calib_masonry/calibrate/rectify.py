@@ -628,6 +628,17 @@ CREASE_SLABS = 6
 #: directions stepped by 0.063-0.27 on the Blender walls; a brick wall's half-bats in every other
 #: course, seen through a barrel lens, by 0.018 (a false crease, W 4.5 % short)
 CREASE_MIN_STEP = 0.04
+#: a weaker step, down to CREASE_WEAK_STEP, is a crease where it stands out of the texture by
+#: CREASE_WEAK_CONTRAST: faces whose light differs little stepped by 0.027-0.038 at 6.4-6.6 times
+#: the face's texture (Blender walls 12143, 12163, 12170: W +2.8 to +8.8 % with the end face in);
+#: false creases of the project's own flat walls stepped by 0.023-0.029 at 3.3-4.1 times (a wall's
+#: bond seen past a lens's edge, the coverage run's seeds 11714 and 708)
+CREASE_WEAK_STEP = 0.02
+CREASE_WEAK_CONTRAST = 5.0
+#: the slabs agree on the crease within 1.5 px, or this fraction of its distance in from the side
+#: (a fit made with the end face inside the outline maps the crease a little aslant: 33-36 px in
+#: from the side over the height of 12163's 39-px end face)
+CREASE_AGREE_FRACTION = 0.1
 
 
 def crease_by_shading(rgb: np.ndarray, result, sign: float) -> float | None:
@@ -644,9 +655,11 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> float | None:
     least 4.5 px in from the outline's side (clear of its own edge and blur). Faces lit from
     different directions step where they meet, at the same x all the way up; the front face's
     texture (head joints, stones' ends) steps at other x in each slab. The crease is taken where at
-    least :data:`CREASE_SLABS` slabs agree within 1.5 px, its step is :data:`CREASE_CONTRAST` times
-    the median step of the face beside it (sampled to twice the band, or 16 px, in from the side;
-    more than 4 px from the crease) and at least :data:`CREASE_MIN_STEP`, and the band's level
+    least :data:`CREASE_SLABS` slabs agree within 1.5 px (or :data:`CREASE_AGREE_FRACTION` of its
+    distance from the side), its step is :data:`CREASE_CONTRAST` times the median step of the face
+    beside it (sampled to twice the band, or 16 px, in from the side; more than 4 px from the
+    crease) and at least :data:`CREASE_MIN_STEP` (or :data:`CREASE_WEAK_CONTRAST` times and at
+    least :data:`CREASE_WEAK_STEP`), and the band's level
     differs from the face's beyond by three quarters of that step (a perpend of a regular bond is
     a line at the same x in every other course: it steps in and out), and as much from the
     background 3 px outside the side (the band is a face of its own); and where what lies 3 px
@@ -690,14 +703,18 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> float | None:
     at = np.argmax(np.where(valid, step, -1.0), axis=1)
     ds = di[at]
     crease = float(np.median(ds))
-    agree = np.abs(ds - crease) <= 1.5 / ppm
+    agree = np.abs(ds - crease) <= max(1.5 / ppm, CREASE_AGREE_FRACTION * crease)
     if agree.sum() < CREASE_SLABS:
         return None
     texture = inner & (np.abs(di - crease) > 4.0 / ppm)
     if texture.sum() < 3:
         return None
     strength = float(np.median(step[np.arange(8), at][agree]))
-    if not strength > max(CREASE_MIN_STEP, CREASE_CONTRAST * float(np.median(step[:, texture]))):
+    face = float(np.median(step[:, texture]))
+    if not (
+        strength > max(CREASE_MIN_STEP, CREASE_CONTRAST * face)
+        or strength > max(CREASE_WEAK_STEP, CREASE_WEAK_CONTRAST * face)
+    ):
         return None
     # a step between two faces, not a line on one (a perpend of a regular bond, at the same x in
     # every course of its kind, steps in and out again): the band's level differs from the face's

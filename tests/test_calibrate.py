@@ -327,6 +327,23 @@ def test_a_cast_shadow_under_part_of_the_base_leaves_the_base_straight():
     assert abs(c[1] + (300 - c[0]) / d[0] * d[1] - 8.0) < 0.3
 
 
+def _wall_over_a_shadow(cols: int, depth: float, *, seed: int) -> np.ndarray:
+    """A brick wall (400 px high, ``cols`` wide, its foot on row 450 from column 100) on a light
+    ground, its cast shadow a wedge from ``depth`` px deep at column 20 to 0 at the wall's right
+    end (RGB, blurred as a photo is)."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(seed)
+    img = np.full((560, cols + 220), 0.78) + rng.normal(0, 0.01, (560, cols + 220))
+    for x in range(20, 100 + cols):
+        img[450 : int(round(450 + depth * (100 + cols - x) / (80 + cols))), x] = 0.30
+    wall = 0.45 + rng.normal(0, 0.02, (400, cols))
+    wall[::25, :] = 0.85  # the bed joints, light mortar
+    wall[:, ::60] = 0.85
+    img[50:450, 100 : 100 + cols] = wall
+    return np.repeat(ndimage.gaussian_filter(img, 0.8)[..., None], 3, -1).astype(np.float32)
+
+
 def test_a_base_found_along_a_cast_shadow_is_put_back_on_the_walls_foot():
     # a brick wall on a light ground, its cast shadow a wedge from 0 px deep at the right end of
     # its base to 8 px at the left and beyond: snapped from an outline whose base runs along the
@@ -335,19 +352,9 @@ def test_a_base_found_along_a_cast_shadow_is_put_back_on_the_walls_foot():
     # 8 px low (the outermost strong edge). A base along the bed joints' vanishing point is left
     # as it is, and so is one whose correction would move a corner by more than 3 % of the height
     # (a stone wall's vanishing point 14 degrees off its base, measured on a laboratory photo)
-    from scipy import ndimage
-
     from calib_masonry.calibrate.lines import base_off_shadow, refine_quad
 
-    rng = np.random.default_rng(8)
-    img = np.full((560, 520), 0.78) + rng.normal(0, 0.01, (560, 520))
-    for x in range(20, 400):  # the shadow: from (20, 460) to (400, 450) on the ground
-        img[450 : int(round(460 - 10 * (x - 20) / 380)), x] = 0.30
-    wall = 0.45 + rng.normal(0, 0.02, (400, 300))
-    wall[::25, :] = 0.85  # the bed joints, light mortar
-    wall[:, ::60] = 0.85
-    img[50:450, 100:400] = wall
-    rgb = np.repeat(ndimage.gaussian_filter(img, 0.8)[..., None], 3, -1).astype(np.float32)
+    rgb = _wall_over_a_shadow(300, 10.0, seed=8)  # the shadow: from (20, 460) to (400, 450) on the ground
     truth = np.array([[99.5, 449.5], [399.5, 449.5], [399.5, 49.5], [99.5, 49.5]])
     on_shadow = np.array([[99.5, 457.9], [399.5, 449.5], [399.5, 49.5], [99.5, 49.5]])
     quad, sigma = refine_quad(rgb, on_shadow, (6.0, 2.5), with_sigma=True, curved=False)
@@ -371,24 +378,12 @@ def test_a_base_turned_steeply_by_a_long_shadow_is_put_back_further():
     # face's foot and a shadow put it on Blender-rendered walls: 8-14 degrees, 3.1-5.1 %). On the
     # code before, the base stayed in the shadow; the same wedge at a quarter of the turn (a wide
     # wall) is left as it is
-    from scipy import ndimage
-
     from calib_masonry.calibrate.lines import base_off_shadow, refine_quad
 
-    def photo(cols, depth):
-        rng = np.random.default_rng(9)
-        img = np.full((560, cols + 200), 0.78) + rng.normal(0, 0.01, (560, cols + 200))
-        for x in range(20, 100 + cols):  # the shadow: `depth` px deep at the wall's left end, 0 at its right
-            img[450 : int(round(450 + depth * (100 + cols - x) / cols)), x] = 0.30
-        wall = 0.45 + rng.normal(0, 0.02, (400, cols))
-        wall[::25, :] = 0.85
-        wall[:, ::60] = 0.85
-        img[50:450, 100 : 100 + cols] = wall
-        return np.repeat(ndimage.gaussian_filter(img, 0.8)[..., None], 3, -1).astype(np.float32)
-
     vp = np.array([1.0, 0.0, 0.0])
-    for cols, depth, put_back in ((200, 20.0, True), (800, 20.0, False)):
-        rgb = photo(cols, depth)
+    depth = 20.0  # at the wall's left corner
+    for cols, put_back in ((200, True), (800, False)):
+        rgb = _wall_over_a_shadow(cols, depth * (80 + cols) / cols, seed=9)
         right = 99.5 + cols
         on_shadow = np.array([[99.5, 449.5 + depth], [right, 449.5], [right, 49.5], [99.5, 49.5]])
         quad, sigma = refine_quad(rgb, on_shadow, (6.0, 2.5), with_sigma=True, curved=False)

@@ -1070,38 +1070,42 @@ def test_shrink_samples_rescales_grid(shape, s):
     assert diff.mean() < 0.1 * noise.std()
 
 
+_END_FACE_SIZE, _END_FACE_W, _END_FACE_H = (1400, 2000), 2.2, 10.0
+
+
+def _end_face_fit(cx: float):
+    """A fitted wall (2.2 x 10 m, seen at a yaw of 25 degrees from ``cx`` along it) as
+    front_face_ends reads one: a camera with ``cx`` < 0 stands beyond its left end."""
+    from types import SimpleNamespace
+
+    from calib_masonry.calibrate.camera import image_from_wall_homography, principal_point, project
+
+    w, h = _END_FACE_W, _END_FACE_H
+    params = np.array([1500.0, np.radians(-25.0), np.radians(25.0), 0.0, cx, -9.0, 1.6, w, h, 0.0, 0.0])
+    hom = image_from_wall_homography(params, principal_point(_END_FACE_SIZE))
+    return SimpleNamespace(
+        params=params,
+        image_size=_END_FACE_SIZE,
+        width_m=w,
+        height_m=h,
+        image_from_wall=hom,
+        undistort=lambda p: np.asarray(p, dtype=float),
+        photo_from_wall=lambda xz, hom=hom: project(hom, np.asarray(xz, dtype=float)),
+    )
+
+
 def test_an_end_face_in_the_outline_is_cut_at_the_crease():
     """A wall seen from beyond its left end shows its end face; an outline on the end face's far
     edge made W 2.3-7.9 % wide (Blender renders). The end face's courses point at the vanishing
     point of the wall's normal and end on the crease, which front_face_ends maps back to its x on
     the wall: the left side moves there, the right stays, and a camera in front of the wall (which
     sees no end face) moves nothing; nor does an outline whose side is on the crease already."""
-    from types import SimpleNamespace
-
-    from calib_masonry.calibrate.camera import (
-        image_from_wall_homography,
-        intrinsics,
-        principal_point,
-        project,
-        wall_from_camera_rotation,
-    )
+    from calib_masonry.calibrate.camera import intrinsics, principal_point, project, wall_from_camera_rotation
     from calib_masonry.calibrate.rectify import front_face_ends
 
-    size = (1400, 2000)
-    crease, w, h, t = 0.15, 2.2, 10.0, 0.4  # the fit's frame: x = 0 on the end face's far edge
-
-    def result(cx):
-        params = np.array([1500.0, np.radians(-25.0), np.radians(25.0), 0.0, cx, -9.0, 1.6, w, h, 0.0, 0.0])
-        hom = image_from_wall_homography(params, principal_point(size))
-        return SimpleNamespace(
-            params=params,
-            image_size=size,
-            width_m=w,
-            height_m=h,
-            image_from_wall=hom,
-            undistort=lambda p: np.asarray(p, dtype=float),
-            photo_from_wall=lambda xz, hom=hom: project(hom, np.asarray(xz, dtype=float)),
-        )
+    size = _END_FACE_SIZE
+    crease, w, h, t = 0.15, _END_FACE_W, _END_FACE_H, 0.4  # the fit's frame: x = 0 on the end face's far edge
+    result = _end_face_fit
 
     def camera_points(res, xyz):  # wall metres (x, y, z) -> pixels
         rot = wall_from_camera_rotation(*res.params[1:4]).T
@@ -1173,6 +1177,53 @@ def test_an_end_face_in_the_outline_is_cut_at_the_crease():
     back = np.c_[found[0], np.ones(4)] @ np.linalg.inv(res.image_from_wall).T
     assert np.abs(back[[0, 3], 0] / back[[0, 3], 2] - crease).max() * px_per_m < 1.5
     assert front_face_ends(res, np.zeros((0, 4)), dim(0.318)) is None
+
+
+def test_an_end_face_a_few_pixels_wide_is_cut_at_its_crease():
+    """Seen at a small yaw, a wall's end face is a band a few pixels wide along the outline's side
+    (under the 4.5 px crease_by_shading looks at), and the side snaps to its far edge: Blender
+    walls 12089 and 12096 came out with their right corners 2.6-4.4 px out. A band of its own colour,
+    at the end the camera stands beyond, moves the side onto its inner edge; a face without one, a
+    band of the face's own colour, a strip of mortar along both ends, or a camera that sees no end
+    face move nothing."""
+    from calib_masonry.calibrate.camera import project
+    from calib_masonry.calibrate.rectify import front_face_ends
+
+    w, h = _END_FACE_W, _END_FACE_H
+    res = _end_face_fit(-3.0)
+    cols, rows = 2800, _END_FACE_SIZE[1]
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    q = np.c_[xx.ravel(), yy.ravel(), np.ones(xx.size)] @ np.linalg.inv(res.image_from_wall).T
+    wx, wz = q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]
+    # the photo's pixels per metre across the left end, at its foot and at its top
+    ppm = [
+        np.linalg.norm(np.diff(project(res.image_from_wall, np.array([[0.0, z], [0.1, z]])), axis=0)) / 0.1
+        for z in (0.0, h)
+    ]
+    crease = 3.0 / max(ppm)  # the band 3 px wide where the wall is nearest, less higher up
+    rng = np.random.default_rng(11)
+    course = np.floor(wz / 0.075)
+    joint = ((wx - 0.05 - 0.1125 * (course % 2)) % 0.225 < 0.01) | (wz % 0.075 < 0.01)
+    face = np.where(joint, 0.5, 0.3 + 0.03 * rng.standard_normal(xx.size))
+    on = (wx >= 0.0) & (wx <= w) & (wz >= 0.0) & (wz <= h)
+
+    def photo(band: float | None, right: float | None = None) -> np.ndarray:
+        g = np.where(on, face, 0.8)
+        if band is not None:
+            g = np.where(on & (wx < crease), band, g)
+        if right is not None:
+            g = np.where(on & (wx > w - crease), right, g)
+        return np.repeat(g.reshape(rows, cols, 1), 3, axis=-1).astype(np.float32)
+
+    found = front_face_ends(res, np.zeros((0, 4)), photo(0.6))
+    assert found is not None and found[1] == ["left"]
+    back = np.c_[found[0], np.ones(4)] @ np.linalg.inv(res.image_from_wall).T
+    x = back[:, 0] / back[:, 2]
+    assert np.abs(x[[0, 3]] - crease).max() * max(ppm) < 0.5 and x[[1, 2]] == pytest.approx(w, abs=1e-6)
+    assert front_face_ends(res, np.zeros((0, 4)), photo(None)) is None  # bricks to the end
+    assert front_face_ends(res, np.zeros((0, 4)), photo(0.3)) is None  # a band of the face's colour
+    assert front_face_ends(res, np.zeros((0, 4)), photo(0.6, right=0.6)) is None  # mortar at both ends
+    assert front_face_ends(_end_face_fit(1.0), np.zeros((0, 4)), photo(0.6)) is None  # no end face to see
 
 
 def test_a_shaded_rim_is_carried_but_a_lighter_cast_shadow_at_the_foot_is_not():

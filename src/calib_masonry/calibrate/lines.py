@@ -292,6 +292,53 @@ def _refine_side(
     return line
 
 
+def inner_step(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, reach: float) -> tuple | None:
+    """The side a-b's edge (:func:`_refine_side`, the outermost strong one) and a second step of
+    colour up to ``reach`` px in from it: ``(edge line, step line, fraction of the profiles that
+    show the step)``, lines as (point, direction); None where fewer than a quarter of the profiles
+    (or ten) show one. A profile's second step is its largest colour gradient between 1.5 px and
+    ``reach`` in from the edge, kept only where the gradient falls between the two (by
+    :data:`INNER_STEP_VALLEY`): a step of its own, not the edge's own ramp fading inward (a
+    Blender render's colours bled over 3-4 px at one wall's end). The sides run LL, LR, UR, UL, so
+    +n points out of the wall."""
+    outer = _refine_side(rgb, a, b, 2.5)
+    if outer is None:
+        return None
+    c, dd = outer
+    d = (b - a) / float(np.linalg.norm(b - a))
+    n = np.array([-d[1], d[0]])
+    ts = np.linspace(0.05, 0.95, max(20, int(np.linalg.norm(b - a) / 6)))
+    p = a[None] + ts[:, None] * (b - a)[None]
+    # each profile starts on the edge's line, across the side
+    s0 = (dd[0] * (c[1] - p[:, 1]) - dd[1] * (c[0] - p[:, 0])) / (dd[0] * n[1] - dd[1] * n[0])
+    on = p + s0[:, None] * n
+    offs = np.arange(-reach - 1.0, 1.0 + 1e-9, 0.5)
+    pts = on[:, None, :] + offs[None, :, None] * n[None, None, :]
+    prof = _blurred_samples(rgb, pts[..., 1].ravel(), pts[..., 0].ravel()).reshape(len(ts), len(offs), 3)
+    grad = np.linalg.norm(np.diff(prof, axis=1), axis=-1)
+    mids = (offs[:-1] + offs[1:]) / 2
+    window = (mids <= -1.5) & (mids >= -reach)
+    k = np.argmax(np.where(window[None], grad, -1.0), axis=1)
+    kk = np.clip(k, 1, len(mids) - 2)
+    rows = np.arange(len(ts))
+    g0, g1, g2 = grad[rows, kk - 1], grad[rows, kk], grad[rows, kk + 1]
+    edge_i = int(np.argmin(np.abs(mids)))
+    valley = np.array([grad[i, kk[i] + 1 : edge_i].min(initial=np.inf) for i in rows])
+    ok = (k == kk) & (g1 >= g0) & (g1 >= g2) & (g1 >= INNER_STEP_VALLEY * valley)
+    if ok.sum() < max(10, 0.25 * len(ts)):
+        return None
+    den = g0 - 2 * g1 + g2
+    frac = np.where(np.abs(den) > 1e-12, 0.5 * (g0 - g2) / np.where(np.abs(den) > 1e-12, den, 1.0), 0.0)
+    at = mids[kk] + 0.5 * np.clip(frac, -0.5, 0.5)
+    inner = _robust_fit(on[ok] + at[ok, None] * n, pad=0.05)
+    return None if inner is None else (outer, inner, float(ok.mean()))
+
+
+#: a second step of colour inside a side's edge is one of its own where its gradient is this many
+#: times the least gradient between it and the edge (:func:`inner_step`)
+INNER_STEP_VALLEY = 1.5
+
+
 def _edge_at(grad, k, offs, a, b, ts, n) -> np.ndarray:
     """The edge points ``(n, 2)`` of a side's profiles ``grad`` ``(n, m)`` at the profile index
     ``k`` ``(n,)`` of each, placed at sub-pixel by a parabola through the gradient's three samples."""

@@ -562,11 +562,103 @@ def front_face_ends(result, segments: np.ndarray, rgb: np.ndarray | None = None)
             continue
         x_new[0 if sign > 0 else 1] = crease if sign > 0 else w - crease
         moved.append(side)
-    if not moved:
-        return None
     x0, x1 = x_new
     corners = result.photo_from_wall(np.array([[x0, 0.0], [x1, 0.0], [x1, ht], [x0, ht]]))
+    if rgb is not None:
+        from .lines import _intersect
+
+        cx = float(result.params[4])
+        for side, sign in (("left", 1.0), ("right", -1.0)):
+            if side in moved or (sign > 0 and cx >= 0.0) or (sign < 0 and cx <= w):
+                continue
+            line = sliver_crease(rgb, corners, sign)
+            if line is None:
+                continue
+            base, top = (corners[0], corners[1] - corners[0]), (corners[2], corners[3] - corners[2])
+            lower, upper = (0, 3) if sign > 0 else (1, 2)
+            corners[lower], corners[upper] = _intersect(base, line), _intersect(top, line)
+            moved.append(side)
+    if not moved:
+        return None
     return corners, moved
+
+
+#: an end face narrower than :func:`crease_by_shading` looks for (under 4.5 px: a small yaw, or a
+#: far wall) is a band of its own colour along the outline's side; its crease is sought up to this
+#: far in from the side
+SLIVER_REACH_PX = 5.0
+#: the band's colour differs from the front face's (and the background's) by this much, and by
+#: SLIVER_CONTRAST times the face's texture
+SLIVER_MIN_STEP = 0.04
+SLIVER_CONTRAST = 3.0
+
+
+def _side_ends(corners: np.ndarray, sign: float) -> tuple[np.ndarray, np.ndarray]:
+    """The ends of the outline's left (``sign`` 1) or right (-1) side, in the order the sides run
+    (LL, LR, UR, UL), so that the side's normal points out of the wall."""
+    return (corners[3], corners[0]) if sign > 0 else (corners[1], corners[2])
+
+
+def _sliver(rgb: np.ndarray, corners: np.ndarray, sign: float) -> dict | None:
+    """The band between the left (``sign`` 1) or right (-1) side of ``corners`` and a second step
+    of colour up to :data:`SLIVER_REACH_PX` in from it (:func:`~.lines.inner_step`), where it is
+    at least a pixel and a half wide on ten or more of the profiles: the crease's line, the band's
+    colour, and its differences from the face inside it, the face's texture and the background."""
+    from .lines import _blurred_samples, inner_step
+
+    a, b = _side_ends(corners, sign)
+    found = inner_step(rgb, a, b, SLIVER_REACH_PX)
+    if found is None:
+        return None
+    outer, inner, _ = found
+    d = (b - a) / float(np.linalg.norm(b - a))
+    n = np.array([-d[1], d[0]])
+    p = a[None] + np.linspace(0.05, 0.95, 60)[:, None] * (b - a)[None]
+
+    def offset(line) -> np.ndarray:  # where each profile across the side meets the line, along n
+        c, dd = line
+        return (dd[0] * (c[1] - p[:, 1]) - dd[1] * (c[0] - p[:, 0])) / (dd[0] * n[1] - dd[1] * n[0])
+
+    so, si = offset(outer), offset(inner)
+    gap = so - si
+    wide = gap >= 1.5
+    if gap.min() < -0.5 or wide.sum() < 10:
+        return None
+
+    def colour(at: np.ndarray) -> np.ndarray:
+        q = p[wide] + at[wide, None] * n
+        return _blurred_samples(rgb, q[:, 1], q[:, 0])
+
+    band, face, deeper, background = colour((so + si) / 2), colour(si - 2.0), colour(si - 4.0), colour(so + 2.5)
+    return {
+        "line": inner,
+        "colour": np.median(band, axis=0),
+        "to_face": float(np.median(np.linalg.norm(band - face, axis=1))),
+        "texture": float(np.median(np.linalg.norm(face - deeper, axis=1))),
+        "to_background": float(np.median(np.linalg.norm(band - background, axis=1))),
+    }
+
+
+def sliver_crease(rgb: np.ndarray, corners: np.ndarray, sign: float):
+    """The crease (a line: point, direction) of an end face only a few pixels wide along the left
+    (``sign`` 1) or right (-1) side of the outline ``corners`` (photo pixels, LL, LR, UR, UL), or
+    None. The side snaps to the outermost strong edge (:func:`~.lines._refine_side`), which for
+    such an end face is its far edge: W and the camera came out 2-7 % off on Blender walls seen
+    at a small yaw (12089, 12096: their right corners 2.6-4.4 px out). A band of its own is an end
+    face where its colour differs from the front face's by :data:`SLIVER_MIN_STEP` and
+    :data:`SLIVER_CONTRAST` times the face's texture, and from the background's; and not where the
+    other end shows a band of the same colour (a strip of mortar along both of a wall's ends, which
+    the outline rightly takes in). Only for an end the camera stands beyond (the caller's)."""
+    mine = _sliver(rgb, corners, sign)
+    if mine is None:
+        return None
+    step = max(SLIVER_MIN_STEP, SLIVER_CONTRAST * mine["texture"])
+    if not (mine["to_face"] > step and mine["to_background"] > SLIVER_MIN_STEP):
+        return None
+    other = _sliver(rgb, corners, -sign)
+    if other is not None and float(np.linalg.norm(other["colour"] - mine["colour"])) < 0.5 * mine["to_face"]:
+        return None
+    return mine["line"]
 
 
 def _ends_by_courses(result, seg: np.ndarray) -> dict[str, float]:

@@ -294,9 +294,8 @@ def _refine_side(
 
 def inner_step(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, reach: float) -> tuple | None:
     """The side a-b's edge (:func:`_refine_side`, the outermost strong one) and a second step of
-    colour up to ``reach`` px in from it: ``(edge line, step line, fraction of the profiles that
-    show the step)``, lines as (point, direction); None where fewer than a quarter of the profiles
-    (or ten) show one. A profile's second step is its largest colour gradient between 1.5 px and
+    colour up to ``reach`` px in from it: ``(edge line, step line)``, each as (point, direction);
+    None where fewer than a quarter of the profiles (or ten) show one. A profile's second step is its largest colour gradient between 1.5 px and
     ``reach`` in from the edge, kept only where the gradient falls between the two (by
     :data:`INNER_STEP_VALLEY`): a step of its own, not the edge's own ramp fading inward (a
     Blender render's colours bled over 3-4 px at one wall's end). The sides run LL, LR, UR, UL, so
@@ -304,14 +303,10 @@ def inner_step(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, reach: float) -> t
     outer = _refine_side(rgb, a, b, 2.5)
     if outer is None:
         return None
-    c, dd = outer
-    d = (b - a) / float(np.linalg.norm(b - a))
-    n = np.array([-d[1], d[0]])
     ts = np.linspace(0.05, 0.95, max(20, int(np.linalg.norm(b - a) / 6)))
     p = a[None] + ts[:, None] * (b - a)[None]
-    # each profile starts on the edge's line, across the side
-    s0 = (dd[0] * (c[1] - p[:, 1]) - dd[1] * (c[0] - p[:, 0])) / (dd[0] * n[1] - dd[1] * n[0])
-    on = p + s0[:, None] * n
+    n = side_normal(a, b)
+    on = p + across(outer, p, n)[:, None] * n  # each profile starts on the edge's line, across the side
     offs = np.arange(-reach - 1.0, 1.0 + 1e-9, 0.5)
     pts = on[:, None, :] + offs[None, :, None] * n[None, None, :]
     prof = _blurred_samples(rgb, pts[..., 1].ravel(), pts[..., 0].ravel()).reshape(len(ts), len(offs), 3)
@@ -331,7 +326,20 @@ def inner_step(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, reach: float) -> t
     frac = np.where(np.abs(den) > 1e-12, 0.5 * (g0 - g2) / np.where(np.abs(den) > 1e-12, den, 1.0), 0.0)
     at = mids[kk] + 0.5 * np.clip(frac, -0.5, 0.5)
     inner = _robust_fit(on[ok] + at[ok, None] * n, pad=0.05)
-    return None if inner is None else (outer, inner, float(ok.mean()))
+    return None if inner is None else (outer, inner)
+
+
+def side_normal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The unit normal of the side a-b that points out of the wall (the sides run LL, LR, UR, UL)."""
+    d = (b - a) / float(np.linalg.norm(b - a))
+    return np.array([-d[1], d[0]])
+
+
+def across(line: tuple[np.ndarray, np.ndarray], points: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """``(m,)`` how far along ``n`` from each of the ``points`` ``(m, 2)`` the ``line`` (point,
+    direction) lies."""
+    c, d = line
+    return (d[0] * (c[1] - points[:, 1]) - d[1] * (c[0] - points[:, 0])) / (d[0] * n[1] - d[1] * n[0])
 
 
 #: a second step of colour inside a side's edge is one of its own where its gradient is this many
@@ -417,7 +425,7 @@ def _robust_fit(pts: np.ndarray, *, pad: float = 0.0, floor: float = 0.0) -> tup
     keep = np.ones(len(pts), dtype=bool)
     if len(pts) >= 5:
         c = pts.mean(axis=0)
-        _, _, vt = np.linalg.svd(pts - c)
+        _, _, vt = np.linalg.svd(pts - c, full_matrices=False)  # vt alone: U would be (n, n)
         u, v = (pts - c) @ vt[0], (pts - c) @ vt[1]
         i, j = np.triu_indices(len(pts), k=1)
         du = u[j] - u[i]
@@ -430,7 +438,7 @@ def _robust_fit(pts: np.ndarray, *, pad: float = 0.0, floor: float = 0.0) -> tup
         if keep.sum() < 5:
             return None
         c = pts[keep].mean(axis=0)
-        _, _, vt = np.linalg.svd(pts[keep] - c)
+        _, _, vt = np.linalg.svd(pts[keep] - c, full_matrices=False)
         r = (pts - c) @ np.array([-vt[0][1], vt[0][0]])
         keep = np.abs(r) < max(floor, 3.0 * 1.4826 * (float(np.median(np.abs(r[keep]))) + pad))
     return c, vt[0]

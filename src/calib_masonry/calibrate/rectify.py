@@ -604,22 +604,16 @@ def _sliver(rgb: np.ndarray, corners: np.ndarray, sign: float) -> dict | None:
     of colour up to :data:`SLIVER_REACH_PX` in from it (:func:`~.lines.inner_step`), where it is
     at least a pixel and a half wide on ten or more of the profiles: the crease's line, the band's
     colour, and its differences from the face inside it, the face's texture and the background."""
-    from .lines import _blurred_samples, inner_step
+    from .lines import _blurred_samples, across, inner_step, side_normal
 
     a, b = _side_ends(corners, sign)
     found = inner_step(rgb, a, b, SLIVER_REACH_PX)
     if found is None:
         return None
-    outer, inner, _ = found
-    d = (b - a) / float(np.linalg.norm(b - a))
-    n = np.array([-d[1], d[0]])
+    outer, inner = found
+    n = side_normal(a, b)
     p = a[None] + np.linspace(0.05, 0.95, 60)[:, None] * (b - a)[None]
-
-    def offset(line) -> np.ndarray:  # where each profile across the side meets the line, along n
-        c, dd = line
-        return (dd[0] * (c[1] - p[:, 1]) - dd[1] * (c[0] - p[:, 0])) / (dd[0] * n[1] - dd[1] * n[0])
-
-    so, si = offset(outer), offset(inner)
+    so, si = across(outer, p, n), across(inner, p, n)
     gap = so - si
     wide = gap >= 1.5
     if gap.min() < -0.5 or wide.sum() < 10:

@@ -285,7 +285,7 @@ def _refine_side(
         k = np.where(
             strong.any(axis=1), grad.shape[1] - 1 - np.argmax(strong[:, ::-1], axis=1), np.argmax(grad, axis=1)
         )
-    edge = _edge_at(grad, k, offs, a, b, ts, n)
+    edge = _edge_at(grad, k, offs, a[None, :] + ts[:, None] * (b - a)[None, :], n)
     line = _robust_fit(edge, pad=0.05)
     if points is not None:
         points.append(edge)
@@ -322,10 +322,7 @@ def inner_step(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, reach: float) -> t
     ok = (k == kk) & (g1 >= g0) & (g1 >= g2) & (g1 >= INNER_STEP_VALLEY * valley)
     if ok.sum() < max(10, 0.25 * len(ts)):
         return None
-    den = g0 - 2 * g1 + g2
-    frac = np.where(np.abs(den) > 1e-12, 0.5 * (g0 - g2) / np.where(np.abs(den) > 1e-12, den, 1.0), 0.0)
-    at = mids[kk] + 0.5 * np.clip(frac, -0.5, 0.5)
-    inner = _robust_fit(on[ok] + at[ok, None] * n, pad=0.05)
+    inner = _robust_fit(_edge_at(grad, k, offs, on, n)[ok], pad=0.05)
     return None if inner is None else (outer, inner)
 
 
@@ -347,16 +344,17 @@ def across(line: tuple[np.ndarray, np.ndarray], points: np.ndarray, n: np.ndarra
 INNER_STEP_VALLEY = 1.5
 
 
-def _edge_at(grad, k, offs, a, b, ts, n) -> np.ndarray:
-    """The edge points ``(n, 2)`` of a side's profiles ``grad`` ``(n, m)`` at the profile index
-    ``k`` ``(n,)`` of each, placed at sub-pixel by a parabola through the gradient's three samples."""
+def _edge_at(grad, k, offs, base, n) -> np.ndarray:
+    """The edge points ``(n, 2)`` of a side's profiles ``grad`` ``(n, m)`` (sampled at ``offs``
+    along ``n`` from the points ``base`` ``(n, 2)``) at the profile index ``k`` ``(n,)`` of each,
+    placed at sub-pixel by a parabola through the gradient's three samples."""
     kk = np.clip(k, 1, grad.shape[1] - 2)
-    rows = np.arange(len(ts))
+    rows = np.arange(len(base))
     g0, g1, g2 = grad[rows, kk - 1], grad[rows, kk], grad[rows, kk + 1]
     den = g0 - 2 * g1 + g2
     frac = np.where(np.abs(den) > 1e-12, 0.5 * (g0 - g2) / np.where(np.abs(den) > 1e-12, den, 1.0), 0.0)
     off = offs[0] + 0.5 * (kk + np.clip(frac, -0.5, 0.5)) + 0.25
-    return a[None, :] + ts[:, None] * (b - a)[None, :] + off[:, None] * n[None, :]
+    return base + off[:, None] * n[None, :]
 
 
 def _off_vp(line: tuple[np.ndarray, np.ndarray], vp: np.ndarray) -> float:

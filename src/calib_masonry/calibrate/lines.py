@@ -260,12 +260,10 @@ def _refine_side(
     profile, the outermost, or with ``inner`` the innermost. ``to_photo``: a map of ideal image
     points ``(..., 2)`` to the photo's (a lens): the side is then straight in ideal coordinates and
     the photo is sampled where the lens put each of its points."""
-    d = b - a
-    length = float(np.linalg.norm(d))
+    length = float(np.linalg.norm(b - a))
     if length < 10:
         return None
-    d = d / length
-    n = np.array([-d[1], d[0]])
+    n = side_normal(a, b)
     ts = np.linspace(0.08, 0.92, max(20, int(length / 6)))
     offs = np.arange(-half, half + 0.25, 0.5)
     pts = a[None, None, :] + ts[:, None, None] * (b - a)[None, None, :] + offs[None, :, None] * n[None, None, :]
@@ -295,11 +293,11 @@ def _refine_side(
 def inner_step(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, reach: float) -> tuple | None:
     """The side a-b's edge (:func:`_refine_side`, the outermost strong one) and a second step of
     colour up to ``reach`` px in from it: ``(edge line, step line)``, each as (point, direction);
-    None where fewer than a quarter of the profiles (or ten) show one. A profile's second step is its largest colour gradient between 1.5 px and
-    ``reach`` in from the edge, kept only where the gradient falls between the two (by
-    :data:`INNER_STEP_VALLEY`): a step of its own, not the edge's own ramp fading inward (a
-    Blender render's colours bled over 3-4 px at one wall's end). The sides run LL, LR, UR, UL, so
-    +n points out of the wall."""
+    None where fewer than a quarter of the profiles (or ten) show one. A profile's second step is
+    its largest colour gradient between 1.5 px and ``reach`` in from the edge, kept only where the
+    gradient falls between the two (by :data:`INNER_STEP_VALLEY`): a step of its own, not the
+    edge's own ramp fading inward (a Blender render's colours bled over 3-4 px at one wall's end).
+    The sides run LL, LR, UR, UL, so +n points out of the wall."""
     outer = _refine_side(rgb, a, b, 2.5)
     if outer is None:
         return None

@@ -69,6 +69,11 @@ SETTINGS = {
     "1/2 check interval": replace(DEFAULT, check_interval_s=DEFAULT.check_interval_s / 2),
     "2x check interval": replace(DEFAULT, check_interval_s=DEFAULT.check_interval_s * 2),  # coarser: 0.01 s
     "1/4 check interval": replace(DEFAULT, check_interval_s=DEFAULT.check_interval_s / 4),
+    # the freed pieces' own joints checked (--piece-joints), at the default interval and at half
+    "piece joints": replace(DEFAULT, piece_joints=True),
+    "piece joints 1/2 check interval": replace(
+        DEFAULT, piece_joints=True, check_interval_s=DEFAULT.check_interval_s / 2
+    ),
     "4x iterations": replace(DEFAULT, iterations=4 * DEFAULT.iterations),
     "4x both": replace(DEFAULT, substeps=4 * DEFAULT.substeps, iterations=4 * DEFAULT.iterations),
 }

@@ -169,3 +169,63 @@ def test_the_verdict_does_not_read_where_a_rocking_piece_is():
     for k in (swung, back):
         pm = _rocking(0.9, t[: k + 1])
         assert not pm.toppled[0] and not pm.fallen[0]
+
+
+def _arm_on_a_column(tensile_strength, motion, arm=(0.1, 0.3, 0.4)):
+    """A heavy column (0.4 x 0.3 x 1 m) on a let-go footing, and an arm ``arm`` (x, y, z) bonded to
+    its +x face near the top by a head joint whose tensile strength is given (its shear strength
+    high: the tension criterion governs)."""
+    lx, ly, hz = arm
+    mat = Material(tensile_strength=tensile_strength, shear_strength=1e7, friction=0.6, compressive_strength=1e9)
+    col = _block("col", (0.4, 0.3, 1.0), (0, 0, 0.5), density=5000.0)
+    piece = _block("arm", arm, (0.2 + lx / 2, 0, 1.0 - hz / 2))
+    bonds = (
+        Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, 0.4, 0.3),
+        Bond.rectangle(0, 1, (0.2, 0, 1.0 - hz / 2), X, np.array([0.0, 1.0, 0.0]), ly, hz),
+    )
+    return Scene(bodies=(col, piece), bonds=bonds, material=mat, motion=motion), piece.mass
+
+
+@pytest.mark.parametrize("target_g", [0.1, 0.3])
+def test_a_piece_cracks_its_own_joint_where_statics_says(target_g):
+    # the column and its arm, set free as one piece on the plate, under a ground acceleration
+    # towards -x ramped from 0 to 0.4 g over 2 s: the inertial force pulls the arm off the column.
+    # The head joint's largest tensile stress is m a / A + 6 m g (l / 2) / (b h^2) (the arm's pull
+    # and its weight's moment); with the tensile strength set to that at target_g, the piece's own
+    # check cracks the joint at target_g (within 2 %; one check interval of the ramp is 0.001 g), the
+    # arm falls and the column stays
+    lx, ly, hz = 0.1, 0.3, 0.4
+    m = 1800.0 * lx * ly * hz
+    strength = m * target_g * G / (ly * hz) + 6 * m * G * (lx / 2) / (ly * hz**2)
+    ramp = 2.0
+    motion = constant_acceleration(0.4 * G, ramp, ramp_s=ramp, direction_deg=180.0)
+    sc, _ = _arm_on_a_column(strength, motion)
+    on = PieceSettings(fallen_m=100.0, check_joints=True)
+    pm = piece_motion(sc, np.array([0.0, np.nan]), np.linspace(0, ramp, 5), settings=on)
+    assert np.isnan(pm.crack_time_s[0])  # the footing is the joint model's (let go at 0)
+    a_crack = 0.4 * pm.crack_time_s[1] / ramp
+    assert a_crack == pytest.approx(target_g, rel=0.02)
+    assert pm.release_time_s[1] == pytest.approx(pm.crack_time_s[1], abs=0.02)  # no tension left: it falls
+    d = pm.distance_m()[-1]
+    assert d[1] > 0.5 and d[0] < 1e-3
+    assert pm.pieces == 2
+
+
+@pytest.mark.parametrize("factor, falls", [(0.85, False), (1.0, True)])
+def test_an_arm_hangs_from_its_piece_until_its_weight_cracks_it(factor, falls):
+    # a 0.3 m arm hanging from the column under gravity alone: its joint's tension is its weight's
+    # moment, 6 m g (l / 2) / (b h^2). Below its strength it hangs (the piece moves as one), at it
+    # the joint cracks and the arm falls. (The margin: a piece set free drops onto its contacts,
+    # which start unloaded; their settling loads its joints up to 10 % above their static forces
+    # for a few milliseconds: measured, the arm cracks from 0.92 of its static stress.)
+    lx, ly, hz = 0.3, 0.3, 0.2
+    m = 1800.0 * lx * ly * hz
+    stress = 6 * m * G * (lx / 2) / (ly * hz**2)
+    sc, _ = _arm_on_a_column(stress / factor, constant_acceleration(0.0, 1.0), arm=(lx, ly, hz))
+    on = PieceSettings(fallen_m=100.0, check_joints=True)
+    pm = piece_motion(sc, np.array([0.0, np.nan]), np.linspace(0, 1, 3), settings=on)
+    assert np.isfinite(pm.release_time_s[1]) == falls
+    assert (pm.distance_m()[-1, 1] > 1.0) == falls
+    # without the check (the default) the piece never cracks
+    off = piece_motion(sc, np.array([0.0, np.nan]), np.linspace(0, 1, 3), settings=PieceSettings(fallen_m=100.0))
+    assert off.distance_m()[-1, 1] < 1e-3 and np.isnan(off.crack_time_s).all()

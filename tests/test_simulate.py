@@ -1132,3 +1132,18 @@ def test_frames_show_cracked_joints_and_the_time_origin_of_the_histories():
     assert title.startswith("t = 0.10 s since the ground started moving") and "0 joints cracked" in title
     assert "1 joint cracked" in late.axes[0].get_title()
     assert len(late.axes[0].collections) == len(early.axes[0].collections) + 1  # the red marks
+
+
+def test_a_run_that_checks_its_pieces_joints_changes_nothing_the_pieces_hold():
+    # --piece-joints (SolverSettings.piece_joints): the shaken stack's freed top holds together
+    # (its joints' strength is far above what keeps it rigid), so checking them cracks nothing and
+    # the joint model's cracks, the pieces' motion and the verdict are those of the run without
+    # the check, bit for bit (tests/test_pieces.py checks the cracking itself against statics)
+    scene = _stack_under_a_broadband_record()
+    checked = replace(scene, solver=replace(scene.solver, piece_joints=True))
+    a, b = run(scene, progress=False, bullet=False), run(checked, progress=False, bullet=False)
+    assert a.pieces.pieces >= 1 and np.isfinite(a.bond_release_time_s).any()
+    for name in ("bond_break_time_s", "bond_release_time_s"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert np.isnan(b.pieces.crack_time_s).all() and np.isnan(b.pieces.release_time_s).all()
+    np.testing.assert_array_equal(a.pieces.displacement_m, b.pieces.displacement_m)

@@ -366,6 +366,7 @@ def _cmd_simulate(args) -> int:
             if v is not None
         },
         dynamics=not args.quasi_static,
+        piece_joints=args.piece_joints,
     )
     material = None
     if args.material:
@@ -663,6 +664,13 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="under a ground motion, seconds between the joint model's checks of the joints, the same at every "
         "frame rate (default 0.005: every sample of a 200 Hz record)",
+    )
+    m.add_argument(
+        "--piece-joints",
+        action="store_true",
+        help="under a ground motion, also check the joints inside the pieces the joint model sets free, against "
+        "the forces that keep each piece rigid, and split a piece where they let go (off by default: slower, "
+        "and the README's tables are without it)",
     )
     m.add_argument(
         "--quasi-static",

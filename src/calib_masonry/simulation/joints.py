@@ -381,10 +381,21 @@ class _Tangent:
     def solve(self, values: np.ndarray, b: np.ndarray) -> np.ndarray:
         """``A^-1 b`` for the symmetric positive definite ``A`` of these lower-triangle ``values``.
         Raises ArithmeticError where ``A`` is not positive definite."""
+        self.factor(values)
+        return self.solve_factored(b)
+
+    def factor(self, values: np.ndarray) -> None:
+        """Factorise ``A`` of these lower-triangle ``values`` (kept until the next); ArithmeticError
+        where it is not positive definite."""
         from cvxopt import cholmod, matrix
 
         self._A.V = matrix(values)
         cholmod.numeric(self._A, self._symbolic)
+
+    def solve_factored(self, b: np.ndarray) -> np.ndarray:
+        """``A^-1 b`` with the last factorised ``A`` (:meth:`factor`)."""
+        from cvxopt import cholmod, matrix
+
         x = matrix(np.ascontiguousarray(b, dtype=np.float64))
         cholmod.solve(self._symbolic, x)
         return np.array(x).ravel()

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..progress import progress as _progress
-from .pieces import piece_motion
+from .pieces import PieceSettings, piece_motion
 from .scene import Scene, grounded_bodies, quaternions_from_matrices, rotations
 from .tracker import CrackTracker
 
@@ -373,7 +373,9 @@ def steps(
             tracker.release_time_s,
             times,
             velocity=tracker.free_velocity,
+            crack_time_s=tracker.break_time_s,
             model=tracker.model,
+            settings=PieceSettings(check_joints=scene.solver.piece_joints),
             progress=progress if np.isfinite(tracker.release_time_s).any() else False,
             stopped=stopped,
             reached=reached,

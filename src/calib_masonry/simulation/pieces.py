@@ -7,7 +7,8 @@ together only as far as Bullet's iterative solve converges, and how far it rocks
 whether the structure counts as collapsed, changed with the solver's substeps and iterations (the
 Stylite tower: a collapse PGA of 0.35 g at the defaults, 0.20 g at twice the substeps or the
 iterations; docs/dynamics.md). The joint model never cracks a joint inside a piece once it is free,
-so such a piece *is* one rigid body; this module moves it as one.
+so such a piece *is* one rigid body; this module moves it as one (and, if asked, checks its joints:
+below).
 
 The model (small strains, finite motion):
 
@@ -38,6 +39,23 @@ The model (small strains, finite motion):
   centroid over an edge of its support (``_Pieces.overturns``): with the ground still the contacts
   only dissipate, so this does not depend on where in a swing a rocking piece is.
 
+A piece's own joints (``check_joints``; ``simulate --piece-joints``, off by default). Held together
+by its joints, a rocking or sliding piece loads them with the forces that keep it rigid; without
+this check nothing inside a piece ever cracks, and the paper example's box of 6 m walls stood at
+1.5 g (docs/dynamics.md). Every ``scene.solver.check_interval_s`` each moving piece's bodies are
+loaded with gravity and the ground's inertial force, the contact forces on them and minus their
+share of the piece's rigid acceleration (``m (A + alpha x r + w x (w x r))``, ``I alpha + w x I w``),
+all averaged over the interval (so an impact enters by its impulse, not by the penalty's peak) and
+balanced per piece; the joint model's joints between them take these loads, intact ones as mortar
+(its criteria) and cracked ones as contacts that carry compression alone (found by an active-set
+iteration; their shear elastic), with the joint model's weak springs. Intact joints over their
+strength crack in rounds as in the joint model (the worst within 10 %, solved again); a cracked
+joint whose corners then move more than the joint model's ``release_m`` (a part nothing holds
+under its load: metres, against microns) is let go, and the piece splits there, each part moving
+on with its parent's velocity field. A piece set free starts on unloaded penalty contacts and
+settles onto them in a few milliseconds, which loads its joints up to about 10 % above their
+static forces (tests/test_pieces.py).
+
 The run's verdict reads the bodies in pieces that fell or overturn at the last time asked
 (``PieceMotion.toppled``: collapsed from half of the bricks; simulation/results.py ``outcome``),
 and reports the displacement of every body's centroid at every frame beside it (bricks moved,
@@ -59,7 +77,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
 from ..progress import progress as _progress
-from .joints import _skew
+from .joints import _skew, _Tangent
 from .scene import Scene
 
 __all__ = ["PieceSettings", "PieceMotion", "piece_motion", "rigid_velocity"]
@@ -78,6 +96,9 @@ class PieceSettings:
     # step to about a millisecond instead of the joints' ~20 microseconds
     settle_fraction: float = 1e-4
     fallen_m: float = 0.5  # a piece that has moved this far (any body) has fallen
+    # check the joints inside every piece against the forces that keep it rigid, once per joint-model
+    # check interval (module docstring, "A piece's own joints"); False: a piece never cracks
+    check_joints: bool = False
 
     def __post_init__(self) -> None:
         if not self.steps_per_period >= 4.0:
@@ -110,6 +131,10 @@ class PieceMotion:
     # float32), if asked for (``piece_motion(..., rotations=True)``): with ``displacement_m`` the
     # bodies' poses, for a run whose frames show the verdict's motion (no Bullet)
     rotation: np.ndarray | None = None
+    # (J,) when a piece's own joints cracked and were let go (:meth:`_Pieces.check_joints`; NaN:
+    # not in a piece, or never)
+    crack_time_s: np.ndarray | None = None
+    release_time_s: np.ndarray | None = None
 
     def distance_m(self) -> np.ndarray:
         """``(T, B)`` every body's displacement's length."""
@@ -187,6 +212,15 @@ class _Pieces:
         self.points = model.corner_points() if model.n_all else np.zeros((0, K, 3))
         k = model._corner_k * settings.stiffness_factor if model.n_all else np.zeros((0, K, 3))
         self.k = k
+        # the joints inside the pieces: which are still mortar, and when they cracked or were let go
+        self.intact = np.ones(model.nj, dtype=bool)
+        self.held = np.ones(model.nj, dtype=bool)
+        self.crack_time_s = np.full(model.nj, np.nan)
+        self.release_time_s = np.full(model.nj, np.nan)
+        self._solver: tuple | None = None  # (bodies' key, _Tangent, joints' places, kept entries, last factor's key)
+        self._open = np.zeros((model.n_all, K), dtype=bool)  # the cracked corners the last check found open
+        self._K78: np.ndarray | None = None
+        self._window()
 
     # ---------------------------------------------------------------- pieces
     def regroup(self, free: np.ndarray, held: np.ndarray, velocity: np.ndarray | None) -> None:
@@ -240,7 +274,9 @@ class _Pieces:
         self.I0 = np.array(I0).reshape(-1, 3, 3)
         self.alive = np.array(alive, dtype=bool)
         self.size = np.array(size)
+        self.held = held[: m.nj].copy()
         self._contacts(held)
+        self._window()
 
     def _contacts(self, held: np.ndarray) -> None:
         """The contact corners: of the joints let go (and the plate contacts) between a piece and
@@ -328,6 +364,15 @@ class _Pieces:
         self.fv = self.frame[:, :, 1].copy()
         self.I0inv = np.linalg.inv(self.I0) if n else np.zeros((0, 3, 3))
         self._count = 0
+        # each corner's force on the bodies of the pieces on either side, and its lever from the
+        # body's centroid (in the piece's frame): the loads on a piece's own joints (check_joints)
+        m = self.model
+        ba, bb = m.a[self.cj], m.b[self.cj]
+        on_a, on_b = self.pa >= 0, self.pb >= 0
+        self.Ba = csr_matrix((np.ones(int(on_a.sum())), (ba[on_a], cols[on_a])), shape=(m.nb, C))
+        self.Bb = csr_matrix((np.ones(int(on_b.sum())), (bb[on_b], cols[on_b])), shape=(m.nb, C))
+        self.qa = self.p - self.x[ba]
+        self.qb = self.p - self.x[np.maximum(bb, 0)]
 
     def advance(self, g: np.ndarray, dt: float) -> None:
         """One step of ``dt`` under the load ``g`` (3,) per unit mass."""
@@ -371,6 +416,13 @@ class _Pieces:
             fb = fn * N[:, None] + fu * Tt[:, :1] + fv * Tt[:, 1:]  # on side b; -fb on side a
             F += (self.Sb @ fb - self.Sa @ fb)[:n]
             T += (self.Sb @ _cross(rb, fb) - self.Sa @ _cross(ra, fb))[:n]
+            if self.settings.check_joints:
+                la = np.einsum("cij,cj->ci", R[self.sa], self.qa)
+                lb = np.einsum("cij,cj->ci", R[self.sb], self.qb)
+                self.acc_F += dt * (self.Bb @ fb - self.Ba @ fb)
+                self.acc_T += dt * (self.Bb @ _cross(lb, fb) - self.Ba @ _cross(la, fb))
+        self.acc_g += dt * g
+        self.acc_t += dt
         live = self.alive
         Rt = np.transpose(self.R, (0, 2, 1))
         Iw = self.R @ self.I0 @ Rt
@@ -382,6 +434,162 @@ class _Pieces:
         self.d[live] += dt * self.v[live]
         self._count += 1
         self.R[live] = _rotate(self.R[live], dt * self.w[live], exact=self._count % 64 == 0)
+
+    # ---------------------------------------------------------------- a piece's own joints
+    def _window(self) -> None:
+        """Start a new window over which the loads on the pieces' joints are averaged."""
+        nb = self.model.nb
+        self.acc_F = np.zeros((nb, 3))
+        self.acc_T = np.zeros((nb, 3))
+        self.acc_g = np.zeros(3)
+        self.acc_t = 0.0
+        self.v0 = self.v.copy()
+        self.w0 = self.w.copy()
+
+    def _internal(self) -> np.ndarray:
+        """``(J,)`` the held joints between two bodies of one piece still moving."""
+        m = self.model
+        nj = m.nj
+        if nj == 0 or self.n == 0:
+            return np.zeros(nj, dtype=bool)
+        b = m.b[:nj]
+        pa = self.piece_of[m.a[:nj]]
+        pb = np.where(b >= 0, self.piece_of[np.maximum(b, 0)], -1)
+        live = np.zeros(nj, dtype=bool)
+        on = pa >= 0
+        live[on] = self.alive[pa[on]]
+        return self.held & (pa == pb) & live
+
+    def _joint_loads(self, bodies: np.ndarray) -> np.ndarray:
+        """``(6 B,)`` the forces and moments on the ``bodies`` (B,) of the pieces, averaged over the
+        window, in each piece's own frame (where the joint model's joints are): gravity and the
+        ground's inertial force, the contacts, less the body's share of its piece's rigid motion
+        (``m (A + alpha x r + w x (w x r))`` and ``I alpha + w x I w``). What the averages leave out of
+        balance (the piece turns within the window) is taken out as a rigid acceleration of the
+        piece, so that each piece's loads balance and strain its joints alone."""
+        h = self.acc_t
+        out = np.zeros((self.model.nb, 6))
+        idx = np.flatnonzero(bodies)
+        p = self.piece_of[idx]
+        R = self.R[p]
+        Rt = np.transpose(R, (0, 2, 1))
+        r = np.einsum("nij,nj->ni", R, self.x[idx] - self.c[p])
+        A = (self.v - self.v0) / h
+        alpha = (self.w - self.w0) / h
+        w = self.w[p]
+        acc = A[p] + _cross(alpha[p], r) + _cross(w, _cross(w, r))
+        F = self.mass[idx, None] * (self.acc_g / h - acc) + self.acc_F[idx] / h
+        Iw = R @ self.inertia[idx] @ Rt
+        T = self.acc_T[idx] / h - np.einsum("nij,nj->ni", Iw, alpha[p]) - _cross(w, np.einsum("nij,nj->ni", Iw, w))
+        Ftot = np.zeros((self.n, 3))
+        Mtot = np.zeros((self.n, 3))
+        np.add.at(Ftot, p, F)
+        np.add.at(Mtot, p, _cross(r, F) + T)
+        Ip = self.R @ self.I0 @ np.transpose(self.R, (0, 2, 1))
+        dA = Ftot / self.M[:, None]
+        dalpha = np.linalg.solve(Ip, Mtot[..., None])[..., 0]
+        F -= self.mass[idx, None] * (dA[p] + _cross(dalpha[p], r))
+        T -= np.einsum("nij,nj->ni", Iw, dalpha[p])
+        out[idx, :3] = np.einsum("nij,nj->ni", Rt, F)
+        out[idx, 3:] = np.einsum("nij,nj->ni", Rt, T)
+        return out.ravel()
+
+    def _internal_motion(self, bodies: np.ndarray, intact: np.ndarray, cracked: np.ndarray, rhs: np.ndarray):
+        """The bodies' motion ``(6 B,)`` under ``rhs`` on the ``intact`` joints (J,) as mortar and the
+        ``cracked`` ones (indices) as contacts that carry compression alone (their corners found by
+        an active-set iteration; their shear elastic), with the joint model's weak springs: the
+        balanced loads strain the joints, and a part that nothing holds under its load moves by
+        ``g / eps`` (metres)."""
+        m = self.model
+        key = bodies.tobytes()
+        if self._solver is None or self._solver[0] != key:
+            nj = m.nj
+            b = m.b[:nj]
+            inside = bodies[m.a[:nj]] & (b >= 0) & bodies[np.maximum(b, 0)]
+            local = np.full(nj, -1, dtype=np.int64)
+            local[inside] = np.arange(int(inside.sum()))
+            keep = np.repeat(bodies, 6)
+            place = np.cumsum(keep) - 1
+            self._solver = (key, _Tangent(place[m.dofs[:nj][inside]], int(keep.sum())), local, keep, [None])
+        _, tan, local, keep, last = self._solver
+        corners = m.corner_mask[cracked]
+        cj = np.repeat(cracked, corners.sum(axis=1))
+        ck = np.nonzero(corners)[1]
+        # each crack's corners start as the last check left them (a new crack closed)
+        active = ~self._open[cj, ck]
+        idx = np.flatnonzero(intact)
+        U = np.zeros(6 * m.nb)
+        if self._K78 is None:
+            self._K78 = m.Kj[:, tan.ROW, tan.COL]  # (J', 78): each joint's block as the tangent sums it
+
+        def base() -> np.ndarray:
+            return tan.values(local[idx], self._K78[idx], m._reg.diagonal()[keep])
+
+        blocks = None
+        if len(cj):
+            Lc = m._corner_L[cj, ck]
+            blocks = np.einsum("cai,ca,caj->cij", Lc, m._corner_k[cj, ck], Lc)[:, tan.ROW, tan.COL]
+        for rounds in range(len(cj) + 1):
+            fkey = (intact.tobytes(), np.packbits(active).tobytes())
+            if last[0] != fkey:
+                values = tan.base(intact.tobytes(), base)
+                if active.any():
+                    values = values + tan.values(local[cj[active]], blocks[active])
+                tan.factor(values)
+                last[0] = fkey
+            U[keep] = tan.solve_factored(rhs[keep])
+            if not len(cj):
+                break
+            closed = m._corner_relative(cj, ck, U)[:, 2] < 0.0
+            # the first pass opens and closes; then corners only open (the pulled ones), so that the
+            # iteration ends (a no-tension active set can cycle), at most once per corner
+            new = closed if rounds == 0 else active & closed
+            if (new == active).all():
+                break
+            active = new
+        self._open[cj, ck] = ~active
+        return U
+
+    def check_joints(self, t: float) -> np.ndarray:
+        """Check the joints inside the moving pieces under the loads that keep each piece rigid,
+        averaged since the last check: crack the intact ones over their strength (the joint
+        model's criteria, rounds as :meth:`JointModel.crack`'s: the worst within 10 %, solved
+        again), and let go the cracked ones whose corners a part that nothing holds moves by more
+        than the joint model's ``release_m`` (the piece splits where its joints can no longer hold
+        it together). Returns the joints let go (indices)."""
+        released = np.zeros(0, dtype=np.int64)
+        internal = self._internal()
+        if not self.settings.check_joints or self.acc_t <= 0.0 or not internal.any():
+            self._window()
+            return released
+        m = self.model
+        nj = m.nj
+        bodies = np.zeros(m.nb, dtype=bool)
+        bodies[m.a[:nj][internal]] = True
+        bodies[m.b[:nj][internal]] = True
+        rhs = self._joint_loads(bodies)
+        for _ in range(m.settings.max_rounds + 1):
+            intact = internal & self.intact
+            cracked = np.flatnonzero(internal & ~self.intact)
+            U = self._internal_motion(bodies, intact, cracked, rhs)
+            if cracked.size:
+                moved = cracked[m._motion(U, cracked) > m.settings.release_m]
+                if moved.size:
+                    released = moved
+                    break
+            idx = np.flatnonzero(intact)
+            if not idx.size:
+                break
+            util = m.state(U, idx).utilisation[idx]
+            worst = float(util.max())
+            if worst <= 1.0:
+                break
+            new = idx[util >= max(1.0, 0.9 * worst)]
+            self.intact[new] = False
+            self.crack_time_s[new] = t
+        self.release_time_s[released] = t
+        self._window()
+        return released
 
     def rotation(self) -> np.ndarray:
         """(B, 3, 3) every body's rotation from its place: its piece's (a fallen piece's as it fell,
@@ -488,6 +696,7 @@ def piece_motion(
     stopped: Callable[[], bool] | None = None,
     reached: Callable[[float], None] | None = None,
     rotations: bool = False,
+    crack_time_s: np.ndarray | None = None,
 ) -> PieceMotion | None:
     """The freed pieces' motion (module docstring) at ``times_s`` (T,), seconds since the ground
     began to move, given when the joint model let each joint go (``release_time_s`` (nj,), NaN
@@ -498,7 +707,10 @@ def piece_motion(
     every 64 steps whether the caller has gone (a run stopped while the pieces moved on a thread
     of their own): then None at once. ``reached(t)``, if given, is told every 64 steps how far
     (seconds) the motion has got (a caller waiting for it shows the progress). ``rotations``: also
-    record every body's rotation at each time (:attr:`PieceMotion.rotation`)."""
+    record every body's rotation at each time (:attr:`PieceMotion.rotation`). ``crack_time_s``
+    (nj,): when the joint model cracked each joint (NaN for never; None: none cracked): a piece's
+    cracked joints are contacts in its own joints' check (:meth:`_Pieces.check_joints`), made every
+    ``scene.solver.check_interval_s``."""
     from .dynamics import body_inertia
     from .joints import JointModel
 
@@ -548,41 +760,70 @@ def piece_motion(
                 rot[k_time] = state.rotation()
             k_time += 1
 
+    cracked = np.asarray(crack_time_s, dtype=np.float64) if crack_time_s is not None else np.full(model.nj, np.nan)
+    check_s = float(scene.solver.check_interval_s)
     read(float(events[0]) - 1e-9)  # before the first release nothing has moved
     for e in _progress(range(len(events)), desc="pieces", unit="release", enabled=progress):
         t = float(events[e])
-        held = ~(release <= t + 1e-12)
+        state.intact &= ~(cracked <= t + 1e-12)
+        held = ~(release <= t + 1e-12) & np.isnan(state.release_time_s)
         free = ~model.grounded(held) if model.nj else np.ones(nb, dtype=bool)
         vel = velocity.get(t) if velocity else None
         state.regroup(free, held, vel)
         dt = state.step_size()
         read(t)
-        span = float(ends[e + 1]) - t
-        if span <= 0 or not state.n or dt == np.inf:
-            continue
-        n = max(1, int(np.ceil(span / dt - 1e-9)))
-        grid = t + span * np.arange(n + 1) / n
-        a = motion.mean_acceleration(grid) if motion is not None else np.zeros((n, 2))
-        h = span / n
-        for q in range(n):
-            g = gravity.copy()
-            g[:2] -= a[q]
-            state.advance(g, h)
-            if (q & 63) == 63:
-                state.check_fallen()
-                if stopped is not None and stopped():
-                    return None
-                if reached is not None:
-                    reached(float(grid[q + 1]))
-            if k_time < len(times_s) and times_s[k_time] <= grid[q + 1] + 1e-12:
-                read(float(grid[q + 1]))
+        t0 = t
+        next_check = (np.floor(t0 / check_s + 1e-9) + 1.0) * check_s
+        while True:
+            span = float(ends[e + 1]) - t0
+            if span <= 0 or not state.n or dt == np.inf:
+                break
+            n = max(1, int(np.ceil(span / dt - 1e-9)))
+            grid = t0 + span * np.arange(n + 1) / n
+            a = motion.mean_acceleration(grid) if motion is not None else np.zeros((n, 2))
+            h = span / n
+            split = None
+            for q in range(n):
+                g = gravity.copy()
+                g[:2] -= a[q]
+                state.advance(g, h)
+                if (q & 63) == 63:
+                    state.check_fallen()
+                    if stopped is not None and stopped():
+                        return None
+                    if reached is not None:
+                        reached(float(grid[q + 1]))
+                if k_time < len(times_s) and times_s[k_time] <= grid[q + 1] + 1e-12:
+                    read(float(grid[q + 1]))
+                if grid[q + 1] >= next_check - 1e-12:
+                    next_check = (np.floor(grid[q + 1] / check_s + 1e-9) + 1.0) * check_s
+                    if state.check_joints(float(grid[q + 1])).size:
+                        split = float(grid[q + 1])
+                        steps += q + 1
+                        break
+            if split is None:
+                steps += n
+                break
+            # a piece's own joints let go: it splits, its parts moving on as they were
+            state.regroup(free, held & np.isnan(state.release_time_s), None)
+            dt = state.step_size()
+            t0 = split
         state.check_fallen()
-        steps += n
     read(np.inf)
     toppled = state.fallen.copy()
     for i in np.flatnonzero(state.alive):
         if state.overturns(int(i)):
             toppled[state.piece_of == i] = True
     return PieceMotion(
-        times_s, out, int(state.n), state.fallen.copy(), float(dt), steps, time.perf_counter() - clock, toppled, rot
+        times_s,
+        out,
+        int(state.n),
+        state.fallen.copy(),
+        float(dt),
+        steps,
+        time.perf_counter() - clock,
+        toppled,
+        rot,
+        state.crack_time_s.copy(),
+        state.release_time_s.copy(),
     )

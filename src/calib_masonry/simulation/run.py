@@ -272,8 +272,15 @@ def _pieces_summary(scene: Scene, out) -> dict | None:
         "step_s": float(p.dt_s) if np.isfinite(p.dt_s) else None,
         "steps": int(p.steps),
         "seconds": round(float(p.seconds), 3),
+        # the joints inside the pieces, checked against the forces that keep each piece rigid
+        "joints_cracked_in_pieces": _count_finite(p.crack_time_s),
+        "joints_let_go_in_pieces": _count_finite(p.release_time_s),
         "bullet_moved_fraction_final": float(bullet.moved_fraction[-1]),
     }
+
+
+def _count_finite(times: np.ndarray | None) -> int:
+    return 0 if times is None else int(np.isfinite(times).sum())
 
 
 def _dynamics_summary(scene: Scene, out) -> dict:
@@ -359,6 +366,8 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
             "gravity_ramp_s": s.gravity_ramp_s,
             "warmup_damping": s.warmup_damping,
             "contact_gap_m": s.contact_gap_m,
+            "check_interval_s": s.check_interval_s,
+            "piece_joints": s.piece_joints,
         },
         "joints": {
             "model": "elastic interfaces (UDEC/3DEC convention) between rigid bricks, cracked ones as "

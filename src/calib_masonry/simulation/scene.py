@@ -247,6 +247,11 @@ class SolverSettings:
     # tower's three records 0.01 -> 0.005 s moved the collapse PGA by 0.00-0.10 g, 0.005 -> 0.0025 s
     # by 0.05-0.10 g, as much as the freed pieces' own settings move it (docs/dynamics.md)
     check_interval_s: float = 0.005
+    # under a ground motion, check the joints inside the pieces the joint model sets free against the
+    # forces that keep each piece rigid, at the same interval, and split a piece where they let go
+    # (simulation/pieces.py, _Pieces.check_joints); off by default until the README's tables are
+    # re-run with it (docs/dynamics.md, "A freed piece's own joints")
+    piece_joints: bool = False
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or self.substeps <= 0 or self.iterations <= 0:

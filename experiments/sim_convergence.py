@@ -109,6 +109,12 @@ def one_run(
     return {
         "freed": float(freed),
         "cracked": float(np.isfinite(m.bond_break_time_s).mean()) if len(m.bond_break_time_s) else 0.0,
+        # cracked inside the freed pieces by their own check (--piece-joints; None without it)
+        "in_pieces": (
+            float(np.isfinite(out.pieces.crack_time_s).mean())
+            if solver.piece_joints and out.pieces is not None and len(out.pieces.crack_time_s)
+            else None
+        ),
         "moved": float(m.moved_fraction[-1]),
         "toppled": m.toppled_fraction,
         "outcome": m.outcome,
@@ -182,7 +188,9 @@ def main() -> None:
                             model, solver, pga, seed, args.duration
                         )
                         print(
-                            f"{label} seed {seed} PGA {pga:4.2f} g: cracked {r['cracked']:6.1%}  set free "
+                            f"{label} seed {seed} PGA {pga:4.2f} g: cracked {r['cracked']:6.1%}"
+                            + (f" (+{r['in_pieces']:6.1%} in pieces)" if r["in_pieces"] is not None else "")
+                            + "  set free "
                             f"{r['freed']:6.1%}  moved {r['moved']:6.1%} (Bullet's {r['bullet_moved']:6.1%})  "
                             f"toppled {_percent(r['toppled'])}: {r['outcome']}  ({r['seconds']:.0f} s)",
                             flush=True,

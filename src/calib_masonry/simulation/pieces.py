@@ -219,6 +219,14 @@ class _Pieces:
         self.release_time_s = np.full(model.nj, np.nan)
         self._solver: tuple | None = None  # (bodies' key, _Tangent, joints' places, kept entries, last factor's key)
         self._open = np.zeros((model.n_all, K), dtype=bool)  # the cracked corners the last check found open
+        # with check_joints, a new contact starts loaded (_preload): each corner's offset into its
+        # spring (m; the force it carries at zero gap is k times it), and the forces a cracked
+        # joint's corners carried in the last check that held them (normal N >= 0, shear (2,) on b)
+        self.off = np.zeros((model.n_all, K))
+        self.pre_N = np.full((model.n_all, K), np.nan)
+        self.pre_T = np.zeros((model.n_all, K, 2))
+        self.g_now = np.array([0.0, 0.0, -self.gravity])  # the load per unit mass when pieces regroup
+        self.new = np.zeros(0, dtype=bool)  # per piece: made of bodies that were not moving
         self._K78: np.ndarray | None = None
         self._window()
 
@@ -240,7 +248,7 @@ class _Pieces:
             groups.setdefault(int(label[j]), []).append(int(j))
         old = (self.c, self.d, self.R, self.v, self.w, self.alive)
         old_of = self.piece_of.copy()
-        c, d, R, v, w, M, I0, alive, size = [], [], [], [], [], [], [], [], []
+        c, d, R, v, w, M, I0, alive, size, new = [], [], [], [], [], [], [], [], [], []
         piece_of = np.full(nb, -1)
         for members in groups.values():
             idx = np.array(members)
@@ -257,8 +265,10 @@ class _Pieces:
                 vi = pv + np.cross(pw, pR @ (ci - pc))
                 wi = pw
                 Ri = pR
+                new.append(False)
             else:
                 di, Ri = np.zeros(3), np.eye(3)
+                new.append(True)
             piece_of[idx] = len(c)
             c.append(ci), d.append(di), R.append(Ri), v.append(vi), w.append(wi)
             M.append(self.mass[idx].sum()), I0.append(Ii), alive.append(True)
@@ -274,6 +284,7 @@ class _Pieces:
         self.I0 = np.array(I0).reshape(-1, 3, 3)
         self.alive = np.array(alive, dtype=bool)
         self.size = np.array(size)
+        self.new = np.array(new, dtype=bool)
         self.held = held[: m.nj].copy()
         self._contacts(held)
         self._window()
@@ -311,7 +322,73 @@ class _Pieces:
                 factor[i] = min(1.0, cap / total)
         f = float(factor.max(initial=0.0)) or 1.0
         self.kc = kc_ * f
+        if self.settings.check_joints:
+            self._preload()
         self._prepare()
+
+    def _preload(self) -> None:
+        """Start the new contacts loaded (with ``check_joints``): a piece set free that bore on
+        unloaded penalty springs would drop onto them, and their settling would load its joints up
+        to ~10 % above their static forces, cracking joints that hold. The corners of a joint a
+        piece's own check let go carry the forces they carried in its last check that held them;
+        a piece new from the joint model's release is settled statically on its contacts with
+        the rest of the world (its load ``M g_now``; the contacts' tension-free corners found in a
+        few passes; friction capped at ``mu N``) and its corners start with those forces. The
+        offsets stay with the corners: a contact that opens closes again a settling short of
+        its gap (about ``settle_fraction`` of the piece's size)."""
+        cj, ck, kc = self.cj, self.ck, self.kc
+        mu = self.friction
+        fresh = (self.off[cj, ck] == 0.0) & (self.slip[cj, ck] == 0.0).all(axis=1)
+        # a joint the check let go: its last forces
+        pend = fresh & np.isfinite(self.pre_N[cj, ck])
+        if pend.any():
+            j, k = cj[pend], ck[pend]
+            N = self.pre_N[j, k]
+            T = self.pre_T[j, k]
+            size = np.linalg.norm(T, axis=1)
+            T = T * np.minimum(1.0, mu * N / np.maximum(size, 1e-300))[:, None]
+            self.off[j, k] = N / np.maximum(kc[pend, 2], 1e-300)
+            self.slip[j, k] = T / np.maximum(kc[pend, :2], 1e-300)
+            self.pre_N[j, k] = np.nan
+        for i in np.flatnonzero(self.new):
+            side_b = self.pb == i
+            on = ((self.pa == i) | side_b) & fresh & ~pend
+            other = np.where(side_b, self.pa, self.pb)
+            on &= (other < 0) | ~self.new[np.maximum(other, 0)]  # two new pieces' contacts: left unloaded
+            idx = np.flatnonzero(on)
+            if len(idx) < 3:
+                continue
+            sgn = np.where(side_b[idx], 1.0, -1.0)
+            r = (self.p[idx] - self.c[i]) @ self.R[i].T
+            J = [
+                np.concatenate([self.frame[idx, :, col], np.cross(r, self.frame[idx, :, col])], axis=1)
+                for col in range(3)
+            ]
+            F = np.concatenate([self.M[i] * self.g_now, np.zeros(3)])
+            act = np.ones(len(idx), dtype=bool)
+            gap = None
+            for _ in range(6):
+                K = sum((J[col][act] * kc[idx[act], col][:, None]).T @ J[col][act] for col in range(3))
+                try:
+                    delta = np.linalg.solve(K, F)
+                except np.linalg.LinAlgError:
+                    gap = None
+                    break
+                gap = np.stack([sgn * (J[col] @ delta) for col in range(3)], axis=1)  # b against a
+                now = gap[:, 2] < 0.0
+                if (now == act).all():
+                    break
+                act = now
+            if gap is None or not act.any():
+                continue
+            j, k = cj[idx[act]], ck[idx[act]]
+            kk = kc[idx[act]]
+            N = -kk[:, 2] * gap[act, 2]
+            T = -kk[:, :2] * gap[act, :2]
+            size = np.linalg.norm(T, axis=1)
+            T = T * np.minimum(1.0, mu * N / np.maximum(size, 1e-300))[:, None]
+            self.off[j, k] = -gap[act, 2]
+            self.slip[j, k] = T / np.maximum(kk[:, :2], 1e-300)
 
     def step_size(self) -> float:
         """``1 / steps_per_period`` of the shortest period of a piece on its contacts, all closed."""
@@ -372,6 +449,7 @@ class _Pieces:
         self.Ba = csr_matrix((np.ones(int(on_a.sum())), (ba[on_a], cols[on_a])), shape=(m.nb, C))
         self.Bb = csr_matrix((np.ones(int(on_b.sum())), (bb[on_b], cols[on_b])), shape=(m.nb, C))
         self.qa = self.p - self.x[ba]
+        self.o = self.off[self.cj, self.ck]
         self.qb = self.p - self.x[np.maximum(bb, 0)]
 
     def advance(self, g: np.ndarray, dt: float) -> None:
@@ -398,6 +476,7 @@ class _Pieces:
             vu = np.stack([(vel * fu).sum(1), (vel * fv).sum(1)], axis=1)
             vn = (vel * fn).sum(1)
             k, cdamp = self.kc, self.cdamp
+            dn = dn - self.o  # a corner that started loaded (_preload) is that far into its spring
             closed = dn < 0.0
             N = np.maximum(np.where(closed, -k[:, 2] * dn - cdamp[:, 2] * vn, 0.0), 0.0)
             s = self.slip[self.cj, self.ck]
@@ -550,6 +629,20 @@ class _Pieces:
         self._open[cj, ck] = ~active
         return U
 
+    def _keep_forces(self, joints: np.ndarray, U: np.ndarray) -> None:
+        """Keep the forces the corners of these ``joints`` carry under the motion ``U`` (the
+        corner springs of the joint model: compression alone, shear where they press), for the
+        contacts they become if they are let go (:meth:`_preload`)."""
+        m = self.model
+        corners = m.corner_mask[joints]
+        j = np.repeat(joints, corners.sum(axis=1))
+        k = np.nonzero(corners)[1]
+        rel = m._corner_relative(j, k, U)
+        kk = m._corner_k[j, k]
+        N = np.maximum(-kk[:, 2] * rel[:, 2], 0.0)
+        self.pre_N[j, k] = N
+        self.pre_T[j, k] = np.where((N > 0.0)[:, None], -kk[:, :2] * rel[:, :2], 0.0)
+
     def check_joints(self, t: float) -> np.ndarray:
         """Check the joints inside the moving pieces under the loads that keep each piece rigid,
         averaged since the last check: crack the intact ones over their strength (the joint
@@ -577,6 +670,7 @@ class _Pieces:
                 if moved.size:
                     released = moved
                     break
+                self._keep_forces(cracked, U)
             idx = np.flatnonzero(intact)
             if not idx.size:
                 break
@@ -585,6 +679,7 @@ class _Pieces:
             if worst <= 1.0:
                 break
             new = idx[util >= max(1.0, 0.9 * worst)]
+            self._keep_forces(new, U)
             self.intact[new] = False
             self.crack_time_s[new] = t
         self.release_time_s[released] = t
@@ -684,6 +779,15 @@ class _Pieces:
         return gone
 
 
+def _load_at(gravity: np.ndarray, motion, t: float) -> np.ndarray:
+    """The load per unit mass (3,) at ``t``: gravity and the ground's inertial force (its mean
+    acceleration over the next millisecond)."""
+    g = gravity.copy()
+    if motion is not None:
+        g[:2] -= motion.mean_acceleration(np.array([t, t + 1e-3]))[0]
+    return g
+
+
 def piece_motion(
     scene: Scene,
     release_time_s: np.ndarray,
@@ -769,6 +873,7 @@ def piece_motion(
         held = ~(release <= t + 1e-12) & np.isnan(state.release_time_s)
         free = ~model.grounded(held) if model.nj else np.ones(nb, dtype=bool)
         vel = velocity.get(t) if velocity else None
+        state.g_now = _load_at(gravity, motion, t)
         state.regroup(free, held, vel)
         dt = state.step_size()
         read(t)
@@ -805,6 +910,7 @@ def piece_motion(
                 steps += n
                 break
             # a piece's own joints let go: it splits, its parts moving on as they were
+            state.g_now = _load_at(gravity, motion, split)
             state.regroup(free, held & np.isnan(state.release_time_s), None)
             dt = state.step_size()
             t0 = split

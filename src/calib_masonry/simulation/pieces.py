@@ -219,12 +219,9 @@ class _Pieces:
         self.release_time_s = np.full(model.nj, np.nan)
         self._solver: tuple | None = None  # (bodies' key, _Tangent, joints' places, kept entries, last factor's key)
         self._open = np.zeros((model.n_all, K), dtype=bool)  # the cracked corners the last check found open
-        # with check_joints, a new contact starts loaded (_preload): each corner's offset into its
-        # spring (m; the force it carries at zero gap is k times it), and the forces a cracked
-        # joint's corners carried in the last check that held them (normal N >= 0, shear (2,) on b)
+        # with check_joints, a new piece's contacts start loaded (_preload): each corner's offset
+        # into its spring (m; the force it carries at zero gap is k times it)
         self.off = np.zeros((model.n_all, K))
-        self.pre_N = np.full((model.n_all, K), np.nan)
-        self.pre_T = np.zeros((model.n_all, K, 2))
         self.g_now = np.array([0.0, 0.0, -self.gravity])  # the load per unit mass when pieces regroup
         self.new = np.zeros(0, dtype=bool)  # per piece: made of bodies that were not moving
         self._K78: np.ndarray | None = None
@@ -327,32 +324,23 @@ class _Pieces:
         self._prepare()
 
     def _preload(self) -> None:
-        """Start the new contacts loaded (with ``check_joints``): a piece set free that bore on
-        unloaded penalty springs would drop onto them, and their settling would load its joints up
-        to ~10 % above their static forces, cracking joints that hold. The corners of a joint a
-        piece's own check let go carry the forces they carried in its last check that held them;
-        a piece new from the joint model's release is settled statically on its contacts with
-        the rest of the world (its load ``M g_now``; the contacts' tension-free corners found in a
-        few passes; friction capped at ``mu N``) and its corners start with those forces. The
-        offsets stay with the corners: a contact that opens closes again a settling short of
-        its gap (about ``settle_fraction`` of the piece's size)."""
+        """Start a new piece's contacts loaded (with ``check_joints``): a piece set free that bore
+        on unloaded penalty springs would drop onto them, and their settling would load its joints
+        up to ~10 % above their static forces, cracking joints that hold. A piece new from the
+        joint model's release is settled statically on its contacts with the rest of the world
+        (its load ``M g_now``; the tension-free corners found in a few passes; friction capped at
+        ``mu N``; none where that load tips or lifts it) and its corners start with those forces.
+        The offsets stay with the corners: a contact that opens closes again a settling short of
+        its gap (about ``settle_fraction`` of the piece's size). The parts of a piece its own
+        check splits start on unloaded contacts between them: the forces of the last check that
+        held the joint were tried (a solve near a mechanism: tens of times the parts' weight, and
+        the Stylite tower fell at 0.1 g) and are not used."""
         cj, ck, kc = self.cj, self.ck, self.kc
         mu = self.friction
         fresh = (self.off[cj, ck] == 0.0) & (self.slip[cj, ck] == 0.0).all(axis=1)
-        # a joint the check let go: its last forces
-        pend = fresh & np.isfinite(self.pre_N[cj, ck])
-        if pend.any():
-            j, k = cj[pend], ck[pend]
-            N = self.pre_N[j, k]
-            T = self.pre_T[j, k]
-            size = np.linalg.norm(T, axis=1)
-            T = T * np.minimum(1.0, mu * N / np.maximum(size, 1e-300))[:, None]
-            self.off[j, k] = N / np.maximum(kc[pend, 2], 1e-300)
-            self.slip[j, k] = T / np.maximum(kc[pend, :2], 1e-300)
-            self.pre_N[j, k] = np.nan
         for i in np.flatnonzero(self.new):
             side_b = self.pb == i
-            on = ((self.pa == i) | side_b) & fresh & ~pend
+            on = ((self.pa == i) | side_b) & fresh
             other = np.where(side_b, self.pa, self.pb)
             on &= (other < 0) | ~self.new[np.maximum(other, 0)]  # two new pieces' contacts: left unloaded
             idx = np.flatnonzero(on)
@@ -372,14 +360,18 @@ class _Pieces:
                 try:
                     delta = np.linalg.solve(K, F)
                 except np.linalg.LinAlgError:
-                    gap = None
                     break
                 gap = np.stack([sgn * (J[col] @ delta) for col in range(3)], axis=1)  # b against a
                 now = gap[:, 2] < 0.0
                 if (now == act).all():
                     break
-                act = now
+                act, gap = now, None
+            # no static settle where the load tips or lifts it (no equilibrium on these contacts: a
+            # settle of more than ten times the mean one): it starts on unloaded springs
             if gap is None or not act.any():
+                continue
+            mean = self.M[i] * float(np.linalg.norm(self.g_now)) / float(kc[idx[act], 2].sum())
+            if float(-gap[act, 2].min()) > 10.0 * mean:
                 continue
             j, k = cj[idx[act]], ck[idx[act]]
             kk = kc[idx[act]]
@@ -629,20 +621,6 @@ class _Pieces:
         self._open[cj, ck] = ~active
         return U
 
-    def _keep_forces(self, joints: np.ndarray, U: np.ndarray) -> None:
-        """Keep the forces the corners of these ``joints`` carry under the motion ``U`` (the
-        corner springs of the joint model: compression alone, shear where they press), for the
-        contacts they become if they are let go (:meth:`_preload`)."""
-        m = self.model
-        corners = m.corner_mask[joints]
-        j = np.repeat(joints, corners.sum(axis=1))
-        k = np.nonzero(corners)[1]
-        rel = m._corner_relative(j, k, U)
-        kk = m._corner_k[j, k]
-        N = np.maximum(-kk[:, 2] * rel[:, 2], 0.0)
-        self.pre_N[j, k] = N
-        self.pre_T[j, k] = np.where((N > 0.0)[:, None], -kk[:, :2] * rel[:, :2], 0.0)
-
     def check_joints(self, t: float) -> np.ndarray:
         """Check the joints inside the moving pieces under the loads that keep each piece rigid,
         averaged since the last check: crack the intact ones over their strength (the joint
@@ -670,7 +648,6 @@ class _Pieces:
                 if moved.size:
                     released = moved
                     break
-                self._keep_forces(cracked, U)
             idx = np.flatnonzero(intact)
             if not idx.size:
                 break
@@ -679,7 +656,6 @@ class _Pieces:
             if worst <= 1.0:
                 break
             new = idx[util >= max(1.0, 0.9 * worst)]
-            self._keep_forces(new, U)
             self.intact[new] = False
             self.crack_time_s[new] = t
         self.release_time_s[released] = t

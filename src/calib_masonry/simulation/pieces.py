@@ -222,6 +222,7 @@ class _Pieces:
         # with check_joints, a new piece's contacts start loaded (_preload): each corner's offset
         # into its spring (m; the force it carries at zero gap is k times it)
         self.off = np.zeros((model.n_all, K))
+        self._split_loads: np.ndarray | None = None
         self.g_now = np.array([0.0, 0.0, -self.gravity])  # the load per unit mass when pieces regroup
         self.new = np.zeros(0, dtype=bool)  # per piece: made of bodies that were not moving
         self._K78: np.ndarray | None = None
@@ -338,6 +339,9 @@ class _Pieces:
         cj, ck, kc = self.cj, self.ck, self.kc
         mu = self.friction
         fresh = (self.off[cj, ck] == 0.0) & (self.slip[cj, ck] == 0.0).all(axis=1)
+        if self._split_loads is not None:
+            self._settle_split(fresh)
+            self._split_loads = None
         for i in np.flatnonzero(self.new):
             side_b = self.pb == i
             on = ((self.pa == i) | side_b) & fresh
@@ -381,6 +385,76 @@ class _Pieces:
             T = T * np.minimum(1.0, mu * N / np.maximum(size, 1e-300))[:, None]
             self.off[j, k] = -gap[act, 2]
             self.slip[j, k] = T / np.maximum(kk[:, :2], 1e-300)
+
+    def _settle_split(self, fresh: np.ndarray) -> None:
+        """Start the contacts between the parts of a split loaded: each part needs from the others
+        what it needed from the rest of its piece to move with it (the sum of its bodies' balanced
+        loads of the check that split it); the parts are settled on the new contacts between them
+        together (6 unknowns a part, tension-free corners dropped in a few passes, a weak spring
+        for the group's own rigid motion), and none where that has no equilibrium (a part that
+        falls off: a settle of more than ten times the mean)."""
+        use = fresh & (self.pa >= 0) & (self.pb >= 0) & ~self.new[np.maximum(self.pa, 0)]
+        use &= ~self.new[np.maximum(self.pb, 0)]
+        idx = np.flatnonzero(use)
+        if len(idx) < 3:
+            return
+        parts = np.unique(np.concatenate([self.pa[idx], self.pb[idx]]))
+        place = np.full(self.n, -1)
+        place[parts] = np.arange(len(parts))
+        n6 = 6 * len(parts)
+        loads = self._split_loads.reshape(-1, 6)
+        F = np.zeros(n6)
+        for q, i in enumerate(parts):
+            bodies = np.flatnonzero(self.piece_of == i)
+            f = loads[bodies, :3].sum(axis=0)
+            mom = (np.cross(self.x[bodies] - self.c[i], loads[bodies, :3]) + loads[bodies, 3:]).sum(axis=0)
+            F[6 * q : 6 * q + 3] = self.R[i] @ f
+            F[6 * q + 3 : 6 * q + 6] = self.R[i] @ mom
+        ia, ib = place[self.pa[idx]], place[self.pb[idx]]
+        ra = np.einsum("cij,cj->ci", self.R[self.pa[idx]], self.p[idx] - self.c[self.pa[idx]])
+        rb = np.einsum("cij,cj->ci", self.R[self.pb[idx]], self.p[idx] - self.c[self.pb[idx]])
+        frames = self.frame[idx]  # the springs' directions, as advance() takes them
+        kc = self.kc[idx]
+        # each corner's gap change (b against a) per direction: rows of a (C, 3, 6 n) operator
+        rows, cols, vals = [], [], []
+        C = len(idx)
+        for col in range(3):
+            e = frames[:, :, col]
+            for side, r, sgn in ((ib, rb, 1.0), (ia, ra, -1.0)):
+                blk = sgn * np.concatenate([e, np.cross(r, e)], axis=1)  # (C, 6)
+                rows.append(np.repeat(3 * np.arange(C) + col, 6))
+                cols.append((6 * side[:, None] + np.arange(6)).ravel())
+                vals.append(blk.ravel())
+        G = csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * C, n6))
+        weak = 1e-9 * float(kc.max()) * np.ones(n6)
+        act = np.ones(C, dtype=bool)
+        gap = None
+        for _ in range(8):
+            k = (kc * act[:, None]).ravel()
+            K = (G.T @ G.multiply(k[:, None])).toarray() + np.diag(weak)
+            try:
+                delta = np.linalg.solve(K, F)
+            except np.linalg.LinAlgError:
+                return
+            gap = (G @ delta).reshape(C, 3)
+            now = gap[:, 2] < 0.0
+            if (now == act).all():
+                break
+            act, gap = now, None
+        if gap is None or not act.any():
+            return
+        weight = float(np.abs(F[2::6]).sum()) or float(self.M[parts].sum() * self.gravity)
+        mean = weight / float(kc[act, 2].sum())
+        if float(-gap[act, 2].min()) > 10.0 * mean:
+            return
+        j, k2 = self.cj[idx[act]], self.ck[idx[act]]
+        kk = kc[act]
+        N = -kk[:, 2] * gap[act, 2]
+        T = -kk[:, :2] * gap[act, :2]
+        size = np.linalg.norm(T, axis=1)
+        T = T * np.minimum(1.0, self.friction * N / np.maximum(size, 1e-300))[:, None]
+        self.off[j, k2] = -gap[act, 2]
+        self.slip[j, k2] = T / np.maximum(kk[:, :2], 1e-300)
 
     def step_size(self) -> float:
         """``1 / steps_per_period`` of the shortest period of a piece on its contacts, all closed."""
@@ -659,6 +733,9 @@ class _Pieces:
             self.intact[new] = False
             self.crack_time_s[new] = t
         self.release_time_s[released] = t
+        # what each body needs from the rest of its piece to move with it (its balanced load): the
+        # parts a split makes need it from the contacts between them (_preload)
+        self._split_loads = rhs if released.size else None
         self._window()
         return released
 

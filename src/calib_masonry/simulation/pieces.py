@@ -333,9 +333,9 @@ class _Pieces:
         ``mu N``; none where that load tips or lifts it) and its corners start with those forces.
         The offsets stay with the corners: a contact that opens closes again a settling short of
         its gap (about ``settle_fraction`` of the piece's size). The parts of a piece its own
-        check splits start on unloaded contacts between them: the forces of the last check that
-        held the joint were tried (a solve near a mechanism: tens of times the parts' weight, and
-        the Stylite tower fell at 0.1 g) and are not used."""
+        check splits are settled on the contacts between them (:meth:`_settle_split`); the forces
+        of the last check that held the joint were tried for them (a solve near a mechanism: tens
+        of times the parts' weight, and the Stylite tower fell at 0.1 g) and are not used."""
         cj, ck, kc = self.cj, self.ck, self.kc
         mu = self.friction
         fresh = (self.off[cj, ck] == 0.0) & (self.slip[cj, ck] == 0.0).all(axis=1)

@@ -52,9 +52,10 @@ iteration; their shear elastic), with the joint model's weak springs. Intact joi
 strength crack in rounds as in the joint model (the worst within 10 %, solved again); a cracked
 joint whose corners then move more than the joint model's ``release_m`` (a part nothing holds
 under its load: metres, against microns) is let go, and the piece splits there, each part moving
-on with its parent's velocity field. A piece set free starts on unloaded penalty contacts and
-settles onto them in a few milliseconds, which loads its joints up to about 10 % above their
-static forces (tests/test_pieces.py).
+on with its parent's velocity field. With the check, a piece starts settled on its new contacts
+(``_Pieces._preload``, ``_settle_split``): on unloaded penalty springs it would drop onto them in a
+few milliseconds and load its joints up to about 10 % above their static forces
+(tests/test_pieces.py).
 
 The run's verdict reads the bodies in pieces that fell or overturn at the last time asked
 (``PieceMotion.toppled``: collapsed from half of the bricks; simulation/results.py ``outcome``),

@@ -338,7 +338,6 @@ class _Pieces:
         of the last check that held the joint were tried for them (a solve near a mechanism: tens
         of times the parts' weight, and the Stylite tower fell at 0.1 g) and are not used."""
         cj, ck, kc = self.cj, self.ck, self.kc
-        mu = self.friction
         fresh = (self.off[cj, ck] == 0.0) & (self.slip[cj, ck] == 0.0).all(axis=1)
         if self._split_loads is not None:
             self._settle_split(fresh)
@@ -371,21 +370,8 @@ class _Pieces:
                 if (now == act).all():
                     break
                 act, gap = now, None
-            # no static settle where the load tips or lifts it (no equilibrium on these contacts: a
-            # settle of more than ten times the mean one): it starts on unloaded springs
-            if gap is None or not act.any():
-                continue
-            mean = self.M[i] * float(np.linalg.norm(self.g_now)) / float(kc[idx[act], 2].sum())
-            if float(-gap[act, 2].min()) > 10.0 * mean:
-                continue
-            j, k = cj[idx[act]], ck[idx[act]]
-            kk = kc[idx[act]]
-            N = -kk[:, 2] * gap[act, 2]
-            T = -kk[:, :2] * gap[act, :2]
-            size = np.linalg.norm(T, axis=1)
-            T = T * np.minimum(1.0, mu * N / np.maximum(size, 1e-300))[:, None]
-            self.off[j, k] = -gap[act, 2]
-            self.slip[j, k] = T / np.maximum(kk[:, :2], 1e-300)
+            if gap is not None:
+                self._start_loaded(idx, act, gap, self.M[i] * float(np.linalg.norm(self.g_now)))
 
     def _settle_split(self, fresh: np.ndarray) -> None:
         """Start the contacts between the parts of a split loaded: each part needs from the others
@@ -442,20 +428,29 @@ class _Pieces:
             if (now == act).all():
                 break
             act, gap = now, None
-        if gap is None or not act.any():
+        if gap is not None:
+            weight = float(np.abs(F[2::6]).sum()) or float(self.M[parts].sum() * self.gravity)
+            self._start_loaded(idx, act, gap, weight)
+
+    def _start_loaded(self, idx: np.ndarray, act: np.ndarray, gap: np.ndarray, load_n: float) -> None:
+        """Give the contact corners ``idx`` (into the contact set) that a settle left pressed
+        (``act``) the forces of its gaps ``gap`` (C, 3; b against a): each an offset into its normal
+        spring and a slip carrying its shear, capped at ``mu N``. Nothing where the settle has no
+        equilibrium (a load ``load_n`` (N) that tips, lifts or drops a part off: a settle of more
+        than ten times the mean one, ``load_n`` over the pressed corners' stiffness): those
+        corners start on unloaded springs. (Shared by :meth:`_preload` and :meth:`_settle_split`.)"""
+        if not act.any():
             return
-        weight = float(np.abs(F[2::6]).sum()) or float(self.M[parts].sum() * self.gravity)
-        mean = weight / float(kc[act, 2].sum())
-        if float(-gap[act, 2].min()) > 10.0 * mean:
+        kk = self.kc[idx[act]]
+        if float(-gap[act, 2].min()) > 10.0 * (load_n / float(kk[:, 2].sum())):
             return
-        j, k2 = self.cj[idx[act]], self.ck[idx[act]]
-        kk = kc[act]
+        j, k = self.cj[idx[act]], self.ck[idx[act]]
         N = -kk[:, 2] * gap[act, 2]
         T = -kk[:, :2] * gap[act, :2]
         size = np.linalg.norm(T, axis=1)
         T = T * np.minimum(1.0, self.friction * N / np.maximum(size, 1e-300))[:, None]
-        self.off[j, k2] = -gap[act, 2]
-        self.slip[j, k2] = T / np.maximum(kk[:, :2], 1e-300)
+        self.off[j, k] = -gap[act, 2]
+        self.slip[j, k] = T / np.maximum(kk[:, :2], 1e-300)
 
     def step_size(self) -> float:
         """``1 / steps_per_period`` of the shortest period of a piece on its contacts, all closed."""
@@ -510,14 +505,15 @@ class _Pieces:
         self._count = 0
         # each corner's force on the bodies of the pieces on either side, and its lever from the
         # body's centroid (in the piece's frame): the loads on a piece's own joints (check_joints)
-        m = self.model
-        ba, bb = m.a[self.cj], m.b[self.cj]
-        on_a, on_b = self.pa >= 0, self.pb >= 0
-        self.Ba = csr_matrix((np.ones(int(on_a.sum())), (ba[on_a], cols[on_a])), shape=(m.nb, C))
-        self.Bb = csr_matrix((np.ones(int(on_b.sum())), (bb[on_b], cols[on_b])), shape=(m.nb, C))
-        self.qa = self.p - self.x[ba]
         self.o = self.off[self.cj, self.ck]
-        self.qb = self.p - self.x[np.maximum(bb, 0)]
+        if self.settings.check_joints:
+            m = self.model
+            ba, bb = m.a[self.cj], m.b[self.cj]
+            on_a, on_b = self.pa >= 0, self.pb >= 0
+            self.Ba = csr_matrix((np.ones(int(on_a.sum())), (ba[on_a], cols[on_a])), shape=(m.nb, C))
+            self.Bb = csr_matrix((np.ones(int(on_b.sum())), (bb[on_b], cols[on_b])), shape=(m.nb, C))
+            self.qa = self.p - self.x[ba]
+            self.qb = self.p - self.x[np.maximum(bb, 0)]
 
     def advance(self, g: np.ndarray, dt: float) -> None:
         """One step of ``dt`` under the load ``g`` (3,) per unit mass."""
@@ -704,8 +700,10 @@ class _Pieces:
         than the joint model's ``release_m`` (the piece splits where its joints can no longer hold
         it together). Returns the joints let go (indices)."""
         released = np.zeros(0, dtype=np.int64)
+        if not self.settings.check_joints:
+            return released  # the default: a piece never cracks, and no window is kept
         internal = self._internal()
-        if not self.settings.check_joints or self.acc_t <= 0.0 or not internal.any():
+        if self.acc_t <= 0.0 or not internal.any():
             self._window()
             return released
         m = self.model

@@ -242,3 +242,53 @@ def test_a_piece_that_checks_its_joints_starts_settled_on_its_contacts():
     settled = piece_motion(sc, release, t, settings=PieceSettings(fallen_m=100.0, check_joints=True))
     assert np.abs(dropped.displacement_m[:, 0, 2]).max() > 1e-5
     assert np.abs(settled.displacement_m[:, 0]).max() < 1e-7
+
+
+@pytest.mark.parametrize("dynamic", [True, False])
+def test_a_pieces_joint_rings_as_a_damped_oscillator_under_a_step_load(dynamic):
+    # two blocks bonded face to face, free as one piece, a force F pulling one of them away along
+    # the line through both centroids from t = 0 on (a step): the joint's normal force follows the
+    # relative coordinate's damped oscillator, N(t) = N_s (1 - e^(-z w t) (cos w_d t + z / sqrt(1 -
+    # z^2) sin w_d t)), N_s = F m_2 / (m_1 + m_2), w^2 = k_n A (1 / m_1 + 1 / m_2) with k_n the units
+    # and mortar in series, z the Rayleigh damping at w (5 %); checked every T / 40 (Newmark's period
+    # elongation about (2 pi / 40)^2 / 12 = 0.2 %). A window's mean load is the load at its end,
+    # so the step enters as a ramp over the first window: half a window late (t - h / 2 below).
+    # Statically each check carries N_s at once.
+    from calib_masonry.simulation.dynamics import body_inertia, rayleigh
+    from calib_masonry.simulation.joints import JointModel
+    from calib_masonry.simulation.pieces import _Pieces
+
+    mat = Material(tensile_strength=1e9, shear_strength=1e9, compressive_strength=1e12)
+    a = _block("a", (0.3, 0.3, 0.3), (0.0, 0.0, 0.5), density=3000.0)
+    b = _block("b", (0.2, 0.3, 0.3), (0.25, 0.0, 0.5))
+    sc = Scene(bodies=(a, b), bonds=(Bond.rectangle(0, 1, (0.15, 0, 0.5), X, UP, 0.3, 0.3),), material=mat)
+    m1, m2 = a.mass, b.mass
+    kn = 1.0 / (mat.joint_thickness_m / mat.mortar_youngs_modulus + (0.15 + 0.1) / mat.unit_youngs_modulus)
+    w = math.sqrt(kn * 0.09 * (1 / m1 + 1 / m2))
+    zeta = 0.05
+    model = JointModel(sc)
+    state = _Pieces(sc, model, np.array([body_inertia(x) for x in sc.bodies]), PieceSettings(check_joints=True))
+    if dynamic:
+        state.damping = rayleigh(zeta, w, 3 * w)
+    state.regroup(np.ones(2, dtype=bool), np.ones(1, dtype=bool), None)
+    h = 2 * math.pi / w / 40
+    F = 1000.0  # N on body a, towards -x: the joint in tension
+    n_s = F * m2 / (m1 + m2)
+    wd = w * math.sqrt(1 - zeta**2)
+    got, want = [], []
+    for k in range(121):
+        state.acc_t = h
+        state.acc_F[0] = [-F * h if k else 0.0, 0.0, 0.0]  # the first check (static) unloaded
+        assert state.check_joints(k * h).size == 0
+        got.append(model.state(state.eu if dynamic else state._last_U, np.array([0])).forces[0, 2])
+        t = k * h - h / 2
+        env = math.exp(-zeta * w * t) * (math.cos(wd * t) + zeta / math.sqrt(1 - zeta**2) * math.sin(wd * t))
+        want.append(n_s * (1 - env) if k else 0.0)
+    got = np.abs(np.array(got))
+    if not dynamic:
+        assert got[1:] == pytest.approx(n_s, rel=1e-6)
+        return
+    assert np.abs(got - np.array(want)).max() < 0.03 * n_s
+    # the first peak: 1 + e^(-pi z / sqrt(1 - z^2)) times the static force, half a damped period on
+    assert got.max() / n_s == pytest.approx(1 + math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2)), rel=0.01)
+    assert abs(got.argmax() * h - h / 2 - math.pi / wd) <= h

@@ -356,6 +356,9 @@ class _Tangent:
         self.slot = slot[:-n].reshape(dofs.shape[0], len(self.ROW))  # (J, 78)
         self.diag_slot = slot[-n:]
         self.nnz = place.size
+        self.n = n
+        self._place = place
+        self._csc = None  # scipy's matrix of this pattern (matvec), made when first asked
         self._A = spmatrix(matrix(np.ones(self.nnz)), matrix(place % n), matrix(place // n), (n, n))
         self._symbolic = cholmod.symbolic(self._A)
         self._base: tuple[bytes, np.ndarray] | None = None
@@ -370,6 +373,32 @@ class _Tangent:
         if diag is not None:
             out[self.diag_slot] += diag
         return out
+
+    def body_values(self, dofs: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+        """The lower triangle's values ``(nnz,)`` of block-diagonal 6 x 6 ``blocks`` ``(B, 6, 6)``
+        (symmetric) at the unknowns ``dofs`` ``(B, 6)``: a body's own block lies in the pattern when
+        one of the joints it was made with joins it."""
+        r, c = np.tril_indices(6)
+        gi, gj = dofs[:, r].astype(np.int64), dofs[:, c].astype(np.int64)
+        key = (np.minimum(gi, gj) * self.n + np.maximum(gi, gj)).ravel()
+        slot = np.searchsorted(self._place, key)
+        if not (self._place[np.minimum(slot, self.nnz - 1)] == key).all():
+            raise ValueError("a body's block is not in the pattern (a body no joint of the pattern joins)")
+        return np.bincount(slot, weights=blocks[:, r, c].ravel(), minlength=self.nnz).astype(np.float64, copy=False)
+
+    def matvec(self, values: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``A x`` for the symmetric ``A`` of these lower-triangle ``values``."""
+        import scipy.sparse as sp
+
+        if self._csc is None:
+            n = self.n
+            self._csc = sp.csc_matrix((np.ones(self.nnz), (self._place % n, self._place // n)), shape=(n, n))
+            self._csc.sort_indices()
+            # the csc's data in the pattern's order (column-major, rows ascending: the same)
+        low = self._csc.copy()
+        low.data = np.asarray(values, dtype=np.float64)
+        diag = values[self.diag_slot]
+        return low @ x + low.T @ x - diag * x
 
     def base(self, key: bytes, make) -> np.ndarray:
         """The values of the intact joints' part and the weak springs, kept for the last ``key``

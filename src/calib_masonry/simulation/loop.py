@@ -380,6 +380,7 @@ def steps(
             stopped=stopped,
             reached=reached,
             rotations=not bullet,
+            damping=(tracker.elastic.alpha, tracker.elastic.beta) if tracker.elastic is not None else None,
         )
 
     # where the pieces' motion on the thread ahead has got, and its progress shown while this

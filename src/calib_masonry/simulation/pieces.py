@@ -52,7 +52,17 @@ iteration; their shear elastic), with the joint model's weak springs. Intact joi
 strength crack in rounds as in the joint model (the worst within 10 %, solved again); a cracked
 joint whose corners then move more than the joint model's ``release_m`` (a part nothing holds
 under its load: metres, against microns) is let go, and the piece splits there, each part moving
-on with its parent's velocity field. With the check, a piece starts settled on its new contacts
+on with its parent's velocity field. Under a ground motion (the run's Rayleigh damping given,
+``joint_dynamics``) a piece's joints vibrate: its first check is static (the piece was so loaded
+in the structure it left), and each later one is a step of Newmark's average acceleration over
+the interval, ``M u'' + C u' + K u = f`` for the bodies' elastic motion ``u`` relative to the
+piece's rigid motion, with the run's Rayleigh damping on the same tangent; a part nothing holds
+then runs away over a few checks (the window's load accelerates it) until its joint's corners
+have moved ``release_m``. A static check takes each window's load at once, so the joints of a
+rocking piece took every impact's mean over the interval as a static load and the verdict
+changed with the interval (docs/dynamics.md); a step load rings to 1.85 times its static force
+at 5 % damping, as a damped oscillator does (tests/test_pieces.py). The parts of a split start
+again from rest, statically. With the check, a piece starts settled on its new contacts
 (``_Pieces._preload``, ``_settle_split``): on unloaded penalty springs it would drop onto them in a
 few milliseconds and load its joints up to about 10 % above their static forces
 (tests/test_pieces.py).
@@ -100,6 +110,10 @@ class PieceSettings:
     # check the joints inside every piece against the forces that keep it rigid, once per joint-model
     # check interval (module docstring, "A piece's own joints"); False: a piece never cracks
     check_joints: bool = False
+    # with check_joints and the run's Rayleigh damping: a piece's joints vibrate under the window's
+    # loads (Newmark's average acceleration over each check interval, relative to the piece's rigid
+    # motion) instead of taking each window's loads statically; a piece's first check is static
+    joint_dynamics: bool = True
 
     def __post_init__(self) -> None:
         if not self.steps_per_period >= 4.0:
@@ -218,7 +232,16 @@ class _Pieces:
         self.held = np.ones(model.nj, dtype=bool)
         self.crack_time_s = np.full(model.nj, np.nan)
         self.release_time_s = np.full(model.nj, np.nan)
-        self._solver: tuple | None = None  # (bodies' key, _Tangent, joints' places, kept entries, last factor's key)
+        # per group of bodies checked together: (_Tangent, joints' places, kept entries, last factor's key)
+        self._solvers: dict[bytes, tuple] = {}
+        # the pieces' own vibration (joint_dynamics): Rayleigh's (alpha, beta), None for static checks;
+        # every body's elastic displacement, velocity and acceleration (6 B,) relative to its
+        # piece's rigid motion, in the piece's frame, and whether a check has started them
+        self.damping: tuple[float, float] | None = None
+        self.eu = np.zeros(6 * nb)
+        self.ev = np.zeros(6 * nb)
+        self.ea = np.zeros(6 * nb)
+        self.e_on = np.zeros(nb, dtype=bool)
         self._open = np.zeros((model.n_all, K), dtype=bool)  # the cracked corners the last check found open
         # with check_joints, a new piece's contacts start loaded (_preload): each corner's offset
         # into its spring (m; the force it carries at zero gap is k times it)
@@ -636,15 +659,22 @@ class _Pieces:
         out[idx, 3:] = np.einsum("nij,nj->ni", Rt, T)
         return out.ravel()
 
-    def _internal_motion(self, bodies: np.ndarray, intact: np.ndarray, cracked: np.ndarray, rhs: np.ndarray):
+    def _internal_motion(
+        self, bodies: np.ndarray, intact: np.ndarray, cracked: np.ndarray, rhs: np.ndarray, step: float | None = None
+    ):
         """The bodies' motion ``(6 B,)`` under ``rhs`` on the ``intact`` joints (J,) as mortar and the
         ``cracked`` ones (indices) as contacts that carry compression alone (their corners found by
         an active-set iteration; their shear elastic), with the joint model's weak springs: the
         balanced loads strain the joints, and a part that nothing holds under its load moves by
-        ``g / eps`` (metres)."""
+        ``g / eps`` (metres). With a ``step`` (s), the motion at its end from the bodies' elastic
+        state (``eu``, ``ev``, ``ea``) by Newmark's average acceleration with Rayleigh damping on the
+        same tangent: ``(K + c_k K + c_m M) u = f + M (...) + C (...)``; a part nothing holds then
+        moves by its acceleration over the step, and on over the next ones."""
         m = self.model
         key = bodies.tobytes()
-        if self._solver is None or self._solver[0] != key:
+        if key not in self._solvers:
+            if len(self._solvers) >= 4:
+                self._solvers.pop(next(iter(self._solvers)))
             nj = m.nj
             b = m.b[:nj]
             inside = bodies[m.a[:nj]] & (b >= 0) & bodies[np.maximum(b, 0)]
@@ -652,8 +682,8 @@ class _Pieces:
             local[inside] = np.arange(int(inside.sum()))
             keep = np.repeat(bodies, 6)
             place = np.cumsum(keep) - 1
-            self._solver = (key, _Tangent(place[m.dofs[:nj][inside]], int(keep.sum())), local, keep, [None])
-        _, tan, local, keep, last = self._solver
+            self._solvers[key] = (_Tangent(place[m.dofs[:nj][inside]], int(keep.sum())), local, keep, [None], [None])
+        tan, local, keep, last, mass = self._solvers[key]
         corners = m.corner_mask[cracked]
         cj = np.repeat(cracked, corners.sum(axis=1))
         ck = np.nonzero(corners)[1]
@@ -671,15 +701,39 @@ class _Pieces:
         if len(cj):
             Lc = m._corner_L[cj, ck]
             blocks = np.einsum("cai,ca,caj->cij", Lc, m._corner_k[cj, ck], Lc)[:, tan.ROW, tan.COL]
+        b_rhs = rhs[keep]
+        if step is not None:
+            h = float(step)
+            alpha, beta = self.damping
+            if mass[0] is None:
+                ids = np.flatnonzero(bodies)
+                blk = np.zeros((len(ids), 6, 6))
+                blk[:, 0, 0] = blk[:, 1, 1] = blk[:, 2, 2] = self.mass[ids]
+                blk[:, 3:, 3:] = self.inertia[ids]
+                mv = tan.body_values(np.arange(6 * len(ids)).reshape(-1, 6), blk)
+                mass[0] = (mv, blk)
+            mv, blk = mass[0]
+            u, v, a = self.eu[keep], self.ev[keep], self.ea[keep]
+
+            def M(x: np.ndarray) -> np.ndarray:
+                return np.einsum("nij,nj->ni", blk, x.reshape(-1, 6)).ravel()
+
+            c_m, c_k = 4.0 / h**2 + 2.0 * alpha / h, 1.0 + 2.0 * beta / h
+            cu = (2.0 / h) * u + v
+            b_inertia = b_rhs + M((4.0 / h**2) * u + (4.0 / h) * v + a) + alpha * M(cu)
         for rounds in range(len(cj) + 1):
-            fkey = (intact.tobytes(), np.packbits(active).tobytes())
-            if last[0] != fkey:
+            fkey = (intact.tobytes(), np.packbits(active).tobytes(), step)
+            if last[0] != fkey or step is not None:
                 values = tan.base(intact.tobytes(), base)
                 if active.any():
                     values = values + tan.values(local[cj[active]], blocks[active])
-                tan.factor(values)
-                last[0] = fkey
-            U[keep] = tan.solve_factored(rhs[keep])
+                if step is not None:
+                    b_rhs = b_inertia + beta * tan.matvec(values, cu)
+                    values = c_k * values + c_m * mv
+                if last[0] != fkey:
+                    tan.factor(values)
+                    last[0] = fkey
+            U[keep] = tan.solve_factored(b_rhs)
             if not len(cj):
                 break
             closed = m._corner_relative(cj, ck, U)[:, 2] < 0.0
@@ -712,10 +766,43 @@ class _Pieces:
         bodies[m.a[:nj][internal]] = True
         bodies[m.b[:nj][internal]] = True
         rhs = self._joint_loads(bodies)
+        if self.damping is None:
+            released = self._check_group(bodies, internal, rhs, t, None)
+        else:
+            # a piece's first check is static (it was loaded so in the structure it left), then
+            # it vibrates from there; a piece's bodies are all new or all started
+            parts = []
+            for group, step in ((bodies & ~self.e_on, None), (bodies & self.e_on, self.acc_t)):
+                if group.any():
+                    inside = internal & group[m.a[:nj]] & group[np.maximum(m.b[:nj], 0)]
+                    parts.append(self._check_group(group, inside, rhs, t, step))
+            released = np.concatenate(parts) if parts else released
+            if released.size:
+                # the parts of a split start again from rest, statically (their split is rigid motion)
+                split = np.unique(self.piece_of[np.concatenate([m.a[released], m.b[released]])])
+                again = np.isin(self.piece_of, split[split >= 0])
+                self.e_on[again] = False
+                dof = np.repeat(again, 6)
+                self.eu[dof] = self.ev[dof] = self.ea[dof] = 0.0
+        self.release_time_s[released] = t
+        # what each body needs from the rest of its piece to move with it (its balanced load): the
+        # parts a split makes need it from the contacts between them (_preload)
+        self._split_loads = rhs if released.size else None
+        self._window()
+        return released
+
+    def _check_group(
+        self, bodies: np.ndarray, internal: np.ndarray, rhs: np.ndarray, t: float, step: float | None
+    ) -> np.ndarray:
+        """:meth:`check_joints` on the ``bodies`` (B,) and their ``internal`` joints (J,):
+        statically, or (a ``step``) as the step of their vibration that ends at ``t``, kept as
+        their elastic state. Returns the joints let go."""
+        m = self.model
+        released = np.zeros(0, dtype=np.int64)
         for _ in range(m.settings.max_rounds + 1):
             intact = internal & self.intact
             cracked = np.flatnonzero(internal & ~self.intact)
-            U = self._internal_motion(bodies, intact, cracked, rhs)
+            U = self._internal_motion(bodies, intact, cracked, rhs, step)
             if cracked.size:
                 moved = cracked[m._motion(U, cracked) > m.settings.release_m]
                 if moved.size:
@@ -731,11 +818,18 @@ class _Pieces:
             new = idx[util >= max(1.0, 0.9 * worst)]
             self.intact[new] = False
             self.crack_time_s[new] = t
-        self.release_time_s[released] = t
-        # what each body needs from the rest of its piece to move with it (its balanced load): the
-        # parts a split makes need it from the contacts between them (_preload)
-        self._split_loads = rhs if released.size else None
-        self._window()
+        self._last_U = U  # the last solve's motion (a test reads a static check's forces from it)
+        if self.damping is not None:
+            dof = np.repeat(bodies, 6)
+            if step is None:
+                self.ev[dof] = self.ea[dof] = 0.0
+            else:
+                h = float(step)
+                a1 = (4.0 / h**2) * (U[dof] - self.eu[dof]) - (4.0 / h) * self.ev[dof] - self.ea[dof]
+                self.ev[dof] += 0.5 * h * (self.ea[dof] + a1)
+                self.ea[dof] = a1
+            self.eu[dof] = U[dof]
+            self.e_on[bodies] = True
         return released
 
     def rotation(self) -> np.ndarray:
@@ -853,6 +947,7 @@ def piece_motion(
     reached: Callable[[float], None] | None = None,
     rotations: bool = False,
     crack_time_s: np.ndarray | None = None,
+    damping: tuple[float, float] | None = None,
 ) -> PieceMotion | None:
     """The freed pieces' motion (module docstring) at ``times_s`` (T,), seconds since the ground
     began to move, given when the joint model let each joint go (``release_time_s`` (nj,), NaN
@@ -866,7 +961,9 @@ def piece_motion(
     record every body's rotation at each time (:attr:`PieceMotion.rotation`). ``crack_time_s``
     (nj,): when the joint model cracked each joint (NaN for never; None: none cracked): a piece's
     cracked joints are contacts in its own joints' check (:meth:`_Pieces.check_joints`), made every
-    ``scene.solver.check_interval_s``."""
+    ``scene.solver.check_interval_s``. ``damping``: the run's Rayleigh ``(alpha, beta)``: with
+    ``settings.joint_dynamics`` a piece's joints vibrate between checks (None: each check is
+    static)."""
     from .dynamics import body_inertia
     from .joints import JointModel
 
@@ -892,6 +989,8 @@ def piece_motion(
     release = np.where(release <= times_s[-1], release, np.nan)  # let go after the last time asked: no matter
     inertia = np.array([body_inertia(b) for b in scene.bodies])
     state = _Pieces(scene, model, inertia, settings)
+    if settings.check_joints and settings.joint_dynamics and damping is not None:
+        state.damping = (float(damping[0]), float(damping[1]))
     events = np.unique(release[np.isfinite(release)])
     start_free = ~model.grounded(np.ones(model.nj, dtype=bool)) if model.nj else np.ones(nb, dtype=bool)
     if start_free.any():

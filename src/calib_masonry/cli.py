@@ -669,7 +669,8 @@ def _parser() -> argparse.ArgumentParser:
         "--piece-joints",
         action="store_true",
         help="under a ground motion, also check the joints inside the pieces the joint model sets free, against "
-        "the forces that keep each piece rigid, and split a piece where they let go (off by default: slower, "
+        "the forces that keep each piece rigid (the joints vibrating between checks with the structure's damping; "
+        "statically with --quasi-static), and split a piece where they let go (off by default: slower, "
         "and the README's tables are without it)",
     )
     m.add_argument(

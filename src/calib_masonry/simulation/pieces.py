@@ -61,8 +61,8 @@ then runs away over a few checks (the window's load accelerates it) until its jo
 have moved ``release_m``. A static check takes each window's load at once, so the joints of a
 rocking piece took every impact's mean over the interval as a static load and the verdict
 changed with the interval (docs/dynamics.md); a step load rings to 1.85 times its static force
-at 5 % damping, as a damped oscillator does (tests/test_pieces.py). Each check first takes the
-pieces' rigid motion out of that state (the parts of a split keep their own vibration). With the check, a piece starts settled on its new contacts
+at 5 % damping, as a damped oscillator does (tests/test_pieces.py). The parts of a split start
+again from rest, statically. With the check, a piece starts settled on its new contacts
 (``_Pieces._preload``, ``_settle_split``): on unloaded penalty springs it would drop onto them in a
 few milliseconds and load its joints up to about 10 % above their static forces
 (tests/test_pieces.py).
@@ -777,6 +777,13 @@ class _Pieces:
                     inside = internal & group[m.a[:nj]] & group[np.maximum(m.b[:nj], 0)]
                     parts.append(self._check_group(group, inside, rhs, t, step))
             released = np.concatenate(parts) if parts else released
+            if released.size:
+                # the parts of a split start again from rest, statically (their split is rigid motion)
+                split = np.unique(self.piece_of[np.concatenate([m.a[released], m.b[released]])])
+                again = np.isin(self.piece_of, split[split >= 0])
+                self.e_on[again] = False
+                dof = np.repeat(again, 6)
+                self.eu[dof] = self.ev[dof] = self.ea[dof] = 0.0
         self.release_time_s[released] = t
         # what each body needs from the rest of its piece to move with it (its balanced load): the
         # parts a split makes need it from the contacts between them (_preload)
@@ -792,8 +799,6 @@ class _Pieces:
         their elastic state. Returns the joints let go."""
         m = self.model
         released = np.zeros(0, dtype=np.int64)
-        if step is not None:
-            self._rigid_out(bodies)
         for _ in range(m.settings.max_rounds + 1):
             intact = internal & self.intact
             cracked = np.flatnonzero(internal & ~self.intact)
@@ -826,31 +831,6 @@ class _Pieces:
             self.eu[dof] = U[dof]
             self.e_on[bodies] = True
         return released
-
-    def _rigid_out(self, bodies: np.ndarray) -> None:
-        """Take out of the ``bodies``' elastic state (``eu``, ``ev``, ``ea``) each piece's rigid
-        motion (its mass-weighted least-squares part): the piece's integrator carries that. A part
-        split off a piece keeps its own vibration; what it moved apart by is its rigid motion."""
-        idx = np.flatnonzero(bodies)
-        p = self.piece_of[idx]
-        n = len(idx)
-        basis = np.zeros((n, 6, 6))  # a body's motion under the piece's translation and small rotation
-        basis[:, :3, :3] = basis[:, 3:, 3:] = np.eye(3)
-        basis[:, :3, 3:] = -_skew(self.x[idx] - self.c[p])
-        mass = np.zeros((n, 6, 6))
-        mass[:, 0, 0] = mass[:, 1, 1] = mass[:, 2, 2] = self.mass[idx]
-        mass[:, 3:, 3:] = self.inertia[idx]
-        mb = mass @ basis
-        A = np.zeros((self.n, 6, 6))
-        np.add.at(A, p, np.transpose(basis, (0, 2, 1)) @ mb)
-        on = np.unique(p)
-        for vec in (self.eu, self.ev, self.ea):
-            x = vec.reshape(-1, 6)
-            b = np.zeros((self.n, 6))
-            np.add.at(b, p, np.einsum("nji,nj->ni", mb, x[idx]))
-            q = np.zeros((self.n, 6))
-            q[on] = np.linalg.solve(A[on], b[on][..., None])[..., 0]
-            x[idx] -= np.einsum("nij,nj->ni", basis, q[p])
 
     def rotation(self) -> np.ndarray:
         """(B, 3, 3) every body's rotation from its place: its piece's (a fallen piece's as it fell,

@@ -242,6 +242,7 @@ class _Pieces:
         self.ev = np.zeros(6 * nb)
         self.ea = np.zeros(6 * nb)
         self.e_on = np.zeros(nb, dtype=bool)
+        self.e_t = np.nan  # when the last check was made (s): a vibrating check's step runs from it
         self._open = np.zeros((model.n_all, K), dtype=bool)  # the cracked corners the last check found open
         # with check_joints, a new piece's contacts start loaded (_preload): each corner's offset
         # into its spring (m; the force it carries at zero gap is k times it)
@@ -772,7 +773,10 @@ class _Pieces:
             # a piece's first check is static (it was loaded so in the structure it left), then
             # it vibrates from there; a piece's bodies are all new or all started
             parts = []
-            for group, step in ((bodies & ~self.e_on, None), (bodies & self.e_on, self.acc_t)):
+            # the step from the last check (a regroup since then restarts the load's window, not the
+            # vibration's clock)
+            since = t - self.e_t if np.isfinite(self.e_t) and t > self.e_t else self.acc_t
+            for group, step in ((bodies & ~self.e_on, None), (bodies & self.e_on, since)):
                 if group.any():
                     inside = internal & group[m.a[:nj]] & group[np.maximum(m.b[:nj], 0)]
                     parts.append(self._check_group(group, inside, rhs, t, step))
@@ -785,6 +789,7 @@ class _Pieces:
                 dof = np.repeat(again, 6)
                 self.eu[dof] = self.ev[dof] = self.ea[dof] = 0.0
         self.release_time_s[released] = t
+        self.e_t = t
         # what each body needs from the rest of its piece to move with it (its balanced load): the
         # parts a split makes need it from the contacts between them (_preload)
         self._split_loads = rhs if released.size else None

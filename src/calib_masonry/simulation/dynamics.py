@@ -41,7 +41,10 @@ from .scene import Body, Scene, grounded_bodies
 __all__ = [
     "Modes",
     "body_inertia",
+    "mass_blocks",
     "mass_matrix",
+    "newmark_rhs",
+    "newmark_next",
     "stiffness_matrix",
     "modes",
     "empirical_tower_periods",
@@ -107,16 +110,22 @@ def body_inertia(body: Body) -> np.ndarray:
     return R @ I_body @ R.T
 
 
+def mass_blocks(mass: np.ndarray, inertia: np.ndarray) -> np.ndarray:
+    """``(B, 6, 6)``: each body's ``mass`` (B,) on its translations, its ``inertia`` tensor
+    ``(B, 3, 3)`` about its centroid on its rotations."""
+    mass = np.asarray(mass, dtype=np.float64)
+    out = np.zeros((len(mass), 6, 6))
+    out[:, 0, 0] = out[:, 1, 1] = out[:, 2, 2] = mass
+    out[:, 3:, 3:] = inertia
+    return out
+
+
 def mass_matrix(scene: Scene) -> sp.csr_matrix:
-    """Block-diagonal ``(6 B, 6 B)``: each body's mass on its translations, its inertia tensor about
-    its centroid on its rotations."""
-    blocks = []
-    for body in scene.bodies:
-        blk = np.zeros((6, 6))
-        blk[:3, :3] = body.mass * np.eye(3)
-        blk[3:, 3:] = body_inertia(body)
-        blocks.append(blk)
-    return sp.block_diag(blocks, format="csr") if blocks else sp.csr_matrix((0, 0))
+    """Block-diagonal ``(6 B, 6 B)`` of :func:`mass_blocks`."""
+    if not scene.bodies:
+        return sp.csr_matrix((0, 0))
+    blocks = mass_blocks([b.mass for b in scene.bodies], np.array([body_inertia(b) for b in scene.bodies]))
+    return sp.block_diag(list(blocks), format="csr")
 
 
 def stiffness_matrix(scene: Scene, intact: np.ndarray | None = None, model=None) -> sp.csr_matrix:
@@ -305,6 +314,21 @@ def rayleigh(ratio: float, omega_1: float, omega_2: float) -> tuple[float, float
     return 2.0 * ratio * w1 * w2 / (w1 + w2), 2.0 * ratio / (w1 + w2)
 
 
+def newmark_rhs(f, mass, stiffness, u, v, a, dt: float, alpha: float, beta: float) -> np.ndarray:
+    """The right-hand side of a step of Newmark's average acceleration (gamma 1/2, beta 1/4) with
+    Rayleigh damping ``C = alpha M + beta K``, from the state ``u, v, a`` under the load ``f`` at
+    the step's end: ``f + M (4 u / dt^2 + 4 v / dt + a) + C (2 u / dt + v)``; ``mass`` and
+    ``stiffness`` multiply by ``M`` and ``K``. Its matrix is ``K + 4 M / dt^2 + 2 C / dt``."""
+    cu = (2.0 / dt) * u + v
+    return f + mass((4.0 / dt**2) * u + (4.0 / dt) * v + a) + alpha * mass(cu) + beta * stiffness(cu)
+
+
+def newmark_next(u, u1, v, a, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The velocity and acceleration at the end of that step, which moved ``u`` to ``u1``."""
+    a1 = (4.0 / dt**2) * (u1 - u) - (4.0 / dt) * v - a
+    return v + 0.5 * dt * (a + a1), a1
+
+
 def record_load(motion, t: float, g: np.ndarray) -> np.ndarray:
     """The load per unit mass ``t`` seconds after the ground began to move: ``g``'s vertical with
     the ground ``motion``'s acceleration then, reversed (``g`` itself without a motion)."""
@@ -423,13 +447,10 @@ class ElasticResponse:
             tk = t_start + span * (k / steps)
             gk = self.load_at(tk, g) if self.motion is not None else g_start + (g - g_start) * (k / steps)
             f = self._force(gk)
-            mu = M @ ((4.0 / dt**2) * u + (4.0 / dt) * v + a)
-            cu = (2.0 / dt) * u + v
-            rhs = f + mu + self.alpha * (M @ cu) + self.beta * (K @ cu)
+            rhs = newmark_rhs(f, M.__matmul__, K.__matmul__, u, v, a, dt, self.alpha, self.beta)
             u1 = lu(rhs)
-            a1 = (4.0 / dt**2) * (u1 - u) - (4.0 / dt) * v - a
-            v = v + 0.5 * dt * (a + a1)
-            u, a = u1, a1
+            v, a = newmark_next(u, u1, v, a, dt)
+            u = u1
             if until is not None and k < steps and k % self.check_every == 0:
                 self.u[d] = u
                 if until(self.u):

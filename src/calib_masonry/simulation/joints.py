@@ -394,11 +394,10 @@ class _Tangent:
             n = self.n
             self._csc = sp.csc_matrix((np.ones(self.nnz), (self._place % n, self._place // n)), shape=(n, n))
             self._csc.sort_indices()
-            # the csc's data in the pattern's order (column-major, rows ascending: the same)
-        low = self._csc.copy()
+        # the csc's entries are the pattern's, in its order (column-major, rows ascending)
+        low = self._csc
         low.data = np.asarray(values, dtype=np.float64)
-        diag = values[self.diag_slot]
-        return low @ x + low.T @ x - diag * x
+        return low @ x + low.T @ x - values[self.diag_slot] * x
 
     def base(self, key: bytes, make) -> np.ndarray:
         """The values of the intact joints' part and the weak springs, kept for the last ``key``

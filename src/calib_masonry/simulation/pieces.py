@@ -88,6 +88,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
 from ..progress import progress as _progress
+from .dynamics import mass_blocks, newmark_next, newmark_rhs
 from .joints import _skew, _Tangent
 from .scene import Scene
 
@@ -708,20 +709,16 @@ class _Pieces:
             alpha, beta = self.damping
             if mass[0] is None:
                 ids = np.flatnonzero(bodies)
-                blk = np.zeros((len(ids), 6, 6))
-                blk[:, 0, 0] = blk[:, 1, 1] = blk[:, 2, 2] = self.mass[ids]
-                blk[:, 3:, 3:] = self.inertia[ids]
-                mv = tan.body_values(np.arange(6 * len(ids)).reshape(-1, 6), blk)
-                mass[0] = (mv, blk)
+                blk = mass_blocks(self.mass[ids], self.inertia[ids])
+                mass[0] = (tan.body_values(np.arange(6 * len(ids)).reshape(-1, 6), blk), blk)
             mv, blk = mass[0]
             u, v, a = self.eu[keep], self.ev[keep], self.ea[keep]
 
             def M(x: np.ndarray) -> np.ndarray:
                 return np.einsum("nij,nj->ni", blk, x.reshape(-1, 6)).ravel()
 
+            # newmark_rhs's matrix, K + 4 M / h^2 + 2 C / h, as multiples of the tangent and the mass
             c_m, c_k = 4.0 / h**2 + 2.0 * alpha / h, 1.0 + 2.0 * beta / h
-            cu = (2.0 / h) * u + v
-            b_inertia = b_rhs + M((4.0 / h**2) * u + (4.0 / h) * v + a) + alpha * M(cu)
         for rounds in range(len(cj) + 1):
             fkey = (intact.tobytes(), np.packbits(active).tobytes(), step)
             if last[0] != fkey or step is not None:
@@ -729,7 +726,8 @@ class _Pieces:
                 if active.any():
                     values = values + tan.values(local[cj[active]], blocks[active])
                 if step is not None:
-                    b_rhs = b_inertia + beta * tan.matvec(values, cu)
+                    stiff = values
+                    b_rhs = newmark_rhs(rhs[keep], M, lambda x: tan.matvec(stiff, x), u, v, a, h, alpha, beta)
                     values = c_k * values + c_m * mv
                 if last[0] != fkey:
                     tan.factor(values)
@@ -829,10 +827,7 @@ class _Pieces:
             if step is None:
                 self.ev[dof] = self.ea[dof] = 0.0
             else:
-                h = float(step)
-                a1 = (4.0 / h**2) * (U[dof] - self.eu[dof]) - (4.0 / h) * self.ev[dof] - self.ea[dof]
-                self.ev[dof] += 0.5 * h * (self.ea[dof] + a1)
-                self.ea[dof] = a1
+                self.ev[dof], self.ea[dof] = newmark_next(self.eu[dof], U[dof], self.ev[dof], self.ea[dof], float(step))
             self.eu[dof] = U[dof]
             self.e_on[bodies] = True
         return released

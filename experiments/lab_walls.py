@@ -14,6 +14,22 @@ check against real walls. Two single-leaf series of the Stone Masonry Database (
   the Bullet Constraints Builder's masonry preset and Lourenco 1996's ratios), the database's mortar
   compressive strength f_c,m (3.8 MPa) and the units' density of granite, 2650 kg/m^3.
 
+Any other single-leaf wall of the database is run the same way (``--db DIR``: a folder with the
+database's tests.csv and crackmaps/), its inputs read from its own row, never from its name:
+
+- material: ``Joints`` "Dry" -> f_t = c = 0, mu 0.6; any mortar -> the package's default mortar with
+  the row's f_c,m (a row without one: the mean of its reference's rows, else the package default);
+  the stones' density 2650 kg/m^3 (granite; the database gives none) and mu 0.6 for every wall;
+- boundary from ``H0/H``: at most 0.55 -> double-fixed (H0 = H / 2); above 1 -> cantilever with the
+  load H0 above the foot (``--shear-span-ratio H0/L``); from 0.95 to 1 -> cantilever with the load
+  5 cm above the wall's top (the beam's centroid; noted); between -> not run (a partly restrained
+  top, which the shear test does not model), said so;
+- the statistics are per reference (a series), from the test's own ``Reference`` field;
+- not run, each with its reason printed: more than one leaf (the model is single-wythe), no
+  drawing, no precompression or no Vmax. A drawing is ``crackmaps/crackmap_<unit, letters and
+  digits only>_D<drift>_<ref>.png``: the one at the smallest drift (D0p00, before the test) is
+  used; a later one's crack lines would be taken for joints (noted).
+
 No value is fitted to the measured Vmax. Each drawing (crackmaps/crackmap_<unit>_D0p00_<ref>.png:
 the stone outlines in grey, the wall's outline in black, the damage after the test in red and
 yellow) becomes a mask by :func:`stone_mask`: the outline's four corners map to the wall's L x H
@@ -21,7 +37,7 @@ yellow) becomes a mask by :func:`stone_mask`: the outline's four corners map to 
 run along the joints and count as joints, the yellow hatching of crushed zones is ignored), and the
 mortar between stones of a mortared wall, one network of low solidity, is dropped.
 
-    .venv/bin/python experiments/lab_walls.py [--out DIR] [--only SW.30.1 WI1.100]
+    .venv/bin/python experiments/lab_walls.py [--out DIR] [--only SW.30.1 WI1.100] [--db DIR]
 
 prints per test: sigma0, measured Vmax (the larger of the two directions), predicted, ratio,
 mechanism (model) and failure type (test); then per series the mean and the coefficient of
@@ -35,6 +51,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import re
 import subprocess
 import sys
 import tempfile
@@ -45,19 +62,33 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 DB = ROOT.parent / "shared" / "data" / "external" / "stone_masonry_db"
 PX_PER_M = 1000
-MATERIALS = {
-    "SW": {"friction": 0.6, "tensile_strength_mpa": 0.0, "cohesion_mpa": 0.0, "density_kg_m3": 2650.0},
-    "WI": {"friction": 0.6, "density_kg_m3": 2650.0, "compressive_strength_mpa": 3.8},
-}
+STONE = {"friction": 0.6, "density_kg_m3": 2650.0}  # every wall: mu (Lourenco 1996), granite's density
+DRY = {"tensile_strength_mpa": 0.0, "cohesion_mpa": 0.0}
 
 
-def drawing_of(unit: str) -> Path:
-    """The crackmap of a test unit: SW.100.1 -> SW1001, WI1.100 -> WI1100."""
-    key = unit.replace(".", "")
-    found = sorted((DB / "crackmaps").glob(f"crackmap_{key}_D0p00_*.png"))
+def _drift(path: Path) -> float:
+    """The drift of a crackmap's name (``..._D0p93_...`` -> 0.93), inf if it has none."""
+    m = re.search(r"_D(\d+)p(\d+)_", path.name)
+    return float(f"{m.group(1)}.{m.group(2)}") if m else float("inf")
+
+
+def drawing_of(unit: str, db: Path = DB) -> Path:
+    """The crackmap of a test unit (SW.100.1 -> SW1001, WI1.100 -> WI1100: letters and digits), the
+    one at the smallest drift (D0p00: the layout before the test)."""
+    key = re.sub(r"[^A-Za-z0-9]", "", unit)
+    found = sorted((Path(db) / "crackmaps").glob(f"crackmap_{key}_D*.png"), key=lambda p: (_drift(p), p.name))
     if not found:
-        raise FileNotFoundError(f"no crackmap for {unit} ({key}) in {DB / 'crackmaps'}")
+        raise FileNotFoundError(f"no crackmap for {unit} ({key}) in {Path(db) / 'crackmaps'}")
     return found[0]
+
+
+def boundary_of(h0_over_h: float) -> tuple[str | None, str]:
+    """The shear test's boundary for the database's H0/H, or None and why it is not run."""
+    if h0_over_h <= 0.55:
+        return "double-fixed", ""
+    if h0_over_h >= 0.95:
+        return "cantilever", ""
+    return None, f"H0/H = {h0_over_h:.2f}: a partly restrained top, which the shear test does not model"
 
 
 def stone_mask(
@@ -123,41 +154,91 @@ def stone_mask(
     return np.where(size[final] >= 2e-4 * px_per_m**2, 255, 0).astype(np.uint8)  # no specks of aliasing
 
 
-def tests() -> list[dict]:
-    with open(DB / "tests.csv", newline="") as fh:
+def _field(row: dict, name: str) -> str:
+    """A field of a tests.csv row by its name with spaces and line breaks ignored (the database's
+    headers break lines inside a name: "fc\\nm  [MPa]" is "fc,m [MPa]")."""
+    want = re.sub(r"[\s,]", "", name)
+    for key, value in row.items():
+        if key is not None and re.sub(r"[\s,]", "", key) == want:
+            return (value or "").strip()
+    return ""
+
+
+def _num(row: dict, name: str) -> float | None:
+    try:
+        return float(_field(row, name))
+    except ValueError:
+        return None
+
+
+def tests(db: Path = DB) -> list[dict]:
+    """Every row of the database's tests.csv with what the shear test needs, read from the row:
+    ``skip`` says why a row is not run ("" if it is)."""
+    with open(Path(db) / "tests.csv", newline="", encoding="utf-8-sig") as fh:
         rows = list(csv.DictReader(fh))
+    fcm: dict[str, list[float]] = {}
+    for row in rows:
+        if (v := _num(row, "fc,m [MPa]")) is not None and v > 0:
+            fcm.setdefault(_field(row, "Reference"), []).append(v)
     out = []
     for row in rows:
-
-        def num(key):
-            v = row[key].strip()
-            return float(v) if v else None
-
-        vmax = [v for v in (num("Vmax,+ [kN]"), num("Vmax,- [kN]")) if v is not None]
-        out.append(
-            {
-                "unit": row["Test unit name"],
-                "series": "SW" if row["Test unit name"].startswith("SW") else "WI",
-                "H": num("H [mm]") / 1000,
-                "L": num("L [mm]") / 1000,
-                "t": num("t [mm]") / 1000,
-                "H0": num("H0 [mm]") / 1000,
-                "sigma0": num("σ0,tot [MPa]"),
-                "vmax": max(vmax),
-                "failure": row["From test report: Failure type"].strip() or "?",
-            }
-        )
+        unit = _field(row, "Test unit name")
+        ref = _field(row, "Reference") or "?"
+        H, L, t, H0 = (_num(row, k) for k in ("H [mm]", "L [mm]", "t [mm]", "H0 [mm]"))
+        vmax = [v for v in (_num(row, "Vmax,+ [kN]"), _num(row, "Vmax,- [kN]")) if v is not None]
+        dry = "dry" in _field(row, "Joints").lower()
+        test = {
+            "unit": unit,
+            "series": ref,
+            "mortar": not dry,
+            "H": H / 1000 if H else None,
+            "L": L / 1000 if L else None,
+            "t": t / 1000 if t else None,
+            "H0": H0 / 1000 if H0 else None,
+            "sigma0": _num(row, "σ0,tot [MPa]"),
+            "vmax": max(vmax) if vmax else None,
+            "failure": _field(row, "From test report: Failure type") or "?",
+            "skip": "",
+            "note": "",
+        }
+        material = dict(STONE)
+        if dry:
+            material.update(DRY)
+        else:
+            own = _num(row, "fc,m [MPa]")
+            if own is not None and own > 0:
+                material["compressive_strength_mpa"] = own
+            elif fcm.get(ref):
+                material["compressive_strength_mpa"] = round(float(np.mean(fcm[ref])), 3)
+                test["note"] = f"f_c,m {material['compressive_strength_mpa']} MPa: the mean of its reference's rows"
+        test["material"] = material
+        leaves = _num(row, "Leaves")
+        if not (H and L and t):
+            test["skip"] = "no H, L or t"
+        elif leaves is not None and leaves != 1:
+            test["skip"] = f"{leaves:g} leaves: the model is a single wythe"
+        elif not test["sigma0"] or test["sigma0"] <= 0:
+            test["skip"] = "no precompression"
+        elif test["vmax"] is None:
+            test["skip"] = "no measured Vmax"
+        else:
+            ratio = (H0 / H) if H0 else 0.5  # the database's H0 is missing only for double-fixed tests
+            test["boundary"], test["skip"] = boundary_of(ratio)
+            if test["boundary"] == "cantilever" and test["H0"] <= test["H"]:
+                test["H0"] = test["H"] + 0.05
+                test["note"] = (test["note"] + "; " if test["note"] else "") + "H0 <= H: the load 5 cm above the top"
+        out.append(test)
     return out
 
 
-def build_wall(test: dict, folder: Path) -> Path:
+def build_wall(test: dict, folder: Path, db: Path = DB) -> Path:
     """Mask, structure and build of one wall in ``folder``; the model folder."""
     from PIL import Image
 
     folder.mkdir(parents=True, exist_ok=True)
-    mask = stone_mask(drawing_of(test["unit"]), test["L"], test["H"], mortar=test["series"] == "WI")
+    mask = stone_mask(drawing_of(test["unit"], db), test["L"], test["H"], mortar=test["mortar"])
     Image.fromarray(mask).save(folder / "mask.png")
-    material = "\n".join(f"{k} = {v}" for k, v in MATERIALS[test["series"]].items())
+    material = "\n".join(f"{k} = {v}" for k, v in test["material"].items())
     (folder / "structure.toml").write_text(
         f'[structure]\nname = "{test["unit"]}"\nthickness_m = {test["t"]}\nvertices = 8\nclosed = false\n\n'
         f'[[wall]]\nname = "w"\nmask = "mask.png"\nwidth_m = {test["L"]}\nheight_m = {test["H"]}\ntheta_deg = 0\n\n'
@@ -176,9 +257,11 @@ def call(args: list[str]) -> None:
         raise RuntimeError(f"{' '.join(args[2:5])}: exit {r.returncode}: {r.stderr.strip()[-2000:]}")
 
 
-def run(test: dict, folder: Path, boundary: str = "cantilever") -> dict:
-    """Mask, structure, build and shear test of one wall in ``folder``; the simulate summary."""
-    build_wall(test, folder)
+def run(test: dict, folder: Path, boundary: str | None = None, db: Path = DB) -> dict:
+    """Mask, structure, build and shear test of one wall in ``folder`` (``boundary``: the row's by
+    default); the simulate summary."""
+    boundary = boundary or test["boundary"]
+    build_wall(test, folder, db)
     call(
         [*CLI, "simulate", str(folder / "model"), "--shear-test", "--precompression-mpa", str(test["sigma0"])]
         + ["--boundary", boundary]
@@ -196,25 +279,37 @@ def main() -> None:
     ap.add_argument("--only", nargs="*", default=None, help="test units to run (default: all)")
     ap.add_argument(
         "--boundary",
-        default="cantilever",
+        default=None,
         choices=["cantilever", "double-fixed"],
-        help="the beam's rotation (default: cantilever, as the database reports every test of both series)",
+        help="the beam's rotation for every wall (default: each row's, from its H0/H)",
     )
+    ap.add_argument("--db", type=Path, default=DB, help=f"the database folder: tests.csv and crackmaps/ (default {DB})")
     args = ap.parse_args()
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="lab_walls_"))
     ratios: dict[str, list[float]] = {}
     print(f"{'test':>10} {'sigma0':>7} {'Vmax':>7} {'model':>7} {'ratio':>6}  mechanism (model) / failure (test)")
-    for t in tests():
+    for t in tests(args.db):
         if args.only and t["unit"] not in args.only:
             continue
-        s = run(t, base / t["unit"], args.boundary)
+        if not t["skip"]:
+            try:
+                drawing_of(t["unit"], args.db)
+            except FileNotFoundError:
+                t["skip"] = "no drawing in crackmaps/"
+        if t["skip"]:
+            print(f"{t['unit']:>10}  not run: {t['skip']}", flush=True)
+            continue
+        if _drift(drawing_of(t["unit"], args.db)) > 0:
+            t["note"] = (t["note"] + "; " if t["note"] else "") + "drawn after the test: its cracks count as joints"
+        s = run(t, base / re.sub(r"[^A-Za-z0-9._-]", "_", t["unit"]), args.boundary, args.db)
         st = s["shear_test"]
         peak = st["peak_lateral_force_kn"]
         ratio = peak / t["vmax"] if peak is not None else float("nan")
         ratios.setdefault(t["series"], []).append(ratio)
         print(
             f"{t['unit']:>10} {t['sigma0']:7.3f} {t['vmax']:7.1f} {peak if peak is not None else float('nan'):7.1f} "
-            f"{ratio:6.2f}  {st['mechanism']} / {t['failure']}  (coverage {s['joint_coverage']['median']})",
+            f"{ratio:6.2f}  {st['mechanism']} / {t['failure']}  ({st['boundary']}, coverage "
+            f"{s['joint_coverage']['median']}{'; ' + t['note'] if t['note'] else ''})",
             flush=True,
         )
     for series, r in ratios.items():

@@ -316,8 +316,55 @@ def test_a_laboratory_drawing_becomes_a_stone_mask_of_the_walls_size(unit, stone
     from lab_walls import drawing_of, stone_mask, tests
 
     row = next(t for t in tests() if t["unit"] == unit)
-    mask = stone_mask(drawing_of(unit), row["L"], row["H"], mortar=row["series"] == "WI")
+    mask = stone_mask(drawing_of(unit), row["L"], row["H"], mortar=row["mortar"])
     assert mask.shape == (round(row["H"] * 1000), round(row["L"] * 1000))
     count = ndimage.label(mask > 0)[1]
     assert stones[0] <= count <= stones[1]
     assert 0.5 < (mask > 0).mean() < 0.97  # mortar (WI) or hairline joints (SW) between the stones
+
+
+def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path):
+    # experiments/lab_walls.py on walls of the database that are not in ../shared: material and
+    # boundary come from each row's fields (never from the unit's name), unsupported rows say why
+    import csv
+    import shutil
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+    from lab_walls import DB, drawing_of, tests
+
+    header = ["Test unit name", "Reference", "Joints", "Leaves", "H [mm]", "L [mm]", "t [mm]", "H0 [mm]"]
+    header += ["fc\nm  [MPa]", "σ0\ntot [MPa]", "Vmax\n+ [kN]", "Vmax\n- [kN]", "From test report: Failure type"]
+    rows = [
+        ["A-1", "Someone (2020)", "Lime mortar", "1", "1600", "1200", "300", "800", "2.0", "0.4", "90", "", "S"],
+        ["A-2", "Someone (2020)", "Lime mortar", "1", "1600", "1200", "300", "1600", "", "0.4", "80", "85", "R"],
+        ["B-1", "Other (2021)", "Dry", "1", "1000", "1000", "200", "1300", "", "0.2", "20", "", "R"],
+        ["C-1", "Other (2021)", "Cement mortar", "2", "1000", "1000", "500", "1300", "5", "0.2", "60", "", "S"],
+        ["D-1", "Other (2021)", "Lime mortar", "1", "1000", "1000", "200", "700", "", "0.2", "60", "", "S"],
+        ["E-1", "Other (2021)", "Lime mortar", "1", "1000", "1000", "200", "1300", "", "", "60", "", "S"],
+    ]
+    with open(tmp_path / "tests.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+    (tmp_path / "crackmaps").mkdir()
+    src = DB / "crackmaps" / "crackmap_WI1100_D0p00_Vasconcelos2005.png"
+    for name in ("crackmap_A1_D0p93_Someone2020.png", "crackmap_A1_D0p00_Someone2020.png", "crackmap_A2_D1p50_X.png"):
+        shutil.copy(src, tmp_path / "crackmaps" / name)
+    got = {t["unit"]: t for t in tests(tmp_path)}
+    a1, a2, b1 = got["A-1"], got["A-2"], got["B-1"]
+    assert a1["boundary"] == "double-fixed" and a1["mortar"] and a1["material"]["compressive_strength_mpa"] == 2.0
+    assert a1["series"] == "Someone (2020)" and a1["vmax"] == 90.0 and a1["skip"] == ""
+    # no f_c,m of its own: its reference's mean; H0 = H: a cantilever loaded just above the top
+    assert a2["material"]["compressive_strength_mpa"] == 2.0 and "mean of its reference" in a2["note"]
+    assert a2["boundary"] == "cantilever" and a2["H0"] > a2["H"] and a2["vmax"] == 85.0
+    assert not b1["mortar"] and b1["material"]["tensile_strength_mpa"] == 0.0 and b1["material"]["cohesion_mpa"] == 0.0
+    assert b1["boundary"] == "cantilever" and b1["H0"] == 1.3
+    assert "leaves" in got["C-1"]["skip"]
+    assert "partly restrained" in got["D-1"]["skip"]
+    assert "precompression" in got["E-1"]["skip"]
+    # the drawing before the test (the smallest drift), whatever the unit's punctuation
+    assert drawing_of("A-1", tmp_path).name == "crackmap_A1_D0p00_Someone2020.png"
+    assert drawing_of("A-2", tmp_path).name == "crackmap_A2_D1p50_X.png"
+    with pytest.raises(FileNotFoundError, match="no crackmap for B-1"):
+        drawing_of("B-1", tmp_path)

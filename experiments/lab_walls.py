@@ -18,8 +18,9 @@ Any other single-leaf wall of the database is run the same way (``--db DIR``: a 
 database's tests.csv and crackmaps/), its inputs read from its own row, never from its name:
 
 - material: ``Joints`` "Dry" -> f_t = c = 0, mu 0.6; any mortar -> the package's default mortar with
-  the row's f_c,m (a row without one: the mean of its reference's rows, else the package default);
-  the stones' density 2650 kg/m^3 (granite; the database gives none) and mu 0.6 for every wall;
+  the row's f_c,m (a row without one: the mean of its reference's rows, else the package default)
+  and E_m where given; the units' modulus E_b where given (else the package's 10 GPa); the stones'
+  density 2650 kg/m^3 (granite; the database gives none) and mu 0.6 for every wall;
 - boundary from ``H0/H``: at most 0.55 -> double-fixed (H0 = H / 2); above 1 -> cantilever with the
   load H0 above the foot (``--shear-span-ratio H0/L``); from 0.95 to 1 -> cantilever with the load
   5 cm above the wall's top (the beam's centroid; noted); between -> not run (a partly restrained
@@ -202,6 +203,11 @@ def tests(db: Path = DB) -> list[dict]:
             "note": "",
         }
         material = dict(STONE)
+        # the units' modulus (joints' stiffness: units and mortar in series), and the mortar's, where given
+        if (eb := _num(row, "Eb [MPa]")) is not None and eb > 0:
+            material["unit_youngs_modulus_mpa"] = eb
+        if not dry and (em := _num(row, "Em [MPa]")) is not None and em > 0:
+            material["mortar_youngs_modulus_mpa"] = em
         if dry:
             material.update(DRY)
         else:

@@ -335,9 +335,42 @@ def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path)
 
     header = ["Test unit name", "Reference", "Joints", "Leaves", "H [mm]", "L [mm]", "t [mm]", "H0 [mm]"]
     header += ["fc\nm  [MPa]", "σ0\ntot [MPa]", "Vmax\n+ [kN]", "Vmax\n- [kN]", "From test report: Failure type"]
+    header += ["Eb [MPa]", "Em [MPa]"]
     rows = [
-        ["A-1", "Someone (2020)", "Lime mortar", "1", "1600", "1200", "300", "800", "2.0", "0.4", "90", "", "S"],
-        ["A-2", "Someone (2020)", "Lime mortar", "1", "1600", "1200", "300", "1600", "", "0.4", "80", "85", "R"],
+        [
+            "A-1",
+            "Someone (2020)",
+            "Lime mortar",
+            "1",
+            "1600",
+            "1200",
+            "300",
+            "800",
+            "2.0",
+            "0.4",
+            "90",
+            "",
+            "S",
+            "30000",
+            "900",
+        ],
+        [
+            "A-2",
+            "Someone (2020)",
+            "Lime mortar",
+            "1",
+            "1600",
+            "1200",
+            "300",
+            "1600",
+            "",
+            "0.4",
+            "80",
+            "85",
+            "R",
+            "",
+            "",
+        ],
         ["B-1", "Other (2021)", "Dry", "1", "1000", "1000", "200", "1300", "", "0.2", "20", "", "R"],
         ["C-1", "Other (2021)", "Cement mortar", "2", "1000", "1000", "500", "1300", "5", "0.2", "60", "", "S"],
         ["D-1", "Other (2021)", "Lime mortar", "1", "1000", "1000", "200", "700", "", "0.2", "60", "", "S"],
@@ -355,6 +388,8 @@ def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path)
     a1, a2, b1 = got["A-1"], got["A-2"], got["B-1"]
     assert a1["boundary"] == "double-fixed" and a1["mortar"] and a1["material"]["compressive_strength_mpa"] == 2.0
     assert a1["series"] == "Someone (2020)" and a1["vmax"] == 90.0 and a1["skip"] == ""
+    assert a1["material"]["unit_youngs_modulus_mpa"] == 30000.0 and a1["material"]["mortar_youngs_modulus_mpa"] == 900.0
+    assert "unit_youngs_modulus_mpa" not in got["A-2"]["material"]  # none given: the package's
     # no f_c,m of its own: its reference's mean; H0 = H: a cantilever loaded just above the top
     assert a2["material"]["compressive_strength_mpa"] == 2.0 and "mean of its reference" in a2["note"]
     assert a2["boundary"] == "cantilever" and a2["H0"] > a2["H"] and a2["vmax"] == 85.0

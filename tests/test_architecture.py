@@ -152,7 +152,7 @@ class _StillEngine:
     def switch_off(self, bonds):
         self.calls.append(("off", tuple(int(k) for k in bonds)))
 
-    def set_free(self, bodies, bonds):
+    def set_free(self, bodies, bonds, velocity=None):
         self.calls.append(("free", tuple(int(j) for j in bodies), tuple(int(k) for k in bonds)))
 
     def save(self, path, frames, freed_at):

@@ -1147,3 +1147,41 @@ def test_a_run_that_checks_its_pieces_joints_changes_nothing_the_pieces_hold():
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
     assert np.isnan(b.pieces.crack_time_s).all() and np.isnan(b.pieces.release_time_s).all()
     np.testing.assert_array_equal(a.pieces.displacement_m, b.pieces.displacement_m)
+
+
+def test_a_body_set_free_in_bullet_starts_with_the_velocity_it_is_given(tmp_path):
+    # Bullet gives a kinematic body that turns dynamic the velocity its last kinematic step moved
+    # it with: the engine moves a body set free with a velocity over one frame, kinematic, and
+    # turns it dynamic a frame later (simulation/blender.py); without gravity it then flies on at
+    # that velocity and spin. The saved .blend replays the frame's move, then Bullet's flight.
+    from calib_masonry.simulation.blender import BlenderEngine
+
+    bpy = need_bpy()
+    scene = Scene(bodies=(_block((0.2, 0.2, 0.2), (0, 0, 5.0)),), duration_s=1.0, solver=_solver())
+    frames = 16
+    eng = BlenderEngine(scene, np.array([True]), np.zeros((frames + 1, 3)))
+    dt = 1.0 / FPS
+    out = np.zeros((1, 4, 4))
+    x = []
+    for f in range(frames + 1):
+        if f == 4:
+            eng.set_free(np.array([0]), np.zeros(0, dtype=int), np.array([[1.0, 0.0, 0.0, 0.0, 0.0, 0.5]]))
+        eng.step_to(f)
+        eng.read_poses(out)
+        x.append((out[0, 0, 3], math.atan2(out[0, 1, 0], out[0, 0, 0]), out[0, 2, 3]))
+    x = np.array(x)
+    assert np.allclose(x[:4], [0.0, 0.0, 5.0], atol=1e-6)  # held where it stands until then
+    t = (np.arange(4, frames + 1) - 3) * dt  # moved from our frame 3 on
+    assert x[4:, 0] == pytest.approx(t * 1.0, rel=1e-3, abs=1e-4)
+    assert x[4:, 1] == pytest.approx(t * 0.5, rel=1e-3, abs=1e-4)
+    assert np.allclose(x[:, 2], 5.0, atol=1e-4)
+    freed_at = np.array([4])
+    eng.save(tmp_path / "kick.blend", frames + 1, freed_at)
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "kick.blend"))
+    sc = bpy.context.scene
+    ob = bpy.data.objects["block"]
+    replay = []
+    for f in range(frames + 1):
+        sc.frame_set(f + 1)
+        replay.append(ob.matrix_world.translation.x)
+    assert np.allclose(replay, x[:, 0], atol=1e-3)

@@ -78,9 +78,10 @@ class Engine(Protocol):
     def switch_off(self, bonds: Sequence[int]) -> None:
         """Let the joints ``bonds`` go (their bodies bear on each other from now on)."""
 
-    def set_free(self, bodies: np.ndarray, bonds: np.ndarray) -> None:
-        """Turn the bodies held fixed ``bodies`` dynamic (from rest) and switch the held joints
-        ``bonds`` among them on."""
+    def set_free(self, bodies: np.ndarray, bonds: np.ndarray, velocity: np.ndarray | None = None) -> None:
+        """Turn the bodies held fixed ``bodies`` dynamic and switch the held joints ``bonds`` among
+        them on: from rest, or with ``velocity`` ``(len(bodies), 6)`` (translation m/s and rotation
+        rad/s about each centroid, in the engine's frame)."""
 
     def save(self, path: Path, frames: int, freed_at: np.ndarray) -> None:
         """Save the run's first ``frames`` frames, the bodies set free keyed at ``freed_at``."""
@@ -114,7 +115,7 @@ class StillEngine:
     def switch_off(self, bonds: Sequence[int]) -> None:
         pass
 
-    def set_free(self, bodies: np.ndarray, bonds: np.ndarray) -> None:
+    def set_free(self, bodies: np.ndarray, bonds: np.ndarray, velocity: np.ndarray | None = None) -> None:
         pass
 
     def save(self, path: Path, frames: int, freed_at: np.ndarray) -> None:
@@ -330,17 +331,19 @@ def steps(
     bond_a = np.array([b.a for b in scene.bonds], dtype=np.int64)
     freed_at = np.full(nb, -1)  # the frame at which each body held fixed was set free
 
-    def switch_off(bonds, frame: int) -> None:
+    def switch_off(bonds, frame: int, velocity: np.ndarray | None = None) -> None:
         eng.switch_off(bonds)
         held[list(bonds)] = False
         # the part of the structure that no held joint ties to the plate any more is set free:
-        # its bodies turn dynamic (from rest) and the held joints among them act in the engine
+        # its bodies turn dynamic, with the elastic vibration's velocities they had (``velocity``
+        # (B, 6), the last release's of the step; from rest without one), and the held joints
+        # among them act in the engine
         free = np.flatnonzero(fixed & ~grounded_bodies(scene.bonds, nb, held))
         if free.size == 0:
             return
         fixed[free] = False
         freed_at[free] = frame
-        eng.set_free(free, np.flatnonzero(held & np.isin(bond_a, free)))
+        eng.set_free(free, np.flatnonzero(held & np.isin(bond_a, free)), None if velocity is None else velocity[free])
 
     def check(f: int, p: int):
         # the joints that step f's load cracks and the engine must let go, given the poses of
@@ -353,7 +356,9 @@ def steps(
             mats[p, :, :3, :3].astype(np.float64),
             plate_pos[p].copy(),
         )
-        return release, tracker.max_utilisation
+        # the vibration's velocities at the step's last release (its pieces start with them)
+        velocity = tracker.free_velocity[max(tracker.free_velocity)] if len(release) and tracker.free_velocity else None
+        return release, tracker.max_utilisation, velocity
 
     # A tracker that reads no pose (no body bears on the plate without a joint) decides every step
     # from the load history and its own state alone, so it runs ahead on the other core, frame
@@ -429,9 +434,9 @@ def steps(
                         waiting=waiting,
                     )
                 p = i - 1
-                release, utilisation[p] = next(ahead) if ahead is not None else check(f, p)
+                release, utilisation[p], velocity = next(ahead) if ahead is not None else check(f, p)
                 if len(release):
-                    switch_off(release, f)
+                    switch_off(release, f, velocity)
             elif f - 1 in schedule:
                 switch_off(schedule[f - 1], f)
             eng.step_to(f)

@@ -45,6 +45,9 @@ __all__ = [
     "mass_matrix",
     "newmark_rhs",
     "newmark_next",
+    "l_stable_rhs",
+    "l_stable_next",
+    "L_STABLE_MATRIX",
     "stiffness_matrix",
     "modes",
     "empirical_tower_periods",
@@ -327,6 +330,36 @@ def newmark_next(u, u1, v, a, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """The velocity and acceleration at the end of that step, which moved ``u`` to ``u1``."""
     a1 = (4.0 / dt**2) * (u1 - u) - (4.0 / dt) * v - a
     return v + 0.5 * dt * (a + a1), a1
+
+
+#: the step matrix of :func:`l_stable_rhs`, ``K + 2 M / dt^2 + 3 C / (2 dt)``: the multiples of ``M``
+#: and of ``C`` (times ``1 / dt^2`` and ``1 / dt``)
+L_STABLE_MATRIX = (2.0, 1.5)
+
+
+def l_stable_rhs(f, mass, stiffness, u, v, a, dt: float, alpha: float, beta: float) -> np.ndarray:
+    """The right-hand side of a step of the generalised-alpha rule (Chung & Hulbert 1993) with a
+    spectral radius of 0 at infinity (alpha_m = -1, alpha_f = 0, gamma = 3/2, beta = 1): second order
+    like Newmark's average acceleration, but L-stable, so that a mode far shorter than the step,
+    or overdamped with a time constant shorter than it, settles at once instead of ringing.
+    ``M (2 a' - a) + C v' + K u' = f`` at the step's end; Rayleigh damping ``C = alpha M + beta K``.
+    Its matrix is ``K + 2 M / dt^2 + 3 C / (2 dt)`` (:data:`L_STABLE_MATRIX`).
+
+    Why: Rayleigh damping set at a structure's first two modes is many times critical at a joint's
+    own frequency, where average acceleration's amplification tends to -1: a step load on a
+    piece's joint overshot its static force by 13 % at checks of 5 ms and 10 % at 2.5 ms (a 0.6 ms
+    joint at a tower's damping, 3.9 times critical), this rule's by 1.7 and 2.2 %
+    (docs/dynamics.md)."""
+    A = u / dt**2 + v / dt - 0.5 * a
+    B = v - 0.5 * dt * a - 1.5 * dt * A
+    return f + mass(2.0 * A + a) - alpha * mass(B) - beta * stiffness(B)
+
+
+def l_stable_next(u, u1, v, a, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The velocity and acceleration at the end of the :func:`l_stable_rhs` step that moved ``u`` to ``u1``."""
+    A = u / dt**2 + v / dt - 0.5 * a
+    B = v - 0.5 * dt * a - 1.5 * dt * A
+    return B + 1.5 * u1 / dt, u1 / dt**2 - A
 
 
 def record_load(motion, t: float, g: np.ndarray) -> np.ndarray:

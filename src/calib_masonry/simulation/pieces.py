@@ -54,14 +54,17 @@ joint whose corners then move more than the joint model's ``release_m`` (a part 
 under its load: metres, against microns) is let go, and the piece splits there, each part moving
 on with its parent's velocity field. Under a ground motion (the run's Rayleigh damping given,
 ``joint_dynamics``) a piece's joints vibrate: its first check is static (the piece was so loaded
-in the structure it left), and each later one is a step of Newmark's average acceleration over
-the interval, ``M u'' + C u' + K u = f`` for the bodies' elastic motion ``u`` relative to the
+in the structure it left), and each later one is a step over the interval of the L-stable
+generalised-alpha rule (:func:`~calib_masonry.simulation.dynamics.l_stable_rhs`: the run's Rayleigh
+damping is many times critical at a joint's own frequency, where Newmark's average acceleration
+rang 10-13 % past the static force at the default intervals), ``M u'' + C u' + K u = f`` for the bodies' elastic motion ``u`` relative to the
 piece's rigid motion, with the run's Rayleigh damping on the same tangent; a part nothing holds
 then runs away over a few checks (the window's load accelerates it) until its joint's corners
 have moved ``release_m``. A static check takes each window's load at once, so the joints of a
 rocking piece took every impact's mean over the interval as a static load and the verdict
 changed with the interval (docs/dynamics.md); a step load rings to 1.85 times its static force
-at 5 % damping, as a damped oscillator does (tests/test_pieces.py). The parts of a split start
+at 5 % damping, as a damped oscillator does, and rises to it without ringing at a tower's damping
+(tests/test_pieces.py). The parts of a split start
 again from rest, statically. With the check, a piece starts settled on its new contacts
 (``_Pieces._preload``, ``_settle_split``): on unloaded penalty springs it would drop onto them in a
 few milliseconds and load its joints up to about 10 % above their static forces
@@ -88,7 +91,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
 from ..progress import progress as _progress
-from .dynamics import mass_blocks, newmark_next, newmark_rhs
+from .dynamics import L_STABLE_MATRIX, l_stable_next, l_stable_rhs, mass_blocks
 from .joints import _skew, _Tangent
 from .scene import Scene
 
@@ -112,7 +115,7 @@ class PieceSettings:
     # check interval (module docstring, "A piece's own joints"); False: a piece never cracks
     check_joints: bool = False
     # with check_joints and the run's Rayleigh damping: a piece's joints vibrate under the window's
-    # loads (Newmark's average acceleration over each check interval, relative to the piece's rigid
+    # loads (an L-stable step over each check interval, relative to the piece's rigid
     # motion) instead of taking each window's loads statically; a piece's first check is static
     joint_dynamics: bool = True
 
@@ -669,7 +672,7 @@ class _Pieces:
         an active-set iteration; their shear elastic), with the joint model's weak springs: the
         balanced loads strain the joints, and a part that nothing holds under its load moves by
         ``g / eps`` (metres). With a ``step`` (s), the motion at its end from the bodies' elastic
-        state (``eu``, ``ev``, ``ea``) by Newmark's average acceleration with Rayleigh damping on the
+        state (``eu``, ``ev``, ``ea``) by the L-stable generalised-alpha rule with Rayleigh damping on the
         same tangent: ``(K + c_k K + c_m M) u = f + M (...) + C (...)``; a part nothing holds then
         moves by its acceleration over the step, and on over the next ones."""
         m = self.model
@@ -717,8 +720,9 @@ class _Pieces:
             def M(x: np.ndarray) -> np.ndarray:
                 return np.einsum("nij,nj->ni", blk, x.reshape(-1, 6)).ravel()
 
-            # newmark_rhs's matrix, K + 4 M / h^2 + 2 C / h, as multiples of the tangent and the mass
-            c_m, c_k = 4.0 / h**2 + 2.0 * alpha / h, 1.0 + 2.0 * beta / h
+            # l_stable_rhs's matrix, K + 2 M / h^2 + 3 C / (2 h), as multiples of the tangent and the mass
+            q_m, q_c = L_STABLE_MATRIX
+            c_m, c_k = q_m / h**2 + q_c * alpha / h, 1.0 + q_c * beta / h
         for rounds in range(len(cj) + 1):
             fkey = (intact.tobytes(), np.packbits(active).tobytes(), step)
             if last[0] != fkey or step is not None:
@@ -727,7 +731,7 @@ class _Pieces:
                     values = values + tan.values(local[cj[active]], blocks[active])
                 if step is not None:
                     stiff = values
-                    b_rhs = newmark_rhs(rhs[keep], M, lambda x: tan.matvec(stiff, x), u, v, a, h, alpha, beta)
+                    b_rhs = l_stable_rhs(rhs[keep], M, lambda x: tan.matvec(stiff, x), u, v, a, h, alpha, beta)
                     values = c_k * values + c_m * mv
                 if last[0] != fkey:
                     tan.factor(values)
@@ -827,7 +831,9 @@ class _Pieces:
             if step is None:
                 self.ev[dof] = self.ea[dof] = 0.0
             else:
-                self.ev[dof], self.ea[dof] = newmark_next(self.eu[dof], U[dof], self.ev[dof], self.ea[dof], float(step))
+                self.ev[dof], self.ea[dof] = l_stable_next(
+                    self.eu[dof], U[dof], self.ev[dof], self.ea[dof], float(step)
+                )
             self.eu[dof] = U[dof]
             self.e_on[bodies] = True
         return released

@@ -58,6 +58,10 @@ class RunOutput:
     pieces: object | None = None
     # what the poses are: Bullet's ("bullet"), or the verdict's pieces' in a run without it ("pieces")
     frames_of: str = "bullet"
+    # the frame at which the engine set each body free (-1: never), and whether it started with the
+    # vibration's velocities (B, 6), NaN rows for a body set free from rest or never
+    freed_frame: np.ndarray | None = None
+    freed_velocity: np.ndarray | None = None
 
 
 class Engine(Protocol):
@@ -250,6 +254,7 @@ def steps(
     blend_path: Path | None = None,
     record: bool = True,
     switch_off_s: np.ndarray | None = None,
+    freed_velocity: np.ndarray | None = None,
     stop=None,
     joints_ahead: bool = True,
     engine: Callable[[Scene, np.ndarray, np.ndarray], Engine] = _blender_engine,
@@ -271,8 +276,9 @@ def steps(
     :mod:`~calib_masonry.simulation.blender` for why). With ``record=False`` only the stepping is
     done (the bare-engine baseline): no poses are read and no joint model runs; ``switch_off_s``
     (per bond, seconds after the warm-up, NaN for never; the ``bond_release_time_s`` of a recorded
-    run) then replays that run's joint switches on a schedule fixed in advance, so the baseline
-    does the same engine work. ``stop(frame, positions (B, 3), plate (3,))``, if given, is asked
+    run) then replays that run's joint switches on a schedule fixed in advance, and
+    ``freed_velocity`` (its :attr:`RunOutput.freed_velocity`) the velocities its bodies were set
+    free with, so the baseline does the same engine work. ``stop(frame, positions (B, 3), plate (3,))``, if given, is asked
     after every recorded frame whether the run may end there (a pushover ends once it has run
     away); the output then holds the frames up to that one. ``engine(scene, held fixed (B,),
     gravity per frame)`` builds the engine (default: Blender's).
@@ -330,6 +336,7 @@ def steps(
     held = np.ones(len(scene.bonds), dtype=bool)  # the joints the engine holds
     bond_a = np.array([b.a for b in scene.bonds], dtype=np.int64)
     freed_at = np.full(nb, -1)  # the frame at which each body held fixed was set free
+    started = np.full((nb, 6), np.nan)  # the velocities they were set free with (NaN: from rest)
 
     def switch_off(bonds, frame: int, velocity: np.ndarray | None = None) -> None:
         eng.switch_off(bonds)
@@ -343,7 +350,10 @@ def steps(
             return
         fixed[free] = False
         freed_at[free] = frame
-        eng.set_free(free, np.flatnonzero(held & np.isin(bond_a, free)), None if velocity is None else velocity[free])
+        v = None if velocity is None or np.isnan(velocity[free]).all() else np.nan_to_num(velocity[free])
+        if v is not None:
+            started[free] = v
+        eng.set_free(free, np.flatnonzero(held & np.isin(bond_a, free)), v)
 
     def check(f: int, p: int):
         # the joints that step f's load cracks and the engine must let go, given the poses of
@@ -438,7 +448,8 @@ def steps(
                 if len(release):
                     switch_off(release, f, velocity)
             elif f - 1 in schedule:
-                switch_off(schedule[f - 1], f)
+                # the recorded run's velocities where it set these bodies free with some
+                switch_off(schedule[f - 1], f, freed_velocity if freed_velocity is not None else None)
             eng.step_to(f)
             if record:
                 grab(i)
@@ -485,6 +496,8 @@ def steps(
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
         pieces=pieces,
         frames_of="bullet" if bullet else "pieces",
+        freed_frame=freed_at,
+        freed_velocity=started,
     )
 
 

@@ -640,6 +640,7 @@ def write_simulation(
         bond_release_time_s=(
             r.bond_release_time_s if r.bond_release_time_s is not None else np.full(len(scene.bonds), np.nan)
         ),
+        **({"freed_velocity": r.freed_velocity.astype(np.float32)} if r.freed_velocity is not None else {}),
         **(
             {f"elastic_{k}": v for k, v in r.elastic.items() if isinstance(v, np.ndarray)}
             if r.elastic is not None

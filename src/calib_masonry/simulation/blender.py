@@ -20,11 +20,12 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
   1 m/s), so a part set free with the structure's elastic velocities is first moved by them over
   one frame, kinematic (its *original* objects' location and rotation written, which Blender
   re-evaluates into the live body), and turns dynamic a frame later: Bullet's pieces start with
-  the velocities the vibration gave them, as the verdict's pieces do (one frame late); Why: Bullet holds a joint rigid only
-  as far as its iterative solver converges, and a tall structure under its own weight then
-  sways by its solver's settings (a 20 m tower of 557 stones: 100 mm at 10 substeps x 50
-  iterations, 34 mm at 20 x 100, with no joint let go), while the structure the joint model
-  holds is rigid by its own account (its joints move by microns);
+  the velocities the vibration gave them, as the verdict's pieces do (one frame late). Why the
+  held structure is kinematic: Bullet holds a joint rigid only as far as its iterative solver
+  converges, and a tall structure under its own weight then sways by its solver's settings (a
+  20 m tower of 557 stones: 100 mm at 10 substeps x 50 iterations, 34 mm at 20 x 100, with no
+  joint let go), while the structure the joint model holds is rigid by its own account (its
+  joints move by microns);
   ``rigid_body_constraint.enabled = False`` is written on the *evaluated* object between
   frames: it reaches the live Bullet constraint at once; writing the original object instead
   tags the depsgraph and crashed Blender in about half the trials;

@@ -58,9 +58,8 @@ class RunOutput:
     pieces: object | None = None
     # what the poses are: Bullet's ("bullet"), or the verdict's pieces' in a run without it ("pieces")
     frames_of: str = "bullet"
-    # the frame at which the engine set each body free (-1: never), and whether it started with the
-    # vibration's velocities (B, 6), NaN rows for a body set free from rest or never
-    freed_frame: np.ndarray | None = None
+    # the velocities (B, 6) the engine set each body free with (the vibration's), NaN rows for a body
+    # set free from rest or never
     freed_velocity: np.ndarray | None = None
 
 
@@ -278,8 +277,8 @@ def steps(
     (per bond, seconds after the warm-up, NaN for never; the ``bond_release_time_s`` of a recorded
     run) then replays that run's joint switches on a schedule fixed in advance, and
     ``freed_velocity`` (its :attr:`RunOutput.freed_velocity`) the velocities its bodies were set
-    free with, so the baseline does the same engine work. ``stop(frame, positions (B, 3), plate (3,))``, if given, is asked
-    after every recorded frame whether the run may end there (a pushover ends once it has run
+    free with, so the baseline does the same engine work. ``stop(frame, positions (B, 3), plate
+    (3,))``, if given, is asked after every recorded frame whether the run may end there (a pushover ends once it has run
     away); the output then holds the frames up to that one. ``engine(scene, held fixed (B,),
     gravity per frame)`` builds the engine (default: Blender's).
 
@@ -449,7 +448,7 @@ def steps(
                     switch_off(release, f, velocity)
             elif f - 1 in schedule:
                 # the recorded run's velocities where it set these bodies free with some
-                switch_off(schedule[f - 1], f, freed_velocity if freed_velocity is not None else None)
+                switch_off(schedule[f - 1], f, freed_velocity)
             eng.step_to(f)
             if record:
                 grab(i)
@@ -496,7 +495,6 @@ def steps(
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
         pieces=pieces,
         frames_of="bullet" if bullet else "pieces",
-        freed_frame=freed_at,
         freed_velocity=started,
     )
 

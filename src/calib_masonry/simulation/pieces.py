@@ -55,17 +55,16 @@ under its load: metres, against microns) is let go, and the piece splits there, 
 on with its parent's velocity field. Under a ground motion (the run's Rayleigh damping given,
 ``joint_dynamics``) a piece's joints vibrate: its first check is static (the piece was so loaded
 in the structure it left), and each later one is a step over the interval of the L-stable
-generalised-alpha rule (:func:`~calib_masonry.simulation.dynamics.l_stable_rhs`: the run's Rayleigh
-damping is many times critical at a joint's own frequency, where Newmark's average acceleration
-rang 10-13 % past the static force at the default intervals), ``M u'' + C u' + K u = f`` for the bodies' elastic motion ``u`` relative to the
-piece's rigid motion, with the run's Rayleigh damping on the same tangent; a part nothing holds
+generalised-alpha rule (:func:`~calib_masonry.simulation.dynamics.l_stable_rhs`: the run's
+Rayleigh damping is many times critical at a joint's own frequency, where Newmark's average
+acceleration rang 10-13 % past the static force at the default intervals), ``M u'' + C u' + K u
+= f`` for the bodies' elastic motion ``u`` relative to the piece's rigid motion, with the run's Rayleigh damping on the same tangent; a part nothing holds
 then runs away over a few checks (the window's load accelerates it) until its joint's corners
 have moved ``release_m``. A static check takes each window's load at once, so the joints of a
 rocking piece took every impact's mean over the interval as a static load and the verdict
 changed with the interval (docs/dynamics.md); a step load rings to 1.85 times its static force
 at 5 % damping, as a damped oscillator does, and rises to it without ringing at a tower's damping
-(tests/test_pieces.py). The parts of a split start
-again from rest, statically. With the check, a piece starts settled on its new contacts
+(tests/test_pieces.py). The parts of a split start again from rest, statically. With the check, a piece starts settled on its new contacts
 (``_Pieces._preload``, ``_settle_split``): on unloaded penalty springs it would drop onto them in a
 few milliseconds and load its joints up to about 10 % above their static forces
 (tests/test_pieces.py).

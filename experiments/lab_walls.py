@@ -291,6 +291,9 @@ def main() -> None:
     )
     ap.add_argument("--db", type=Path, default=DB, help=f"the database folder: tests.csv and crackmaps/ (default {DB})")
     args = ap.parse_args()
+    if not (args.db / "tests.csv").is_file():
+        print(f"error: --db {args.db}: no tests.csv there; give the database folder (tests.csv and crackmaps/)")
+        raise SystemExit(2)
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="lab_walls_"))
     ratios: dict[str, list[float]] = {}
     print(f"{'test':>10} {'sigma0':>7} {'Vmax':>7} {'model':>7} {'ratio':>6}  mechanism (model) / failure (test)")

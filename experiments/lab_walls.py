@@ -27,7 +27,7 @@ database's tests.csv and crackmaps/), its inputs read from its own row, never fr
   top, which the shear test does not model), said so;
 - the statistics are per reference (a series), from the test's own ``Reference`` field;
 - not run, each with its reason printed: more than one leaf (the model is single-wythe), no
-  drawing, no precompression or no Vmax. A drawing is ``crackmaps/crackmap_<unit, letters and
+  drawing, no precompression, no Vmax or no H0. A drawing is ``crackmaps/crackmap_<unit, letters and
   digits only>_D<drift>_<ref>.png``: the one at the smallest drift (D0p00, before the test) is
   used; a later one's crack lines would be taken for joints (noted).
 
@@ -227,9 +227,10 @@ def tests(db: Path = DB) -> list[dict]:
             test["skip"] = "no precompression"
         elif test["vmax"] is None:
             test["skip"] = "no measured Vmax"
+        elif not H0:
+            test["skip"] = "no H0: the boundary is not known"
         else:
-            ratio = (H0 / H) if H0 else 0.5  # the database's H0 is missing only for double-fixed tests
-            test["boundary"], test["skip"] = boundary_of(ratio)
+            test["boundary"], test["skip"] = boundary_of(H0 / H)
             if test["boundary"] == "cantilever" and test["H0"] <= test["H"]:
                 test["H0"] = test["H"] + 0.05
                 test["note"] = (test["note"] + "; " if test["note"] else "") + "H0 <= H: the load 5 cm above the top"

@@ -375,6 +375,7 @@ def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path)
         ["C-1", "Other (2021)", "Cement mortar", "2", "1000", "1000", "500", "1300", "5", "0.2", "60", "", "S"],
         ["D-1", "Other (2021)", "Lime mortar", "1", "1000", "1000", "200", "700", "", "0.2", "60", "", "S"],
         ["E-1", "Other (2021)", "Lime mortar", "1", "1000", "1000", "200", "1300", "", "", "60", "", "S"],
+        ["F-1", "Other (2021)", "Lime mortar", "1", "1000", "1000", "200", "", "", "0.2", "60", "", "S"],
     ]
     with open(tmp_path / "tests.csv", "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
@@ -398,6 +399,7 @@ def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path)
     assert "leaves" in got["C-1"]["skip"]
     assert "partly restrained" in got["D-1"]["skip"]
     assert "precompression" in got["E-1"]["skip"]
+    assert "no H0" in got["F-1"]["skip"]  # not guessed
     # the drawing before the test (the smallest drift), whatever the unit's punctuation
     assert drawing_of("A-1", tmp_path).name == "crackmap_A1_D0p00_Someone2020.png"
     assert drawing_of("A-2", tmp_path).name == "crackmap_A2_D1p50_X.png"

@@ -350,6 +350,8 @@ def steps(
         fixed[free] = False
         freed_at[free] = frame
         v = None if velocity is None or np.isnan(velocity[free]).all() else np.nan_to_num(velocity[free])
+        if v is not None and not v.any():
+            v = None  # at rest: set free at once (a velocity costs the engine a frame)
         if v is not None:
             started[free] = v
         eng.set_free(free, np.flatnonzero(held & np.isin(bond_a, free)), v)

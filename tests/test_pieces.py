@@ -248,34 +248,57 @@ def test_a_piece_that_checks_its_joints_starts_settled_on_its_contacts():
     assert np.abs(settled.displacement_m[:, 0]).max() < 1e-7
 
 
-@pytest.mark.parametrize("h", [0.005, 0.0025])
-def test_a_pieces_joint_at_a_towers_damping_rises_to_its_static_force_without_ringing(h):
-    # the blocks below (their joint's period 0.6 ms) with the damping of a tower, 5 % at modes of
-    # 0.2 and 0.06 s: 3.9 times critical at the joint, a time constant of 0.7 ms, so a step load
-    # takes the joint to its static force within a millisecond or so and no further. Checked at the
-    # default interval and its half (steps 7 and 3.5 times that constant): Newmark's average
-    # acceleration rang to 1.126 and 1.100 times the static force there (docs/dynamics.md)
-    from calib_masonry.simulation.dynamics import body_inertia, rayleigh
-    from calib_masonry.simulation.joints import JointModel
-    from calib_masonry.simulation.pieces import _Pieces
+STEP_N = 1000.0  # the step load of the tests below, on body a towards -x: the joint in tension
 
+
+def _bonded_pair():
+    """Two blocks bonded face to face (strong mortar), free as one piece: the scene, the static
+    force a step load STEP_N pulling block a away puts on their joint (``F m_2 / (m_1 + m_2)``)
+    and the joint's circular frequency ``w^2 = k_n A (1 / m_1 + 1 / m_2)`` (units and mortar in
+    series)."""
     mat = Material(tensile_strength=1e9, shear_strength=1e9, compressive_strength=1e12)
     a = _block("a", (0.3, 0.3, 0.3), (0.0, 0.0, 0.5), density=3000.0)
     b = _block("b", (0.2, 0.3, 0.3), (0.25, 0.0, 0.5))
     sc = Scene(bodies=(a, b), bonds=(Bond.rectangle(0, 1, (0.15, 0, 0.5), X, UP, 0.3, 0.3),), material=mat)
+    kn = 1.0 / (mat.joint_thickness_m / mat.mortar_youngs_modulus + (0.15 + 0.1) / mat.unit_youngs_modulus)
+    w = math.sqrt(kn * 0.09 * (1 / a.mass + 1 / b.mass))
+    return sc, STEP_N * b.mass / (a.mass + b.mass), w
+
+
+def _joint_force_under_a_step(sc, damping, h: float, checks: int) -> np.ndarray:
+    """The joint's normal force (N, its size) at each of ``checks`` checks ``h`` apart of the pair's
+    piece, STEP_N on block a from the second check on (the first, static, unloaded); the joints
+    vibrating with Rayleigh's ``damping`` (alpha, beta), or static checks (None)."""
+    from calib_masonry.simulation.dynamics import body_inertia
+    from calib_masonry.simulation.joints import JointModel
+    from calib_masonry.simulation.pieces import _Pieces
+
     model = JointModel(sc)
     state = _Pieces(sc, model, np.array([body_inertia(x) for x in sc.bodies]), PieceSettings(check_joints=True))
-    state.damping = rayleigh(0.05, 2 * math.pi / 0.2, 2 * math.pi / 0.06)
+    if damping is not None:
+        state.damping = damping
     state.regroup(np.ones(2, dtype=bool), np.ones(1, dtype=bool), None)
-    F = 1000.0
-    n_s = F * b.mass / (a.mass + b.mass)
     got = []
-    for k in range(int(round(0.05 / h)) + 1):
+    for k in range(checks):
         state.acc_t = h
-        state.acc_F[0] = [-F * h if k else 0.0, 0.0, 0.0]
+        state.acc_F[0] = [-STEP_N * h if k else 0.0, 0.0, 0.0]
         assert state.check_joints(k * h).size == 0
-        got.append(abs(model.state(state.eu, np.array([0])).forces[0, 2]) / n_s)
-    got = np.array(got)
+        got.append(model.state(state.eu if damping is not None else state._last_U, np.array([0])).forces[0, 2])
+    return np.abs(np.array(got))
+
+
+@pytest.mark.parametrize("h", [0.005, 0.0025])
+def test_a_pieces_joint_at_a_towers_damping_rises_to_its_static_force_without_ringing(h):
+    # the pair below (their joint's period 0.6 ms) with the damping of a tower, 5 % at modes of
+    # 0.2 and 0.06 s: 3.9 times critical at the joint, a time constant of 0.7 ms, so a step load
+    # takes the joint to its static force within a millisecond or so and no further. Checked at the
+    # default interval and its half (steps 7 and 3.5 times that constant): Newmark's average
+    # acceleration rang to 1.126 and 1.100 times the static force there (docs/dynamics.md)
+    from calib_masonry.simulation.dynamics import rayleigh
+
+    sc, n_s, _ = _bonded_pair()
+    damping = rayleigh(0.05, 2 * math.pi / 0.2, 2 * math.pi / 0.06)
+    got = _joint_force_under_a_step(sc, damping, h, int(round(0.05 / h)) + 1) / n_s
     assert got.max() < 1.03
     assert got[-1] == pytest.approx(1.0, rel=1e-3)
 
@@ -291,41 +314,20 @@ def test_a_pieces_joint_rings_as_a_damped_oscillator_under_a_step_load(dynamic):
     # T / 80, against 1.855). A window's mean load is the load at its end,
     # so the step enters as a ramp over the first window: half a window late (t - h / 2 below).
     # Statically each check carries N_s at once.
-    from calib_masonry.simulation.dynamics import body_inertia, rayleigh
-    from calib_masonry.simulation.joints import JointModel
-    from calib_masonry.simulation.pieces import _Pieces
+    from calib_masonry.simulation.dynamics import rayleigh
 
-    mat = Material(tensile_strength=1e9, shear_strength=1e9, compressive_strength=1e12)
-    a = _block("a", (0.3, 0.3, 0.3), (0.0, 0.0, 0.5), density=3000.0)
-    b = _block("b", (0.2, 0.3, 0.3), (0.25, 0.0, 0.5))
-    sc = Scene(bodies=(a, b), bonds=(Bond.rectangle(0, 1, (0.15, 0, 0.5), X, UP, 0.3, 0.3),), material=mat)
-    m1, m2 = a.mass, b.mass
-    kn = 1.0 / (mat.joint_thickness_m / mat.mortar_youngs_modulus + (0.15 + 0.1) / mat.unit_youngs_modulus)
-    w = math.sqrt(kn * 0.09 * (1 / m1 + 1 / m2))
+    sc, n_s, w = _bonded_pair()
     zeta = 0.05
-    model = JointModel(sc)
-    state = _Pieces(sc, model, np.array([body_inertia(x) for x in sc.bodies]), PieceSettings(check_joints=True))
-    if dynamic:
-        state.damping = rayleigh(zeta, w, 3 * w)
-    state.regroup(np.ones(2, dtype=bool), np.ones(1, dtype=bool), None)
     h = 2 * math.pi / w / 80
-    F = 1000.0  # N on body a, towards -x: the joint in tension
-    n_s = F * m2 / (m1 + m2)
-    wd = w * math.sqrt(1 - zeta**2)
-    got, want = [], []
-    for k in range(241):
-        state.acc_t = h
-        state.acc_F[0] = [-F * h if k else 0.0, 0.0, 0.0]  # the first check (static) unloaded
-        assert state.check_joints(k * h).size == 0
-        got.append(model.state(state.eu if dynamic else state._last_U, np.array([0])).forces[0, 2])
-        t = k * h - h / 2
-        env = math.exp(-zeta * w * t) * (math.cos(wd * t) + zeta / math.sqrt(1 - zeta**2) * math.sin(wd * t))
-        want.append(n_s * (1 - env) if k else 0.0)
-    got = np.abs(np.array(got))
+    got = _joint_force_under_a_step(sc, rayleigh(zeta, w, 3 * w) if dynamic else None, h, 241)
     if not dynamic:
         assert got[1:] == pytest.approx(n_s, rel=1e-6)
         return
-    assert np.abs(got - np.array(want)).max() < 0.03 * n_s
+    wd = w * math.sqrt(1 - zeta**2)
+    t = np.arange(len(got)) * h - h / 2
+    env = np.exp(-zeta * w * t) * (np.cos(wd * t) + zeta / math.sqrt(1 - zeta**2) * np.sin(wd * t))
+    want = np.where(np.arange(len(got)) > 0, n_s * (1 - env), 0.0)
+    assert np.abs(got - want).max() < 0.03 * n_s
     # the first peak: 1 + e^(-pi z / sqrt(1 - z^2)) times the static force, half a damped period on
     assert got.max() / n_s == pytest.approx(1 + math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2)), rel=0.01)
     assert abs(got.argmax() * h - h / 2 - math.pi / wd) <= h

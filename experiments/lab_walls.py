@@ -234,16 +234,26 @@ def tests(db: Path = DB) -> list[dict]:
             if test["boundary"] == "cantilever" and test["H0"] <= test["H"]:
                 test["H0"] = test["H"] + 0.05
                 test["note"] = (test["note"] + "; " if test["note"] else "") + "H0 <= H: the load 5 cm above the top"
+        if not test["skip"]:
+            try:
+                test["drawing"] = drawing_of(unit, db)
+            except FileNotFoundError:
+                test["skip"] = "no drawing in crackmaps/"
+            else:
+                if _drift(test["drawing"]) > 0:
+                    test["note"] = (test["note"] + "; " if test["note"] else "") + (
+                        "drawn after the test: its cracks count as joints"
+                    )
         out.append(test)
     return out
 
 
-def build_wall(test: dict, folder: Path, db: Path = DB) -> Path:
-    """Mask, structure and build of one wall in ``folder``; the model folder."""
+def build_wall(test: dict, folder: Path) -> Path:
+    """Mask (from the row's ``drawing``), structure and build of one wall in ``folder``; the model folder."""
     from PIL import Image
 
     folder.mkdir(parents=True, exist_ok=True)
-    mask = stone_mask(drawing_of(test["unit"], db), test["L"], test["H"], mortar=test["mortar"])
+    mask = stone_mask(test["drawing"], test["L"], test["H"], mortar=test["mortar"])
     Image.fromarray(mask).save(folder / "mask.png")
     material = "\n".join(f"{k} = {v}" for k, v in test["material"].items())
     (folder / "structure.toml").write_text(
@@ -264,11 +274,11 @@ def call(args: list[str]) -> None:
         raise RuntimeError(f"{' '.join(args[2:5])}: exit {r.returncode}: {r.stderr.strip()[-2000:]}")
 
 
-def run(test: dict, folder: Path, boundary: str | None = None, db: Path = DB) -> dict:
+def run(test: dict, folder: Path, boundary: str | None = None) -> dict:
     """Mask, structure, build and shear test of one wall in ``folder`` (``boundary``: the row's by
     default); the simulate summary."""
     boundary = boundary or test["boundary"]
-    build_wall(test, folder, db)
+    build_wall(test, folder)
     call(
         [*CLI, "simulate", str(folder / "model"), "--shear-test", "--precompression-mpa", str(test["sigma0"])]
         + ["--boundary", boundary]
@@ -301,17 +311,10 @@ def main() -> None:
     for t in tests(args.db):
         if args.only and t["unit"] not in args.only:
             continue
-        if not t["skip"]:
-            try:
-                drawing_of(t["unit"], args.db)
-            except FileNotFoundError:
-                t["skip"] = "no drawing in crackmaps/"
         if t["skip"]:
             print(f"{t['unit']:>10}  not run: {t['skip']}", flush=True)
             continue
-        if _drift(drawing_of(t["unit"], args.db)) > 0:
-            t["note"] = (t["note"] + "; " if t["note"] else "") + "drawn after the test: its cracks count as joints"
-        s = run(t, base / re.sub(r"[^A-Za-z0-9._-]", "_", t["unit"]), args.boundary, args.db)
+        s = run(t, base / re.sub(r"[^A-Za-z0-9._-]", "_", t["unit"]), args.boundary)
         st = s["shear_test"]
         peak = st["peak_lateral_force_kn"]
         ratio = peak / t["vmax"] if peak is not None else float("nan")

@@ -350,16 +350,21 @@ def l_stable_rhs(f, mass, stiffness, u, v, a, dt: float, alpha: float, beta: flo
     piece's joint overshot its static force by 13 % at checks of 5 ms and 10 % at 2.5 ms (a 0.6 ms
     joint at a tower's damping, 3.9 times critical), this rule's by 1.7 and 2.2 %
     (docs/dynamics.md)."""
-    A = u / dt**2 + v / dt - 0.5 * a
-    B = v - 0.5 * dt * a - 1.5 * dt * A
+    A, B = _l_stable_terms(u, v, a, dt)
     return f + mass(2.0 * A + a) - alpha * mass(B) - beta * stiffness(B)
 
 
 def l_stable_next(u, u1, v, a, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """The velocity and acceleration at the end of the :func:`l_stable_rhs` step that moved ``u`` to ``u1``."""
-    A = u / dt**2 + v / dt - 0.5 * a
-    B = v - 0.5 * dt * a - 1.5 * dt * A
+    A, B = _l_stable_terms(u, v, a, dt)
     return B + 1.5 * u1 / dt, u1 / dt**2 - A
+
+
+def _l_stable_terms(u, v, a, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The step's start-state terms of :func:`l_stable_rhs`: its end acceleration is ``u' / dt^2 - A``
+    and its end velocity ``B + 3 u' / (2 dt)`` (Newmark's update with gamma 3/2, beta 1)."""
+    A = u / dt**2 + v / dt - 0.5 * a
+    return A, v - 0.5 * dt * a - 1.5 * dt * A
 
 
 def record_load(motion, t: float, g: np.ndarray) -> np.ndarray:

@@ -44,30 +44,30 @@ by its joints, a rocking or sliding piece loads them with the forces that keep i
 this check nothing inside a piece ever cracks, and the paper example's box of 6 m walls stood at
 1.5 g (docs/dynamics.md). Every ``scene.solver.check_interval_s`` each moving piece's bodies are
 loaded with gravity and the ground's inertial force, the contact forces on them and minus their
-share of the piece's rigid acceleration (``m (A + alpha x r + w x (w x r))``, ``I alpha + w x I w``),
-all averaged over the interval (so an impact enters by its impulse, not by the penalty's peak) and
-balanced per piece; the joint model's joints between them take these loads, intact ones as mortar
-(its criteria) and cracked ones as contacts that carry compression alone (found by an active-set
-iteration; their shear elastic), with the joint model's weak springs. Intact joints over their
-strength crack in rounds as in the joint model (the worst within 10 %, solved again); a cracked
-joint whose corners then move more than the joint model's ``release_m`` (a part nothing holds
-under its load: metres, against microns) is let go, and the piece splits there, each part moving
-on with its parent's velocity field. Under a ground motion (the run's Rayleigh damping given,
-``joint_dynamics``) a piece's joints vibrate: its first check is static (the piece was so loaded
-in the structure it left), and each later one is a step over the interval of the L-stable
-generalised-alpha rule (:func:`~calib_masonry.simulation.dynamics.l_stable_rhs`: the run's
-Rayleigh damping is many times critical at a joint's own frequency, where Newmark's average
-acceleration rang 10-13 % past the static force at the default intervals), ``M u'' + C u' + K u
-= f`` for the bodies' elastic motion ``u`` relative to the piece's rigid motion, with the run's Rayleigh damping on the same tangent; a part nothing holds
-then runs away over a few checks (the window's load accelerates it) until its joint's corners
-have moved ``release_m``. A static check takes each window's load at once, so the joints of a
-rocking piece took every impact's mean over the interval as a static load and the verdict
-changed with the interval (docs/dynamics.md); a step load rings to 1.85 times its static force
-at 5 % damping, as a damped oscillator does, and rises to it without ringing at a tower's damping
-(tests/test_pieces.py). The parts of a split start again from rest, statically. With the check, a piece starts settled on its new contacts
-(``_Pieces._preload``, ``_settle_split``): on unloaded penalty springs it would drop onto them in a
-few milliseconds and load its joints up to about 10 % above their static forces
-(tests/test_pieces.py).
+share of the piece's rigid acceleration (``m (A + alpha x r + w x (w x r))``, ``I alpha + w x I
+w``), all averaged over the interval (so an impact enters by its impulse, not by the penalty's
+peak) and balanced per piece; the joint model's joints between them take these loads, intact ones
+as mortar (its criteria) and cracked ones as contacts that carry compression alone (found by an
+active-set iteration; their shear elastic), with the joint model's weak springs. Intact joints over
+their strength crack in rounds as in the joint model (the worst within 10 %, solved again); a
+cracked joint whose corners then move more than the joint model's ``release_m`` (a part nothing
+holds under its load: metres, against microns) is let go, and the piece splits there, each part
+moving on with its parent's velocity field. Under a ground motion (the run's Rayleigh damping
+given, ``joint_dynamics``) a piece's joints vibrate: its first check is static (the piece was so
+loaded in the structure it left), and each later one is a step over the interval of the L-stable
+generalised-alpha rule (:func:`~calib_masonry.simulation.dynamics.l_stable_rhs`: the run's Rayleigh
+damping is many times critical at a joint's own frequency, where Newmark's average acceleration
+rang 10-13 % past the static force at the default intervals), ``M u'' + C u' + K u = f`` for the
+bodies' elastic motion ``u`` relative to the piece's rigid motion, with the run's Rayleigh damping
+on the same tangent; a part nothing holds then runs away over a few checks (the window's load
+accelerates it) until its joint's corners have moved ``release_m``. A static check takes each
+window's load at once, so the joints of a rocking piece took every impact's mean over the interval
+as a static load and the verdict changed with the interval (docs/dynamics.md); a step load rings to
+1.85 times its static force at 5 % damping, as a damped oscillator does, and rises to it without
+ringing at a tower's damping (tests/test_pieces.py). The parts of a split start again from rest,
+statically. With the check, a piece starts settled on its new contacts (``_Pieces._preload``,
+``_settle_split``): on unloaded penalty springs it would drop onto them in a few milliseconds and
+load its joints up to about 10 % above their static forces (tests/test_pieces.py).
 
 The run's verdict reads the bodies in pieces that fell or overturn at the last time asked
 (``PieceMotion.toppled``: collapsed from half of the bricks; simulation/results.py ``outcome``),
@@ -671,8 +671,8 @@ class _Pieces:
         an active-set iteration; their shear elastic), with the joint model's weak springs: the
         balanced loads strain the joints, and a part that nothing holds under its load moves by
         ``g / eps`` (metres). With a ``step`` (s), the motion at its end from the bodies' elastic
-        state (``eu``, ``ev``, ``ea``) by the L-stable generalised-alpha rule with Rayleigh damping on the
-        same tangent: ``(K + c_k K + c_m M) u = f + M (...) + C (...)``; a part nothing holds then
+        state (``eu``, ``ev``, ``ea``) by the L-stable generalised-alpha rule with Rayleigh damping on
+        the same tangent: ``(c_k K + c_m M) u = f + M (...) + C (...)``; a part nothing holds then
         moves by its acceleration over the step, and on over the next ones."""
         m = self.model
         key = bodies.tobytes()

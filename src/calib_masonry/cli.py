@@ -367,6 +367,7 @@ def _cmd_simulate(args) -> int:
         },
         dynamics=not args.quasi_static,
         piece_joints=args.piece_joints,
+        bullet_moves=args.bullet_moves,
     )
     material = None
     if args.material:
@@ -672,6 +673,15 @@ def _parser() -> argparse.ArgumentParser:
         "the forces that keep each piece rigid (the joints vibrating between checks with the structure's damping; "
         "statically with --quasi-static), and split a piece where they let go (off by default: slower, "
         "and the README's tables are without it)",
+    )
+    m.add_argument(
+        "--bullet-moves",
+        choices=("fallen", "freed"),
+        default="fallen",
+        help="under a ground motion, what Bullet moves: 'fallen' (default) plays the verdict's rigid pieces on "
+        "kinematic bricks and takes over a piece once it has fallen (its fall onto the ground and the debris); "
+        "'freed' sets every piece the joints let go dynamic in Bullet on its joints (slower; its motion is "
+        "Bullet's solve, not the verdict's)",
     )
     m.add_argument(
         "--quasi-static",

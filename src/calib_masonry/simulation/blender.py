@@ -224,6 +224,39 @@ def write_animation_blend(scene: Scene, positions: np.ndarray, quaternions: np.n
     _reset(bpy)
 
 
+def _key_poses(bpy, objects: list, keys: dict[int, dict[int, tuple]]) -> None:
+    """Key each object ``objects[j]``'s location and rotation quaternion at the Blender frames of
+    ``keys[j]`` (frame -> (location, quaternion)), linear in between, in one write per curve."""
+    from bpy_extras import anim_utils
+
+    linear = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["LINEAR"].value
+    for j, poses in keys.items():
+        ob = objects[j]
+        frames = sorted(poses)
+        values = np.array([[*poses[f][0], *poses[f][1]] for f in frames], dtype=np.float64)
+        ob.location, ob.rotation_quaternion = poses[frames[0]]  # the place it stood at first
+        if ob.animation_data is None:
+            ob.animation_data_create()
+        if ob.animation_data.action is None:
+            action = bpy.data.actions.new(ob.name)
+            ob.animation_data.action = action
+            ob.animation_data.action_slot = action.slots.new(id_type="OBJECT", name=ob.name)
+        action, slot = ob.animation_data.action, ob.animation_data.action_slot
+        bag = anim_utils.action_ensure_channelbag_for_slot(action, slot)
+        co = np.empty(2 * len(frames))
+        co[0::2] = frames
+        interpolation = np.full(len(frames), linear, np.int32)
+        for path, first, width in (("location", 0, 3), ("rotation_quaternion", 3, 4)):
+            for i in range(width):
+                fc = bag.fcurves.find(path, index=i) or bag.fcurves.new(path, index=i)
+                fc.keyframe_points.clear()
+                fc.keyframe_points.add(len(frames))
+                co[1::2] = values[:, first + i]
+                fc.keyframe_points.foreach_set("co", co)
+                fc.keyframe_points.foreach_set("interpolation", interpolation)
+                fc.update()
+
+
 def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:
     """Quaternion (w, x, y, z) of the joint frame (:func:`~calib_masonry.simulation.scene.joint_axes`)
     whose z axis is ``normal``."""
@@ -390,7 +423,10 @@ class BlenderEngine:
         self.warm = False  # whether the warm-up's damping is off
         # bodies moved over one kinematic step, to turn dynamic at the next: (last frame stepped, bodies)
         self.pending: list[tuple[int, np.ndarray]] = []
-        self.kicked: dict[int, tuple] = {}  # body -> (frame moved, location and rotation before)
+        self.kicked: set[int] = set()  # bodies moved a frame kinematic before turning dynamic
+        # the moves written on kinematic bodies, keyed in the saved file: body -> {Blender frame:
+        # (location, rotation quaternion)}
+        self.keys: dict[int, dict[int, tuple]] = {}
         self.frame = 0
 
     def step_to(self, frame: int) -> None:
@@ -425,6 +461,24 @@ class BlenderEngine:
             live.enabled = False
             live.disable_collisions = False  # the cracked joint's bricks bear on each other
 
+    def _move(self, j: int, location, quaternion) -> None:
+        """Move kinematic body ``j`` to ``location``, ``quaternion`` (w, x, y, z) over the coming
+        step: its *original* object written, which Blender re-evaluates into the live body (and
+        Bullet moves it at the velocity of that step); the move is keyed in the saved file."""
+        ob = self.objects[j]
+        keys = self.keys.setdefault(j, {})
+        if not keys:  # where it stood until now
+            keys[self.frame + 1] = (tuple(ob.location), tuple(ob.rotation_quaternion))
+        ob.location = tuple(float(x) for x in location)
+        ob.rotation_quaternion = tuple(float(x) for x in quaternion)
+        keys[self.frame + 2] = (tuple(ob.location), tuple(ob.rotation_quaternion))  # our frame + 1
+
+    def place(self, bodies: np.ndarray, locations: np.ndarray, quaternions: np.ndarray) -> None:
+        """Move the kinematic ``bodies`` to ``locations`` ``(n, 3)`` and ``quaternions`` ``(n, 4)``
+        (w, x, y, z) over the coming step (a motion computed elsewhere, played by Bullet)."""
+        for j, loc, q in zip(bodies, np.asarray(locations, np.float64), np.asarray(quaternions, np.float64)):
+            self._move(int(j), loc, q)
+
     def set_free(self, bodies: np.ndarray, bonds: np.ndarray, velocity: np.ndarray | None = None) -> None:
         if velocity is None:
             for j in bodies:
@@ -435,14 +489,14 @@ class BlenderEngine:
 
             for j, v in zip(bodies, np.asarray(velocity, dtype=np.float64)):
                 ob = self.objects[j]
-                before = (tuple(ob.location), tuple(ob.rotation_quaternion))
-                self.kicked[int(j)] = (self.frame, *before)
-                ob.location = Vector(before[0]) + Vector(tuple(v[:3] * self.dt))
+                self.kicked.add(int(j))
+                location = Vector(tuple(ob.location)) + Vector(tuple(v[:3] * self.dt))
+                q = Quaternion(tuple(ob.rotation_quaternion))
                 turn = v[3:] * self.dt
                 angle = float(np.linalg.norm(turn))
                 if angle > 0.0:
-                    q = Quaternion(tuple(turn / angle), angle) @ Quaternion(before[1])
-                    ob.rotation_quaternion = q.normalized()
+                    q = (Quaternion(tuple(turn / angle), angle) @ q).normalized()
+                self._move(int(j), location, q)
             self.pending.append((self.frame, np.asarray(bodies)))
         for k in bonds:
             self.constraints[k].evaluated_get(self.depsgraph).rigid_body_constraint.enabled = True
@@ -463,17 +517,8 @@ class BlenderEngine:
             rb.kinematic = False
             late = int(j) in self.kicked  # moved a frame kinematic first, dynamic a frame later
             rb.keyframe_insert("kinematic", frame=int(freed_at[j]) + 1 + late)  # our frame f is Blender's f + 1
-            if late:  # its place until that frame, then the one frame's move
-                ob = self.objects[j]
-                moved = (tuple(ob.location), tuple(ob.rotation_quaternion))
-                f0, loc, rot = self.kicked[int(j)]
-                ob.location, ob.rotation_quaternion = loc, rot
-                # moved over our step f0 -> f0 + 1: Blender's frames f0 + 1 -> f0 + 2
-                ob.keyframe_insert("location", frame=f0 + 1)
-                ob.keyframe_insert("rotation_quaternion", frame=f0 + 1)
-                ob.location, ob.rotation_quaternion = moved
-                ob.keyframe_insert("location", frame=f0 + 2)
-                ob.keyframe_insert("rotation_quaternion", frame=f0 + 2)
+        # the moves written on kinematic bodies: their place until then, each frame's move after
+        _key_poses(bpy, self.objects, self.keys)
         sc.frame_end = frames
         sc.frame_set(1)
         _save(bpy, path)

@@ -14,7 +14,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable, Generator, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Protocol, TypeVar
 
@@ -56,7 +56,8 @@ class RunOutput:
     # the pieces the joint model set free, moved as rigid bodies to convergence (simulation/pieces.py):
     # the verdict's motion; None where no ground motion ran with the joint model
     pieces: object | None = None
-    # what the poses are: Bullet's ("bullet"), or the verdict's pieces' in a run without it ("pieces")
+    # what the poses are: Bullet's ("bullet"), the verdict's pieces' in a run without it ("pieces"),
+    # or those on kinematic bricks until a piece falls and Bullet's then ("pieces, then bullet": _follow)
     frames_of: str = "bullet"
     # the velocities (B, 6) the engine set each body free with (the vibration's), NaN rows for a body
     # set free from rest or never
@@ -85,6 +86,10 @@ class Engine(Protocol):
         """Turn the bodies held fixed ``bodies`` dynamic and switch the held joints ``bonds`` among
         them on: from rest, or with ``velocity`` ``(len(bodies), 6)`` (translation m/s and rotation
         rad/s about each centroid, in the engine's frame)."""
+
+    def place(self, bodies: np.ndarray, locations: np.ndarray, quaternions: np.ndarray) -> None:
+        """Move the kinematic ``bodies`` to ``locations`` ``(n, 3)`` and ``quaternions`` ``(n, 4)``
+        (w, x, y, z) over the coming step (a motion computed elsewhere: the verdict's pieces')."""
 
     def save(self, path: Path, frames: int, freed_at: np.ndarray) -> None:
         """Save the run's first ``frames`` frames, the bodies set free keyed at ``freed_at``."""
@@ -119,6 +124,9 @@ class StillEngine:
         pass
 
     def set_free(self, bodies: np.ndarray, bonds: np.ndarray, velocity: np.ndarray | None = None) -> None:
+        pass
+
+    def place(self, bodies: np.ndarray, locations: np.ndarray, quaternions: np.ndarray) -> None:
         pass
 
     def save(self, path: Path, frames: int, freed_at: np.ndarray) -> None:
@@ -289,6 +297,23 @@ def steps(
     tower is free). A structure with bodies that bear on the plate without a joint needs Bullet's
     poses for them, and is refused.
     """
+    if (
+        bullet
+        and record
+        and engine is _blender_engine
+        and scene.motion is not None
+        and scene.pushover is None
+        and scene.solver.bullet_moves == "fallen"
+        and scene.bonds
+    ):
+        # Bullet plays the verdict's pieces and takes over those that fell (_follow): the verdict's
+        # pass first, without Bullet; a structure whose checks read Bullet's poses runs as before
+        try:
+            first = yield from steps(scene, progress=progress, joints_ahead=joints_ahead, bullet=False)
+        except _NeedsPoses:
+            pass
+        else:
+            return (yield from _follow(scene, first, blend_path, progress))
     if not bullet:
         if scene.motion is None or scene.pushover is not None or not record:
             raise InputError(
@@ -322,7 +347,7 @@ def steps(
         if record and scene.bonds:
             tracker = CrackTracker(scene, mats[i, :, :3, 3], mats[i, :, :3, :3], plate_pos[i], (i) / s.fps)
             if not bullet and tracker.reads_poses:
-                raise InputError(
+                raise _NeedsPoses(
                     "--no-bullet: some bricks stand on the plate without a joint (a model without its footing, "
                     "--no-foundation): where they touch it is Bullet's to say; run it with Bullet"
                 )
@@ -498,6 +523,92 @@ def steps(
         pieces=pieces,
         frames_of="bullet" if bullet else "pieces",
         freed_velocity=started,
+    )
+
+
+class _NeedsPoses(InputError):
+    """A run without Bullet of a structure whose joint checks read Bullet's poses."""
+
+
+def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: bool | None):
+    """Bullet's pass after the verdict's (``first``: a run without Bullet, its frames the verdict's
+    pieces' poses): every body kinematic, the verdict's motion played on them frame by frame (the
+    held structure stands, the freed pieces rock and slide as the verdict moves them), and the
+    bodies of a piece that fell (:attr:`PieceMotion.fell_time_s`) set dynamic at the first frame
+    at or after its fall, with the velocities it fell with, its held joints Bullet's constraints and
+    the joints let go around it bearing as contacts: Bullet animates the fall onto the ground and
+    the debris. The verdict, cracks and releases are ``first``'s; the frames are Bullet's (the
+    verdict's pieces exactly until they fall). Yields each frame stepped; returns ``first`` with
+    Bullet's poses.
+
+    Why: a freed piece set dynamic on its joints is held together only as far as Bullet's
+    iterative solve converges, its motion is not the verdict's, and solving its hundreds of
+    constraints was most of a quake's time (docs/dynamics.md)."""
+    t0 = time.perf_counter()
+    s = scene.solver
+    nb = len(scene.bodies)
+    frames = len(first.time) - 1
+    warm = min(s.warmup_frames, frames)
+    eng = _blender_engine(scene, np.ones(nb, dtype=bool), gravity_per_frame(scene))
+    seconds_build = time.perf_counter() - t0
+    p = first.pieces
+    fell = p.fell_time_s if p is not None and p.fell_time_s is not None else np.full(nb, np.nan)
+    fell_v = p.fell_velocity if p is not None and p.fell_velocity is not None else np.full((nb, 6), np.nan)
+    hand = np.full(nb, -1)  # the frame each body turns dynamic at (-1: never)
+    ok = np.isfinite(fell)
+    hand[ok] = np.maximum(warm + np.ceil(fell[ok] * s.fps - 1e-9).astype(int), warm + 1)
+    hand[hand > frames] = -1
+    bond_a = np.array([b.a for b in scene.bonds], dtype=np.int64)
+    bond_b = np.array([b.b for b in scene.bonds], dtype=np.int64)
+    # when each joint was let go: by the joint model, or inside a piece (--piece-joints)
+    release = np.full(len(bond_a), np.nan) if first.bond_release_time_s is None else first.bond_release_time_s
+    if p is not None and p.release_time_s is not None:
+        release = np.fmin(release, p.release_time_s)
+    pos = first.positions
+    quat = first.quaternions.copy()
+    for f in range(1, len(quat)):  # one sign from frame to frame (the keys interpolate linearly)
+        quat[f] *= np.where((quat[f] * quat[f - 1]).sum(axis=1) < 0.0, -1.0, 1.0)[:, None]
+    moves = np.any(pos[1:] != pos[:-1], axis=2) | np.any(quat[1:] != quat[:-1], axis=2)  # into frame f: f - 1
+    mats = np.zeros((frames + 1, nb, 4, 4), dtype=np.float32)
+    plate = np.zeros((frames + 1, 3))
+    freed_at = np.full(nb, -1)
+    t1 = time.perf_counter()
+    eng.step_to(0)
+    plate[0] = eng.read_poses(mats[0])
+    if warm == 0:
+        eng.end_warmup()
+    for f in _progress(range(1, frames + 1), desc="bullet", unit="frame", enabled=progress):
+        go = np.flatnonzero(hand == f)
+        if go.size:
+            group = np.zeros(nb, dtype=bool)
+            group[go] = True
+            inner = group[bond_a] & (bond_b >= 0) & group[np.maximum(bond_b, 0)]
+            touching = group[bond_a] | ((bond_b >= 0) & group[np.maximum(bond_b, 0)])
+            gone = release <= (f - warm) / s.fps + 1e-9
+            eng.switch_off(np.flatnonzero(touching & gone))  # those joints' bricks bear on each other
+            v = fell_v[go]
+            v = None if not np.isfinite(v).all() or not v.any() else v
+            eng.set_free(go, np.flatnonzero(inner & ~gone), v)
+            freed_at[go] = f
+        drive = np.flatnonzero(moves[f - 1] & ((hand < 0) | (hand > f)))
+        if drive.size:
+            eng.place(drive, pos[f, drive], quat[f, drive])
+        eng.step_to(f)
+        plate[f] = eng.read_poses(mats[f])
+        if f == warm:
+            eng.end_warmup()
+        yield f
+    seconds = time.perf_counter() - t1
+    if blend_path is not None:
+        eng.save(blend_path, len(mats), freed_at)
+    return replace(
+        first,
+        positions=mats[:, :, :3, 3].astype(np.float64),
+        quaternions=quaternions_from_matrices(mats[:, :, :3, :3].astype(np.float64)),
+        plate=plate,
+        seconds_build=first.seconds_build + seconds_build,
+        seconds_stepping=first.seconds_stepping + seconds,
+        frames_of="pieces, then bullet",
     )
 
 

@@ -153,6 +153,10 @@ class PieceMotion:
     # not in a piece, or never)
     crack_time_s: np.ndarray | None = None
     release_time_s: np.ndarray | None = None
+    # (B,) when each body's piece fell (NaN: never), and (B, 6) the body's velocity then (m/s of its
+    # centroid, rad/s; NaN rows where it never fell): where an engine takes the fall on from here
+    fell_time_s: np.ndarray | None = None
+    fell_velocity: np.ndarray | None = None
 
     def distance_m(self) -> np.ndarray:
         """``(T, B)`` every body's displacement's length."""
@@ -225,6 +229,10 @@ class _Pieces:
         self.alive = np.zeros(0, dtype=bool)
         self.fallen = np.zeros(nb, dtype=bool)
         self.final = np.zeros((nb, 3))  # displacement of the bodies of fallen pieces when they fell
+        self.final_R = np.broadcast_to(np.eye(3), (nb, 3, 3)).copy()  # and their rotation
+        self.fell_s = np.full(nb, np.nan)  # when each body's piece fell
+        self.fell_v = np.full((nb, 6), np.nan)  # and the body's velocity then (centroid m/s, rad/s)
+        self.t = 0.0  # the time the state is at (s since the ground began to move)
         K = model.outline.shape[1] if model.n_all else 0
         self.slip = np.zeros((model.n_all, K, 2))
         self.points = model.corner_points() if model.n_all else np.zeros((0, K, 3))
@@ -840,7 +848,7 @@ class _Pieces:
     def rotation(self) -> np.ndarray:
         """(B, 3, 3) every body's rotation from its place: its piece's (a fallen piece's as it fell,
         its state is no longer advanced), the identity for a body the joints hold."""
-        out = np.broadcast_to(np.eye(3), (len(self.piece_of), 3, 3)).copy()
+        out = self.final_R.copy()
         on = self.piece_of >= 0
         out[on] = self.R[self.piece_of[on]]
         return out
@@ -918,6 +926,12 @@ class _Pieces:
                 self.alive[i] = False
                 self.fallen[idx] = True
                 self.final[idx] = disp[idx]
+                self.final_R[idx] = self.R[i]
+                # each body's velocity as it fell: the piece's field at the body's centroid
+                r = self.x[idx] + disp[idx] - (self.c[i] + self.d[i])
+                self.fell_v[idx, :3] = self.v[i] + np.cross(self.w[i], r)
+                self.fell_v[idx, 3:] = self.w[i]
+                self.fell_s[idx] = self.t
                 self.v[i] = self.w[i] = 0.0
                 gone = True
         if gone:
@@ -1030,6 +1044,7 @@ def piece_motion(
         free = ~model.grounded(held) if model.nj else np.ones(nb, dtype=bool)
         vel = velocity.get(t) if velocity else None
         state.g_now = _load_at(gravity, motion, t)
+        state.t = t
         state.regroup(free, held, vel)
         dt = state.step_size()
         read(t)
@@ -1048,6 +1063,7 @@ def piece_motion(
                 g = gravity.copy()
                 g[:2] -= a[q]
                 state.advance(g, h)
+                state.t = float(grid[q + 1])
                 if (q & 63) == 63:
                     state.check_fallen()
                     if stopped is not None and stopped():
@@ -1088,4 +1104,6 @@ def piece_motion(
         rot,
         state.crack_time_s.copy(),
         state.release_time_s.copy(),
+        state.fell_s.copy(),
+        state.fell_v.copy(),
     )

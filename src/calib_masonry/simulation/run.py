@@ -368,6 +368,7 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
             "contact_gap_m": s.contact_gap_m,
             "check_interval_s": s.check_interval_s,
             "piece_joints": s.piece_joints,
+            "bullet_moves": s.bullet_moves,
         },
         "joints": {
             "model": "elastic interfaces (UDEC/3DEC convention) between rigid bricks, cracked ones as "
@@ -517,8 +518,9 @@ def _scene_steps(
     curve = collapse_multiplier(scene, out, m) if scene.pushover is not None else None
     shear = shear_curve(scene, out, m, curve) if "shear_test" in scene.notes and curve is not None else None
     summary = _summary(scene, out, m, curve, name, shear)
-    # what moved the freed pieces in the frames: Bullet, or the verdict's rigid pieces (--no-bullet)
-    summary["engine"] = "bullet" if bullet else "pieces"
+    # what moved the freed pieces in the frames: Bullet, the verdict's rigid pieces (--no-bullet), or
+    # these until they fall and Bullet then (--bullet-moves fallen, the default under a ground motion)
+    summary["engine"] = out.frames_of
     if not bullet and isinstance(summary.get("pieces"), dict):
         summary["pieces"]["bullet_moved_fraction_final"] = None  # no Bullet ran
     return SimulationResult(scene=scene, output=out, metrics=m, curve=curve, summary=summary, shear=shear)

@@ -252,6 +252,13 @@ class SolverSettings:
     # (simulation/pieces.py, _Pieces.check_joints); off by default until the README's tables are
     # re-run with it (docs/dynamics.md, "A freed piece's own joints")
     piece_joints: bool = False
+    # under a ground motion, what Bullet moves: "fallen" (default) plays the verdict's rigid pieces
+    # (simulation/pieces.py) on kinematic bodies and takes over a piece's bodies once it has fallen,
+    # with their velocities then (its held joints Bullet's constraints); "freed" sets every freed
+    # piece's bodies dynamic in Bullet on its joints as it is freed (before 2026-11-29: Bullet's
+    # iterative solve of hundreds of constraints, most of a quake's time). The verdict is the pieces'
+    # either way (simulation/loop.py, _follow)
+    bullet_moves: str = "fallen"
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or self.substeps <= 0 or self.iterations <= 0:
@@ -274,6 +281,11 @@ class SolverSettings:
             raise InputError(
                 f"--check-interval {self.check_interval_s}: the joints' check interval must be in (0, 0.1] s "
                 "(default 0.005: every sample of a 200 Hz record)"
+            )
+        if self.bullet_moves not in ("fallen", "freed"):
+            raise InputError(
+                f"--bullet-moves {self.bullet_moves!r}: 'fallen' (Bullet takes over the pieces that fell) or "
+                "'freed' (Bullet moves every freed piece on its joints)"
             )
         if not 0.0 <= self.damping_ratio < 1.0:
             raise InputError(

@@ -62,6 +62,10 @@ class RunOutput:
     # the velocities (B, 6) the engine set each body free with (the vibration's), NaN rows for a body
     # set free from rest or never
     freed_velocity: np.ndarray | None = None
+    # the vibration's displacement of every body about the weight's equilibrium at each frame the
+    # joint model stepped: (times since the ground started (K,), (K, B, 6) m and rad, float32);
+    # None without a vibration (a quasi-static run)
+    vibration: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class Engine(Protocol):
@@ -520,6 +524,7 @@ def steps(
         max_utilisation=utilisation if record else None,
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
+        vibration=_vibration(tracker),
         pieces=pieces,
         frames_of="bullet" if bullet else "pieces",
         freed_velocity=started,
@@ -564,11 +569,10 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
     release = np.full(len(bond_a), np.nan) if first.bond_release_time_s is None else first.bond_release_time_s
     if p is not None and p.release_time_s is not None:
         release = np.fmin(release, p.release_time_s)
-    pos = first.positions
-    quat = first.quaternions.copy()
+    pos, quat = _with_vibration(scene, first, warm)
     for f in range(1, len(quat)):  # one sign from frame to frame (the keys interpolate linearly)
         quat[f] *= np.where((quat[f] * quat[f - 1]).sum(axis=1) < 0.0, -1.0, 1.0)[:, None]
-    moves = np.any(pos[1:] != pos[:-1], axis=2) | np.any(quat[1:] != quat[:-1], axis=2)  # into frame f: f - 1
+    placed_pos, placed_quat = pos[0].copy(), quat[0].copy()  # where each kinematic body was put last
     mats = np.zeros((frames + 1, nb, 4, 4), dtype=np.float32)
     plate = np.zeros((frames + 1, 3))
     freed_at = np.full(nb, -1)
@@ -590,9 +594,13 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
             v = None if not np.isfinite(v).all() or not v.any() else v
             eng.set_free(go, np.flatnonzero(inner & ~gone), v)
             freed_at[go] = f
-        drive = np.flatnonzero(moves[f - 1] & ((hand < 0) | (hand > f)))
+        # the kinematic bodies that move by more than a micrometre (or a microradian) from where
+        # they were put last
+        moves = (np.abs(pos[f] - placed_pos).max(axis=1) > 1e-6) | (np.abs(quat[f] - placed_quat).max(axis=1) > 5e-7)
+        drive = np.flatnonzero(moves & ((hand < 0) | (hand > f)))
         if drive.size:
             eng.place(drive, pos[f, drive], quat[f, drive])
+            placed_pos[drive], placed_quat[drive] = pos[f, drive], quat[f, drive]
         eng.step_to(f)
         plate[f] = eng.read_poses(mats[f])
         if f == warm:
@@ -610,6 +618,53 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
         seconds_stepping=first.seconds_stepping + seconds,
         frames_of="pieces, then bullet",
     )
+
+
+def _with_vibration(scene: Scene, first: RunOutput, warm: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every body's pose at every frame for Bullet's pass (:func:`_follow`): the verdict's pieces'
+    (``first``'s frames) for the bodies set free, and for those that held joints still tie to the
+    ground their place moved by the vibration at that frame (:attr:`RunOutput.vibration`: the last
+    one recorded at or before it; translation of the centroid, rotation about it). Returns
+    positions ``(F, B, 3)`` and quaternions ``(F, B, 4)`` (float64)."""
+    pos = first.positions.copy()
+    quat = first.quaternions.copy()
+    if first.vibration is None:
+        return pos, quat
+    times, u = first.vibration
+    s = scene.solver
+    nb = len(scene.bodies)
+    release = first.bond_release_time_s if first.bond_release_time_s is not None else np.full(len(scene.bonds), np.nan)
+    events = np.unique(release[np.isfinite(release)])
+    x0, q0 = first.positions[warm], first.quaternions[warm]
+    R0 = rotations(q0)
+    held_at, idx = -1, np.zeros(0, dtype=np.int64)
+    for f in range(warm + 1, len(pos)):
+        t = (f - warm) / s.fps
+        k = int(np.searchsorted(times, t + 1e-9, side="right")) - 1
+        if k < 0:
+            continue
+        gone = int(np.searchsorted(events, t + 1e-9, side="right"))
+        if gone != held_at:
+            held_at = gone
+            held = grounded_bodies(scene.bonds, nb, ~(release <= t + 1e-9))
+            idx = np.flatnonzero(held)
+        if not idx.size:
+            continue
+        du = u[k, idx].astype(np.float64)
+        pos[f, idx] = x0[idx] + du[:, :3]
+        angle = np.linalg.norm(du[:, 3:], axis=1)
+        axis = du[:, 3:] / np.where(angle > 0, angle, 1.0)[:, None]
+        c, sn = np.cos(angle / 2), np.sin(angle / 2)
+        turn = np.concatenate([c[:, None], sn[:, None] * axis], axis=1)  # w, x, y, z
+        quat[f, idx] = quaternions_from_matrices(rotations(turn) @ R0[idx])
+    return pos, quat
+
+
+def _vibration(tracker) -> tuple[np.ndarray, np.ndarray] | None:
+    """The tracker's record of every body's vibration at each frame (:attr:`RunOutput.vibration`)."""
+    if tracker is None or not tracker.frame_u:
+        return None
+    return np.array([t for t, _ in tracker.frame_u]), np.stack([u for _, u in tracker.frame_u])
 
 
 def _elastic_history(tracker, end_s: float) -> dict | None:

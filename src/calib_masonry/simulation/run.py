@@ -297,8 +297,12 @@ def _dynamics_summary(scene: Scene, out) -> dict:
     return {
         "elastic": True,
         "method": "Newmark average acceleration on the intact joints and the bricks' rigid-body inertia, Rayleigh "
-        "damping at the first two modes, on the undamaged stiffness; its joints crack on the vibration's forces. "
-        "Bullet keeps the structure it holds rigid: the drift below is the vibration's, not the poses'",
+        "damping at the first two modes, on the undamaged stiffness; its joints crack on the vibration's forces",
+        # whether the frames show it: Bullet's held bricks follow the vibration where Bullet plays
+        # the verdict's pieces (loop._follow); otherwise Bullet holds them rigid
+        "frames": "the held bricks follow the vibration (about the weight's equilibrium)"
+        if out.frames_of == "pieces, then bullet"
+        else "the held bricks stand rigid: the drift below is the vibration's, not the poses'",
         "first_period_s": el["first_period_s"],
         "damping_ratio": el["damping_ratio"],
         "max_roof_drift_m": float(drift.max()) if drift.size else 0.0,

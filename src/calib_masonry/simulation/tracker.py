@@ -98,6 +98,10 @@ class CrackTracker:
         # 68.9 kN), so there the joints go one run-away a check, as Bullet moves them
         self.cascade = scene.motion is not None
         self.history: dict[str, list[float]] = {"time_s": [], "roof_drift_m": [], "base_shear_n": [], "first_mode": []}
+        # every body's elastic displacement (B, 6: m, rad) about the weight's equilibrium at the end
+        # of each step (a frame), and its time since t0: what an engine's held bricks may follow
+        self.frame_u: list[tuple[float, np.ndarray]] = []
+        self._u_static: np.ndarray | None = None
         if scene.motion is not None and scene.solver.dynamics and n:
             mass = mass_matrix(scene)
             try:
@@ -199,6 +203,11 @@ class CrackTracker:
                 self._next_check += 1
             if peak is not None:
                 self.max_utilisation = peak  # the largest of this frame's checks
+            if self.elastic is not None and out:
+                if self._u_static is None:  # the first check: the equilibrium under the weight
+                    self._u_static = self.elastic.u.copy()
+                u = (self.elastic.u - self._u_static).reshape(-1, 6).astype(np.float32)
+                self.frame_u.append((float(time_s) - self.t0, u))
             return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
         finally:
             self.seconds += time.perf_counter() - t

@@ -331,3 +331,29 @@ def test_a_pieces_joint_rings_as_a_damped_oscillator_under_a_step_load(dynamic):
     # the first peak: 1 + e^(-pi z / sqrt(1 - z^2)) times the static force, half a damped period on
     assert got.max() / n_s == pytest.approx(1 + math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2)), rel=0.01)
     assert abs(got.argmax() * h - h / 2 - math.pi / wd) <= h
+
+
+def test_a_fallen_piece_keeps_its_rotation_and_says_when_and_how_fast_it_fell():
+    # a slender block let go at once tips over under a steady 0.5 g (b / h = 1/4) and falls; a squat
+    # one 3 m away is let go later, which regroups the pieces: the fallen block keeps the pose it
+    # fell in (its rotation too, not only its displacement: the verdict's frames once turned it
+    # back upright here), and the motion says when it fell and the velocity field it had then
+    # (where an engine takes its fall on: loop._follow)
+    bodies = (_block("slender", (0.2, 0.3, 0.8), (0, 0, 0.4)), _block("squat", (0.9, 0.6, 0.3), (3.0, 0, 0.15)))
+    bonds = (
+        Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, 0.2, 0.3),
+        Bond.rectangle(1, -1, (3.0, 0, 0), DOWN, X, 0.9, 0.6),
+    )
+    sc = Scene(bodies=bodies, bonds=bonds, material=DRY, motion=constant_acceleration(0.5 * G, 3.0))
+    t = np.linspace(0.0, 3.0, 61)
+    pm = piece_motion(sc, np.array([0.0, 2.5]), t, rotations=True)
+    assert pm.fallen[0] and not pm.fallen[1]
+    fell = float(pm.fell_time_s[0])
+    assert 0.0 < fell < 2.5 and np.isnan(pm.fell_time_s[1])
+    after = np.flatnonzero(t > fell + 0.05)
+    R = pm.rotation[after, 0].astype(float)
+    angle = np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    assert angle.min() > 10.0 and np.ptp(angle) < 1e-3  # tipped, and held so after the regroup
+    v = pm.fell_velocity[0]
+    assert abs(v[4]) > 0.5 and np.allclose(v[[3, 5]], 0.0, atol=1e-6)  # turning about y as it tips
+    assert np.isnan(pm.fell_velocity[1]).all()

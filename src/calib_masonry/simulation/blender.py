@@ -189,34 +189,17 @@ def write_animation_blend(scene: Scene, positions: np.ndarray, quaternions: np.n
     y, z; our frame f is Blender's f + 1, linear in between), played at ``fps``. For a run without
     Bullet, whose frames are the verdict's pieces (open it in Blender and press play). Blender's
     state is reset before and after."""
-    from bpy_extras import anim_utils
-
     bpy = require_bpy()
     _reset(bpy)
     sc = bpy.context.scene
     col = bpy.data.collections.new("Bricks")  # as in a run's scene.blend with Bullet
     sc.collection.children.link(col)
     n = len(positions)
-    co = np.empty(2 * n)
-    co[0::2] = np.arange(1, n + 1)
-    linear = np.full(n, bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["LINEAR"].value, np.int32)
+    frames = np.arange(1, n + 1)
     for j, b in enumerate(scene.bodies):
         ob = _mesh_object(bpy, b.name or f"body_{j}", np.asarray(b.vertices), np.asarray(b.faces), b.location, col)
         ob.rotation_mode = "QUATERNION"
-        ob.animation_data_create()
-        action = bpy.data.actions.new(ob.name)
-        slot = action.slots.new(id_type="OBJECT", name=ob.name)
-        ob.animation_data.action = action
-        ob.animation_data.action_slot = slot
-        bag = anim_utils.action_ensure_channelbag_for_slot(action, slot)
-        for data_path, values in (("location", positions[:, j]), ("rotation_quaternion", quaternions[:, j])):
-            for i in range(values.shape[1]):
-                fc = bag.fcurves.new(data_path, index=i)
-                fc.keyframe_points.add(n)
-                co[1::2] = values[:, i]
-                fc.keyframe_points.foreach_set("co", co)
-                fc.keyframe_points.foreach_set("interpolation", linear)
-                fc.update()
+        _key_transform(bpy, ob, frames, np.concatenate([positions[:, j], quaternions[:, j]], axis=1))
     sc.render.fps = int(fps)
     sc.frame_start, sc.frame_end = 1, n
     sc.frame_set(1)
@@ -224,37 +207,43 @@ def write_animation_blend(scene: Scene, positions: np.ndarray, quaternions: np.n
     _reset(bpy)
 
 
-def _key_poses(bpy, objects: list, keys: dict[int, dict[int, tuple]]) -> None:
-    """Key each object ``objects[j]``'s location and rotation quaternion at the Blender frames of
-    ``keys[j]`` (frame -> (location, quaternion)), linear in between, in one write per curve."""
+def _key_transform(bpy, ob, frames: np.ndarray, values: np.ndarray) -> None:
+    """Key ``ob``'s location and rotation quaternion at the Blender ``frames`` (n,) to ``values``
+    ``(n, 7)`` (x, y, z, w, qx, qy, qz), linear in between, in one write per curve (into the
+    object's action where it has one: a rigid body's keyed ``kinematic`` switch)."""
     from bpy_extras import anim_utils
 
+    if ob.animation_data is None:
+        ob.animation_data_create()
+    if ob.animation_data.action is None:
+        action = bpy.data.actions.new(ob.name)
+        ob.animation_data.action = action
+        ob.animation_data.action_slot = action.slots.new(id_type="OBJECT", name=ob.name)
+    bag = anim_utils.action_ensure_channelbag_for_slot(ob.animation_data.action, ob.animation_data.action_slot)
     linear = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["LINEAR"].value
+    co = np.empty(2 * len(frames))
+    co[0::2] = frames
+    interpolation = np.full(len(frames), linear, np.int32)
+    for path, first, width in (("location", 0, 3), ("rotation_quaternion", 3, 4)):
+        for i in range(width):
+            fc = bag.fcurves.find(path, index=i) or bag.fcurves.new(path, index=i)
+            fc.keyframe_points.clear()
+            fc.keyframe_points.add(len(frames))
+            co[1::2] = values[:, first + i]
+            fc.keyframe_points.foreach_set("co", co)
+            fc.keyframe_points.foreach_set("interpolation", interpolation)
+            fc.update()
+
+
+def _key_poses(bpy, objects: list, keys: dict[int, dict[int, tuple]]) -> None:
+    """Key each object ``objects[j]``'s moves ``keys[j]`` (Blender frame -> (location, quaternion)):
+    :func:`_key_transform`, its place set to the first."""
     for j, poses in keys.items():
         ob = objects[j]
-        frames = sorted(poses)
+        frames = np.array(sorted(poses))
         values = np.array([[*poses[f][0], *poses[f][1]] for f in frames], dtype=np.float64)
         ob.location, ob.rotation_quaternion = poses[frames[0]]  # the place it stood at first
-        if ob.animation_data is None:
-            ob.animation_data_create()
-        if ob.animation_data.action is None:
-            action = bpy.data.actions.new(ob.name)
-            ob.animation_data.action = action
-            ob.animation_data.action_slot = action.slots.new(id_type="OBJECT", name=ob.name)
-        action, slot = ob.animation_data.action, ob.animation_data.action_slot
-        bag = anim_utils.action_ensure_channelbag_for_slot(action, slot)
-        co = np.empty(2 * len(frames))
-        co[0::2] = frames
-        interpolation = np.full(len(frames), linear, np.int32)
-        for path, first, width in (("location", 0, 3), ("rotation_quaternion", 3, 4)):
-            for i in range(width):
-                fc = bag.fcurves.find(path, index=i) or bag.fcurves.new(path, index=i)
-                fc.keyframe_points.clear()
-                fc.keyframe_points.add(len(frames))
-                co[1::2] = values[:, first + i]
-                fc.keyframe_points.foreach_set("co", co)
-                fc.keyframe_points.foreach_set("interpolation", interpolation)
-                fc.update()
+        _key_transform(bpy, ob, frames, values)
 
 
 def _frame_quaternion(normal: np.ndarray) -> tuple[float, float, float, float]:

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..progress import progress as _progress
-from .pieces import PieceSettings, piece_motion
+from .pieces import PieceSettings, _rotate, piece_motion
 from .scene import Scene, grounded_bodies, quaternions_from_matrices, rotations
 from .tracker import CrackTracker
 
@@ -378,9 +378,7 @@ def steps(
             return
         fixed[free] = False
         freed_at[free] = frame
-        v = None if velocity is None or np.isnan(velocity[free]).all() else np.nan_to_num(velocity[free])
-        if v is not None and not v.any():
-            v = None  # at rest: set free at once (a velocity costs the engine a frame)
+        v = _start_velocity(None if velocity is None else velocity[free])
         if v is not None:
             started[free] = v
         eng.set_free(free, np.flatnonzero(held & np.isin(bond_a, free)), v)
@@ -531,6 +529,15 @@ def steps(
     )
 
 
+def _start_velocity(velocity: np.ndarray | None) -> np.ndarray | None:
+    """The velocities ``(n, 6)`` to set bodies free with (NaN rows: from rest), or None to set them
+    free at once from rest (none given, or all at rest: a velocity costs the engine a frame)."""
+    if velocity is None or np.isnan(velocity).all():
+        return None
+    v = np.nan_to_num(velocity)
+    return v if v.any() else None
+
+
 class _NeedsPoses(InputError):
     """A run without Bullet of a structure whose joint checks read Bullet's poses."""
 
@@ -590,9 +597,7 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
             touching = group[bond_a] | ((bond_b >= 0) & group[np.maximum(bond_b, 0)])
             gone = release <= (f - warm) / s.fps + 1e-9
             eng.switch_off(np.flatnonzero(touching & gone))  # those joints' bricks bear on each other
-            v = fell_v[go]
-            v = None if not np.isfinite(v).all() or not v.any() else v
-            eng.set_free(go, np.flatnonzero(inner & ~gone), v)
+            eng.set_free(go, np.flatnonzero(inner & ~gone), _start_velocity(fell_v[go]))
             freed_at[go] = f
         # the kinematic bodies that move by more than a micrometre (or a microradian) from where
         # they were put last
@@ -652,11 +657,7 @@ def _with_vibration(scene: Scene, first: RunOutput, warm: int) -> tuple[np.ndarr
             continue
         du = u[k, idx].astype(np.float64)
         pos[f, idx] = x0[idx] + du[:, :3]
-        angle = np.linalg.norm(du[:, 3:], axis=1)
-        axis = du[:, 3:] / np.where(angle > 0, angle, 1.0)[:, None]
-        c, sn = np.cos(angle / 2), np.sin(angle / 2)
-        turn = np.concatenate([c[:, None], sn[:, None] * axis], axis=1)  # w, x, y, z
-        quat[f, idx] = quaternions_from_matrices(rotations(turn) @ R0[idx])
+        quat[f, idx] = quaternions_from_matrices(_rotate(R0[idx], du[:, 3:], exact=False))
     return pos, quat
 
 

@@ -1257,7 +1257,10 @@ def segment_orthophoto(cal: PhotoCalibration, rect: np.ndarray, px_per_m: float)
     f = min(1.0, SEGMENT_PX_PER_M / px_per_m)
     small = rect if f >= 1.0 else np.stack([shrink(np.ascontiguousarray(rect[..., k]), f) for k in range(3)], -1)
     ppm = px_per_m * small.shape[1] / rect.shape[1]
+    # the shrunk orthophoto's rows are rounded on their own, so the mask at its column scale can be a
+    # row longer or shorter (a square close-up of bricks, 304 against 303): cut, or the edge repeated
     valid = valid_ortho(cal, ppm)[: small.shape[0], : small.shape[1]]
+    valid = np.pad(valid, [(0, small.shape[0] - valid.shape[0]), (0, small.shape[1] - valid.shape[1])], mode="edge")
     seg = segment_wall(small, ppm, valid=valid if not valid.all() else None)
     polygons = piece_polygons(seg.labels, tolerance_px=1.5)
     up = np.array([rect.shape[1] / small.shape[1], rect.shape[0] / small.shape[0]])

@@ -546,3 +546,40 @@ def test_a_scenario_too_fine_for_memory_is_refused_before_any_work(tmp_path):
     p.write_text(text)
     r = _run("synth", p, "--out", tmp_path / "out", timeout=120)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "lower px_per_m to at most" in r.stderr, r.stderr
+
+
+_REFUSED_AFTER = """
+import sys, time
+import calib_masonry.calibrate.rectify as rectify
+from calib_masonry.cli import main
+from calib_masonry.errors import FitFailed
+
+def refuse(photo, config):
+    time.sleep(float(sys.argv[1]))
+    raise FitFailed(f"{photo}: refused (test)")
+
+rectify.calibrate_photo = refuse
+sys.exit(main(["rectify", sys.argv[2], "--known-width", "1", "--out", sys.argv[3]]))
+"""
+
+
+def test_rectify_refused_while_jax_loads_beside_it_exits_2(tmp_path):
+    """rectify loads JAX's compiled fit on a thread of its own while it reads the photo. A photo
+    refused within a second (a 16-bit PNG read as a white photo) left the process while that
+    thread was inside JAX's native code, and the interpreter's shutdown aborted it (exit code 134,
+    "terminate called after throwing an instance of ''"): measured with the refusal 0.4 and 0.6 s
+    after the start. The refusal is made at delays across that window: one line and exit code 2
+    on every run, nothing written."""
+    Image.fromarray(np.full((300, 200, 3), 128, np.uint8)).save(tmp_path / "flat.png")
+    script = tmp_path / "refused.py"
+    script.write_text(_REFUSED_AFTER)
+    for delay in (0.3, 0.4, 0.45, 0.5, 0.55, 0.6, 0.7, 0.9):
+        out = tmp_path / f"o{delay}"
+        r = subprocess.run(
+            [sys.executable, str(script), str(delay), str(tmp_path / "flat.png"), str(out)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert r.returncode == 2, (delay, r.stderr[-2000:])
+        assert r.stderr.count("\n") == 1 and "refused (test)" in r.stderr and not out.exists()

@@ -173,3 +173,40 @@ def test_records_json_reads_back_as_the_indented_exact_json(tmp_path):
     lines = raw.decode().splitlines()
     assert len(lines) == 9 and lines[4].startswith('  {"xy": ')  # a record to a line
     assert json.loads(raw)["rows"][1]["dice"] is None and json.loads(raw)["scale"] == 0.1 + 0.2
+
+
+def _pattern(rows=60, cols=40):
+    """A photo-like grey image that shows which way up it is (a bright top-left block)."""
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    img = (40 + 2 * xx + yy).astype(np.uint8)
+    img[:15, :10] = 250
+    return img
+
+
+def test_read_photo_turns_a_photo_upright_as_its_exif_orientation_says(tmp_path):
+    """A phone stores a portrait photo as landscape pixels tagged to be turned (Orientation 6:
+    90 degrees clockwise to view); viewers and LabelMe show it upright, and so must the photo
+    path (it read the stored pixels, a wall lying on its side)."""
+    from calib_masonry.io import read_photo
+
+    upright = _pattern()
+    stored = np.rot90(upright)  # turned 90 degrees anticlockwise, as the sensor stored it
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(np.repeat(stored[..., None], 3, -1)).save(tmp_path / "p.jpg", exif=exif, quality=100)
+    photo = read_photo(tmp_path / "p.jpg")
+    assert photo.rgb.shape == (60, 40, 3) and photo.size == (40, 60)
+    assert np.abs(photo.rgb[..., 0] * 255 - upright).mean() < 3
+
+
+def test_read_photo_scales_a_16_bit_grey_image_by_its_range(tmp_path):
+    """A 16-bit greyscale PNG (a scanner's, a machine-vision camera's) read as the same photo as
+    its 8-bit version: Pillow's conversion to RGB clipped it at 255, a white photo."""
+    from calib_masonry.io import read_photo
+
+    grey = _pattern()
+    Image.fromarray(grey.astype(np.uint16) * 257).save(tmp_path / "g16.png")
+    Image.fromarray(grey).save(tmp_path / "g8.png")
+    wide, narrow = read_photo(tmp_path / "g16.png"), read_photo(tmp_path / "g8.png")
+    assert wide.rgb.dtype == np.float32 and wide.rgb.shape == narrow.rgb.shape
+    assert np.abs(wide.rgb - narrow.rgb).max() < 1e-6

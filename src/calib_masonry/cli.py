@@ -897,6 +897,9 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        from .preload import wait_for_background
+
+        wait_for_background()
 
 
 if __name__ == "__main__":  # pragma: no cover

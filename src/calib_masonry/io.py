@@ -535,6 +535,35 @@ def _exif_lens(im) -> dict | None:
     return out if out["model"] else None
 
 
+_EXIF_ORIENTATION = 0x0112
+_WIDE_GREY = ("I;16", "I;16B", "I;16L", "I;16N", "I", "F")  # 16-bit, 32-bit and float single-channel
+
+
+def _photo_rgb(im) -> np.ndarray:
+    """A decoded photo as float32 ``(rows, cols, 3)`` in [0, 1], turned upright as its EXIF
+    orientation says (a phone stores a portrait photo as landscape pixels tagged to be turned
+    90 degrees, as viewers and LabelMe show it). A 16-bit greyscale image is scaled by its own
+    range (to 65,535, or its largest value above that): Pillow's conversion to RGB clipped it at
+    255, so a 16-bit PNG of a wall read as a white photo."""
+    from PIL import ImageOps
+
+    try:
+        turned = im.getexif().get(_EXIF_ORIENTATION, 1) in range(2, 9)
+    except Exception:  # noqa: BLE001 - a broken EXIF block only means no orientation
+        turned = False
+    if turned:
+        im = ImageOps.exif_transpose(im)
+    if im.mode in _WIDE_GREY:
+        grey = np.asarray(im, dtype=np.float32)
+        top = float(np.nanmax(grey)) if grey.size else 1.0
+        scale = 1.0 if im.mode == "F" and top <= 1.0 else 255.0 if top <= 255 else max(65535.0, top)
+        grey = np.clip(np.nan_to_num(grey / scale), 0.0, 1.0)
+        return np.repeat(grey[..., None], 3, axis=-1)
+    rgb = np.asarray(im if im.mode == "RGB" else im.convert("RGB"), dtype=np.float32)
+    rgb /= 255.0  # in place: the same values as a division into a new array, one 6 MP copy fewer
+    return rgb
+
+
 def read_photo(path: str | Path, *, field: str = "PHOTO", data: bytes | None = None) -> Photo:
     """Read a colour photo (JPEG, PNG, TIFF) and its EXIF focal length, compass heading and lens;
     from its bytes ``data``, when given (a photo made in memory), named ``path``."""
@@ -542,8 +571,7 @@ def read_photo(path: str | Path, *, field: str = "PHOTO", data: bytes | None = N
     with _opened_image(path, field, "give a JPEG, PNG or TIFF photo", data) as im:
         focal, heading = _exif_camera(im)
         lens = _exif_lens(im)
-        rgb = np.asarray(im if im.mode == "RGB" else im.convert("RGB"), dtype=np.float32)
-    rgb /= 255.0  # in place: the same values as a division into a new array, one 6 MP copy fewer
+        rgb = _photo_rgb(im)
     if min(rgb.shape[:2]) < 32:
         raise InputError(f"{field} {path}: image is only {rgb.shape[1]} x {rgb.shape[0]} px; give the full photo")
     return Photo(path=path, rgb=rgb, focal_px=focal, heading_deg=heading, lens=lens)

@@ -23,7 +23,7 @@ import ast
 import importlib
 import threading
 
-__all__ = ["GROUPS", "preload", "preload_in_background"]
+__all__ = ["GROUPS", "preload", "preload_in_background", "wait_for_background"]
 
 GROUPS: dict[str, tuple[str, ...]] = {
     # the photo's automatic detection (calibrate.rectify, its threads in pipeline.resolve_photo_walls)
@@ -98,6 +98,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
 
 _LOADED: set[str] = set()  # groups loaded (on any thread), so a second preload costs nothing
 _STARTED: set[str] = set()  # groups handed to a background thread
+_THREADS: list[threading.Thread] = []  # the background threads started, until waited for
 
 
 def preload(*groups: str) -> None:
@@ -150,4 +151,14 @@ def preload_in_background(*groups: str, first: tuple[str, ...] = ()) -> threadin
     _STARTED.update(todo)
     thread = threading.Thread(target=run, name="calib-masonry-imports", daemon=True)
     thread.start()
+    _THREADS.append(thread)
     return thread
+
+
+def wait_for_background(timeout_s: float = 30.0) -> None:
+    """Wait for the background loads to finish (each up to ``timeout_s``). A process that exits
+    while one is inside JAX's native code is aborted at the interpreter's shutdown ("terminate
+    called after throwing an instance of ''", exit code 134): a rectify that failed at once on its
+    photo did so on 2 runs of 4, where it should say its one line and exit with 2."""
+    while _THREADS:
+        _THREADS.pop().join(timeout_s)

@@ -81,8 +81,12 @@ def _print_build(summary: dict, out) -> None:
     print(
         f"build: {summary['structure']}: {summary['bricks']} bricks "
         f"({summary['corner_pieces_removed']} corner pieces removed), mean Dice {summary['mean_dice']:.4f}, "
-        f"closure error {summary['closure_error_m'] * 1000:.2f} mm, "
-        f"max interpenetration {summary['max_interpenetration_m3']:.2e} m^3 -> {out}"
+        + (  # an open footprint's ends are apart by design: no closure to report
+            f"closure error {summary['closure_error_m'] * 1000:.2f} mm, "
+            if summary.get("closed_footprint", True)
+            else "open footprint, "
+        )
+        + f"max interpenetration {summary['max_interpenetration_m3']:.2e} m^3 -> {out}"
     )
     for w in summary["walls"]:
         ref = f" (splitting {w['mean_dice_splitting']:.4f})" if "mean_dice_splitting" in w else ""

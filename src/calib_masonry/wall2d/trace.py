@@ -19,6 +19,7 @@ from skimage.measure import find_contours
 
 from ..errors import InputError
 from ..io import xy_from_rc
+from ..spec import DEFAULT_VERTICES
 from .dice import dice_polygon_region
 from .segment import SegmentConfig, label_bricks
 from .split import splitting_sequence, visvalingam
@@ -37,10 +38,6 @@ __all__ = [
     "trace_outline",
     "DEFAULT_VERTICES",
 ]
-
-
-#: Vertices per brick when neither a count nor a target Dice is given.
-DEFAULT_VERTICES = 5
 
 
 @dataclass(frozen=True)

@@ -404,3 +404,25 @@ def test_a_stone_wall_built_from_its_photo_is_traced_to_the_stones_shapes(tmp_pa
     given = (tmp_path / "structure.toml").read_text().replace("closed = false", "closed = false\nvertices = 5")
     (tmp_path / "structure.toml").write_text(given)
     assert cm.load_structure(tmp_path / "structure.toml").walls[0].vertices == 5
+
+
+def test_the_pieces_rectify_writes_as_labelme_build_as_many_stones(tmp_path):
+    """The engineer's loop on a real photo: rectify writes rectified.json, and build reads it back as
+    the wall's mask (nothing said about the polygons): one stone per piece, traced to Dice 0.95.
+    Read as a mask, the one-pixel lines between stones that touch were filled as holes and the
+    stones merged (36 pieces built as 24, at a mean Dice of 0.86)."""
+    from calib_masonry.cli import main
+
+    t = TRUTH[0]
+    out = tmp_path / "rect"
+    assert main(["rectify", str(REAL / t["photo"]), "--known-width", "0.9", "--no-figures", "--out", str(out)]) == 0
+    doc = json.loads((out / "calibration.json").read_text())
+    (tmp_path / "structure.toml").write_text(
+        '[structure]\nname = "lab"\nthickness_m = 0.2\nclosed = false\n'
+        f'[[wall]]\nname = "wall"\nmask = "rect/rectified.json"\nwidth_m = {doc["width_m"]}\n'
+        f"height_m = {doc['height_m']}\ntheta_deg = 0\n"
+    )
+    assert main(["build", str(tmp_path / "structure.toml"), "--no-figures", "--out", str(tmp_path / "model")]) == 0
+    summary = json.loads((tmp_path / "model" / "summary.json").read_text())
+    assert summary["bricks"] == doc["pieces"]["count"] and summary["mean_dice"] >= 0.93
+    assert summary["max_interpenetration_m3"] < 2.5e-4

@@ -119,21 +119,22 @@ def test_specs_check_themselves_on_construction():
 
 def test_polygon_defaults_a_mask_wall_five_vertices_a_photo_wall_a_target_dice(tmp_path):
     """Given neither ``vertices`` nor ``target_dice``: a mask wall's units get five vertices, a
-    photo wall's pieces the fewest reaching Dice 0.95 (a photo's pieces may be irregular stones).
+    photo wall's pieces and a LabelMe file's the fewest reaching Dice 0.95 (irregular stones).
     Either given in [structure] or on the wall holds for both; the structure round-trips."""
     rows = (
         '[[wall]]\nname = "m"\nmask = "m.png"\nwidth_m = 2\nheight_m = 1\n'
         '[[wall]]\nname = "p"\nimage = "p.jpg"\nwidth_m = 2\ntheta_deg = 90\n'
         '[[wall]]\nname = "q"\nimage = "q.jpg"\nwidth_m = 2\ntheta_deg = 180\nvertices = 7\n'
+        '[[wall]]\nname = "l"\nmask = "l.json"\nwidth_m = 2\nheight_m = 1\ntheta_deg = 270\n'
     )
     p = tmp_path / "s.toml"
     p.write_text("[structure]\nthickness_m = 0.2\nclosed = false\n" + rows)
     spec = load_structure(p, require_sources=False)
-    assert [(w.vertices, w.target_dice) for w in spec.walls] == [(5, None), (None, 0.95), (7, None)]
+    assert [(w.vertices, w.target_dice) for w in spec.walls] == [(5, None), (None, 0.95), (7, None), (None, 0.95)]
     again = tmp_path / "again.toml"
     again.write_text(structure_to_toml(spec, relative_to=tmp_path))
     assert load_structure(again, require_sources=False).walls == spec.walls
     p.write_text("[structure]\nthickness_m = 0.2\nclosed = false\nvertices = 6\n" + rows)
-    assert [w.vertices for w in load_structure(p, require_sources=False).walls] == [6, 6, 7]
+    assert [w.vertices for w in load_structure(p, require_sources=False).walls] == [6, 6, 7, 6]
     p.write_text("[structure]\nthickness_m = 0.2\nclosed = false\ntarget_dice = 0.9\n" + rows)
-    assert [w.target_dice for w in load_structure(p, require_sources=False).walls] == [0.9, 0.9, None]
+    assert [w.target_dice for w in load_structure(p, require_sources=False).walls] == [0.9, 0.9, None, 0.9]

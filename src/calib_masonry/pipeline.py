@@ -169,6 +169,13 @@ def trace_wall(
         if wall.mask is None:
             raise InputError(f"wall '{wall.name}': no mask given; add mask = 'PATH' to its [[wall]] table")
         mask = read_mask(wall.mask, field=f"wall '{wall.name}' mask")
+        if labels is None and wall.mask.suffix.lower() == ".json":
+            # a LabelMe file's pieces as drawn, each its own: as a mask, the one-pixel lines between
+            # stones that touch were filled as holes and the stones merged (a real wall's 36 pieces,
+            # as rectify wrote them, built as 24)
+            from .labelme import labelme_labels, read_labelme
+
+            labels = labelme_labels(read_labelme(wall.mask, field_name=f"wall '{wall.name}' mask"))
     mismatch = aspect_mismatch(mask.shape, wall.width_m, wall.height_m)
     if mismatch > spec.aspect_tolerance:
         rows, cols = mask.shape

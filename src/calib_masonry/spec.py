@@ -35,10 +35,11 @@ from .io import read_toml
 #: polygon vertices per unit of a mask wall (and of ``trace``) when neither the wall nor
 #: [structure] gives ``vertices`` or ``target_dice``
 DEFAULT_VERTICES = 5
-#: a photo wall's pieces, likewise, traced to the fewest vertices reaching this Dice: a photo's
-#: pieces are whatever its masonry is, and irregular stones in five vertices were a tangle of
-#: overlapping triangles (a laboratory stone wall: mean Dice 0.84, 7e-4 m^3 of overlap; traced to
-#: 0.95: 0.95 and 7e-5 m^3), where a brick's rectangle takes four or five either way
+#: a photo wall's pieces, and a LabelMe file's (its pieces as rectify wrote them or an engineer
+#: drew them), likewise traced to the fewest vertices reaching this Dice: a photo's pieces are
+#: whatever its masonry is, and irregular stones in five vertices were a tangle of overlapping
+#: triangles (a laboratory stone wall: mean Dice 0.84, 7e-4 m^3 of overlap; traced to 0.95: 0.95
+#: and 7e-5 m^3), where a brick's rectangle takes four or five either way
 PHOTO_TARGET_DICE = 0.95
 
 __all__ = [
@@ -467,7 +468,8 @@ def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_so
     if require_sources and mask is None and image is None:
         raise InputError(f"{where}: neither 'mask' nor 'image' (photo) is given; name the wall's mask or photo file")
     if n is None and d is None:  # given neither here nor in [structure]
-        n, d = (None, PHOTO_TARGET_DICE) if image is not None else (DEFAULT_VERTICES, None)
+        drawn = image is not None or (mask is not None and mask.suffix.lower() == ".json")
+        n, d = (None, PHOTO_TARGET_DICE) if drawn else (DEFAULT_VERTICES, None)
     if mask is None and image is None and (math.isnan(width) or math.isnan(height)):
         raise InputError(f"{where}: width_m and height_m are missing; give them (metres) or a photo to fit them from")
     occluders = None

@@ -360,3 +360,31 @@ def test_a_cache_size_that_is_no_size_is_named_once_and_the_default_used(monkeyp
         with warnings.catch_warnings():
             warnings.simplefilter("error")  # named once
             assert _jax.cache_limit_mb() == _jax.CACHE_MAX_MB
+
+
+def test_target_dice_with_refinement_searches_each_count_in_few_batches(monkeypatch):
+    """A target Dice with refinement on round pieces that need many vertices: each piece starts
+    at the count whose splitting polygon reaches the target and is bisected down, a few batches in
+    all. Counting up from 3 refined every piece once a count (a real stone wall's pieces, up to
+    42 vertices: more than 5 minutes); every piece still reaches the target, with no more
+    vertices than its splitting polygon needs."""
+    from calib_masonry.wall2d import refine
+
+    yy, xx = np.mgrid[0:90, 0:200]
+    m = np.hypot(yy - 45, xx - 45) < 38
+    m |= np.hypot((yy - 45) / 0.8, xx - 145) < 40
+    calls = []
+    real = refine.refine_polygons
+
+    def spy(*args, **kwargs):
+        calls.append(len(args[1]))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(refine, "refine_polygons", spy)
+    plain = trace_mask(m, TraceConfig(target_dice=0.995))
+    refined = trace_mask(m, TraceConfig(target_dice=0.995, refine=RefineConfig()))
+    n_plain = [len(b.vertices_xy) for b in plain.bricks]
+    assert min(n_plain) >= 12  # round: many vertices
+    assert all(b.dice >= 0.995 for b in refined.bricks)
+    assert all(len(r.vertices_xy) <= n for r, n in zip(refined.bricks, n_plain))
+    assert len(calls) <= 1 + int(np.ceil(np.log2(max(n_plain)))) < max(n_plain) - 3

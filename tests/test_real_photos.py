@@ -401,6 +401,19 @@ def test_a_stone_wall_built_from_its_photo_is_traced_to_the_stones_shapes(tmp_pa
     summary = json.loads((tmp_path / "model" / "summary.json").read_text())
     assert 25 <= summary["bricks"] <= 45 and summary["mean_dice"] >= 0.93
     assert summary["max_interpenetration_m3"] < 2.5e-4
+    # the scale from a measured length between two photo points instead (the base's two ends)
+    c = json.loads((tmp_path / "model" / "photos" / "wall" / "calibration.json").read_text())["corners_px"]
+    measured = (
+        (tmp_path / "structure.toml")
+        .read_text()
+        .replace(
+            f"width_m = {t['width_m']}", f"known_length = [{c[0][0]}, {c[0][1]}, {c[1][0]}, {c[1][1]}, {t['width_m']}]"
+        )
+    )
+    (tmp_path / "measured.toml").write_text(measured)
+    assert main(["build", str(tmp_path / "measured.toml"), "--no-figures", "--out", str(tmp_path / "m2")]) == 0
+    wall = json.loads((tmp_path / "m2" / "summary.json").read_text())["walls"][0]
+    assert wall["scale_source"] == "known length" and wall["width_m"] == pytest.approx(t["width_m"], rel=0.01)
     given = (tmp_path / "structure.toml").read_text().replace("closed = false", "closed = false\nvertices = 5")
     (tmp_path / "structure.toml").write_text(given)
     assert cm.load_structure(tmp_path / "structure.toml").walls[0].vertices == 5

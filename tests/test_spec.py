@@ -138,3 +138,34 @@ def test_polygon_defaults_a_mask_wall_five_vertices_a_photo_wall_a_target_dice(t
     assert [w.vertices for w in load_structure(p, require_sources=False).walls] == [6, 6, 7, 6]
     p.write_text("[structure]\nthickness_m = 0.2\nclosed = false\ntarget_dice = 0.9\n" + rows)
     assert [w.target_dice for w in load_structure(p, require_sources=False).walls] == [0.9, 0.9, None, 0.9]
+
+
+def test_a_photo_wall_may_take_its_scale_from_a_measured_length_or_its_courses(tmp_path):
+    """known_length = [x1, y1, x2, y2, metres] and course_height_m, as rectify's --known-length and
+    --course-height, for a photo wall whose W and H are left out; one scale only, and only for a
+    photo. Round-trips."""
+    head = '[structure]\nthickness_m = 0.2\nclosed = false\n[[wall]]\nname = "p"\nimage = "p.jpg"\ntheta_deg = 0\n'
+    p = tmp_path / "s.toml"
+    p.write_text(head + "known_length = [10, 20, 300, 25.5, 1.2]\n")
+    spec = load_structure(p, require_sources=False)
+    assert spec.walls[0].known_length == (10.0, 20.0, 300.0, 25.5, 1.2) and math.isnan(spec.walls[0].width_m)
+    again = tmp_path / "again.toml"
+    again.write_text(structure_to_toml(spec, relative_to=tmp_path))
+    assert load_structure(again, require_sources=False).walls == spec.walls
+    p.write_text(head + "course_height_m = 0.075\n")
+    assert load_structure(p, require_sources=False).walls[0].course_height_m == 0.075
+    for extra, match in (
+        ("known_length = [10, 20, 300, 25.5, 1.2]\nwidth_m = 2\n", "width_m and known_length each set the scale"),
+        ("known_length = [10, 20, 300, 25.5, 1.2]\ncourse_height_m = 0.075\n", "each set the scale"),
+        ("known_length = [10, 20, 300, 1.2]\n", r"known_length must be \[x1, y1, x2, y2, metres\]"),
+        ("known_length = [10, 20, 300, 25, 0]\n", "known_length must be"),
+        ("course_height_m = 3e3\n", "course_height_m = 3000.0 must be the mean course height"),
+    ):
+        p.write_text(head + extra)
+        with pytest.raises(InputError, match=match):
+            load_structure(p, require_sources=False)
+    p.write_text(
+        head.replace('image = "p.jpg"', 'mask = "m.png"\nwidth_m = 2\nheight_m = 1') + "course_height_m = 0.1\n"
+    )
+    with pytest.raises(InputError, match="course_height_m scales a photo"):
+        load_structure(p, require_sources=False)

@@ -77,6 +77,10 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
         known["known_width_m"] = wall.width_m
     elif not math.isnan(wall.height_m):
         known["known_height_m"] = wall.height_m
+    elif wall.known_length is not None:
+        known["known_length"] = wall.known_length
+    elif wall.course_height_m is not None:
+        known["course_height_m"] = wall.course_height_m
     occluders = ()
     try:
         if wall.occluders is not None:

@@ -81,6 +81,10 @@ class WallSpec:
     corners_px: tuple[float, ...] | None = None
     focal_px: float | None = None
     occluders: Path | None = None  # a LabelMe JSON or a JSON list of polygons in the photo's pixels
+    # the scale, where neither W nor H is given: two photo points and their measured distance
+    # (x1, y1, x2, y2, metres), or the masonry's mean course height (metres)
+    known_length: tuple[float, float, float, float, float] | None = None
+    course_height_m: float | None = None
 
     def __post_init__(self) -> None:
         where = f"wall '{self.name}'"
@@ -377,6 +381,8 @@ WALL_KEYS = (
     "camera_height_m",
     "focal_px",
     "corners_px",
+    "known_length",
+    "course_height_m",
     "occluders",
 )
 CORNER_KEYS = ("photo", "walls", "focal_px")
@@ -497,6 +503,29 @@ def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_so
         ):
             raise InputError(f"{where}: corners_px must be 8 numbers [x1, y1, ..., x4, y4] (pixels), got {corners!r}")
         corners = tuple(float(v) for v in corners)
+    known_length = w.get("known_length")
+    if known_length is not None and (
+        not isinstance(known_length, list)
+        or len(known_length) != 5
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in known_length)
+        or not known_length[4] > 0
+    ):
+        raise InputError(
+            f"{where}: known_length must be [x1, y1, x2, y2, metres] (two photo points and their measured distance "
+            f"> 0), got {known_length!r}"
+        )
+    course = _num(w, "course_height_m", where, default=None)
+    if course is not None and not 0.0 < course < 10.0:
+        raise InputError(f"{where}: course_height_m = {course} must be the mean course height in metres (e.g. 0.075)")
+    scales = [k for k, v in (("known_length", known_length), ("course_height_m", course)) if v is not None]
+    if scales and image is None:
+        raise InputError(f"{where}: {scales[0]} scales a photo; this wall has no image (its mask is drawn to W x H)")
+    given = [k for k in ("width_m", "height_m") if k in w]
+    if len(scales) + bool(given) > 1:
+        raise InputError(
+            f"{where}: {' and '.join(given + scales)} each set the scale; give one (leave width_m and height_m out "
+            "to take them from the photo)"
+        )
     return WallSpec(
         name=wname,
         width_m=float(width),
@@ -512,6 +541,8 @@ def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_so
         corners_px=corners,
         focal_px=None if focal is None else float(focal),
         occluders=occluders,
+        known_length=None if known_length is None else tuple(float(v) for v in known_length),
+        course_height_m=None if course is None else float(course),
     )
 
 
@@ -644,6 +675,10 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None, i
                 row[key] = _clean(getattr(w, key))
         if w.corners_px is not None:
             row["corners_px"] = [_clean(v) for v in w.corners_px]
+        if w.known_length is not None:
+            row["known_length"] = [_clean(v) for v in w.known_length]
+        if w.course_height_m is not None:
+            row["course_height_m"] = _clean(w.course_height_m)
         if w.vertices is not None and w.vertices != spec.vertices:
             row["vertices"] = w.vertices
         if w.target_dice is not None and w.target_dice != spec.target_dice:

@@ -79,6 +79,18 @@ def test_real_photo_segmentation_finds_the_stones_not_the_speckle(real_calibrati
     assert 25 <= s["count"] <= 45 and s["max_area_m2"] < 0.1 and s["warning"] == ""
 
 
+def test_a_segmentation_too_coarse_for_the_joints_says_so(real_calibrations):
+    """An orthophoto at 100 px/m (an 8 mm joint 0.8 px): the stones come out as a dozen large
+    pieces (12-15 on the laboratory walls, for 30-40), and the summary's warning says the
+    resolution is too coarse and what to segment at, where it had been silent."""
+    from calib_masonry.calibrate.rectify import rectify
+    from calib_masonry.wall2d.segment import segment_wall
+
+    cal = real_calibrations[TRUTH[0]["wall"]]
+    s = segment_wall(rectify(cal, px_per_m=100.0), 100.0).summary()
+    assert s["count"] < 25 and "too coarse to find the joints" in s["warning"] and "250 px/m" in s["warning"]
+
+
 def _synthetic_photo(seed, *, k1=0.0, wall_index=0, size=(1500, 1000)):
     from calib_masonry.spec import PhotoSpec
     from calib_masonry.synthetic.photo import photograph_wall

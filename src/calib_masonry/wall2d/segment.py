@@ -301,6 +301,7 @@ class Segmentation:
     px_per_m: float
     pieces: object | None = None  # wall2d.pieces.Pieces, for the "joints" method
     note: str = ""  # why the method was chosen
+    coarse: str = ""  # why the resolution is too coarse for the joints ("" when it is not)
 
     @cached_property
     def labels(self) -> np.ndarray:
@@ -332,6 +333,8 @@ class Segmentation:
                 "module_source": "the pieces' median area",
                 "warning": "" if n > 1 else "the segmentation found one piece: no joints stand out",
             }
+        if self.coarse:
+            doc["warning"] = f"{doc['warning']}; {self.coarse}" if doc["warning"] else self.coarse
         doc.update(method=self.method, method_note=self.note)
         return doc
 
@@ -356,6 +359,10 @@ def mortar_plausible(mask: np.ndarray) -> str:
 #: the joints' partition is made at this resolution (px per metre of wall), or the orthophoto's
 #: own where that is coarser, on at most MAX_PIECES_PIXELS pixels
 PIECES_PX_PER_M = 300.0
+#: the fewest pixels across a joint (PieceConfig.joint_width_m) the joints' partition is trusted
+#: at: the laboratory stone walls' 30-40 stones came out as 19-25 at 200 px/m (1.6 px), 12-15
+#: at 100 px/m, against 29-36 from 250 px/m (2.0 px) up
+MIN_JOINT_PX = 2.0
 MAX_PIECES_PIXELS = 2.0e7
 
 
@@ -409,9 +416,17 @@ def segment_wall(
         shape = (max(8, round(rgb.shape[0] * f)), max(8, round(rgb.shape[1] * f)))
         work = _resampled(np.asarray(rgb, dtype=np.float32), shape, order=1)
         work_valid = None if valid is None else _resampled(valid.astype(np.float32), shape, order=1) > 0.5
-    pieces = segment_pieces(
-        work, px_per_m * work.shape[1] / rgb.shape[1], pieces_config or PieceConfig(), valid=work_valid
-    )
+    pc = pieces_config or PieceConfig()
+    work_ppm = px_per_m * work.shape[1] / rgb.shape[1]
+    pieces = segment_pieces(work, work_ppm, pc, valid=work_valid)
+    coarse = ""
+    if work_ppm * pc.joint_width_m < MIN_JOINT_PX:
+        coarse = (
+            f"at {work_ppm:.0f} px/m a {pc.joint_width_m * 1000:.0f} mm joint is {work_ppm * pc.joint_width_m:.1f} px, "
+            f"too coarse to find the joints (fewer, larger pieces); segment at "
+            f"{math.ceil(MIN_JOINT_PX / pc.joint_width_m)} px/m or more (--px-per-m, photo_px_per_m), from a photo "
+            "that holds as many"
+        )
     if work is not rgb:
         from dataclasses import replace
 
@@ -419,5 +434,10 @@ def segment_wall(
         pieces = replace(pieces, labels=labels.astype(np.int32), px_per_m=float(px_per_m))
     mask = pieces_mask(pieces, mortar=~mortar_mask)
     return Segmentation(
-        mask=mask, method="joints", px_per_m=float(px_per_m), pieces=pieces, note=f"{why}: the joints' partition"
+        mask=mask,
+        method="joints",
+        px_per_m=float(px_per_m),
+        pieces=pieces,
+        note=f"{why}: the joints' partition",
+        coarse=coarse,
     )

@@ -1142,7 +1142,7 @@ def test_a_flat_history_is_drawn_flat_not_magnified(tmp_path, monkeypatch):
 def test_frames_show_cracked_joints_and_the_time_origin_of_the_histories():
     """frames/*.png drew no cracked joint and counted time from the warm-up's start, histories.png
     from the ground's: both now count from the ground's start, and the frames mark the joints
-    cracked by then."""
+    cracked by then, in front of the bricks."""
     from calib_masonry.simulation.loop import RunOutput
     from calib_masonry.simulation.results import _FramePainter
     from calib_masonry.simulation.scene import Bond, Scene
@@ -1170,6 +1170,17 @@ def test_frames_show_cracked_joints_and_the_time_origin_of_the_histories():
     assert title.startswith("t = 0.10 s since the ground started moving") and "0 joints cracked" in title
     assert "1 joint cracked" in late.axes[0].get_title()
     assert len(late.axes[0].collections) == len(early.axes[0].collections) + 1  # the red marks
+    # and they show: the joint lies inside the stack, and mplot3d's depth sort drew it behind the
+    # bricks' faces (a tower's frame said "166 joints cracked (red)" and showed none)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    red = []
+    for fig in (early, late):
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        rgb = np.asarray(canvas.buffer_rgba())[..., :3].astype(int)
+        red.append(int(((rgb[..., 0] > 200) & (rgb[..., 1] < 60) & (rgb[..., 2] < 60)).sum()))
+    assert red[0] == 0 and red[1] >= 5
 
 
 def test_a_run_that_checks_its_pieces_joints_cracks_nothing_the_pieces_hold():

@@ -217,6 +217,13 @@ def plot_model(structure: Structure3D, path: Path) -> None:
     ax.set_ylim(lo[1], hi[1])
     ax.set_zlim(lo[2], hi[2])
     ax.set_box_aspect(np.maximum(hi - lo, 1e-3))
+    # ticks in proportion to each axis's length: a single wall's 0.2 m thickness got as many as its
+    # height, printed over one another
+    from matplotlib.ticker import MaxNLocator
+
+    extent = np.maximum(hi - lo, 1e-3)
+    for axis, e in zip((ax.xaxis, ax.yaxis, ax.zaxis), extent):
+        axis.set_major_locator(MaxNLocator(nbins=max(1, int(round(6 * e / extent.max()))), min_n_ticks=2))
     ax.view_init(elev=22, azim=-60)
     ax.set_xlabel("X (m)")
     ax.set_ylabel("Y (m)")

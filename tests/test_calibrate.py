@@ -946,6 +946,31 @@ def test_footprint_cli_from_calibrations(photo_set, tmp_path, capsys):
     assert not Path(tmp_path / "fp").exists()
 
 
+def test_footprint_of_a_structure_of_photos_with_typed_widths(photo_set, tmp_path, capsys):
+    """The README's example, a structure file whose photo walls carry their typed W (as synth
+    --photos writes it): each photo is scaled by its wall's W, as build does, and the footprint
+    closes. On the eye-height prior alone every photo was refused (W uncertain by 31 %), and the
+    example ended in an error."""
+    from PIL import Image
+
+    data, truth = photo_set
+    t0, t1 = truth["photos"][:2]
+    Image.fromarray(np.full((20, 30), 255, np.uint8)).save(tmp_path / "m.png")
+    third = math.hypot(2.4, 2.0)
+    (tmp_path / "s.toml").write_text(
+        '[structure]\nname = "tri"\nthickness_m = 0.2\nclosed = true\n'
+        f'[[wall]]\nname = "a"\nimage = "{(data / t0["photo"]).as_posix()}"\nwidth_m = 2.4\ntheta_deg = 0\n'
+        f'[[wall]]\nname = "b"\nimage = "{(data / t1["photo"]).as_posix()}"\nwidth_m = 2.0\ntheta_deg = 90\n'
+        f'[[wall]]\nname = "c"\nmask = "m.png"\nwidth_m = {third:.6f}\nheight_m = 2.0\n'
+        f"theta_deg = {math.degrees(math.atan2(-2.0, -2.4)) % 360:.6f}\n"
+    )
+    assert _run(["footprint", tmp_path / "s.toml", "--no-figures", "--out", tmp_path / "fp"]) == 0
+    doc = json.loads((tmp_path / "fp" / "footprint.json").read_text())
+    widths = [w["width_m"] for w in doc["walls"]]
+    assert widths == pytest.approx([2.4, 2.0, third], abs=0.01) and doc["closure_gap_m"] < 1e-6
+    assert "gap" in capsys.readouterr().out
+
+
 # ----------------------------------------------------------------------------------------------
 # corner photos
 

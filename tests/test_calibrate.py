@@ -971,6 +971,34 @@ def test_footprint_of_a_structure_of_photos_with_typed_widths(photo_set, tmp_pat
     assert "gap" in capsys.readouterr().out
 
 
+def test_footprints_structure_file_names_its_corner_photos_wherever_it_ran(photo_set, tmp_path, monkeypatch):
+    """footprint writes a structure.toml to build from: its corner photos were written as the input
+    named them, relative to where the command ran, and were then looked for beside the new file
+    (the README's footprint -> build ended in "photo file out/fp/out/pe/photos/... not found")."""
+    import shutil
+
+    from PIL import Image
+
+    from calib_masonry.spec import load_structure
+
+    data, _ = photo_set
+    shutil.copytree(data / "photos", tmp_path / "in" / "photos")
+    shutil.copy(data / "structure_photos.toml", tmp_path / "in" / "s.toml")
+    spec = load_structure(tmp_path / "in" / "s.toml")
+    assert spec.corners  # the photo set's corner photo
+    monkeypatch.chdir(tmp_path)
+    # two walls do not close a footprint; the written file is what is checked, so a third, typed
+    text = (tmp_path / "in" / "s.toml").read_text().replace("[structure]\n", "[structure]\nclosed = true\n")
+    Image.fromarray(np.full((20, 30), 255, np.uint8)).save(tmp_path / "in" / "m.png")
+    third = math.hypot(spec.walls[0].width_m, spec.walls[1].width_m)
+    angle = math.degrees(math.atan2(-spec.walls[1].width_m, -spec.walls[0].width_m)) % 360
+    text += f'\n[[wall]]\nname = "c"\nmask = "m.png"\nwidth_m = {third:.6f}\nheight_m = 2.0\ntheta_deg = {angle:.6f}\n'
+    (tmp_path / "in" / "s.toml").write_text(text)
+    assert _run(["footprint", "in/s.toml", "--no-figures", "--out", "fp"]) == 0
+    again = load_structure(tmp_path / "fp" / "structure.toml")  # every photo found (else an InputError)
+    assert [c.photo for c in again.corners] == [(tmp_path / "in" / "photos" / "corner_w0_w1.jpg").resolve()]
+
+
 # ----------------------------------------------------------------------------------------------
 # corner photos
 

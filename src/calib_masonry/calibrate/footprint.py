@@ -300,9 +300,12 @@ def footprint_to_folder(
                 )
                 for i, wall in enumerate(spec.walls)
             )
+            # every path absolute, the corner photos' too (written as given, relative to where the
+            # command ran, they were looked for beside the new file and the build of it failed)
+            corners = tuple(replace(c, photo=c.photo.resolve()) for c in spec.corners)
             (stage / "structure.toml").write_text(
                 "# Written by `calib-masonry footprint`: W and theta adjusted so the footprint closes.\n"
-                + structure_to_toml(replace(spec, walls=walls, closed=True), relative_to=None),
+                + structure_to_toml(replace(spec, walls=walls, corners=corners, closed=True), relative_to=None),
                 encoding="utf-8",
             )
         if figure and corner_docs:

@@ -290,7 +290,9 @@ def test_the_shear_test_of_one_dry_block_rocks_or_slides_as_statics_says(tmp_pat
         expected = DRY.friction * (n + w)
         assert s["mechanism"] == "sliding"
     assert s["peak_lateral_force_kn"] == pytest.approx(expected, rel=0.05)
-    assert s["drift_at_peak_percent"] >= 0
+    # the drift at 95 % of the peak is reported beside the joint model's drift at the peak itself
+    # (which a mechanism forming makes as large as it likes: 21 % on a rocking stone wall)
+    assert 0 < s["drift_at_95_percent_of_peak_percent"] < 2 * s["drift_at_peak_percent"]
 
 
 def test_shear_test_inputs_are_checked(tmp_path):

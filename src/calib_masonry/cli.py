@@ -411,7 +411,9 @@ def _cmd_simulate(args) -> int:
             f"shear test: {s['bricks'] - 1} stones, {st['boundary']}, {st['precompression_mpa']:g} MPa "
             f"({st['vertical_load_kn']:.1f} kN), H0/L = {st['shear_span_ratio']:.2f}: peak lateral force "
             + (
-                f"{peak:.1f} kN at {st['drift_at_peak_percent']:.3f} % drift, {st['mechanism']}"
+                f"{peak:.1f} kN (95 % of it at {st['drift_at_95_percent_of_peak_percent']:.2f} % drift; the joint "
+                f"model's drift at the peak itself {st['drift_at_peak_percent']:.2f} %, a mechanism forming), "
+                f"{st['mechanism']}"
                 if peak is not None
                 else "not reached (the ramp ended first)"
             )

@@ -456,6 +456,9 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
                 **scene.notes["shear_test"],
                 "peak_lateral_force_kn": shear["peak_lateral_force_kn"],
                 "drift_at_peak_percent": None if shear["drift_at_peak"] is None else 100 * shear["drift_at_peak"],
+                "drift_at_95_percent_of_peak_percent": (
+                    None if shear["drift_at_95_percent_of_peak"] is None else 100 * shear["drift_at_95_percent_of_peak"]
+                ),
                 "reached_max": shear["peak_lateral_force_kn"] is None,
                 "mechanism": (summary["mechanism"] or {}).get("mechanism"),
             }

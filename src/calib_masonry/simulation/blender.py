@@ -235,14 +235,12 @@ def _key_transform(bpy, ob, frames: np.ndarray, values: np.ndarray) -> None:
             fc.update()
 
 
-def _key_poses(bpy, objects: list, keys: dict[int, dict[int, tuple]]) -> None:
-    """Key each object ``objects[j]``'s moves ``keys[j]`` (Blender frame -> (location, quaternion)):
-    :func:`_key_transform`, its place set to the first."""
-    for j, poses in keys.items():
+def _key_poses(bpy, objects: list, moves: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
+    """Key each object ``objects[j]``'s moves ``moves[j]`` (Blender frames (k,), poses (k, 7):
+    location, quaternion): :func:`_key_transform`, its place set to the first."""
+    for j, (frames, values) in moves.items():
         ob = objects[j]
-        frames = np.array(sorted(poses))
-        values = np.array([[*poses[f][0], *poses[f][1]] for f in frames], dtype=np.float64)
-        ob.location, ob.rotation_quaternion = poses[frames[0]]  # the place it stood at first
+        ob.location, ob.rotation_quaternion = values[0, :3].tolist(), values[0, 3:].tolist()  # where it stood first
         _key_transform(bpy, ob, frames, values)
 
 
@@ -413,9 +411,14 @@ class BlenderEngine:
         # bodies moved over one kinematic step, to turn dynamic at the next: (last frame stepped, bodies)
         self.pending: list[tuple[int, np.ndarray]] = []
         self.kicked: set[int] = set()  # bodies moved a frame kinematic before turning dynamic
-        # the moves written on kinematic bodies, keyed in the saved file: body -> {Blender frame:
-        # (location, rotation quaternion)}
+        # the moves written on kinematic bodies, keyed in the saved file: a body's place before its
+        # first move (body -> (Blender frame, pose)), the set-free kicks (body -> {Blender frame:
+        # (location, rotation quaternion)}), and place()'s moves as arrays (Blender frame, bodies
+        # (n,), poses (n, 7)): a dict of tuples for every held brick at every frame of the paper
+        # example's quake (the vibration played) was hundreds of MB of Python objects
+        self.rest: dict[int, tuple[int, tuple]] = {}
         self.keys: dict[int, dict[int, tuple]] = {}
+        self.placed: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.frame = 0
 
     def step_to(self, frame: int) -> None:
@@ -455,18 +458,28 @@ class BlenderEngine:
         step: its *original* object written, which Blender re-evaluates into the live body (and
         Bullet moves it at the velocity of that step); the move is keyed in the saved file."""
         ob = self.objects[j]
-        keys = self.keys.setdefault(j, {})
-        if not keys:  # where it stood until now
-            keys[self.frame + 1] = (tuple(ob.location), tuple(ob.rotation_quaternion))
+        self._rest(j)
         ob.location = tuple(float(x) for x in location)
         ob.rotation_quaternion = tuple(float(x) for x in quaternion)
-        keys[self.frame + 2] = (tuple(ob.location), tuple(ob.rotation_quaternion))  # our frame + 1
+        self.keys.setdefault(j, {})[self.frame + 2] = (tuple(ob.location), tuple(ob.rotation_quaternion))
+
+    def _rest(self, j: int) -> None:
+        """Record where body ``j`` stood until now, before its first move."""
+        if j not in self.rest:
+            ob = self.objects[j]
+            self.rest[j] = (self.frame + 1, (*ob.location, *ob.rotation_quaternion))
 
     def place(self, bodies: np.ndarray, locations: np.ndarray, quaternions: np.ndarray) -> None:
         """Move the kinematic ``bodies`` to ``locations`` ``(n, 3)`` and ``quaternions`` ``(n, 4)``
         (w, x, y, z) over the coming step (a motion computed elsewhere, played by Bullet)."""
-        for j, loc, q in zip(bodies, np.asarray(locations, np.float64), np.asarray(quaternions, np.float64)):
-            self._move(int(j), loc, q)
+        bodies = np.asarray(bodies, dtype=np.int64)
+        poses = np.concatenate([np.asarray(locations, np.float64), np.asarray(quaternions, np.float64)], axis=1)
+        for j, pose in zip(bodies.tolist(), poses.tolist()):
+            ob = self.objects[j]
+            self._rest(j)
+            ob.location = pose[:3]
+            ob.rotation_quaternion = pose[3:]
+        self.placed.append((self.frame + 2, bodies, poses))  # our frame + 1
 
     def set_free(self, bodies: np.ndarray, bonds: np.ndarray, velocity: np.ndarray | None = None) -> None:
         if velocity is None:
@@ -490,6 +503,29 @@ class BlenderEngine:
         for k in bonds:
             self.constraints[k].evaluated_get(self.depsgraph).rigid_body_constraint.enabled = True
 
+    def _moves(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Every moved body's keys: body -> (Blender frames (k,), poses (k, 7)), in frame order
+        (its rest, place()'s moves, the set-free kicks; a later record of a frame wins)."""
+        frames, bodies, poses = [], [], []
+        for j, (f, pose) in self.rest.items():
+            frames.append([f]), bodies.append([j]), poses.append([pose])
+        for f, b, p in self.placed:
+            frames.append(np.full(len(b), f)), bodies.append(b), poses.append(p)
+        for j, keys in self.keys.items():
+            for f, (loc, q) in keys.items():
+                frames.append([f]), bodies.append([j]), poses.append([(*loc, *q)])
+        if not frames:
+            return {}
+        f = np.concatenate([np.asarray(x, dtype=np.int64) for x in frames])
+        b = np.concatenate([np.asarray(x, dtype=np.int64) for x in bodies])
+        p = np.concatenate([np.asarray(x, dtype=np.float64).reshape(-1, 7) for x in poses])
+        order = np.lexsort((np.arange(len(f)), f, b))  # by body, then frame, then record order
+        f, b, p = f[order], b[order], p[order]
+        last = np.r_[(b[1:] != b[:-1]) | (f[1:] != f[:-1]), True]  # of equal (body, frame), the last
+        f, b, p = f[last], b[last], p[last]
+        cuts = np.flatnonzero(np.r_[True, b[1:] != b[:-1], True])
+        return {int(b[s]): (f[s:e], p[s:e]) for s, e in zip(cuts[:-1], cuts[1:])}
+
     def save(self, path: Path, frames: int, freed_at: np.ndarray) -> None:
         """Keep the run in the file: the point cache holds every frame just stepped (with the joint
         model's cracks in it); marked as baked, it is saved and replayed instead of re-simulated. A
@@ -507,7 +543,7 @@ class BlenderEngine:
             late = int(j) in self.kicked  # moved a frame kinematic first, dynamic a frame later
             rb.keyframe_insert("kinematic", frame=int(freed_at[j]) + 1 + late)  # our frame f is Blender's f + 1
         # the moves written on kinematic bodies: their place until then, each frame's move after
-        _key_poses(bpy, self.objects, self.keys)
+        _key_poses(bpy, self.objects, self._moves())
         sc.frame_end = frames
         sc.frame_set(1)
         _save(bpy, path)

@@ -451,6 +451,13 @@ def test_the_pieces_rectify_writes_as_labelme_build_as_many_stones(tmp_path):
     summary = json.loads((tmp_path / "model" / "summary.json").read_text())
     assert summary["bricks"] == doc["pieces"]["count"] and summary["mean_dice"] >= 0.93
     assert summary["max_interpenetration_m3"] < 2.5e-4
+    # and trace reads it the same way
+    polygons = tmp_path / "polygons.json"
+    assert (
+        main(["trace", str(out / "rectified.json"), "--target-dice", "0.95", "--no-figures", "--out", str(polygons)])
+        == 0
+    )
+    assert len(json.loads(polygons.read_text())["bricks"]) == doc["pieces"]["count"]
 
 
 def test_rectify_draws_the_occluders_it_was_given(tmp_path):

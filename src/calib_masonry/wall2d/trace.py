@@ -378,7 +378,14 @@ def trace_to_file(
     check_not_input(figure, [mask_path], flag="--figure" if given else f"--out's figure {figure.name}")
     mask = read_mask(mask_path, field="MASK")
     t0 = time.perf_counter()
-    result = trace_mask(mask, config)
+    if Path(mask_path).suffix.lower() == ".json":
+        # a LabelMe file's pieces as drawn, each its own (as build reads them): as a mask, the
+        # one-pixel lines between pieces that touch were filled as holes (36 stones traced as 24)
+        from ..labelme import labelme_labels, read_labelme
+
+        result = trace_labels(labelme_labels(read_labelme(mask_path, field_name="MASK")), config)
+    else:
+        result = trace_mask(mask, config)
     if not result.bricks:
         raise InputError(f"MASK {mask_path}: no bricks found (no white regions); bricks must be white on black")
     seconds = time.perf_counter() - t0

@@ -505,3 +505,35 @@ def test_a_study_of_a_photo_wall_draws_around_its_measured_width_and_keeps_its_s
     assert all(r["bricks"] == stones for r in rows)
     vol = {int(r["mask.dilate_px"]): r["total_volume_m3"] / r["wall.width_m"] for r in rows}
     assert sorted(vol) == [-1, 0, 1] and vol[-1] < vol[0] < vol[1]
+
+
+def test_an_annotation_drawn_on_another_size_of_the_photo_is_refused(tmp_path, capsys):
+    """A LabelMe outline drawn on a resized copy of the photo (297 x 446 px for a 594 x 891 px
+    photo): its points were read as the photo's pixels, and the fit ran on corners half-way in. It
+    is refused in one line naming both sizes, with nothing written."""
+    from calib_masonry.cli import main
+    from calib_masonry.labelme import write_labelme
+
+    photo = REAL / TRUTH[0]["photo"]
+    w, h = cm.read_photo(photo).size
+    corners = np.array([[30.0, 95.0], [275.0, 103.0], [276.0, 338.0], [31.0, 350.0]])
+    write_labelme(tmp_path / "small.json", photo.name, (h // 2, w // 2), outline=corners)
+    out = tmp_path / "out"
+    assert (
+        main(
+            [
+                "rectify",
+                str(photo),
+                "--known-width",
+                "0.9",
+                "--labelme",
+                str(tmp_path / "small.json"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{w // 2} x {h // 2} px image" in err and f"{w} x {h} px" in err
+    assert not out.exists()

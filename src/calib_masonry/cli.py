@@ -251,12 +251,19 @@ def _calibrate_config(args):
         if ann.outline is not None and not corners:
             kwargs["corners_px"] = tuple(float(v) for v in ann.outline.ravel())
         occluders = ann.occluders
+        kwargs["annotation_size"] = (ann.shape[1], ann.shape[0])
     if corners:
         kwargs["corners_px"] = parse_corners(corners)
     if getattr(args, "occluders", None):
-        from .labelme import read_occluders
+        from .labelme import annotation_size, read_occluders
 
         occluders = tuple(occluders) + tuple(read_occluders(args.occluders))
+        size = annotation_size(args.occluders)
+        if size is not None and kwargs.setdefault("annotation_size", size) != size:
+            raise InputError(
+                f"--occluders {args.occluders}: drawn on a {size[0]} x {size[1]} px image, --labelme on a "
+                f"{kwargs['annotation_size'][0]} x {kwargs['annotation_size'][1]} px one; draw both on the photo"
+            )
     if occluders:
         kwargs["occluders"] = tuple(occluders)
     if getattr(args, "snap_tolerance", None) is not None:

@@ -197,6 +197,16 @@ def read_photo_annotation(path: str | Path) -> LabelMe:
     return doc
 
 
+def annotation_size(path: str | Path) -> tuple[int, int] | None:
+    """The (width, height) px a LabelMe file was drawn on; None for a plain JSON list of polygons
+    (or a file :func:`read_occluders` refuses anyway)."""
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        return (int(doc["imageWidth"]), int(doc["imageHeight"])) if isinstance(doc, dict) else None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, ValueError):
+        return None
+
+
 def read_occluders(path: str | Path) -> tuple[np.ndarray, ...]:
     """Occluder polygons (photo pixels) from a LabelMe file (its ``occluder`` shapes) or a JSON list
     of polygons ``[[[x, y], ...], ...]`` (pixel centres)."""

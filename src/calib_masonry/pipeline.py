@@ -84,9 +84,10 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
     occluders = ()
     try:
         if wall.occluders is not None:
-            from .labelme import read_occluders
+            from .labelme import annotation_size, read_occluders
 
             occluders = read_occluders(wall.occluders)
+            kwargs["annotation_size"] = annotation_size(wall.occluders)
         config = CalibrateConfig(
             corners_px=wall.corners_px, focal_px=wall.focal_px, occluders=occluders, **kwargs, **known
         )

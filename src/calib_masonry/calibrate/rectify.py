@@ -140,6 +140,9 @@ class CalibrateConfig:
     max_relative_sigma: float = MAX_RELATIVE_SIGMA
     force: bool = False
     occluders: tuple = ()
+    # (width, height) px of the image the corners or occluders were drawn on (a LabelMe file's
+    # imageWidth, imageHeight), checked against the photo's
+    annotation_size: tuple[int, int] | None = None
     fit_distortion: bool = True
     lens_profile: bool = True
     detect: DetectConfig = field(default_factory=DetectConfig)
@@ -313,6 +316,12 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         photo = read_photo(photo)
     w, h = photo.size
     diag = math.hypot(w, h)
+    if config.annotation_size is not None and tuple(int(v) for v in config.annotation_size) != (w, h):
+        aw, ah = (int(v) for v in config.annotation_size)
+        raise InputError(
+            f"{photo.path}: the LabelMe annotation was drawn on a {aw} x {ah} px image, but this photo is {w} x {h} px "
+            "(a resized or rotated copy?); draw the outline and occluders on this photo itself"
+        )
     focal, focal_source = config.focal_px, "--focal-px"
     if focal is None and photo.focal_px is not None:
         focal, focal_source = photo.focal_px, "EXIF"

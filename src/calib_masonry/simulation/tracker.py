@@ -54,6 +54,7 @@ class CrackTracker:
         time_s: float,
         *,
         settings: ContactSettings | None = None,
+        record_vibration: bool = False,
     ) -> None:
         # the sparse Cholesky (cvxopt's CHOLMOD) is imported here, on the thread that builds the
         # tracker, not first where its steps may run (a thread of their own beside Bullet's): two
@@ -100,6 +101,8 @@ class CrackTracker:
         self.history: dict[str, list[float]] = {"time_s": [], "roof_drift_m": [], "base_shear_n": [], "first_mode": []}
         # every body's elastic displacement (B, 6: m, rad) about the weight's equilibrium at the end
         # of each step (a frame), and its time since t0: what an engine's held bricks may follow
+        # (recorded where asked: only Bullet's pass after the verdict's reads it)
+        self.record_vibration = record_vibration
         self.frame_u: list[tuple[float, np.ndarray]] = []
         self._u_static: np.ndarray | None = None
         if scene.motion is not None and scene.solver.dynamics and n:
@@ -203,7 +206,7 @@ class CrackTracker:
                 self._next_check += 1
             if peak is not None:
                 self.max_utilisation = peak  # the largest of this frame's checks
-            if self.elastic is not None and out:
+            if self.elastic is not None and out and self.record_vibration:
                 if self._u_static is None:  # the first check: the equilibrium under the weight
                     self._u_static = self.elastic.u.copy()
                 u = (self.elastic.u - self._u_static).reshape(-1, 6).astype(np.float32)

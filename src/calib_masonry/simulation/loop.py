@@ -31,6 +31,12 @@ __all__ = ["Engine", "RunOutput", "StillEngine", "drain", "gravity_per_frame", "
 T = TypeVar("T")
 
 
+#: what a run's frames show (:attr:`RunOutput.frames_of`, summary.json ``engine``): Bullet's poses,
+#: the verdict's pieces (no Bullet), or the verdict's pieces on kinematic bricks until a piece
+#: falls and Bullet's after (:func:`_follow`)
+BULLET_FRAMES, PIECES_FRAMES, PIECES_THEN_BULLET_FRAMES = "bullet", "pieces", "pieces, then bullet"
+
+
 @dataclass(frozen=True)
 class RunOutput:
     """Poses at every frame (frame 0 is the initial state), in the frame that moves with the ground:
@@ -58,7 +64,7 @@ class RunOutput:
     pieces: object | None = None
     # what the poses are: Bullet's ("bullet"), the verdict's pieces' in a run without it ("pieces"),
     # or those on kinematic bricks until a piece falls and Bullet's then ("pieces, then bullet": _follow)
-    frames_of: str = "bullet"
+    frames_of: str = "bullet"  # FRAMES_OF: "bullet", "pieces" or "pieces, then bullet"
     # the velocities (B, 6) the engine set each body free with (the vibration's), NaN rows for a body
     # set free from rest or never
     freed_velocity: np.ndarray | None = None
@@ -529,7 +535,7 @@ def steps(
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
         vibration=_vibration(tracker),
         pieces=pieces,
-        frames_of="bullet" if bullet else "pieces",
+        frames_of=BULLET_FRAMES if bullet else PIECES_FRAMES,
         freed_velocity=started,
     )
 
@@ -626,7 +632,7 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
         plate=plate,
         seconds_build=first.seconds_build + seconds_build,
         seconds_stepping=first.seconds_stepping + seconds,
-        frames_of="pieces, then bullet",
+        frames_of=PIECES_THEN_BULLET_FRAMES,
     )
 
 

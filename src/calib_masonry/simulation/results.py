@@ -25,7 +25,7 @@ import numpy as np
 
 from .ground_motion import G
 from .joints import FAILURE_MODES
-from .loop import RunOutput
+from .loop import BULLET_FRAMES, PIECES_FRAMES, RunOutput
 from .scene import ONSET_DRIFT, Scene, grounded_bodies, rotations, runaway_m, structure_height
 
 ONSET_WINDOW_S = 0.2  # ... measured over this window
@@ -405,7 +405,7 @@ class _FramePainter:
         # no further, so its bricks stay where it fell, drawn grey from that frame on
         self.fallen_at = np.full(len(scene.bodies), np.iinfo(np.int64).max)
         p = getattr(out, "pieces", None)
-        if getattr(out, "frames_of", "bullet") == "pieces" and p is not None and p.fallen.any():
+        if getattr(out, "frames_of", BULLET_FRAMES) == PIECES_FRAMES and p is not None and p.fallen.any():
             start = min(scene.solver.warmup_frames, len(out.time) - 1)
             d = p.displacement_m
             moving = np.any(d != d[-1], axis=2)  # (T, B): not yet where it ends

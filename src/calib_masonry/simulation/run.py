@@ -293,6 +293,8 @@ def _dynamics_summary(scene: Scene, out) -> dict:
             else "quasi-static (--quasi-static), or no body is joined to the ground"
         )
         return {"elastic": False, "note": why, "first_period_s": _first_period(scene)}
+    from .loop import PIECES_THEN_BULLET_FRAMES
+
     drift, shear = el["roof_drift_m"], el["base_shear_n"]
     return {
         "elastic": True,
@@ -301,7 +303,7 @@ def _dynamics_summary(scene: Scene, out) -> dict:
         # whether the frames show it: Bullet's held bricks follow the vibration where Bullet plays
         # the verdict's pieces (loop._follow); otherwise Bullet holds them rigid
         "frames": "the held bricks follow the vibration (about the weight's equilibrium)"
-        if out.frames_of == "pieces, then bullet"
+        if out.frames_of == PIECES_THEN_BULLET_FRAMES
         else "the held bricks stand rigid: the drift below is the vibration's, not the poses'",
         "first_period_s": el["first_period_s"],
         "damping_ratio": el["damping_ratio"],

@@ -537,3 +537,20 @@ def test_an_annotation_drawn_on_another_size_of_the_photo_is_refused(tmp_path, c
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{w // 2} x {h // 2} px image" in err and f"{w} x {h} px" in err
     assert not out.exists()
+
+
+def test_a_photo_wall_without_a_scale_is_refused_in_the_structure_files_words(tmp_path, capsys):
+    """build of a photo wall with no W, H or other scale: refused in one line (exit 2, nothing
+    written) that names the [[wall]] keys that pin the scale. It named rectify's flags
+    (--known-width, --camera-height) and --force, which a structure file has not."""
+    from calib_masonry.cli import main
+
+    (tmp_path / "wall.jpg").write_bytes((REAL / TRUTH[0]["photo"]).read_bytes())
+    (tmp_path / "s.toml").write_text(
+        '[structure]\nname = "lab"\nthickness_m = 0.2\nclosed = false\n'
+        '[[wall]]\nname = "wall"\nimage = "wall.jpg"\ntheta_deg = 0\n'
+    )
+    assert main(["build", str(tmp_path / "s.toml"), "--out", str(tmp_path / "model")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "eye-height prior" in err and not (tmp_path / "model").exists()
+    assert "width_m" in err and "camera_height_m" in err and "known_length = [" in err and "--" not in err

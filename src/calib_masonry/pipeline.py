@@ -60,6 +60,34 @@ class PhotoWall:
     occluders_ortho: tuple = ()  # the occluders in the orthophoto's pixels
 
 
+#: rectify's flags and the [[wall]] keys that say the same in a structure file, for the advice of
+#: a photo wall's calibration in build (longest first: a flag's name may begin another's)
+_WALL_KEYS = (
+    ("--known-length x1,y1,x2,y2,M", "known_length = [x1, y1, x2, y2, M]"),
+    ("--corners x1,y1,...,x4,y4", "corners_px = [x1, y1, ..., x4, y4]"),
+    ("--course-height M", "course_height_m = M"),
+    ("--known-height", "height_m"),
+    ("--known-width", "width_m"),
+    ("--course-height", "course_height_m"),
+    ("--camera-height", "camera_height_m"),
+    ("--focal-px", "focal_px"),
+    ("--occluders", "occluders"),
+    ("--corners", "corners_px"),
+)
+
+
+def as_wall_keys(message: str) -> str:
+    """A calibration's advice (rectify's flags) in a structure file's [[wall]] keys; ``--force``,
+    which build has not, left out. A build from a photo with no scale advised --known-width and
+    --force."""
+    import re
+
+    said = re.sub(r",? or use --force to keep it anyway", "", message)
+    for flag, key in _WALL_KEYS:
+        said = said.replace(flag, key)
+    return said if said == message else f"{said} (keys of the wall's [[wall]] table)"
+
+
 def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) -> PhotoWall:
     """Calibrate a wall's photo (``photo``, or read from ``wall.image``), rectify it onto the wall
     (W x H) and segment its masonry units (:func:`calib_masonry.wall2d.segment.segment_wall`),
@@ -94,7 +122,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
         raise_if_stopped()
         cal = calibrate_photo(photo if photo is not None else wall.image, config)
     except CalibMasonryError as exc:
-        raise type(exc)(f"wall '{wall.name}': {exc}") from None
+        raise type(exc)(f"wall '{wall.name}': {as_wall_keys(str(exc))}") from None
     res = cal.result
     width = res.width_m if math.isnan(wall.width_m) else wall.width_m
     height = res.height_m if math.isnan(wall.height_m) else wall.height_m

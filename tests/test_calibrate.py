@@ -971,6 +971,41 @@ def test_footprint_of_a_structure_of_photos_with_typed_widths(photo_set, tmp_pat
     assert "gap" in capsys.readouterr().out
 
 
+def test_footprint_leaves_a_photo_walls_occluders_out_as_build_does(photo_set, tmp_path, monkeypatch):
+    """A photo wall's ``occluders`` in the structure file reach footprint's calibration of it (they
+    were left to build alone: footprint fitted the wall with the scaffolding in it)."""
+    from PIL import Image
+
+    import calib_masonry.calibrate.rectify as rectify
+
+    data, truth = photo_set
+    t0, t1 = truth["photos"][:2]
+    occ = [[[10, 10], [60, 10], [60, 60], [10, 60]]]
+    (tmp_path / "occ.json").write_text(json.dumps(occ))
+    Image.fromarray(np.full((20, 30), 255, np.uint8)).save(tmp_path / "m.png")
+    third = math.hypot(2.4, 2.0)
+    (tmp_path / "s.toml").write_text(
+        '[structure]\nname = "tri"\nthickness_m = 0.2\nclosed = true\n'
+        f'[[wall]]\nname = "a"\nimage = "{(data / t0["photo"]).as_posix()}"\nwidth_m = 2.4\ntheta_deg = 0\n'
+        'occluders = "occ.json"\n'
+        f'[[wall]]\nname = "b"\nimage = "{(data / t1["photo"]).as_posix()}"\nwidth_m = 2.0\ntheta_deg = 90\n'
+        f'[[wall]]\nname = "c"\nmask = "m.png"\nwidth_m = {third:.6f}\nheight_m = 2.0\n'
+        f"theta_deg = {math.degrees(math.atan2(-2.0, -2.4)) % 360:.6f}\n"
+    )
+    seen = []
+    real = rectify.calibrate_photo
+
+    def spy(photo, config):
+        seen.append(len(config.occluders))
+        return real(photo, config)
+
+    monkeypatch.setattr(rectify, "calibrate_photo", spy)
+    from calib_masonry.calibrate.footprint import footprint_to_folder
+
+    footprint_to_folder([tmp_path / "s.toml"], tmp_path / "fp", figure=False)
+    assert seen == [1, 0]
+
+
 def test_footprints_structure_file_names_its_corner_photos_wherever_it_ran(photo_set, tmp_path, monkeypatch):
     """footprint writes a structure.toml to build from: its corner photos were written as the input
     named them, relative to where the command ran, and were then looked for beside the new file

@@ -196,6 +196,14 @@ def _estimates_from_structure(path, config, heading_sigma_deg, theta_sigma_deg):
             cfg = replace(cfg, corners_px=wall.corners_px)
         if wall.focal_px is not None:
             cfg = replace(cfg, focal_px=wall.focal_px)
+        if wall.occluders is not None:  # left out of the outline and the fit, as build leaves them
+            from ..labelme import annotation_size, read_occluders
+
+            cfg = replace(
+                cfg,
+                occluders=tuple(cfg.occluders) + tuple(read_occluders(wall.occluders)),
+                annotation_size=annotation_size(wall.occluders),
+            )
         cal = calibrate_photo(wall.image, cfg)
         res = cal.result
         if cal.photo.heading_deg is not None:

@@ -79,6 +79,16 @@ def test_real_photo_segmentation_finds_the_stones_not_the_speckle(real_calibrati
     assert 25 <= s["count"] <= 45 and s["max_area_m2"] < 0.1 and s["warning"] == ""
 
 
+def test_with_the_width_measured_the_advice_is_about_the_corners_not_the_scale(real_calibrations):
+    """With --known-width the laboratory photos' H is known to +-3 %: the note said "W and H are
+    known only to ..." and told the user to pin the scale with --known-width, which was given. It
+    names the loose side and what fixes it: the corners (clicked, or the outline corrected)."""
+    for cal in real_calibrations.values():
+        advice = cal.advice()
+        assert advice.startswith("H is known only to") and "--known-width" not in advice
+        assert "--corners" in advice and "--labelme" in advice and "known width" in advice
+
+
 def test_a_segmentation_too_coarse_for_the_joints_says_so(real_calibrations):
     """An orthophoto at 100 px/m (an 8 mm joint 0.8 px): the stones come out as a dozen large
     pieces (12-15 on the laboratory walls, for 30-40), and the summary's warning says the

@@ -258,6 +258,25 @@ class PhotoCalibration:
         rel = self.relative_sigma()
         if not rel > SCALE_ADVICE_RELATIVE_SIGMA:
             return ""
+        measured = (
+            ScaleSource.KNOWN_WIDTH,
+            ScaleSource.KNOWN_HEIGHT,
+            ScaleSource.KNOWN_LENGTH,
+            ScaleSource.COURSE_HEIGHT,
+        )
+        if self.scale_source in measured:
+            # the scale is measured: what is loose is the other side, from where the corners are (the
+            # laboratory photos' H at +-3 % with the width given were told to add --known-width)
+            loose = [
+                name
+                for name, key in (("W", "width_m"), ("H", "height_m"))
+                if self.result.sigma(key) / self.result.value(key) > SCALE_ADVICE_RELATIVE_SIGMA
+            ]
+            return (
+                f"{' and '.join(loose)} {'is' if len(loose) == 1 else 'are'} known only to +-{rel:.1%} (1 sigma) from "
+                f"this photo: the scale is the {self.scale_source}, the rest rests on where its corners are; click "
+                f"them with {CORNERS_FLAG} (or correct the outline in photo.json and pass it with --labelme)"
+            )
         return (
             f"W and H are known only to +-{rel:.1%} (1 sigma) from this photo (scale from the {self.scale_source}); "
             f"pin the scale with {SCALE_FLAGS}"

@@ -412,12 +412,10 @@ class BlenderEngine:
         self.pending: list[tuple[int, np.ndarray]] = []
         self.kicked: set[int] = set()  # bodies moved a frame kinematic before turning dynamic
         # the moves written on kinematic bodies, keyed in the saved file: a body's place before its
-        # first move (body -> (Blender frame, pose)), the set-free kicks (body -> {Blender frame:
-        # (location, rotation quaternion)}), and place()'s moves as arrays (Blender frame, bodies
+        # first move (body -> (Blender frame, pose)), and every move as arrays (Blender frame, bodies
         # (n,), poses (n, 7)): a dict of tuples for every held brick at every frame of the paper
         # example's quake (the vibration played) was hundreds of MB of Python objects
         self.rest: dict[int, tuple[int, tuple]] = {}
-        self.keys: dict[int, dict[int, tuple]] = {}
         self.placed: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.frame = 0
 
@@ -453,16 +451,6 @@ class BlenderEngine:
             live.enabled = False
             live.disable_collisions = False  # the cracked joint's bricks bear on each other
 
-    def _move(self, j: int, location, quaternion) -> None:
-        """Move kinematic body ``j`` to ``location``, ``quaternion`` (w, x, y, z) over the coming
-        step: its *original* object written, which Blender re-evaluates into the live body (and
-        Bullet moves it at the velocity of that step); the move is keyed in the saved file."""
-        ob = self.objects[j]
-        self._rest(j)
-        ob.location = tuple(float(x) for x in location)
-        ob.rotation_quaternion = tuple(float(x) for x in quaternion)
-        self.keys.setdefault(j, {})[self.frame + 2] = (tuple(ob.location), tuple(ob.rotation_quaternion))
-
     def _rest(self, j: int) -> None:
         """Record where body ``j`` stood until now, before its first move."""
         if j not in self.rest:
@@ -471,7 +459,9 @@ class BlenderEngine:
 
     def place(self, bodies: np.ndarray, locations: np.ndarray, quaternions: np.ndarray) -> None:
         """Move the kinematic ``bodies`` to ``locations`` ``(n, 3)`` and ``quaternions`` ``(n, 4)``
-        (w, x, y, z) over the coming step (a motion computed elsewhere, played by Bullet)."""
+        (w, x, y, z) over the coming step (a motion computed elsewhere, played by Bullet): their
+        *original* objects written, which Blender re-evaluates into the live bodies (and Bullet
+        moves them at the velocity of that step); the moves are keyed in the saved file."""
         bodies = np.asarray(bodies, dtype=np.int64)
         poses = np.concatenate([np.asarray(locations, np.float64), np.asarray(quaternions, np.float64)], axis=1)
         for j, pose in zip(bodies.tolist(), poses.tolist()):
@@ -489,31 +479,30 @@ class BlenderEngine:
             # one frame kinematic at the velocity, then dynamic (the module docstring)
             from mathutils import Quaternion, Vector
 
+            locations, quaternions = [], []
             for j, v in zip(bodies, np.asarray(velocity, dtype=np.float64)):
                 ob = self.objects[j]
                 self.kicked.add(int(j))
-                location = Vector(tuple(ob.location)) + Vector(tuple(v[:3] * self.dt))
+                locations.append(tuple(Vector(tuple(ob.location)) + Vector(tuple(v[:3] * self.dt))))
                 q = Quaternion(tuple(ob.rotation_quaternion))
                 turn = v[3:] * self.dt
                 angle = float(np.linalg.norm(turn))
                 if angle > 0.0:
                     q = (Quaternion(tuple(turn / angle), angle) @ q).normalized()
-                self._move(int(j), location, q)
+                quaternions.append(tuple(q))
+            self.place(np.asarray(bodies), np.array(locations, np.float64), np.array(quaternions, np.float64))
             self.pending.append((self.frame, np.asarray(bodies)))
         for k in bonds:
             self.constraints[k].evaluated_get(self.depsgraph).rigid_body_constraint.enabled = True
 
     def _moves(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """Every moved body's keys: body -> (Blender frames (k,), poses (k, 7)), in frame order
-        (its rest, place()'s moves, the set-free kicks; a later record of a frame wins)."""
+        (its rest, then its moves; a later record of a frame wins)."""
         frames, bodies, poses = [], [], []
         for j, (f, pose) in self.rest.items():
             frames.append([f]), bodies.append([j]), poses.append([pose])
         for f, b, p in self.placed:
             frames.append(np.full(len(b), f)), bodies.append(b), poses.append(p)
-        for j, keys in self.keys.items():
-            for f, (loc, q) in keys.items():
-                frames.append([f]), bodies.append([j]), poses.append([(*loc, *q)])
         if not frames:
             return {}
         f = np.concatenate([np.asarray(x, dtype=np.int64) for x in frames])

@@ -64,7 +64,7 @@ class RunOutput:
     pieces: object | None = None
     # what the poses are: Bullet's ("bullet"), the verdict's pieces' in a run without it ("pieces"),
     # or those on kinematic bricks until a piece falls and Bullet's then ("pieces, then bullet": _follow)
-    frames_of: str = "bullet"  # FRAMES_OF: "bullet", "pieces" or "pieces, then bullet"
+    frames_of: str = BULLET_FRAMES
     # the velocities (B, 6) the engine set each body free with (the vibration's), NaN rows for a body
     # set free from rest or never
     freed_velocity: np.ndarray | None = None

@@ -92,33 +92,13 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
     """Calibrate a wall's photo (``photo``, or read from ``wall.image``), rectify it onto the wall
     (W x H) and segment its masonry units (:func:`calib_masonry.wall2d.segment.segment_wall`),
     leaving out the wall's occluders."""
-    from .calibrate.rectify import CalibrateConfig, calibrate_photo, rectify, valid_ortho
+    from .calibrate.rectify import calibrate_photo, rectify, valid_ortho, wall_config
     from .errors import CalibMasonryError
     from .process import raise_if_stopped
     from .wall2d.segment import segment_wall
 
-    kwargs = {}
-    if wall.camera_height_m is not None:
-        kwargs.update(camera_height_m=wall.camera_height_m, camera_height_sigma_m=0.02)
-    known = {}
-    if not math.isnan(wall.width_m):
-        known["known_width_m"] = wall.width_m
-    elif not math.isnan(wall.height_m):
-        known["known_height_m"] = wall.height_m
-    elif wall.known_length is not None:
-        known["known_length"] = wall.known_length
-    elif wall.course_height_m is not None:
-        known["course_height_m"] = wall.course_height_m
-    occluders = ()
     try:
-        if wall.occluders is not None:
-            from .labelme import annotation_size, read_occluders
-
-            occluders = read_occluders(wall.occluders)
-            kwargs["annotation_size"] = annotation_size(wall.occluders)
-        config = CalibrateConfig(
-            corners_px=wall.corners_px, focal_px=wall.focal_px, occluders=occluders, **kwargs, **known
-        )
+        config = wall_config(wall)
         raise_if_stopped()
         cal = calibrate_photo(photo if photo is not None else wall.image, config)
     except CalibMasonryError as exc:

@@ -166,7 +166,7 @@ def fit_footprint(
 def _estimates_from_structure(path, config, heading_sigma_deg, theta_sigma_deg):
     from ..spec import load_structure
     from .camera import theta_from_heading
-    from .rectify import calibrate_photo
+    from .rectify import calibrate_photo, wall_config
 
     spec = load_structure(path)
     rows = []
@@ -176,34 +176,10 @@ def _estimates_from_structure(path, config, heading_sigma_deg, theta_sigma_deg):
                 raise InputError(f"{path}: wall '{wall.name}' has neither a photo nor width_m; give one")
             rows.append((wall.name, wall.width_m, 0.005, wall.theta_rad, math.radians(theta_sigma_deg), "typed"))
             continue
-        cfg = config
-        # a measured side scales the photo, as build's does (on the eye-height prior alone every
-        # photo of the README's example was refused: W uncertain by 31 %); no side given, the
-        # photo's own scale (a camera height, a measured length, the courses) or the command's
-        given_scale = cfg.known_width_m, cfg.known_height_m, cfg.known_length, cfg.course_height_m
-        if all(v is None for v in given_scale):
-            if not math.isnan(wall.width_m):
-                cfg = replace(cfg, known_width_m=wall.width_m)
-            elif not math.isnan(wall.height_m):
-                cfg = replace(cfg, known_height_m=wall.height_m)
-            elif wall.known_length is not None:
-                cfg = replace(cfg, known_length=wall.known_length)
-            elif wall.course_height_m is not None:
-                cfg = replace(cfg, course_height_m=wall.course_height_m)
-        if wall.camera_height_m is not None:
-            cfg = replace(cfg, camera_height_m=wall.camera_height_m, camera_height_sigma_m=0.02)
-        if wall.corners_px is not None:
-            cfg = replace(cfg, corners_px=wall.corners_px)
-        if wall.focal_px is not None:
-            cfg = replace(cfg, focal_px=wall.focal_px)
-        if wall.occluders is not None:  # left out of the outline and the fit, as build leaves them
-            from ..labelme import annotation_size, read_occluders
-
-            cfg = replace(
-                cfg,
-                occluders=tuple(cfg.occluders) + tuple(read_occluders(wall.occluders)),
-                annotation_size=annotation_size(wall.occluders),
-            )
+        # the wall's own scale where the command gives none (its typed W or H, as build's: on the
+        # eye-height prior alone every photo of the README's example was refused, W +-31 %), its
+        # camera height, corners, focal length and occluders
+        cfg = wall_config(wall, config)
         cal = calibrate_photo(wall.image, cfg)
         res = cal.result
         if cal.photo.heading_deg is not None:

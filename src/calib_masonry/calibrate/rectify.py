@@ -328,6 +328,39 @@ def _refine_clicked(rgb: np.ndarray, corners: np.ndarray, tolerance: float):
     return snapped, np.maximum(sigma, 0.5), True
 
 
+def wall_config(wall, base: CalibrateConfig | None = None) -> CalibrateConfig:
+    """What a photo wall's [[wall]] table (a :class:`~calib_masonry.spec.WallSpec`) tells its
+    calibration, on top of ``base`` (a command's flags; default none): its scale where ``base``
+    gives none (its W, else its H, else ``known_length``, else ``course_height_m``), its camera
+    height (sigma 2 cm), clicked corners, focal length and occluders (and the size they were drawn
+    on). build and footprint each calibrate a photo wall so."""
+    cfg = base or CalibrateConfig()
+    if all(v is None for v in (cfg.known_width_m, cfg.known_height_m, cfg.known_length, cfg.course_height_m)):
+        if not math.isnan(wall.width_m):
+            cfg = replace(cfg, known_width_m=wall.width_m)
+        elif not math.isnan(wall.height_m):
+            cfg = replace(cfg, known_height_m=wall.height_m)
+        elif wall.known_length is not None:
+            cfg = replace(cfg, known_length=wall.known_length)
+        elif wall.course_height_m is not None:
+            cfg = replace(cfg, course_height_m=wall.course_height_m)
+    if wall.camera_height_m is not None:
+        cfg = replace(cfg, camera_height_m=wall.camera_height_m, camera_height_sigma_m=0.02)
+    if wall.corners_px is not None:
+        cfg = replace(cfg, corners_px=wall.corners_px)
+    if wall.focal_px is not None:
+        cfg = replace(cfg, focal_px=wall.focal_px)
+    if wall.occluders is not None:
+        from ..labelme import annotation_size, read_occluders
+
+        cfg = replace(
+            cfg,
+            occluders=tuple(cfg.occluders) + tuple(read_occluders(wall.occluders)),
+            annotation_size=annotation_size(wall.occluders),
+        )
+    return cfg
+
+
 def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = CalibrateConfig()) -> PhotoCalibration:
     """Fit the camera, the lens and the wall to one photo; refuse a fit whose residual is above
     ``max_rms_px`` or whose W or H sigma is above ``max_relative_sigma`` (unless ``force``)."""

@@ -141,6 +141,26 @@ def _opened_image(path: Path, field: str, hint: str, data: bytes | None = None) 
         yield im
 
 
+def read_mask_labels(path: str | Path, *, field: str = "mask") -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`read_mask`'s mask and, for a LabelMe ``.json``, its pieces labelled as drawn, each its
+    own where two touch (:func:`calib_masonry.labelme.labelme_labels`), from one reading of the file;
+    None for a mask image. Traced as a mask, the one-pixel lines between touching pieces were filled
+    as holes and the pieces merged (a real wall's 36 as 24)."""
+    path = Path(path)
+    if path.suffix.lower() != ".json":
+        return read_mask(path, field=field), None
+    from .labelme import labelme_labels, labelme_mask, read_labelme
+
+    doc = read_labelme(path, field_name=field)
+    if not doc.pieces:
+        raise InputError(
+            f"{field} {path}: the LabelMe file has no piece polygons (labels piece, stone or brick); "
+            "draw the masonry units"
+        )
+    labels = labelme_labels(doc)
+    return labelme_mask(doc, labels), labels
+
+
 def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float = 0.05) -> np.ndarray:
     """Read a binary-like mask (bricks white, mortar black) as a boolean array ``(rows, cols)``.
 
@@ -151,15 +171,7 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
     """
     path = Path(path)
     if path.suffix.lower() == ".json":
-        from .labelme import labelme_mask, read_labelme
-
-        doc = read_labelme(path, field_name=field)
-        if not doc.pieces:
-            raise InputError(
-                f"{field} {path}: the LabelMe file has no piece polygons (labels piece, stone or brick); "
-                "draw the masonry units"
-            )
-        return labelme_mask(doc)
+        return read_mask_labels(path, field=field)[0]
     with _opened_image(path, field, "give a PNG or TIFF mask") as im:
         arr = np.asarray(im.convert("RGB") if im.mode in ("P", "PA") else im)
     # computed in the file's own integer type where possible: a few bytes per pixel, not 8-24 bytes

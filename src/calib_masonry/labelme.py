@@ -175,10 +175,11 @@ def labelme_labels(doc: LabelMe) -> np.ndarray:
     return labels
 
 
-def labelme_mask(doc: LabelMe) -> np.ndarray:
+def labelme_mask(doc: LabelMe, labels: np.ndarray | None = None) -> np.ndarray:
     """The pieces as a brick mask ``(rows, cols)`` (bricks True): every piece's pixels, less those
-    that touch another piece (4-neighbours), so that two pieces drawn edge to edge stay two."""
-    labels = labelme_labels(doc)
+    that touch another piece (4-neighbours), so that two pieces drawn edge to edge stay two.
+    ``labels``: the document's :func:`labelme_labels`, where they are at hand."""
+    labels = labelme_labels(doc) if labels is None else labels
     edge = np.zeros(labels.shape, dtype=bool)
     below, above = labels[1:], labels[:-1]
     edge[1:] |= (below != above) & (below > 0) & (above > 0)  # the lower of two pieces one above the other

@@ -15,7 +15,7 @@ from .build3d.assemble import Structure3D, WallPolygons, assemble
 from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
-from .io import Photo, read_mask, to_uint8, warn
+from .io import Photo, read_mask_labels, to_uint8, warn
 from .preload import preload
 from .progress import progress as _progress
 from .spec import StructureSpec, WallSpec
@@ -181,14 +181,8 @@ def trace_wall(
     if mask is None:
         if wall.mask is None:
             raise InputError(f"wall '{wall.name}': no mask given; add mask = 'PATH' to its [[wall]] table")
-        mask = read_mask(wall.mask, field=f"wall '{wall.name}' mask")
-        if labels is None and wall.mask.suffix.lower() == ".json":
-            # a LabelMe file's pieces as drawn, each its own: as a mask, the one-pixel lines between
-            # stones that touch were filled as holes and the stones merged (a real wall's 36 pieces,
-            # as rectify wrote them, built as 24)
-            from .labelme import labelme_labels, read_labelme
-
-            labels = labelme_labels(read_labelme(wall.mask, field_name=f"wall '{wall.name}' mask"))
+        mask, drawn = read_mask_labels(wall.mask, field=f"wall '{wall.name}' mask")
+        labels = drawn if labels is None else labels  # a LabelMe file's pieces, each its own
     mismatch = aspect_mismatch(mask.shape, wall.width_m, wall.height_m)
     if mismatch > spec.aspect_tolerance:
         rows, cols = mask.shape

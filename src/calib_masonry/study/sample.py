@@ -133,9 +133,9 @@ def _labelme_labels(path: Path) -> np.ndarray | None:
     """A LabelMe mask's pieces, labelled (None for a mask image)."""
     if Path(path).suffix.lower() != ".json":
         return None
-    from ..labelme import labelme_labels, read_labelme
+    from ..io import read_mask_labels
 
-    return labelme_labels(read_labelme(path, field_name=f"mask {path}"))
+    return read_mask_labels(path, field=f"mask {path}")[1]
 
 
 @functools.lru_cache(maxsize=32)

@@ -369,23 +369,16 @@ def trace_to_file(
     beside it unless ``figure`` names another path). Returns the trace, its seconds and the figure."""
     import time
 
-    from ..io import check_not_input, check_output, read_mask, staged_file, write_json
+    from ..io import check_not_input, check_output, read_mask_labels, staged_file, write_json
 
     out = check_output(out, folder=False)
     check_not_input(out, [mask_path])
     given = figure is not None
     figure = check_output(Path(figure) if given else out.with_suffix(".png"), folder=False, flag="--figure")
     check_not_input(figure, [mask_path], flag="--figure" if given else f"--out's figure {figure.name}")
-    mask = read_mask(mask_path, field="MASK")
+    mask, labels = read_mask_labels(mask_path, field="MASK")  # a LabelMe file's pieces, each its own
     t0 = time.perf_counter()
-    if Path(mask_path).suffix.lower() == ".json":
-        # a LabelMe file's pieces as drawn, each its own (as build reads them): as a mask, the
-        # one-pixel lines between pieces that touch were filled as holes (36 stones traced as 24)
-        from ..labelme import labelme_labels, read_labelme
-
-        result = trace_labels(labelme_labels(read_labelme(mask_path, field_name="MASK")), config)
-    else:
-        result = trace_mask(mask, config)
+    result = trace_mask(mask, config) if labels is None else trace_labels(labels, config)
     if not result.bricks:
         raise InputError(f"MASK {mask_path}: no bricks found (no white regions); bricks must be white on black")
     seconds = time.perf_counter() - t0

@@ -424,12 +424,20 @@ def _structure_defaults(st, path: Path) -> dict:
         "thickness_m": t_default,
         "vertices": n_default,
         "target_dice": d_default,
-        "polygons_given": n_default is not None or d_default is not None,
         "closed": closed,
         "refine": _flag(st, "refine", where, False),
         "photo_px_per_m": photo_ppm,
         "aspect_tolerance": aspect_tol,
     }
+
+
+def _numbers(value, count: int) -> bool:
+    """Whether a TOML value is a list of ``count`` numbers (not booleans)."""
+    return (
+        isinstance(value, list)
+        and len(value) == count
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    )
 
 
 def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_sources: bool) -> WallSpec:
@@ -496,20 +504,11 @@ def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_so
         raise InputError(f"{where}: focal_px = {focal} must be > 0 (pixels)")
     corners = w.get("corners_px")
     if corners is not None:
-        if (
-            not isinstance(corners, list)
-            or len(corners) != 8
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in corners)
-        ):
+        if not _numbers(corners, 8):
             raise InputError(f"{where}: corners_px must be 8 numbers [x1, y1, ..., x4, y4] (pixels), got {corners!r}")
         corners = tuple(float(v) for v in corners)
     known_length = w.get("known_length")
-    if known_length is not None and (
-        not isinstance(known_length, list)
-        or len(known_length) != 5
-        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in known_length)
-        or not known_length[4] > 0
-    ):
+    if known_length is not None and not (_numbers(known_length, 5) and known_length[4] > 0):
         raise InputError(
             f"{where}: known_length must be [x1, y1, x2, y2, metres] (two photo points and their measured distance "
             f"> 0), got {known_length!r}"
@@ -618,7 +617,10 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         name=defaults["name"],
         walls=tuple(walls),
         thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),
-        vertices=defaults["vertices"] if defaults["polygons_given"] else DEFAULT_VERTICES,
+        # neither given in [structure]: each wall took its own default; the structure says five
+        vertices=DEFAULT_VERTICES
+        if defaults["vertices"] is None and defaults["target_dice"] is None
+        else defaults["vertices"],
         target_dice=defaults["target_dice"],
         closed=defaults["closed"],
         aspect_tolerance=defaults["aspect_tolerance"],

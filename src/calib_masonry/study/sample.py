@@ -53,15 +53,19 @@ def _mask(path: Path, dilate_px: int) -> np.ndarray:
     return _dilated(read_mask(path, field=f"mask {path}"), dilate_px)
 
 
+def _disk(r: int) -> np.ndarray:
+    """A disk of radius ``r`` px, the structuring element of a mask input's dilation."""
+    y, x = np.mgrid[-r : r + 1, -r : r + 1]
+    return x * x + y * y <= r * r
+
+
 def _dilated(mask: np.ndarray, dilate_px: int) -> np.ndarray:
     """The bricks (True) dilated by ``dilate_px`` pixels (eroded if negative), a disk's reach."""
     if dilate_px == 0:
         return mask
     from scipy import ndimage
 
-    r = abs(int(dilate_px))
-    y, x = np.mgrid[-r : r + 1, -r : r + 1]
-    disk = x * x + y * y <= r * r
+    disk = _disk(abs(int(dilate_px)))
     op = ndimage.binary_dilation if dilate_px > 0 else ndimage.binary_erosion
     return op(mask.astype(bool), structure=disk)
 
@@ -77,8 +81,7 @@ def _dilated_labels(labels: np.ndarray, dilate_px: int) -> np.ndarray:
 
     r = abs(int(dilate_px))
     if dilate_px < 0:
-        y, x = np.mgrid[-r : r + 1, -r : r + 1]
-        disk = x * x + y * y <= r * r
+        disk = _disk(r)
         lo = ndimage.grey_erosion(labels, footprint=disk, mode="constant", cval=0)
         hi = ndimage.grey_dilation(labels, footprint=disk, mode="constant", cval=0)
         return np.where((lo == labels) & (hi == labels), labels, 0).astype(labels.dtype)

@@ -538,9 +538,16 @@ class _Pieces:
         self.fv = self.frame[:, :, 1].copy()
         self.I0inv = np.linalg.inv(self.I0) if n else np.zeros((0, 3, 3))
         self._count = 0
+        # the compiled step's copies, contiguous and of one type
+        self._sa = np.ascontiguousarray(self.sa, dtype=np.int64)
+        self._sb = np.ascontiguousarray(self.sb, dtype=np.int64)
+        self._p = np.ascontiguousarray(self.p, dtype=np.float64)
+        self._kc = np.ascontiguousarray(self.kc, dtype=np.float64)
+        self._cdamp = np.ascontiguousarray(self.cdamp, dtype=np.float64)
         # each corner's force on the bodies of the pieces on either side, and its lever from the
         # body's centroid (in the piece's frame): the loads on a piece's own joints (check_joints)
         self.o = self.off[self.cj, self.ck]
+        self._o = np.ascontiguousarray(self.o, dtype=np.float64)
         if self.settings.check_joints:
             m = self.model
             ba, bb = m.a[self.cj], m.b[self.cj]
@@ -611,6 +618,47 @@ class _Pieces:
         self.d[live] += dt * self.v[live]
         self._count += 1
         self.R[live] = _rotate(self.R[live], dt * self.w[live], exact=self._count % 64 == 0)
+
+    def advance_many(self, g: np.ndarray, dt: float) -> None:
+        """Steps of ``dt`` under the loads ``g`` (S, 3) per unit mass, one after the other: compiled
+        (simulation/_pieces_step.py) where no piece's joints are checked, :meth:`advance` each
+        otherwise (the check sums the contact forces on each body over the steps)."""
+        if self.n == 0 or len(g) == 0:
+            return
+        if self.settings.check_joints:
+            for row in g:
+                self.advance(row, dt)
+            return
+        from ._pieces_step import advance_steps
+
+        jc, kc = self.cj, self.ck
+        slip = np.ascontiguousarray(self.slip[jc, kc])
+        self._count = advance_steps(
+            np.ascontiguousarray(g, dtype=np.float64),
+            float(dt),
+            self._count,
+            self.R,
+            self.c,
+            self.d,
+            self.v,
+            self.w,
+            self.M,
+            self.I0,
+            self.I0inv,
+            self.alive,
+            self._sa,
+            self._sb,
+            self._p,
+            self.fu,
+            self.fv,
+            self.fn,
+            self._kc,
+            self._cdamp,
+            self._o,
+            slip,
+            self.friction,
+        )
+        self.slip[jc, kc] = slip
 
     # ---------------------------------------------------------------- a piece's own joints
     def _window(self) -> None:
@@ -1059,10 +1107,23 @@ def piece_motion(
             a = motion.mean_acceleration(grid) if motion is not None else np.zeros((n, 2))
             h = span / n
             split = None
-            for q in range(n):
-                g = gravity.copy()
-                g[:2] -= a[q]
-                state.advance(g, h)
+            loads = np.repeat(gravity[None], n, axis=0)
+            loads[:, :2] -= a[:n]
+            q = 0
+            while q < n:
+                # the steps up to the next at which the state is looked at: every 64th, a time
+                # asked, a check of the pieces' joints; made in one call
+                last = min(q | 63, n - 1)
+                if k_time < len(times_s):
+                    due = times_s[k_time] <= grid[q + 1 : last + 2] + 1e-12
+                    if due.any():
+                        last = q + int(np.argmax(due))
+                if state.settings.check_joints:
+                    due = grid[q + 1 : last + 2] >= next_check - 1e-12
+                    if due.any():
+                        last = q + int(np.argmax(due))
+                state.advance_many(loads[q : last + 1], h)
+                q = last
                 state.t = float(grid[q + 1])
                 if (q & 63) == 63:
                     state.check_fallen()
@@ -1078,6 +1139,7 @@ def piece_motion(
                         split = float(grid[q + 1])
                         steps += q + 1
                         break
+                q += 1
             if split is None:
                 steps += n
                 break

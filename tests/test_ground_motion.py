@@ -205,3 +205,82 @@ def test_a_record_not_at_rest_at_its_ends_is_warned_about_and_its_own_peak_kept(
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read_accelerogram(q)
+
+
+def _esm_file(path, values, *, dt=0.005, stream="HNE", units="cm/s^2", data_type="ACCELERATION", ndata=None):
+    """An ESM / ITACA ASCII record as the database writes it (DYNA 1.2: 64 header lines of KEY: value,
+    then one value a line)."""
+    head = {
+        "EVENT_NAME": "CENTRAL_ITALY",
+        "EVENT_ID": "EMSC-20161030_0000029",
+        "EVENT_DATE_YYYYMMDD": "20161030",
+        "EVENT_TIME_HHMMSS": "064017",
+        "EVENT_LATITUDE_DEGREE": "42.8320",
+        "EVENT_LONGITUDE_DEGREE": "13.1110",
+        "EVENT_DEPTH_KM": "9.2",
+        "MAGNITUDE_W": "6.5",
+        "MAGNITUDE_L": "",
+        "FOCAL_MECHANISM": "Normal faulting",
+        "NETWORK": "IT",
+        "STATION_CODE": "NRC",
+        "STATION_NAME": "NORCIA",
+        "STATION_LATITUDE_DEGREE": "42.792500",
+        "STATION_LONGITUDE_DEGREE": "13.096400",
+        "STATION_ELEVATION_M": "",
+        "VS30_M/S": "",
+        "SITE_CLASSIFICATION_EC8": "B*",
+        "EPICENTRAL_DISTANCE_KM": "4.6",
+        "DATE_TIME_FIRST_SAMPLE_YYYYMMDD_HHMMSS": "20161030_064008.000",
+        "DATE_TIME_FIRST_SAMPLE_PRECISION": "milliseconds",
+        "SAMPLING_INTERVAL_S": f"{dt:.6f}",
+        "NDATA": str(len(values) if ndata is None else ndata),
+        "DURATION_S": f"{len(values) * dt:.3f}",
+        "STREAM": stream,
+        "UNITS": units,
+        "INSTRUMENT": "HN",
+        "PGA_CM/S^2": f"{np.abs(values).max():.6f}",
+        "BASELINE_CORRECTION": "BASELINE REMOVED",
+        "FILTER_TYPE": "BUTTERWORTH",
+        "LOW_CUT_FREQUENCY_HZ": "0.100",
+        "HIGH_CUT_FREQUENCY_HZ": "30.000",
+        "HEADER_FORMAT": "DYNA 1.2",
+        "DATA_TYPE": data_type,
+        "PROCESSING": "manual (Paolucci et al., 2011)",
+        "DATA_TIMESTAMP_YYYYMMDD_HHMMSS": "20170119_115411.000",
+    }
+    lines = [f"{k}: {v}" for k, v in head.items()]
+    lines += [f"USER{k}:" for k in range(64 - len(lines))]
+    path.write_text("\n".join(lines + [f"{v:.6f}" for v in values]) + "\n")
+    return path
+
+
+def test_esm_record_in_cm_s2_and_its_two_components(tmp_path):
+    # the ESM / ITACA database's ASCII files, one a component: units from the header (cm/s^2), the
+    # second file the motion along Y; their time steps must agree
+    t = np.arange(0, 6, 0.005)
+    env = np.sin(np.pi * t / t[-1]) ** 2  # starts and ends at rest
+    east = 300.0 * env * np.sin(2 * np.pi * 1.2 * t)  # cm/s^2: 0.31 g
+    north = 150.0 * env * np.sin(2 * np.pi * 2.1 * t)
+    e = _esm_file(tmp_path / "IT.NRC..HNE.D.EMSC-20161030_0000029.ACC.MP.ASC", east)
+    n = _esm_file(tmp_path / "IT.NRC..HNN.D.EMSC-20161030_0000029.ACC.MP.ASC", north, stream="HNN")
+    one = read_accelerogram(e)
+    assert one.dt == pytest.approx(0.005) and one.pga == pytest.approx(3.0, rel=0.02)
+    assert np.all(one.displacement[:, 1] == 0)
+    both = read_accelerogram(e, path_y=n)
+    a = both.mean_acceleration(t[:-1:8])
+    assert np.abs(a[:, 0]).max() == pytest.approx(3.0, rel=0.05)
+    assert np.abs(a[:, 1]).max() == pytest.approx(1.5, rel=0.05)
+    assert np.allclose(both.displacement[:, 0], one.displacement[:, 0])
+    assert "HNN" in both.source and "HNE" in both.source
+    with pytest.raises(InputError, match="time step 0.01 s differs"):
+        read_accelerogram(e, path_y=_esm_file(tmp_path / "coarse.ASC", north[::2], dt=0.01))
+    with pytest.raises(InputError, match="DATA_TYPE is 'VELOCITY'"):
+        read_accelerogram(_esm_file(tmp_path / "v.ASC", east, data_type="VELOCITY"))
+    with pytest.raises(InputError, match="NDATA = 5 but the file holds 1200"):
+        read_accelerogram(_esm_file(tmp_path / "short.ASC", east, ndata=5))
+    with pytest.raises(InputError, match="UNITS is 'counts'"):
+        read_accelerogram(_esm_file(tmp_path / "c.ASC", east, units="counts"))
+    with pytest.raises(InputError, match="--accelerogram-y .*add --accelerogram"):
+        from calib_masonry.simulation.run import SimulationConfig
+
+        SimulationConfig(accelerogram_y=n)

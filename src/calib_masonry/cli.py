@@ -344,7 +344,12 @@ def _cmd_simulate(args) -> int:
     if args.shear_test:
         given = [
             f
-            for f, v in (("--pushover", args.pushover), ("--accelerogram", args.accelerogram), ("--pga", args.pga))
+            for f, v in (
+                ("--pushover", args.pushover),
+                ("--accelerogram", args.accelerogram),
+                ("--accelerogram-y", args.accelerogram_y),
+                ("--pga", args.pga),
+            )
             if v
         ]
         if given:
@@ -356,8 +361,8 @@ def _cmd_simulate(args) -> int:
             raise InputError("--shear-test: give --precompression-mpa S, the vertical stress on the wall (MPa)")
     elif args.precompression_mpa is not None or args.shear_span_ratio is not None:
         raise InputError("--precompression-mpa and --shear-span-ratio belong to --shear-test; add --shear-test")
-    if args.pushover and (args.accelerogram or args.pga is not None):
-        given = "--accelerogram" if args.accelerogram else "--pga"
+    if args.pushover and (args.accelerogram or args.accelerogram_y or args.pga is not None):
+        given = "--accelerogram" if args.accelerogram else "--accelerogram-y" if args.accelerogram_y else "--pga"
         raise InputError(
             f"--pushover with {given}: a pushover ramps its own lateral acceleration (--pushover-rate, "
             f"--pushover-max) and applies no ground motion; drop {given}, or drop --pushover for a quake"
@@ -391,6 +396,7 @@ def _cmd_simulate(args) -> int:
         duration_s=args.duration,
         seed=args.seed,
         accelerogram=Path(args.accelerogram) if args.accelerogram else None,
+        accelerogram_y=Path(args.accelerogram_y) if args.accelerogram_y else None,
         record_units=args.units,
         components=args.components or SimulationConfig.components,
         solver=solver,
@@ -659,10 +665,21 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument(
         "--accelerogram",
         default=None,
-        help="a recorded motion instead of the synthetic one: CSV of time, acceleration[, acceleration_y] "
-        "or a PEER NGA .AT2 file",
+        help="a recorded motion instead of the synthetic one: CSV of time, acceleration[, acceleration_y], "
+        "a PEER NGA .AT2 or an ESM / ITACA ASCII file",
     )
-    m.add_argument("--units", default=None, choices=("g", "m/s2"), help="of a CSV --accelerogram (default g)")
+    m.add_argument(
+        "--accelerogram-y",
+        default=None,
+        help="the record's other horizontal component, along Y, where it comes as a file of its own (PEER "
+        "and ESM give one file a component); --accelerogram's then shakes along X",
+    )
+    m.add_argument(
+        "--units",
+        default=None,
+        choices=("g", "m/s2"),
+        help="of a CSV --accelerogram (default g; .AT2 and ESM name theirs)",
+    )
     m.add_argument("--fps", type=int, default=None, help="frames per second (default: the tested settings, 25)")
     m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")
     m.add_argument("--iterations", type=int, default=None, help="solver iterations per substep (default 150)")

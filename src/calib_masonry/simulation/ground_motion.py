@@ -270,6 +270,87 @@ def _parse_at2(path: Path, lines: list[str]) -> tuple[np.ndarray, float, str]:
     return np.asarray(values)[:, None], dt, units
 
 
+#: the first keys of an ESM (Engineering Strong Motion database, ORFEUS) or ITACA ASCII record:
+#: its header is ``KEY: value`` lines (64 in the DYNA 1.2 format), then one acceleration a line
+_ESM_KEYS = ("EVENT_NAME:", "EVENT_ID:", "SAMPLING_INTERVAL_S:")
+_ESM_UNITS = {
+    "CM/S^2": "cm/s2",
+    "CM/S2": "cm/s2",
+    "CM/S**2": "cm/s2",
+    "GAL": "cm/s2",
+    "M/S^2": "m/s2",
+    "M/S2": "m/s2",
+    "G": "g",
+}
+
+
+def _is_esm(lines: list[str]) -> bool:
+    """Whether the text is an ESM / ITACA ASCII record (its header's keys)."""
+    head = [line.strip().upper() for line in lines[:80]]
+    return any(h.startswith("SAMPLING_INTERVAL_S:") for h in head) and any(h.startswith(_ESM_KEYS[:2]) for h in head)
+
+
+def _parse_esm(path: Path, lines: list[str]) -> tuple[np.ndarray, float, str]:
+    """An ESM / ITACA ASCII record as the databases give it (one file per component, e.g.
+    ``IT.AMT..HNE.D.EMSC-20160824_0000006.ACC.MP.ASC``): ``KEY: value`` header lines, of which
+    ``SAMPLING_INTERVAL_S``, ``UNITS`` (cm/s^2 as downloaded), ``DATA_TYPE`` (ACCELERATION) and
+    ``NDATA`` are read, then the values, one (or several) a line."""
+    header: dict[str, str] = {}
+    first = len(lines)
+    for number, line in enumerate(lines):
+        text = line.strip()
+        if not text:
+            continue
+        key, colon, value = text.partition(":")
+        if colon and key and not _is_number(key):
+            header[key.strip().upper()] = value.strip()
+            continue
+        first = number
+        break
+    kind = header.get("DATA_TYPE", "ACCELERATION").upper()
+    if "ACCELERATION" not in kind:
+        raise _record_error(
+            path, f"DATA_TYPE is {header['DATA_TYPE']!r}; give the record's acceleration file (its .ACC. file)"
+        )
+    try:
+        dt = float(header.get("SAMPLING_INTERVAL_S", "nan"))
+    except ValueError:
+        dt = float("nan")
+    if not (math.isfinite(dt) and dt > 0):
+        raise _record_error(
+            path, f"SAMPLING_INTERVAL_S is {header.get('SAMPLING_INTERVAL_S', 'missing')!r}; it must be > 0 seconds"
+        )
+    written = header.get("UNITS", "").replace(" ", "").upper()
+    if written not in _ESM_UNITS:
+        raise _record_error(
+            path, f"UNITS is {header.get('UNITS', 'missing')!r}; an acceleration in cm/s^2, m/s^2 or g is read"
+        )
+    values: list[float] = []
+    for number, line in enumerate(lines[first:], start=first + 1):
+        for token in line.replace(",", " ").split():
+            try:
+                v = float(token)
+            except ValueError:
+                raise _record_error(path, f"line {number}: {token!r} is not a number") from None
+            if not math.isfinite(v):
+                raise _record_error(path, f"line {number}: {token} is not a finite acceleration")
+            values.append(v)
+    n = header.get("NDATA", "")
+    if n.strip().isdigit() and int(n) != len(values):
+        raise _record_error(path, f"the header says NDATA = {int(n)} but the file holds {len(values)} values")
+    if len(values) < 3:
+        raise _record_error(path, f"{len(values)} values after the header; the record is empty or cut short")
+    return np.asarray(values)[:, None], dt, _ESM_UNITS[written]
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _parse_csv(path: Path, lines: list[str]) -> tuple[np.ndarray, float]:
     """``time, acceleration[, acceleration_y]`` per line (comma, semicolon, tab or spaces), header
     lines allowed before the numbers; every problem names its line."""
@@ -334,47 +415,79 @@ PEAK_CHANGE_WARN = 0.05
 MAX_PGA_G = 5.0
 
 
-def read_accelerogram(path: str | Path, *, units: str | None = None, highpass_hz: float = 0.1) -> GroundMotion:
-    """A recorded ground motion: a CSV of ``time, acceleration[, acceleration_y]`` (a header allowed;
-    ``units`` "g" by default, or "m/s2") or a PEER NGA ``.AT2`` file (units from its header). NaN,
-    inf, a time that does not increase or an irregular time step is refused with its line number.
-    The record is applied as recorded (see :func:`calib_masonry.simulation.run.motion_for` for
-    scaling it to a PGA)."""
-    path = Path(path)
+def _read_record(path: Path, units: str | None) -> tuple[np.ndarray, float, str]:
+    """One file's accelerations ``(n, 1 or 2)``, time step and units (see :func:`read_accelerogram`)."""
     if not path.is_file():
-        raise _record_error(path, "file not found; give a CSV of time, acceleration or a PEER .AT2 file")
-    if units is not None and units not in ("g", "m/s2"):
-        raise InputError(f"--units {units!r}: choose g or m/s2")
+        raise _record_error(
+            path, "file not found; give a CSV of time, acceleration, a PEER .AT2 or an ESM / ITACA ASCII file"
+        )
     try:
         lines = path.read_text(encoding="utf-8", errors="strict").splitlines()
     except (UnicodeDecodeError, OSError) as exc:
         raise _record_error(path, f"unreadable ({exc}); give a text file of numbers") from None
     if path.suffix.upper() == ".AT2":
         acc, dt, file_units = _parse_at2(path, lines)
-        units = units or file_units
-    else:
-        acc, dt = _parse_csv(path, lines)
-        units = units or "g"
+        return acc, dt, units or file_units
+    if _is_esm(lines):
+        acc, dt, file_units = _parse_esm(path, lines)
+        return acc, dt, units or file_units
+    acc, dt = _parse_csv(path, lines)
+    return acc, dt, units or "g"
+
+
+def read_accelerogram(
+    path: str | Path, *, units: str | None = None, highpass_hz: float = 0.1, path_y: str | Path | None = None
+) -> GroundMotion:
+    """A recorded ground motion: a CSV of ``time, acceleration[, acceleration_y]`` (a header allowed;
+    ``units`` "g" by default, or "m/s2"), a PEER NGA ``.AT2`` file or an ESM / ITACA ASCII file
+    (units from their headers). ``path_y``: a second file of one component, the motion along Y
+    (the other horizontal component of the same record: PEER and ESM give one file each); its time
+    step must be the first's, and the record ends with the shorter. NaN, inf, a time that does not
+    increase or an irregular time step is refused with its line number. The record is applied as
+    recorded (see :func:`calib_masonry.simulation.run.motion_for` for scaling it to a PGA)."""
+    path = Path(path)
+    if units is not None and units not in ("g", "m/s2"):
+        raise InputError(f"--units {units!r}: choose g or m/s2")
+    given = units
+    acc, dt, units = _read_record(path, given)
     acc = acc * RECORD_UNITS[units]
+    name = path.name
+    if path_y is not None:
+        path_y = Path(path_y)
+        if acc.shape[1] != 1:
+            raise _record_error(
+                path, "holds two components already; give a second file only beside a one-component one"
+            )
+        acc_y, dt_y, units_y = _read_record(path_y, given)
+        if acc_y.shape[1] != 1:
+            raise _record_error(path_y, "holds two components; the second file must hold the Y component alone")
+        if abs(dt_y - dt) > 1e-9 + 1e-6 * dt:
+            raise _record_error(
+                path_y,
+                f"its time step {dt_y:g} s differs from {path.name}'s {dt:g} s; give two components of one record",
+            )
+        n = min(len(acc), len(acc_y))
+        acc = np.column_stack([acc[:n, 0], acc_y[:n, 0] * RECORD_UNITS[units_y]])
+        name = f"{path.name} + {path_y.name}"
     peak_g = float(np.max(np.abs(acc))) / G
     if peak_g > MAX_PGA_G:
         other = "m/s2" if units == "g" else "g"
         raise _record_error(
-            path,
+            path_y if path_y is not None and np.abs(acc[:, 1]).max() > np.abs(acc[:, 0]).max() else path,
             f"its peak is {peak_g:.3g} g read in {units}, above any recorded ground motion (the bound is "
             f"{MAX_PGA_G:g} g); if the record is in {other} (or cm/s2: divide by 100 for m/s2), pass --units "
             f"{other}, or remove the row that is out of range",
         )
     if acc.shape[1] == 1:  # one horizontal component, along X
         acc = np.column_stack([acc[:, 0], np.zeros(len(acc))])
-    motion = motion_from_acceleration(acc, dt, highpass_hz=highpass_hz, source=path.name)
+    motion = motion_from_acceleration(acc, dt, highpass_hz=highpass_hz, source=name)
     recorded = float(np.abs(acc).max())
     processed = motion.pga
     if recorded > 0 and abs(processed / recorded - 1.0) > PEAK_CHANGE_WARN:
         import warnings
 
         warnings.warn(
-            f"{path.name}: starting the record from rest and high-passing it at {highpass_hz:g} Hz changes its "
+            f"{name}: starting the record from rest and high-passing it at {highpass_hz:g} Hz changes its "
             f"peak from {recorded / G:.3g} g to {processed / G:.3g} g ({processed / recorded - 1.0:+.0%}): the "
             "record does not start and end at rest (a velocity or displacement left at its ends); summary.json "
             "gives both, record_peak_g as recorded",

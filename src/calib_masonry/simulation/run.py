@@ -75,7 +75,10 @@ class SimulationConfig:
     duration_s: float = 10.0
     seed: int = 0
     accelerogram: Path | None = None
-    record_units: str | None = None  # of a CSV record: "g" (default) or "m/s2"; an .AT2 file names its own
+    # a second file of the same record, its other horizontal component (along Y): PEER and ESM
+    # give one file a component
+    accelerogram_y: Path | None = None
+    record_units: str | None = None  # of a CSV record: "g" (default) or "m/s2"; .AT2 and ESM files name their own
     # two independent horizontal components, as a real earthquake has: with one, along X, the walls
     # parallel to X are loaded only in their plane and stand, so at most the other walls fall (the
     # paper example at 0.6 g, seed 0: 43 % of bricks moved with one component, 71-77 % with two)
@@ -106,6 +109,10 @@ class SimulationConfig:
             raise InputError(
                 f"--pga {self.pga_g}: the peak ground acceleration must lie in 0..{MAX_PGA_G:g} g "
                 "(the strongest records reach about 3 g)"
+            )
+        if self.accelerogram_y is not None and self.accelerogram is None:
+            raise InputError(
+                f"--accelerogram-y {self.accelerogram_y}: the record's Y component alone; add --accelerogram with its X component"
             )
         if self.record_units is not None and self.record_units not in ("g", "m/s2"):
             raise InputError(f"--units {self.record_units!r}: choose g or m/s2")
@@ -177,7 +184,7 @@ def motion_for(config: SimulationConfig) -> GroundMotion:
     collapse PGA with the frame rate. A recorded accelerogram is applied as recorded, or, with
     ``pga_g``, scaled the same way so that its peak is the PGA."""
     if config.accelerogram is not None:
-        record = read_accelerogram(config.accelerogram, units=config.record_units)
+        record = read_accelerogram(config.accelerogram, units=config.record_units, path_y=config.accelerogram_y)
         if config.pga_g is None or record.pga <= 0:
             return record
         return record.scaled(config.pga_g * G / record.pga, source=f"{record.source} scaled to {config.pga_g:g} g")
@@ -706,7 +713,9 @@ def simulate_to_folder(
     t0 = time.perf_counter()
     scene = scene_for_model(model_dir, config)
     t_scene = time.perf_counter() - t0
-    with staged_output(out, "simulate", overwrite=overwrite, keep=[config.accelerogram]) as stage:
+    with staged_output(
+        out, "simulate", overwrite=overwrite, keep=[config.accelerogram, config.accelerogram_y]
+    ) as stage:
         result = _run_scene(
             scene,
             str(model_dir),

@@ -28,6 +28,17 @@ def _rotate_exact(R: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
+def _turned(R: np.ndarray, A: np.ndarray, tmp: np.ndarray, out: np.ndarray) -> None:
+    """``out = (R A) R^T`` for 3 x 3 ``R`` and ``A`` (``tmp`` holds ``R A``)."""
+    for a in range(3):
+        for b in range(3):
+            tmp[a, b] = R[a, 0] * A[0, b] + R[a, 1] * A[1, b] + R[a, 2] * A[2, b]
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = tmp[a, 0] * R[b, 0] + tmp[a, 1] * R[b, 1] + tmp[a, 2] * R[b, 2]
+
+
+@njit(cache=True, nogil=True)
 def advance_steps(
     g: np.ndarray,  # (S, 3) the load per unit mass of each step
     dt: float,
@@ -169,18 +180,8 @@ def advance_steps(
         exact = count % 64 == 0
         for i in range(n):
             # the inertia in the world frame, its gyroscopic moment and the angular acceleration
-            for a in range(3):
-                for b in range(3):
-                    tmp[a, b] = R[i, a, 0] * I0[i, 0, b] + R[i, a, 1] * I0[i, 1, b] + R[i, a, 2] * I0[i, 2, b]
-            for a in range(3):
-                for b in range(3):
-                    Iw[a, b] = tmp[a, 0] * R[i, b, 0] + tmp[a, 1] * R[i, b, 1] + tmp[a, 2] * R[i, b, 2]
-            for a in range(3):
-                for b in range(3):
-                    tmp[a, b] = R[i, a, 0] * I0inv[i, 0, b] + R[i, a, 1] * I0inv[i, 1, b] + R[i, a, 2] * I0inv[i, 2, b]
-            for a in range(3):
-                for b in range(3):
-                    Iinv[a, b] = tmp[a, 0] * R[i, b, 0] + tmp[a, 1] * R[i, b, 1] + tmp[a, 2] * R[i, b, 2]
+            _turned(R[i], I0[i], tmp, Iw)
+            _turned(R[i], I0inv[i], tmp, Iinv)
             Lw0 = Iw[0, 0] * w[i, 0] + Iw[0, 1] * w[i, 1] + Iw[0, 2] * w[i, 2]
             Lw1 = Iw[1, 0] * w[i, 0] + Iw[1, 1] * w[i, 1] + Iw[1, 2] * w[i, 2]
             Lw2 = Iw[2, 0] * w[i, 0] + Iw[2, 1] * w[i, 1] + Iw[2, 2] * w[i, 2]

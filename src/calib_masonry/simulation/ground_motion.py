@@ -235,6 +235,22 @@ def _record_error(path: Path, message: str) -> InputError:
     return InputError(f"--accelerogram {path}: {message}")
 
 
+def _values(path: Path, lines: list[str], first: int) -> list[float]:
+    """The accelerations after a header: every number from line ``first`` (0-based) on, several a
+    line or one; anything else is refused with its line."""
+    values: list[float] = []
+    for number, line in enumerate(lines[first:], start=first + 1):
+        for token in line.replace(",", " ").split():
+            try:
+                v = float(token)
+            except ValueError:
+                raise _record_error(path, f"line {number}: {token!r} is not a number") from None
+            if not math.isfinite(v):
+                raise _record_error(path, f"line {number}: {token} is not a finite acceleration")
+            values.append(v)
+    return values
+
+
 def _parse_at2(path: Path, lines: list[str]) -> tuple[np.ndarray, float, str]:
     """A PEER NGA ``.AT2`` record: four header lines (the third names the units, the fourth NPTS and
     DT, as ``NPTS=  5590, DT=   .0050 SEC`` or the older ``5590   .0050   NPTS, DT``), then the
@@ -253,16 +269,7 @@ def _parse_at2(path: Path, lines: list[str]) -> tuple[np.ndarray, float, str]:
     if m is None:
         raise _record_error(path, f"line 4 ({lines[3].strip()!r}) does not give NPTS and DT; is this a PEER .AT2 file?")
     npts, dt = int(m.group(1)), float(m.group(2))
-    values: list[float] = []
-    for number, line in enumerate(lines[4:], start=5):
-        for token in line.replace(",", " ").split():
-            try:
-                v = float(token)
-            except ValueError:
-                raise _record_error(path, f"line {number}: {token!r} is not a number") from None
-            if not math.isfinite(v):
-                raise _record_error(path, f"line {number}: {token} is not a finite acceleration")
-            values.append(v)
+    values = _values(path, lines, 4)
     if len(values) != npts:
         raise _record_error(path, f"the header says NPTS = {npts} but the file holds {len(values)} values")
     if not (math.isfinite(dt) and dt > 0):
@@ -325,16 +332,7 @@ def _parse_esm(path: Path, lines: list[str]) -> tuple[np.ndarray, float, str]:
         raise _record_error(
             path, f"UNITS is {header.get('UNITS', 'missing')!r}; an acceleration in cm/s^2, m/s^2 or g is read"
         )
-    values: list[float] = []
-    for number, line in enumerate(lines[first:], start=first + 1):
-        for token in line.replace(",", " ").split():
-            try:
-                v = float(token)
-            except ValueError:
-                raise _record_error(path, f"line {number}: {token!r} is not a number") from None
-            if not math.isfinite(v):
-                raise _record_error(path, f"line {number}: {token} is not a finite acceleration")
-            values.append(v)
+    values = _values(path, lines, first)
     n = header.get("NDATA", "")
     if n.strip().isdigit() and int(n) != len(values):
         raise _record_error(path, f"the header says NDATA = {int(n)} but the file holds {len(values)} values")

@@ -118,6 +118,20 @@ def test_blender_holds_only_blender_calls():
     assert not _imports(name) & loop_logic
 
 
+def test_an_experiment_run_from_its_folder_shadows_no_module_the_package_imports():
+    # a script's folder comes first on sys.path: experiments/coverage.py was imported by numba as
+    # the coverage package (its optional tracer), and every experiment that moved pieces failed
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]); import numba, calib_masonry.simulation._pieces_step, "
+        "calib_masonry.simulation.run"
+    )
+    r = subprocess.run([sys.executable, "-c", code, str(ROOT / "experiments")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-2000:]
+
+
 def test_no_experiment_imports_a_private_name():
     private = []
     for path in sorted((ROOT / "experiments").glob("*.py")) + sorted((ROOT / "examples").glob("*.py")):

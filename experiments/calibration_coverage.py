@@ -7,7 +7,7 @@ eye height and focal length given) and the paper example's walls through lenses 
 and H with their sigmas, their errors in sigmas, and whether both lie within 2 sigma. The real
 photos' coverage is printed by experiments/bench_real_photos.py.
 
-    .venv/bin/python experiments/coverage.py [--tall 11701 --lens 701 --count 20]
+    .venv/bin/python experiments/calibration_coverage.py [--tall 11701 --lens 701 --count 20]
 """
 
 from __future__ import annotations

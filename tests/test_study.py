@@ -371,6 +371,9 @@ BAD = {
     "bullet flag": ("[simulate]\npga_g = [0.1]\nbullet = 0\n", "bullet = 0: give true or false"),
     "material key": ("[inputs.material]\nfricton = { range = [0.5, 0.8] }\n", "did you mean friction"),
     "material range": ("[inputs.material]\nfriction = { range = [-0.5, 0.8] }\n", "friction = -0.5: must be >= 0"),
+    "no record file": ('[simulate]\npga_g = [0.1]\naccelerograms = ["gone.AT2"]\n', "gone.AT2: file not found"),
+    "records and files": ('[simulate]\npga_g = [0.1]\nrecords = 2\naccelerograms = ["a.csv"]\n', "keep one"),
+    "three components": ('[simulate]\npga_g = [0.1]\naccelerograms = [["a", "b", "c"]]\n', "give a file name, or"),
 }
 
 
@@ -558,3 +561,40 @@ def test_closing_the_cluster_shows_nothing_distributed_logs():
     finally:
         handler.setStream(old)
         root.removeHandler(ours)
+
+
+def test_a_study_runs_recorded_accelerograms_scaled_to_each_pga(tmp_path, small_structure):
+    # [simulate] accelerograms: a CSV record and an ESM record's two component files, each scaled to
+    # every PGA (as simulate --accelerogram --pga does), run for their own length; the record files
+    # are part of the study's fingerprint (a resumed study with another record is refused)
+    from calib_masonry.simulation.ground_motion import G
+    from calib_masonry.study.sample import _recorded
+
+    from .test_ground_motion import _esm_file
+
+    t = np.arange(0, 1.5, 0.005)
+    env = np.sin(np.pi * t / t[-1]) ** 2
+    (tmp_path / "rec.csv").write_text("\n".join(f"{x:.3f},{0.2 * e * np.sin(9 * x):.6f}" for x, e in zip(t, env)))
+    _esm_file(tmp_path / "E.ASC", 100.0 * env * np.sin(2 * np.pi * 2 * t))
+    _esm_file(tmp_path / "N.ASC", 50.0 * env * np.sin(2 * np.pi * 3 * t), stream="HNN")
+    path = _study(
+        tmp_path,
+        f'[study]\nname = "rec"\nstructure = "{small_structure}"\n[simulate]\npga_g = [0.05, 0.4]\n'
+        'accelerograms = ["rec.csv", ["E.ASC", "N.ASC"]]\nbullet = false\n',
+    )
+    study = load_study(path)
+    assert study.loads == (
+        {"pga_g": 0.05, "record": 0},
+        {"pga_g": 0.05, "record": 1},
+        {"pga_g": 0.4, "record": 0},
+        {"pga_g": 0.4, "record": 1},
+    )
+    both = _recorded(study.simulate.accelerograms[1], 0.4)
+    assert both.pga == pytest.approx(0.4 * G, rel=1e-9) and "N.ASC" in both.source
+    assert np.abs(both.displacement[:, 1]).max() > 0.1 * np.abs(both.displacement[:, 0]).max()
+    rows, _, _ = study_to_folder(study, tmp_path / "out", workers=0, progress=False)
+    assert [r["status"] for r in rows] == ["ok"] * 4
+    assert {r["record"] for r in rows} == {0, 1}
+    before = study.fingerprint()
+    _esm_file(tmp_path / "N.ASC", 60.0 * env * np.sin(2 * np.pi * 3 * t), stream="HNN")
+    assert load_study(path).fingerprint() != before

@@ -37,6 +37,9 @@ simulation every sample runs::
     pga_g = [0.1, 0.2, 0.3]
     records = 2             # seeded records per PGA (the same records at every PGA, scaled)
     duration_s = 5.0
+    # accelerograms = ["RSN766_G02_000.AT2", ["E.ASC", "N.ASC"]]  # instead of records: recorded
+    #                        # motions (a file, or its X and Y components), each scaled to every PGA
+    #                        # and run for its whole length
     # pushover = true        # instead: the collapse multiplier
 
 Each input maps one coordinate ``u`` of the unit hypercube to a value (normal: ``mu + sigma
@@ -153,10 +156,13 @@ def _psd(cov) -> np.ndarray:
 @dataclass(frozen=True)
 class SimulateSpec:
     """What each design point runs in Bullet: every PGA (g) times ``records`` seeded records of
-    ``duration_s`` seconds, or (``pushover``) one pushover along ``direction_deg``."""
+    ``duration_s`` seconds (or times each of ``accelerograms``, recorded motions scaled to the PGA:
+    one file, or the X and Y components' two), or (``pushover``) one pushover along
+    ``direction_deg``."""
 
     pga_g: tuple[float, ...] = ()
     records: int = 1
+    accelerograms: tuple[tuple[Path, ...], ...] = ()
     duration_s: float = 5.0
     pushover: bool = False
     direction_deg: float = 0.0
@@ -170,7 +176,8 @@ class SimulateSpec:
     def loads(self) -> tuple[dict, ...]:
         if self.pushover:
             return ({"pushover": True},)
-        return tuple({"pga_g": p, "record": r} for p in self.pga_g for r in range(self.records))
+        n = len(self.accelerograms) or self.records
+        return tuple({"pga_g": p, "record": r} for p in self.pga_g for r in range(n))
 
 
 @dataclass(frozen=True)
@@ -204,7 +211,8 @@ class Study:
         h = hashlib.sha256()
         h.update(repr((self.name, self.method, self.n, self.seed, self.inputs, self.sweep, self.simulate)).encode())
         h.update(repr((self.photos, self.fit_size)).encode())
-        for p in (self.structure, self.scenario):
+        records = [f for r in self.simulate.accelerograms for f in r] if self.simulate is not None else []
+        for p in (self.structure, self.scenario, *records):
             if p is not None:
                 h.update(Path(p).read_bytes())
         return h.hexdigest()[:16]
@@ -443,7 +451,17 @@ def parse_study(data: dict, path: Path) -> Study:
             path,
             "simulate",
             s,
-            ("pga_g", "records", "duration_s", "pushover", "direction_deg", "rate_g_per_s", "max_g", "bullet"),
+            (
+                "pga_g",
+                "records",
+                "accelerograms",
+                "duration_s",
+                "pushover",
+                "direction_deg",
+                "rate_g_per_s",
+                "max_g",
+                "bullet",
+            ),
         )
         pushover = s.get("pushover", False)
         bullet = s.get("bullet", True)
@@ -468,9 +486,13 @@ def parse_study(data: dict, path: Path) -> Study:
             )
         if pushover == bool(pga):
             raise InputError(f"{path}: [simulate]: give either pga_g = [...] or pushover = true")
+        accelerograms = _accelerograms(path, s)
+        if accelerograms and pushover:
+            raise InputError(f"{path}: [simulate]: give either accelerograms = [...] or pushover = true")
         sim = SimulateSpec(
             pga_g=pga,
             records=_number(path, "[simulate] records", s.get("records", 1), positive=True, integer=True),
+            accelerograms=accelerograms,
             duration_s=_number(path, "[simulate] duration_s", s.get("duration_s", 5.0), positive=True),
             pushover=pushover,
             direction_deg=_number(path, "[simulate] direction_deg", s.get("direction_deg", 0.0)),
@@ -547,6 +569,40 @@ def samples(study: Study) -> list[Sample]:
         for j, load in enumerate(loads):
             out.append(Sample(index=p * len(loads) + j, point=p, load=load, values=values))
     return out
+
+
+def _accelerograms(path: Path, s: dict) -> tuple[tuple[Path, ...], ...]:
+    """``[simulate] accelerograms``: each entry a file, or a list of two (the X and Y components),
+    relative to the study file; every record read once here, so that a bad one is refused before
+    any sample runs."""
+    from ..simulation.ground_motion import read_accelerogram
+
+    given = s.get("accelerograms", [])
+    if not isinstance(given, list):
+        raise InputError(
+            f"{path}: [simulate] accelerograms = {given!r}: give a list of record files (a file, or [X, Y] "
+            "for the two components of one record)"
+        )
+    if given and "records" in s:
+        raise InputError(
+            f"{path}: [simulate]: records (seeded synthetic motions) and accelerograms (recorded ones) both "
+            "given; keep one"
+        )
+    out = []
+    for entry in given:
+        files = entry if isinstance(entry, list) else [entry]
+        if not (1 <= len(files) <= 2) or not all(isinstance(f, str) for f in files):
+            raise InputError(
+                f"{path}: [simulate] accelerograms: {entry!r}: give a file name, or [X, Y]: the two horizontal "
+                "components of one record"
+            )
+        paths = tuple((path.parent / f).resolve() for f in files)
+        try:
+            read_accelerogram(paths[0], path_y=paths[1] if len(paths) == 2 else None)
+        except InputError as exc:
+            raise InputError(f"{path}: [simulate] accelerograms: {exc}") from None
+        out.append(paths)
+    return tuple(out)
 
 
 def study_json(study: Study) -> dict:

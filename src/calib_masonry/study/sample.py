@@ -355,6 +355,8 @@ def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -
         load = Pushover(
             rate_g_per_s=sim.pushover_rate_g_per_s, direction_deg=sim.direction_deg, max_g=sim.pushover_max_g
         )
+    elif sim.accelerograms:
+        load = _recorded(sim.accelerograms[sample.load["record"]], sample.load["pga_g"])
     else:
         load = synthetic_motion(
             sample.load["pga_g"],
@@ -363,6 +365,24 @@ def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -
             direction_deg=sim.direction_deg,
         )
     return geometry, load, _material(sample, material)
+
+
+_RECORDS: dict[tuple[Path, ...], object] = {}  # a worker's records, read once
+
+
+def _recorded(files: tuple[Path, ...], pga_g: float):
+    """The recorded motion of ``files`` (one file, or its X and Y components) scaled so that its peak
+    is ``pga_g``, as ``simulate --accelerogram ... --pga`` scales it."""
+    from ..simulation.ground_motion import G, read_accelerogram
+
+    if files not in _RECORDS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # said once, when the study file was read
+            _RECORDS[files] = read_accelerogram(files[0], path_y=files[1] if len(files) == 2 else None)
+    record = _RECORDS[files]
+    if record.pga <= 0:
+        return record
+    return record.scaled(pga_g * G / record.pga, source=f"{record.source} scaled to {pga_g:g} g")
 
 
 def _material(sample: Sample, base: tuple = ()):

@@ -284,3 +284,15 @@ def test_esm_record_in_cm_s2_and_its_two_components(tmp_path):
         from calib_masonry.simulation.run import SimulationConfig
 
         SimulationConfig(accelerogram_y=n)
+
+
+def test_a_record_whose_header_is_not_utf8_is_read_and_a_binary_file_refused(tmp_path):
+    # a station's name in a Windows code page (ESM, PEER headers) is no reason to refuse the numbers
+    t = np.arange(0, 3, 0.005)
+    e = _esm_file(tmp_path / "cp.ASC", 200.0 * np.sin(np.pi * t / t[-1]) ** 2 * np.sin(7 * t))
+    e.write_bytes(e.read_bytes().replace(b"STATION_NAME: NORCIA", "STATION_NAME: CITTÀ DI CASTELLO".encode("cp1252")))
+    assert read_accelerogram(e).pga == pytest.approx(2.0, rel=0.05)
+    b = tmp_path / "rec.csv"
+    b.write_bytes(b"\x00\x01\xff\xfe" * 50)
+    with pytest.raises(InputError, match="rec.csv: unreadable"):
+        read_accelerogram(b)

@@ -420,9 +420,17 @@ def _read_record(path: Path, units: str | None) -> tuple[np.ndarray, float, str]
             path, "file not found; give a CSV of time, acceleration, a PEER .AT2 or an ESM / ITACA ASCII file"
         )
     try:
-        lines = path.read_text(encoding="utf-8", errors="strict").splitlines()
-    except (UnicodeDecodeError, OSError) as exc:
+        raw = path.read_bytes()
+    except OSError as exc:
         raise _record_error(path, f"unreadable ({exc}); give a text file of numbers") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if b"\0" in raw:  # a binary file
+            raise _record_error(path, f"unreadable ({exc}); give a text file of numbers") from None
+        # a header in a Windows code page (a station's name, a degree sign): the numbers are ASCII
+        text = raw.decode("latin-1")
+    lines = text.splitlines()
     if path.suffix.upper() == ".AT2":
         acc, dt, file_units = _parse_at2(path, lines)
         return acc, dt, units or file_units

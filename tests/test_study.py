@@ -589,6 +589,9 @@ def test_a_study_runs_recorded_accelerograms_scaled_to_each_pga(tmp_path, small_
         {"pga_g": 0.4, "record": 0},
         {"pga_g": 0.4, "record": 1},
     )
+    one = _recorded(study.simulate.accelerograms[0], 0.4, direction_deg=90.0)  # a study's direction
+    assert np.abs(one.displacement[:, 0]).max() < 1e-12 < np.abs(one.displacement[:, 1]).max()
+    assert one.pga == pytest.approx(0.4 * G, rel=1e-9)
     both = _recorded(study.simulate.accelerograms[1], 0.4)
     assert both.pga == pytest.approx(0.4 * G, rel=1e-9) and "N.ASC" in both.source
     assert np.abs(both.displacement[:, 1]).max() > 0.1 * np.abs(both.displacement[:, 0]).max()

@@ -356,7 +356,7 @@ def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -
             rate_g_per_s=sim.pushover_rate_g_per_s, direction_deg=sim.direction_deg, max_g=sim.pushover_max_g
         )
     elif sim.accelerograms:
-        load = _recorded(sim.accelerograms[sample.load["record"]], sample.load["pga_g"])
+        load = _recorded(sim.accelerograms[sample.load["record"]], sample.load["pga_g"], sim.direction_deg)
     else:
         load = synthetic_motion(
             sample.load["pga_g"],
@@ -370,9 +370,10 @@ def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -
 _RECORDS: dict[tuple[Path, ...], object] = {}  # a worker's records, read once
 
 
-def _recorded(files: tuple[Path, ...], pga_g: float):
+def _recorded(files: tuple[Path, ...], pga_g: float, direction_deg: float = 0.0):
     """The recorded motion of ``files`` (one file, or its X and Y components) scaled so that its peak
-    is ``pga_g``, as ``simulate --accelerogram ... --pga`` scales it."""
+    is ``pga_g``, as ``simulate --accelerogram ... --pga`` scales it; a one-component record (one
+    file of one component) along ``direction_deg`` from global X, as a study's synthetic motions."""
     from ..simulation.ground_motion import G, read_accelerogram
 
     if files not in _RECORDS:
@@ -380,6 +381,15 @@ def _recorded(files: tuple[Path, ...], pga_g: float):
             warnings.simplefilter("ignore")  # said once, when the study file was read
             _RECORDS[files] = read_accelerogram(files[0], path_y=files[1] if len(files) == 2 else None)
     record = _RECORDS[files]
+    if direction_deg and not record.displacement[:, 1].any():
+        d = np.radians(direction_deg)
+        turn = np.array([np.cos(d), np.sin(d)])
+        record = replace(
+            record,
+            displacement=record.displacement[:, :1] * turn,
+            acceleration=record.acceleration[:, :1] * turn,
+            source=f"{record.source} along {direction_deg:g} deg",
+        )
     if record.pga <= 0:
         return record
     return record.scaled(pga_g * G / record.pga, source=f"{record.source} scaled to {pga_g:g} g")

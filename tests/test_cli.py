@@ -583,3 +583,27 @@ def test_rectify_refused_while_jax_loads_beside_it_exits_2(tmp_path):
         )
         assert r.returncode == 2, (delay, r.stderr[-2000:])
         assert r.stderr.count("\n") == 1 and "refused (test)" in r.stderr and not out.exists()
+
+
+def test_the_quake_line_says_which_roof_drift_is_the_vibration():
+    # a top piece that rocks 24 cm and comes back moves no brick by the end; the printed line said
+    # "moved 0.0 % of bricks, max roof drift 244 mm" and left the held structure's vibration out
+    from calib_masonry.cli import _quake_line
+
+    s = {
+        "bricks": 336,
+        "bonds": 1971,
+        "ground_motion": {"source": "E.ASC + N.ASC"},
+        "outcome": "standing",
+        "toppled_fraction": 0.0,
+        "moved_fraction_final": 0.0,
+        "bonds_broken_fraction": 0.06,
+        "max_roof_drift_m": 0.2439,
+        "dynamics": {"max_roof_drift_m": 0.00537},
+        "seconds": {"stepping": 10.8},
+    }
+    line = _quake_line(s, "out")
+    assert "moved 0.0% of bricks at the end" in line
+    assert "max roof drift 244 mm (the held structure's vibration 5.4 mm)" in line
+    s["dynamics"] = {"elastic": False}  # --quasi-static: no vibration to print
+    assert "vibration" not in _quake_line(s, "out")

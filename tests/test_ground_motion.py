@@ -296,3 +296,35 @@ def test_a_record_whose_header_is_not_utf8_is_read_and_a_binary_file_refused(tmp
     b.write_bytes(b"\x00\x01\xff\xfe" * 50)
     with pytest.raises(InputError, match="rec.csv: unreadable"):
         read_accelerogram(b)
+
+
+def test_direction_turns_a_one_component_motion_and_is_refused_for_two(tmp_path):
+    # simulate --direction: a record of one component (or the synthetic one with --components 1)
+    # shakes along it, at the same peak; with two components there is nothing to turn
+    from calib_masonry.simulation.run import SimulationConfig, motion_for
+
+    t = np.arange(0, 4, 0.005)
+    env = np.sin(np.pi * t / t[-1]) ** 2
+    one = tmp_path / "one.csv"
+    one.write_text("\n".join(f"{x:.3f},{0.2 * e * np.sin(2 * np.pi * 1.5 * x):.6f}" for x, e in zip(t, env)))
+    along_x = motion_for(SimulationConfig(accelerogram=one, pga_g=0.3))
+    turned = motion_for(SimulationConfig(accelerogram=one, pga_g=0.3, direction_deg=90.0))
+    assert np.abs(turned.displacement[:, 0]).max() < 1e-12
+    np.testing.assert_allclose(turned.displacement[:, 1], along_x.displacement[:, 0], rtol=1e-9, atol=1e-15)
+    assert turned.pga == pytest.approx(0.3 * G, rel=1e-9) and "along 90 deg" in turned.source
+    synthetic = motion_for(SimulationConfig(pga_g=0.3, components=1, direction_deg=30.0))
+    ratio = synthetic.displacement[:, 1] / np.where(
+        synthetic.displacement[:, 0] == 0, np.nan, synthetic.displacement[:, 0]
+    )
+    assert np.nanmax(np.abs(ratio - np.tan(np.radians(30.0)))) < 1e-9
+    two = tmp_path / "two.csv"
+    wave = env * np.sin(2 * np.pi * 2.0 * t)
+    two.write_text("\n".join(f"{x:.3f},{0.1 * w:.6f},{-0.1 * w:.6f}" for x, w in zip(t, wave)))
+    with pytest.raises(InputError, match="--direction 20: .*two horizontal components"):
+        motion_for(SimulationConfig(accelerogram=two, pga_g=0.3, direction_deg=20.0))
+    with pytest.raises(InputError, match="--direction 20: the synthetic motion has two .* add --components 1"):
+        SimulationConfig(pga_g=0.3, direction_deg=20.0)
+    with pytest.raises(InputError, match="--direction nan: give the motion's direction"):
+        SimulationConfig(pga_g=0.3, components=1, direction_deg=float("nan"))
+    with pytest.raises(InputError, match="--direction 20: --accelerogram-y"):
+        SimulationConfig(accelerogram=one, accelerogram_y=one, direction_deg=20.0)

@@ -399,6 +399,7 @@ def _cmd_simulate(args) -> int:
         accelerogram_y=Path(args.accelerogram_y) if args.accelerogram_y else None,
         record_units=args.units,
         components=args.components or SimulationConfig.components,
+        direction_deg=0.0 if args.pushover else args.direction,
         solver=solver,
         frames_png=args.frames,
         gif_frames=args.gif_frames,
@@ -736,7 +737,11 @@ def _parser() -> argparse.ArgumentParser:
         "runs away; writes collapse_multiplier_g and pushover.png",
     )
     m.add_argument(
-        "--direction", type=float, default=0.0, help="pushover direction in degrees from global X (default 0)"
+        "--direction",
+        type=float,
+        default=0.0,
+        help="degrees from global X (default 0) of a pushover, or of a one-component ground motion (a record "
+        "of one component, or the synthetic one with --components 1)",
     )
     m.add_argument(
         "--shear-test",

@@ -110,6 +110,19 @@ class GroundMotion:
             recorded_peak=None if self.recorded_peak is None else self.recorded_peak * factor,
         )
 
+    def along(self, direction_deg: float) -> "GroundMotion":
+        """A one-component motion (along X, nothing along Y) turned to ``direction_deg`` from global X."""
+        if self.displacement[:, 1].any():
+            raise InputError(f"{self.source}: a direction turns a one-component motion; this one has two (X and Y)")
+        d = math.radians(direction_deg)
+        turn = np.array([math.cos(d), math.sin(d)])
+        return replace(
+            self,
+            displacement=self.displacement[:, :1] * turn,
+            acceleration=self.acceleration[:, :1] * turn,
+            source=f"{self.source} along {direction_deg:g} deg",
+        )
+
     def displacement_at(self, t: np.ndarray) -> np.ndarray:
         """Linear interpolation of the displacement at times ``t`` ``(K,)`` -> ``(K, 2)``."""
         tt = self.time

@@ -120,6 +120,19 @@ class SimulationConfig:
             raise InputError(f"--duration {self.duration_s}: must be > 0 seconds")
         if self.components not in (1, 2):
             raise InputError(f"--components {self.components}: give 1 (along --direction) or 2 horizontal components")
+        if not math.isfinite(self.direction_deg):
+            raise InputError(f"--direction {self.direction_deg}: give the motion's direction in degrees from global X")
+        quake = self.pushover is None and self.shear_test is None
+        if self.direction_deg and quake and self.accelerogram is None and self.components == 2:
+            raise InputError(
+                f"--direction {self.direction_deg:g}: the synthetic motion has two horizontal components; a direction "
+                "turns one: add --components 1"
+            )
+        if self.direction_deg and self.accelerogram_y is not None:
+            raise InputError(
+                f"--direction {self.direction_deg:g}: --accelerogram-y gives the record's Y component; a direction turns "
+                "a record of one: drop one of them"
+            )
         if self.frames_png < 0:
             raise InputError(f"--frames {self.frames_png}: must be >= 0 (collapse frames to render)")
         if not 0 <= self.seed < 2**63:
@@ -185,6 +198,13 @@ def motion_for(config: SimulationConfig) -> GroundMotion:
     ``pga_g``, scaled the same way so that its peak is the PGA."""
     if config.accelerogram is not None:
         record = read_accelerogram(config.accelerogram, units=config.record_units, path_y=config.accelerogram_y)
+        if config.direction_deg:
+            if record.displacement[:, 1].any():
+                raise InputError(
+                    f"--direction {config.direction_deg:g}: {record.source} has two horizontal components (X and Y); "
+                    "a direction turns a record of one; drop --direction"
+                )
+            record = record.along(config.direction_deg)
         if config.pga_g is None or record.pga <= 0:
             return record
         return record.scaled(config.pga_g * G / record.pga, source=f"{record.source} scaled to {config.pga_g:g} g")

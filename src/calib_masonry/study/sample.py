@@ -382,14 +382,7 @@ def _recorded(files: tuple[Path, ...], pga_g: float, direction_deg: float = 0.0)
             _RECORDS[files] = read_accelerogram(files[0], path_y=files[1] if len(files) == 2 else None)
     record = _RECORDS[files]
     if direction_deg and not record.displacement[:, 1].any():
-        d = np.radians(direction_deg)
-        turn = np.array([np.cos(d), np.sin(d)])
-        record = replace(
-            record,
-            displacement=record.displacement[:, :1] * turn,
-            acceleration=record.acceleration[:, :1] * turn,
-            source=f"{record.source} along {direction_deg:g} deg",
-        )
+        record = record.along(direction_deg)
     if record.pga <= 0:
         return record
     return record.scaled(pga_g * G / record.pga, source=f"{record.source} scaled to {pga_g:g} g")

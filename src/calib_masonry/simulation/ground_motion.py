@@ -111,9 +111,13 @@ class GroundMotion:
         )
 
     def along(self, direction_deg: float) -> "GroundMotion":
-        """A one-component motion (along X, nothing along Y) turned to ``direction_deg`` from global X."""
+        """A one-component motion (along X, nothing along Y) turned to ``direction_deg`` from global X;
+        a motion of two components is refused (``--direction``: nothing to turn)."""
         if self.displacement[:, 1].any():
-            raise InputError(f"{self.source}: a direction turns a one-component motion; this one has two (X and Y)")
+            raise InputError(
+                f"--direction {direction_deg:g}: {self.source} has two horizontal components (X and Y); a direction "
+                "turns a record of one; drop --direction"
+            )
         d = math.radians(direction_deg)
         turn = np.array([math.cos(d), math.sin(d)])
         return replace(
@@ -290,9 +294,10 @@ def _parse_at2(path: Path, lines: list[str]) -> tuple[np.ndarray, float, str]:
     return np.asarray(values)[:, None], dt, units
 
 
-#: the first keys of an ESM (Engineering Strong Motion database, ORFEUS) or ITACA ASCII record:
-#: its header is ``KEY: value`` lines (64 in the DYNA 1.2 format), then one acceleration a line
-_ESM_KEYS = ("EVENT_NAME:", "EVENT_ID:", "SAMPLING_INTERVAL_S:")
+#: the first keys of an ESM (Engineering Strong Motion database, ORFEUS) or ITACA ASCII record,
+#: which with SAMPLING_INTERVAL_S tell one: its header is ``KEY: value`` lines (64 in the DYNA 1.2
+#: format), then one acceleration a line
+_ESM_KEYS = ("EVENT_NAME:", "EVENT_ID:")
 _ESM_UNITS = {
     "CM/S^2": "cm/s2",
     "CM/S2": "cm/s2",
@@ -307,7 +312,7 @@ _ESM_UNITS = {
 def _is_esm(lines: list[str]) -> bool:
     """Whether the text is an ESM / ITACA ASCII record (its header's keys)."""
     head = [line.strip().upper() for line in lines[:80]]
-    return any(h.startswith("SAMPLING_INTERVAL_S:") for h in head) and any(h.startswith(_ESM_KEYS[:2]) for h in head)
+    return any(h.startswith("SAMPLING_INTERVAL_S:") for h in head) and any(h.startswith(_ESM_KEYS) for h in head)
 
 
 def _parse_esm(path: Path, lines: list[str]) -> tuple[np.ndarray, float, str]:

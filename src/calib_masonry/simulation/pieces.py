@@ -538,16 +538,9 @@ class _Pieces:
         self.fv = self.frame[:, :, 1].copy()
         self.I0inv = np.linalg.inv(self.I0) if n else np.zeros((0, 3, 3))
         self._count = 0
-        # the compiled step's copies, contiguous and of one type
-        self._sa = np.ascontiguousarray(self.sa, dtype=np.int64)
-        self._sb = np.ascontiguousarray(self.sb, dtype=np.int64)
-        self._p = np.ascontiguousarray(self.p, dtype=np.float64)
-        self._kc = np.ascontiguousarray(self.kc, dtype=np.float64)
-        self._cdamp = np.ascontiguousarray(self.cdamp, dtype=np.float64)
         # each corner's force on the bodies of the pieces on either side, and its lever from the
         # body's centroid (in the piece's frame): the loads on a piece's own joints (check_joints)
         self.o = self.off[self.cj, self.ck]
-        self._o = np.ascontiguousarray(self.o, dtype=np.float64)
         if self.settings.check_joints:
             m = self.model
             ba, bb = m.a[self.cj], m.b[self.cj]
@@ -646,15 +639,15 @@ class _Pieces:
             self.I0,
             self.I0inv,
             self.alive,
-            self._sa,
-            self._sb,
-            self._p,
+            self.sa,
+            self.sb,
+            self.p,
             self.fu,
             self.fv,
             self.fn,
-            self._kc,
-            self._cdamp,
-            self._o,
+            self.kc,
+            self.cdamp,
+            self.o,
             slip,
             self.friction,
         )

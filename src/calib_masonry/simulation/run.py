@@ -199,11 +199,6 @@ def motion_for(config: SimulationConfig) -> GroundMotion:
     if config.accelerogram is not None:
         record = read_accelerogram(config.accelerogram, units=config.record_units, path_y=config.accelerogram_y)
         if config.direction_deg:
-            if record.displacement[:, 1].any():
-                raise InputError(
-                    f"--direction {config.direction_deg:g}: {record.source} has two horizontal components (X and Y); "
-                    "a direction turns a record of one; drop --direction"
-                )
             record = record.along(config.direction_deg)
         if config.pga_g is None or record.pga <= 0:
             return record

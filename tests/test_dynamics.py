@@ -179,3 +179,33 @@ def test_modes_of_a_large_structure_are_the_same_from_call_to_call():
     a, b = modes(sc, 3), modes(sc, 3)
     assert np.array_equal(a.periods_s, b.periods_s)
     assert np.array_equal(a.shapes, b.shapes)
+
+
+@pytest.mark.parametrize("courses", [20, 120])  # the dense solve, then ARPACK's (over _DENSE unknowns)
+def test_modes_for_a_mass_fraction_are_the_fewest_that_carry_it(courses):
+    # EN 1998-1 4.3.3.3.1: the modes whose effective masses sum to 90 % of the mass along each
+    # horizontal direction; a cantilever's first bending mode carries about 61 % of it
+    sc = _column(courses)
+    m = modes(sc, 1, mass_fraction=0.9)
+    cum = np.cumsum(m.effective_mass_fraction[:, :2], axis=0)
+    k = len(m.periods_s)
+    assert m.mass_fraction_met and cum[-1].min() >= 0.9 and cum[-2].min() < 0.9
+    assert k > 2
+    # the same modes as asking for that many
+    assert m.periods_s == pytest.approx(modes(sc, k).periods_s, rel=1e-9)
+    # more asked for than the fraction needs: all of them
+    assert len(modes(sc, k + 3, mass_fraction=0.9).periods_s) == k + 3
+
+
+def test_modes_refuses_too_many_and_an_impossible_fraction():
+    from calib_masonry.errors import InputError
+    from calib_masonry.simulation.dynamics import MAX_MODES
+
+    sc = _column(3)
+    for kwargs, msg in (
+        (dict(n=MAX_MODES + 1), "at most"),
+        (dict(mass_fraction=1.0), "between 0 and 1"),
+        (dict(mass_fraction=0.0), "between 0 and 1"),
+    ):
+        with pytest.raises(InputError, match=msg):
+            modes(sc, **kwargs)

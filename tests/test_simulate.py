@@ -685,9 +685,18 @@ def test_modes_cli(small_model, tmp_path):
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "soft" / "modes.json").read_text())["modes"][0]["period_s"] > 1.5 * periods[0]
     assert not (tmp_path / "soft" / "modes.png").exists()
+    # the modes that carry 90 % of the mass along x and y (EN 1998-1 4.3.3.3.1): the fewest that do
+    r = _cli("modes", small_model / "model", "--mass-fraction", "0.9", "--out", tmp_path / "ec8", "--no-figures")
+    assert r.returncode == 0, r.stderr
+    ec8 = json.loads((tmp_path / "ec8" / "modes.json").read_text())
+    cum = ec8["cumulative_effective_mass_fraction"]
+    assert ec8["mass_fraction_asked"] == 0.9 and ec8["mass_fraction_met"] and min(cum["x"], cum["y"]) >= 0.9
+    assert f"the {len(ec8['modes'])} modes carry x {cum['x']:.1%}" in r.stdout
     # bad input: one line, exit 2, nothing written
     for args, msg in (
         (["--n", "0"], "at least one mode"),
+        (["--n", "501"], "at most 500 modes"),
+        (["--mass-fraction", "1"], "between 0 and 1"),
         (["--out", small_model / "model"], "--out"),
     ):
         o = tmp_path / "bad"

@@ -470,18 +470,38 @@ def _cmd_modes(args) -> int:
 
         material = read_material(args.material)
     doc = modes_to_folder(
-        args.model_dir, args.out, n=args.n, material=material, figures=not args.no_figures, overwrite=args.overwrite
+        args.model_dir,
+        args.out,
+        n=args.n,
+        material=material,
+        mass_fraction=args.mass_fraction,
+        figures=not args.no_figures,
+        overwrite=args.overwrite,
     )
     print(
         f"modes: {doc['bodies_in_modes']} of {doc['bodies']} bodies held by joints, {doc['total_mass_kg']:.0f} kg, "
         f"height {doc['height_m']:.2f} m -> {args.out}"
     )
-    for row in doc["modes"]:
+    rows = doc["modes"]
+    for row in rows:
         f = row["effective_mass_fraction"]
-        print(
-            f"  mode {row['mode']}: T = {row['period_s']:.4f} s ({row['frequency_hz']:.2f} Hz), effective mass "
-            f"x {f['x']:.1%}, y {f['y']:.1%}, z {f['z']:.1%}"
-        )
+        # past the lowest dozen, only the modes that carry more than 5 % of the mass along x or y
+        # (those EN 1998-1 4.3.3.3.1 names); every one is in modes.json
+        if row["mode"] <= 12 or max(f["x"], f["y"]) > 0.05:
+            print(
+                f"  mode {row['mode']}: T = {row['period_s']:.4f} s ({row['frequency_hz']:.2f} Hz), effective mass "
+                f"x {f['x']:.1%}, y {f['y']:.1%}, z {f['z']:.1%}"
+            )
+    if len(rows) > 12:
+        print(f"  ({len(rows)} modes in modes.json; past mode 12 those above 5 % of the mass are shown)")
+    c = doc["cumulative_effective_mass_fraction"]
+    line = f"  the {len(rows)} modes carry x {c['x']:.1%}, y {c['y']:.1%}, z {c['z']:.1%} of the mass"
+    asked = doc["mass_fraction_asked"]
+    if asked is not None and not doc["mass_fraction_met"]:
+        line += f"; {asked:.0%} along x and y not reached within {len(rows)} modes (the most a call computes)"
+    elif asked is None and min(c["x"], c["y"]) < 0.9:
+        line += " (EN 1998-1 4.3.3.3.1 takes the modes that carry 90 %: --mass-fraction 0.9)"
+    print(line)
     emp = doc["empirical_first_period_of_masonry_towers"]
     print(
         "  empirical first period of masonry towers of this height: "
@@ -822,7 +842,13 @@ def _parser() -> argparse.ArgumentParser:
 
     mo = sub.add_parser("modes", help="natural periods, effective modal masses and mode shapes of a built model")
     mo.add_argument("model_dir", help="a folder `calib-masonry build` wrote")
-    mo.add_argument("--n", type=int, default=6, help="how many of the lowest modes")
+    mo.add_argument("--n", type=int, default=6, help="how many of the lowest modes (at most 500)")
+    mo.add_argument(
+        "--mass-fraction",
+        type=float,
+        default=None,
+        help="also as many more as carry this share of the mass along x and along y (EN 1998-1 4.3.3.3.1: 0.9)",
+    )
     mo.add_argument("--out", required=True)
     mo.add_argument("--material", default=None, help="a TOML [material] table (as structure.toml's) for this run")
     mo.add_argument("--no-figures", action="store_true")

@@ -766,16 +766,19 @@ def _write_pieces_blend(result: SimulationResult, path: Path) -> None:
     write_animation_blend(result.scene, r.positions, r.quaternions, result.scene.solver.fps, path)
 
 
-def model_modes(model_dir: str | Path, n: int = 6, material: Material | None = None):
-    """The ``n`` lowest natural modes of a model folder's intact structure, with the scene they
-    are of (its material: ``material``, else the model's material.toml, else the defaults)."""
+def model_modes(
+    model_dir: str | Path, n: int = 6, material: Material | None = None, mass_fraction: float | None = None
+):
+    """The ``n`` lowest natural modes of a model folder's intact structure (with ``mass_fraction``,
+    as many more as carry that share of the horizontal mass: :func:`~.dynamics.modes`), with the
+    scene they are of (its material: ``material``, else the model's material.toml, else the defaults)."""
     from .dynamics import modes
 
     geometry, _ = geometry_for_model(model_dir)
     mat, source = model_material(model_dir, material)
     scene = scene_for(geometry, None, material=mat, duration_s=1.0)
     scene.notes["material_source"] = source
-    return modes(scene, n), scene
+    return modes(scene, n, mass_fraction=mass_fraction), scene
 
 
 def modes_to_folder(
@@ -784,17 +787,19 @@ def modes_to_folder(
     *,
     n: int = 6,
     material: Material | None = None,
+    mass_fraction: float | None = None,
     figures: bool = True,
     overwrite: bool = False,
 ) -> dict:
     """modes.json (periods, effective modal masses, the empirical periods of masonry towers of the
-    model's height) and modes.png (each mode's shape) of a model folder into ``out``, all or nothing."""
+    model's height) and modes.png (the lowest modes' shapes) of a model folder into ``out``, all or
+    nothing; ``n`` and ``mass_fraction``: :func:`model_modes`."""
     from .dynamics import write_modes
 
     check_output(out, command="modes", overwrite=overwrite)
     checked_model_dir(model_dir)
     _out_beside_model(out, model_dir)
-    m, scene = model_modes(model_dir, n, material)
+    m, scene = model_modes(model_dir, n, material, mass_fraction)
     with staged_output(out, "modes", overwrite=overwrite) as stage:
         doc = write_modes(m, scene, stage, figure=figures)
         doc["model"] = str(model_dir)

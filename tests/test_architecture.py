@@ -284,6 +284,44 @@ def test_a_wait_for_the_pieces_after_the_engine_shows_its_progress(monkeypatch, 
     assert lines[-1].startswith(f"pieces: {frames}/{frames} frames") and lines[-1].endswith("done"), lines
 
 
+def test_a_long_check_shows_its_crack_rounds_in_the_progress(monkeypatch, capsys):
+    # the scale tower's first cracking check ran 340 crack rounds in 605 s under a line that said
+    # only "25/38 frames": the line now says what the check is doing, the record's time it checks,
+    # its crack round and the joints cracked so far, and forgets it once the check is done
+    import re
+    import time
+
+    from calib_masonry import progress as progress_module
+    from calib_masonry.simulation import loop
+    from calib_masonry.simulation.joints import JointModel
+    from calib_masonry.simulation.scene import Material
+
+    monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)
+    real = JointModel.solve
+
+    def slow(self, *args, **kwargs):
+        if self.crack_round:  # a crack round's solve, after the check's first one
+            time.sleep(0.6)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(JointModel, "solve", slow)
+    scene = _shaken_stack(Material(tensile_strength=2e3, shear_strength=2e3))
+    out = loop.drain(loop.steps(scene, progress=None, engine=_StillEngine))
+    lines = capsys.readouterr().err.splitlines()
+    rounds = [
+        (float(m.group(1)), int(m.group(2)), int(m.group(3)))
+        for line in lines
+        if (m := re.search(r"checking the joints at (\d+\.\d{3}) s: crack round (\d+), (\d+) joints? cracked$", line))
+    ]
+    assert rounds, lines
+    cracked = np.isfinite(out.bond_break_time_s)
+    for t, r, n in rounds:
+        # the check's time is one at which joints cracked, and no more had cracked by its end
+        assert r >= 1 and 1 <= n <= cracked.sum()
+        assert np.isclose(out.bond_break_time_s[cracked], t, atol=1e-9).any()
+    assert "checking the joints" not in lines[-1]
+
+
 def test_a_long_check_of_the_joint_model_keeps_the_progress_going(monkeypatch, capsys):
     # one check of the joint model can take minutes (a crack cascade on thousands of joints): the
     # frames' progress goes on showing while the loop waits for it (a line every LOG_EVERY_S in a

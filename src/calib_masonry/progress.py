@@ -32,6 +32,7 @@ class _LogLines:
         self.n = 0
         self.t0 = self.last = time.monotonic()
         self.logged = False
+        self.postfix = ""
 
     def __iter__(self) -> Iterator:
         for item in self.iterable:
@@ -47,8 +48,14 @@ class _LogLines:
                 left = f"about {elapsed / done - elapsed:.0f} s left"
             else:  # one item's time said "about 4771 s left" of a run done a second later
                 left = "time left not known yet"
-            return f"{self.desc}: {self.n}/{self.total} {self.unit}s ({done:.0%}), {elapsed:.0f} s elapsed, {left}"
-        return f"{self.desc}: {self.n} {self.unit}s, {elapsed:.0f} s elapsed"
+            line = f"{self.desc}: {self.n}/{self.total} {self.unit}s ({done:.0%}), {elapsed:.0f} s elapsed, {left}"
+        else:
+            line = f"{self.desc}: {self.n} {self.unit}s, {elapsed:.0f} s elapsed"
+        return f"{line}; {self.postfix}" if self.postfix else line
+
+    def set_postfix_str(self, s: str = "") -> None:
+        """What the step is doing now, after the next lines (tqdm's name); "" clears it."""
+        self.postfix = s
 
     def update(self, n: int = 1) -> None:
         raise_if_stopped()
@@ -74,6 +81,9 @@ class _Silent:
 
     def update(self, n: int = 1) -> None:
         raise_if_stopped()
+
+    def set_postfix_str(self, s: str = "") -> None:
+        pass
 
     def close(self) -> None:
         pass

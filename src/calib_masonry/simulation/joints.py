@@ -467,6 +467,10 @@ class JointModel:
         self._tangent: _Tangent | None = None  # the contact iteration's matrix and its analysis, made at first use
         self._sub_tangents: dict = {}  # the same over the bodies still held, by their set (_tangent_of)
         self.factorisations = 0  # sparse factorisations (LU or Cholesky), over the model's life
+        # the crack rounds of the :meth:`crack` under way (or last): its round and the joints it has
+        # cracked so far, read by another thread to show what a long check is doing
+        self.crack_round = 0
+        self.cracked_in_rounds = 0
         self._U: np.ndarray | None = None  # the last committed solve's motion
         self._last: tuple | None = None
         self.newton_iterations = 0  # of the last solve
@@ -1032,6 +1036,7 @@ class JointModel:
         closed = None if closed is None else np.asarray(closed, dtype=bool).copy()
         cracked: list[np.ndarray] = []
         modes: list[np.ndarray] = []
+        self.crack_round = self.cracked_in_rounds = 0
         state, _ = self.solve(g, intact, closed, start=start, extra=extra, joints=np.flatnonzero(intact))
         kept = state
         for rounds in range(self.settings.max_rounds + 1):
@@ -1054,6 +1059,8 @@ class JointModel:
                 closed[new] = True  # a joint that has just cracked still touches
             cracked.append(new)
             modes.append(state.mode[new])
+            self.cracked_in_rounds += len(new)
+            self.crack_round = rounds + 1  # the solve below is this round's
             # from the last round's motion
             state, _ = self.solve(g, intact, closed, start=self._last[2], extra=extra, joints=np.flatnonzero(intact))
         state = kept

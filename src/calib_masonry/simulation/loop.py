@@ -441,6 +441,7 @@ def steps(
     # thread waits for it once the engine is done (the pieces can take longer than Bullet)
     pieces_at = [0.0]
     wait_bar: list = []
+    waited = [False]  # the frames' line shows a long check's activity (cleared once it is done)
 
     def pieces_reached(t: float) -> None:
         pieces_at[0] = t
@@ -449,6 +450,9 @@ def steps(
         # a check of the joint model can take minutes (a crack cascade on a large structure): the
         # frames' progress goes on showing (a line every 10 s in a log) and a stop ends the wait
         if not for_pieces:
+            if tracker is not None:
+                frames_bar.set_postfix_str(tracker.activity())
+                waited[0] = True
             frames_bar.update(0)
             return
         if not wait_bar:
@@ -484,6 +488,9 @@ def steps(
                     )
                 p = i - 1
                 release, utilisation[p], velocity = next(ahead) if ahead is not None else check(f, p)
+                if waited[0]:
+                    frames_bar.set_postfix_str("")
+                    waited[0] = False
                 if len(release):
                     switch_off(release, f, velocity)
             elif f - 1 in schedule:

@@ -91,6 +91,8 @@ class CrackTracker:
         self.ground_motion = scene.motion
         self.check_interval_s = float(scene.solver.check_interval_s)
         self._next_check = 0
+        self.checking_s: float | None = None  # the record's time of the check under way (or last)
+        self._cracked_before = 0  # the joints cracked before the crack rounds under way
         # whether a check lets go at once all that its load lets go (see _check): under a ground
         # motion, whose verdict moves the freed pieces itself; in a pushover or a shear test the
         # peak is read where Bullet's poses run away, and a piece freed whole at once stood on
@@ -192,6 +194,7 @@ class CrackTracker:
                 return np.zeros(0, dtype=np.int64)
             g = np.asarray(g, dtype=np.float64)
             if self.ground_motion is None:
+                self.checking_s = float(time_s) - self.t0
                 return self._check(float(time_s), g, positions, rotations, plate)
             h = self.check_interval_s
             last = int(np.floor((float(time_s) - self.t0) / h + 1e-6))
@@ -199,6 +202,7 @@ class CrackTracker:
             peak = None
             while self._next_check <= last:
                 tk = self.t0 + self._next_check * h
+                self.checking_s = tk - self.t0
                 out.append(
                     self._check(tk, record_load(self.ground_motion, tk - self.t0, g), positions, rotations, plate)
                 )
@@ -214,6 +218,20 @@ class CrackTracker:
             return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
         finally:
             self.seconds += time.perf_counter() - t
+
+    def activity(self) -> str:
+        """What the check under way is doing, for the progress line of a run that waits for it (a
+        crack cascade on a large structure can take minutes a check): the time it checks (from
+        the ground motion's or the pushover's start), and its crack round with the joints cracked
+        so far. Read from another thread than the check's."""
+        if self.checking_s is None:
+            return ""
+        text = f"checking the joints at {self.checking_s:.3f} s"
+        rounds = self.model.crack_round
+        if rounds:
+            n = self._cracked_before + self.model.cracked_in_rounds
+            text += f": crack round {rounds}, {n} joint{'' if n == 1 else 's'} cracked"
+        return text
 
     def _frozen(self, held_bodies: np.ndarray | None) -> np.ndarray:
         """``(nj,)`` the held joints of the pieces already set free (no held joint ties their bodies
@@ -289,6 +307,8 @@ class CrackTracker:
             intact = self.intact & ~frozen
             if frozen.any() and closed is not None:
                 closed[: self.model.nj][frozen] = False
+            self.model.cracked_in_rounds = 0
+            self._cracked_before = int((~self.intact).sum())
             new, modes, state = self.model.crack(g, intact, closed, runaway_m=self.release_m, extra=extra, start=start)
             self.intact[new] = False
             self.break_time_s[new] = crack_time_s - self.t0

@@ -285,9 +285,9 @@ def test_a_wait_for_the_pieces_after_the_engine_shows_its_progress(monkeypatch, 
 
 
 def test_a_long_check_shows_its_crack_rounds_in_the_progress(monkeypatch, capsys):
-    # the scale tower's first cracking check ran 340 crack rounds in 605 s under a line that said
-    # only "25/38 frames": the line now says what the check is doing, the record's time it checks,
-    # its crack round and the joints cracked so far, and forgets it once the check is done
+    # the scale tower's first cracking frame took 400 s (one of its checks 39 crack rounds) under
+    # a line that said only "24/38 frames": the line now says what the check is doing, the record's
+    # time it checks, its crack round and the joints cracked so far, and forgets it once it is done
     import re
     import time
 

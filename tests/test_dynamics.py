@@ -209,3 +209,24 @@ def test_modes_refuses_too_many_and_an_impossible_fraction():
     ):
         with pytest.raises(InputError, match=msg):
             modes(sc, **kwargs)
+
+
+def test_modes_count_their_steps_and_are_scipys_to_the_last_digit(monkeypatch, capsys):
+    # a large structure's modes take minutes: ARPACK's steps show in log lines (every LOG_EVERY_S,
+    # here at each), through an operator that is scipy's own shift-invert to the last digit (the
+    # Rayleigh damping of every quake is made from the modes)
+    import scipy.sparse.linalg as spla
+
+    from calib_masonry import progress as progress_module
+    from calib_masonry.simulation.dynamics import _lowest_modes, stiffness_matrix
+
+    monkeypatch.setattr(progress_module, "LOG_EVERY_S", 0.0)
+    sc = _column(120)
+    K, M = stiffness_matrix(sc), mass_matrix(sc)
+    w, V = _lowest_modes(K, M, 3, progress=None)
+    v0 = np.random.default_rng(0).uniform(-1.0, 1.0, K.shape[0])
+    w0, V0 = spla.eigsh(K.tocsc(), k=3, M=M.tocsc(), sigma=-1.0, which="LM", v0=v0)
+    order = np.argsort(w0)
+    assert np.array_equal(w, w0[order]) and np.array_equal(V, V0[:, order])
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("modes (the lowest 3)")]
+    assert len(lines) > 3 and lines[-1].endswith("done"), lines

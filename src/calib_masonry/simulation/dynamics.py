@@ -157,12 +157,14 @@ def modes(
     mass_fraction: float | None = None,
     model=None,
     mass: sp.spmatrix | None = None,
+    progress: bool | None = False,
 ) -> Modes:
     """The ``n`` lowest natural modes of the scene's intact structure (see the module docstring);
     with ``mass_fraction`` (0-1), at least ``n`` and as many more as the lowest modes need for their
     effective masses to sum to that fraction of the mass along x and along y (EN 1998-1, 4.3.3.3.1:
     0.9), or :data:`MAX_MODES` (:attr:`Modes.mass_fraction_met` says whether they did). ``model``
-    and ``mass``: the scene's JointModel and mass matrix, if made."""
+    and ``mass``: the scene's JointModel and mass matrix, if made; ``progress``: the Lanczos steps
+    shown (a large structure's hundred modes take minutes)."""
     if n < 1:
         raise InputError(f"modes: n = {n}: ask for at least one mode")
     if n > MAX_MODES:
@@ -193,7 +195,7 @@ def modes(
     total = float(sum(b.mass for b, h in zip(scene.bodies, held) if h))
     met = None
     while True:
-        w, V = _lowest_modes(K, M, n)
+        w, V = _lowest_modes(K, M, n, progress=progress)
         if mass_fraction is None:
             break
         # the horizontal effective masses' running sums: the fewest modes (at least the n asked
@@ -232,8 +234,13 @@ def modes(
     )
 
 
-def _lowest_modes(K: sp.spmatrix, M: sp.spmatrix, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The ``n`` lowest eigenvalues (ascending) and vectors of ``K phi = w M phi``."""
+def _lowest_modes(
+    K: sp.spmatrix, M: sp.spmatrix, n: int, *, progress: bool | None = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``n`` lowest eigenvalues (ascending) and vectors of ``K phi = w M phi``; ``progress``:
+    ARPACK's steps (each a solve with ``K - sigma M``) counted on a bar or in log lines."""
+    from ..progress import progress as _progress
+
     size = K.shape[0]
     if size <= _DENSE:
         return sla.eigh(K.toarray(), M.toarray(), subset_by_index=[0, n - 1])
@@ -242,7 +249,22 @@ def _lowest_modes(K: sp.spmatrix, M: sp.spmatrix, n: int) -> tuple[np.ndarray, n
     # last digits from run to run; the shift lies below the lowest eigenvalue, so that K - sigma M
     # is positive definite
     v0 = np.random.default_rng(0).uniform(-1.0, 1.0, size)
-    w, V = spla.eigsh(K.tocsc(), k=n, M=M.tocsc(), sigma=-1.0, which="LM", v0=v0)
+    sigma = -1.0
+    A, B = K.tocsc(), M.tocsc()
+    # (K - sigma M)^-1 as eigsh makes it (scipy's SpLuInv: SuperLU of the same matrix, the same
+    # options), so that the modes are the same to the last digit; counted here
+    lu = spla.splu((A - sigma * B).tocsc())
+    bar = _progress(desc=f"modes (the lowest {n})", unit="step", enabled=progress)
+
+    def solve(x: np.ndarray) -> np.ndarray:
+        bar.update()
+        return lu.solve(np.asarray(x, dtype=np.float64))
+
+    op = spla.LinearOperator((size, size), matvec=solve, dtype=np.float64)
+    try:
+        w, V = spla.eigsh(A, k=n, M=B, sigma=sigma, which="LM", v0=v0, OPinv=op)
+    finally:
+        bar.close()
     order = np.argsort(w)
     return w[order], V[:, order]
 

@@ -767,7 +767,11 @@ def _write_pieces_blend(result: SimulationResult, path: Path) -> None:
 
 
 def model_modes(
-    model_dir: str | Path, n: int = 6, material: Material | None = None, mass_fraction: float | None = None
+    model_dir: str | Path,
+    n: int = 6,
+    material: Material | None = None,
+    mass_fraction: float | None = None,
+    progress: bool | None = False,
 ):
     """The ``n`` lowest natural modes of a model folder's intact structure (with ``mass_fraction``,
     as many more as carry that share of the horizontal mass: :func:`~.dynamics.modes`), with the
@@ -778,7 +782,7 @@ def model_modes(
     mat, source = model_material(model_dir, material)
     scene = scene_for(geometry, None, material=mat, duration_s=1.0)
     scene.notes["material_source"] = source
-    return modes(scene, n, mass_fraction=mass_fraction), scene
+    return modes(scene, n, mass_fraction=mass_fraction, progress=progress), scene
 
 
 def modes_to_folder(
@@ -790,16 +794,18 @@ def modes_to_folder(
     mass_fraction: float | None = None,
     figures: bool = True,
     overwrite: bool = False,
+    progress: bool | None = None,
 ) -> dict:
     """modes.json (periods, effective modal masses, the empirical periods of masonry towers of the
     model's height) and modes.png (the lowest modes' shapes) of a model folder into ``out``, all or
-    nothing; ``n`` and ``mass_fraction``: :func:`model_modes`."""
+    nothing; ``n`` and ``mass_fraction``: :func:`model_modes`; ``progress``: the eigen-solve's steps
+    shown (a bar on a terminal, a line every 10 s in a log)."""
     from .dynamics import write_modes
 
     check_output(out, command="modes", overwrite=overwrite)
     checked_model_dir(model_dir)
     _out_beside_model(out, model_dir)
-    m, scene = model_modes(model_dir, n, material, mass_fraction)
+    m, scene = model_modes(model_dir, n, material, mass_fraction, progress)
     with staged_output(out, "modes", overwrite=overwrite) as stage:
         doc = write_modes(m, scene, stage, figure=figures)
         doc["model"] = str(model_dir)

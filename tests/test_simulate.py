@@ -678,6 +678,14 @@ def test_modes_cli(small_model, tmp_path):
     assert set(doc["empirical_first_period_of_masonry_towers"]) == {"eurocode_8", "italian_guidelines"}
     assert (out / "modes.png").is_file()
     assert f"T = {periods[0]:.4f} s" in r.stdout and "EN 1998-1" in r.stdout
+    # the fundamental mode along x and y: the one of the largest effective mass (the lowest can be
+    # a panel's own)
+    for d in "xy":
+        masses = [m["effective_mass_fraction"][d] for m in doc["modes"]]
+        f = doc["fundamental_mode"][d]
+        k = int(np.argmax(masses))
+        assert f["mode"] == k + 1 and f["period_s"] == periods[k] and f["effective_mass_fraction"] == masses[k]
+        assert f"{d} mode {k + 1}, T = {periods[k]:.4f} s" in r.stdout
     # a softer mortar (--material) lengthens every period
     soft = tmp_path / "soft.toml"
     soft.write_text("[material]\nmortar_youngs_modulus_mpa = 100\n")

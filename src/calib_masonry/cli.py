@@ -502,6 +502,14 @@ def _cmd_modes(args) -> int:
     elif asked is None and min(c["x"], c["y"]) < 0.9:
         line += " (EN 1998-1 4.3.3.3.1 takes the modes that carry 90 %: --mass-fraction 0.9)"
     print(line)
+    fund = doc["fundamental_mode"]
+    print(
+        "  fundamental mode (the largest effective mass): "
+        + "; ".join(
+            f"{d} mode {f['mode']}, T = {f['period_s']:.4f} s ({f['effective_mass_fraction']:.1%})"
+            for d, f in fund.items()
+        )
+    )
     emp = doc["empirical_first_period_of_masonry_towers"]
     print(
         "  empirical first period of masonry towers of this height: "

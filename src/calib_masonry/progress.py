@@ -54,7 +54,8 @@ class _LogLines:
         return f"{line}; {self.postfix}" if self.postfix else line
 
     def set_postfix_str(self, s: str = "") -> None:
-        """What the step is doing now, after the next lines (tqdm's name); "" clears it."""
+        """What the step is doing now, appended to the lines from here on (tqdm's name for it); ""
+        clears it."""
         self.postfix = s
 
     def update(self, n: int = 1) -> None:

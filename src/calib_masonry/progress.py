@@ -44,7 +44,11 @@ class _LogLines:
         elapsed = now - self.t0
         if self.total:
             done = self.n / self.total
-            if self.n >= min(MIN_ITEMS_FOR_ETA, self.total):
+            if self.postfix:
+                # an item that takes its time (the suffix says what it does): the items' pace says
+                # nothing of it (the scale tower's line said "about 145 s left" during a 400 s frame)
+                left = "time left not known"
+            elif self.n >= min(MIN_ITEMS_FOR_ETA, self.total):
                 left = f"about {elapsed / done - elapsed:.0f} s left"
             else:  # one item's time said "about 4771 s left" of a run done a second later
                 left = "time left not known yet"

@@ -110,6 +110,13 @@ class GroundMotion:
             recorded_peak=None if self.recorded_peak is None else self.recorded_peak * factor,
         )
 
+    def at_pga(self, pga_g: float) -> "GroundMotion":
+        """The motion scaled so that its peak ground acceleration is ``pga_g`` (g), its source naming
+        the scale (`simulate --accelerogram --pga`, a study's records); one without a peak as it is."""
+        if self.pga <= 0:
+            return self
+        return self.scaled(pga_g * G / self.pga, source=f"{self.source} scaled to {pga_g:g} g")
+
     def along(self, direction_deg: float) -> "GroundMotion":
         """A one-component motion (along X, nothing along Y) turned to ``direction_deg`` from global X;
         a motion of two components is refused (``--direction``: nothing to turn)."""

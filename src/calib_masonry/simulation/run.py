@@ -200,9 +200,7 @@ def motion_for(config: SimulationConfig) -> GroundMotion:
         record = read_accelerogram(config.accelerogram, units=config.record_units, path_y=config.accelerogram_y)
         if config.direction_deg:
             record = record.along(config.direction_deg)
-        if config.pga_g is None or record.pga <= 0:
-            return record
-        return record.scaled(config.pga_g * G / record.pga, source=f"{record.source} scaled to {config.pga_g:g} g")
+        return record if config.pga_g is None else record.at_pga(config.pga_g)
     motion = synthetic_motion(
         config.pga_g,
         config.duration_s,

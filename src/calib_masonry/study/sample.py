@@ -374,7 +374,7 @@ def _recorded(files: tuple[Path, ...], pga_g: float, direction_deg: float = 0.0)
     """The recorded motion of ``files`` (one file, or its X and Y components) scaled so that its peak
     is ``pga_g``, as ``simulate --accelerogram ... --pga`` scales it; a one-component record (one
     file of one component) along ``direction_deg`` from global X, as a study's synthetic motions."""
-    from ..simulation.ground_motion import G, read_accelerogram
+    from ..simulation.ground_motion import read_accelerogram
 
     if files not in _RECORDS:
         with warnings.catch_warnings():
@@ -383,9 +383,7 @@ def _recorded(files: tuple[Path, ...], pga_g: float, direction_deg: float = 0.0)
     record = _RECORDS[files]
     if direction_deg and not record.displacement[:, 1].any():
         record = record.along(direction_deg)
-    if record.pga <= 0:
-        return record
-    return record.scaled(pga_g * G / record.pga, source=f"{record.source} scaled to {pga_g:g} g")
+    return record.at_pga(pga_g)
 
 
 def _material(sample: Sample, base: tuple = ()):

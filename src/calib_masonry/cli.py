@@ -462,6 +462,7 @@ def _quake_line(s: dict, out) -> str:
 
 
 def _cmd_modes(args) -> int:
+    from .simulation.dynamics import FIGURE_MODES  # the modes printed in full, as modes.png draws them
     from .simulation.run import modes_to_folder
 
     material = None
@@ -485,15 +486,15 @@ def _cmd_modes(args) -> int:
     rows = doc["modes"]
     for row in rows:
         f = row["effective_mass_fraction"]
-        # past the lowest dozen, only the modes that carry more than 5 % of the mass along x or y
+        # past the lowest few, only the modes that carry more than 5 % of the mass along x or y
         # (those EN 1998-1 4.3.3.3.1 names); every one is in modes.json
-        if row["mode"] <= 12 or max(f["x"], f["y"]) > 0.05:
+        if row["mode"] <= FIGURE_MODES or max(f["x"], f["y"]) > 0.05:
             print(
                 f"  mode {row['mode']}: T = {row['period_s']:.4f} s ({row['frequency_hz']:.2f} Hz), effective mass "
                 f"x {f['x']:.1%}, y {f['y']:.1%}, z {f['z']:.1%}"
             )
-    if len(rows) > 12:
-        print(f"  ({len(rows)} modes in modes.json; past mode 12 those above 5 % of the mass are shown)")
+    if len(rows) > FIGURE_MODES:
+        print(f"  ({len(rows)} modes in modes.json; past mode {FIGURE_MODES} those above 5 % of the mass are shown)")
     c = doc["cumulative_effective_mass_fraction"]
     line = f"  the {len(rows)} modes carry x {c['x']:.1%}, y {c['y']:.1%}, z {c['z']:.1%} of the mass"
     asked = doc["mass_fraction_asked"]

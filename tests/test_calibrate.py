@@ -182,6 +182,16 @@ def test_side_profiles_sample_exactly_the_blurred_photo():
             [ndimage.map_coordinates(whole[..., c], [rows, cols], order=1, mode="nearest") for c in range(3)], -1
         )
         assert np.array_equal(_blurred_samples(rgb, rows, cols), expect)
+        # the grey (carry_soft_sides' profiles): the whole photo's channel mean, blurred, sampled
+        gray = ndimage.gaussian_filter(rgb.mean(axis=-1), _SIDE_BLUR_PX)
+        grey_expect = ndimage.map_coordinates(gray, [rows, cols], order=1, mode="nearest")
+        assert np.array_equal(_blurred_samples(rgb, rows, cols, gray=True), grey_expect)
+        rgb64 = rgb.astype(np.float64) * 0.999  # a float64 photo is read as float32 first
+        gray64 = ndimage.gaussian_filter(rgb64.astype(np.float32).mean(axis=-1), _SIDE_BLUR_PX)
+        assert np.array_equal(
+            _blurred_samples(rgb64, rows, cols, gray=True),
+            ndimage.map_coordinates(gray64, [rows, cols], order=1, mode="nearest"),
+        )
 
 
 def test_the_ridge_hessian_is_scikit_images_value_for_value_without_scipy_stats():

@@ -163,3 +163,35 @@ def test_the_trace_figures_title_stays_inside_the_figure(tmp_path, monkeypatch):
     box = fig.axes[0].title.get_window_extent()
     width = fig.get_size_inches()[0] * fig.dpi
     assert box.x0 >= 0 and box.x1 <= width
+
+
+def test_outlines_all_at_once_are_each_labels_own_value_for_value():
+    # trace_outlines (every label's marching squares at once, joined by an index) must give what
+    # trace_outline gives on each label's crop, point for point and from the same start: on
+    # labels that touch, hold holes and other labels, meet at saddles, lie in several parts and
+    # run along the image's border
+    from scipy import ndimage
+
+    from calib_masonry.wall2d.trace import trace_outlines
+
+    rng = np.random.default_rng(7)
+    checked = 0
+    for t in range(150):
+        h, w = (int(v) for v in rng.integers(2, 30, 2))
+        n = int(rng.integers(1, 7))
+        labels = rng.integers(0, n + 1, (h, w))  # speckle: saddles, parts, holes
+        if t % 3 == 0:  # blobs that touch one another
+            f = ndimage.gaussian_filter(rng.random((h, w)), 2.0)
+            labels = np.digitize(f, np.quantile(f, np.linspace(0, 1, n + 2)[1:-1]))
+        if t % 5 == 0:  # each a 4-connected part, as a segmentation's labels are
+            labels, _ = ndimage.label(labels > 0)
+        slices = ndimage.find_objects(labels)
+        ids = [k for k, sl in enumerate(slices, start=1) if sl is not None]
+        for k, outline in zip(ids, trace_outlines(labels, ids)):
+            expect = trace_outline(labels[slices[k - 1]] == k)
+            assert outline.shape == expect.shape and np.array_equal(outline, expect), (t, k)
+            checked += 1
+    assert checked > 500
+    assert trace_outlines(labels, []) == []
+    with pytest.raises(ValueError, match="no pixels"):
+        trace_outlines(np.zeros((5, 5), int), [1])

@@ -46,8 +46,10 @@ def text_width(text: str, size: int = 12) -> int:
 
 def preview_uint8(img: np.ndarray, max_side: int) -> np.ndarray:
     """An image in [0, 1] (rows, cols[, 3]), taken every ``step`` pixels so that its larger side is
-    at most twice ``max_side`` (the panel's resize smooths the rest), as RGB uint8."""
-    step = max(1, math.floor(max(img.shape[:2]) / (2 * max_side)))
+    at most twice ``max_side`` (the panel's resize smooths the rest), as RGB uint8. (The step was
+    rounded down until 2026-11-30, so that a 3000 px photo in an 870 px panel was converted whole:
+    0.1-0.4 s of a ``rectify``'s figure, with the segmentation's threads on both cores.)"""
+    step = max(1, math.ceil(max(img.shape[:2]) / (2 * max_side)))
     sub = to_uint8(img[::step, ::step])
     return np.repeat(sub[..., None], 3, axis=-1) if sub.ndim == 2 else sub
 

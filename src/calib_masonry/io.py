@@ -479,7 +479,8 @@ class Photo:
             rgb = rgb[..., :3].astype(np.float32) / 255.0
         else:
             rgb = np.asarray(rgb[..., :3], dtype=np.float32)
-            if not np.all(np.isfinite(rgb)) or rgb.min() < 0.0 or rgb.max() > 1.0:
+            # NaN makes min and max NaN, and the test false: two passes over a photo, not three
+            if not (rgb.min() >= 0.0 and rgb.max() <= 1.0):
                 raise InputError(f"photo {self.path}: a float image must hold values in [0, 1] (or give uint8 0-255)")
         object.__setattr__(self, "rgb", rgb)
         if self.focal_px is not None and not (math.isfinite(self.focal_px) and self.focal_px > 0):

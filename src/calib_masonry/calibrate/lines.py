@@ -216,6 +216,11 @@ SIDE_MOVE_FRACTION = 0.03
 #: up into the wall)
 STEEP_TURN_RAD = math.radians(5.0)
 STEEP_MOVE_FRACTION = 0.06
+#: the line :func:`base_in_pencil` finds is snapped to the photo's edge within this many px of it
+PENCIL_SNAP_PX = 1.5
+#: and steps along most of the base by at least this much (the median step of colour, RGB of 1,
+#: between samples half a pixel apart): a flat ground has none
+PENCIL_MIN_STEP = 0.01
 
 
 #: the outline's edges are sought on the photo blurred by this sigma (px)
@@ -371,6 +376,12 @@ def _off_vp(line: tuple[np.ndarray, np.ndarray], vp: np.ndarray) -> float:
     return float(np.arcsin(min(1.0, abs(d[0] * to[1] - d[1] * to[0]))))
 
 
+def side_turn(a: np.ndarray, b: np.ndarray, vp: np.ndarray) -> float:
+    """The angle (rad) between the side a-b and the direction from its middle to the vanishing
+    point ``vp`` (homogeneous)."""
+    return _off_vp(((a + b) / 2, (b - a) / max(float(np.linalg.norm(b - a)), 1e-12)), vp)
+
+
 def _bowed(edge: np.ndarray, line: tuple[np.ndarray, np.ndarray], a: np.ndarray, b: np.ndarray):
     """A side whose edge points bow (a lens bends a straight edge into nearly a parabola): the
     tangents of the parabola fitted to them (robustly) at the side's two ends ``a`` and ``b``, as
@@ -470,16 +481,12 @@ def base_off_shadow(
     evidence (:func:`_side_sigma`), as :func:`refine_quad` gives it."""
     quad = np.asarray(quad, dtype=np.float64)
     sigma = np.asarray(sigma, dtype=np.float64)
-
-    def turn_of(a, b) -> float:
-        return _off_vp(((a + b) / 2, (b - a) / max(float(np.linalg.norm(b - a)), 1e-12)), vp)
-
     a, b = quad[0], quad[1]
-    turn = turn_of(a, b)
+    turn = side_turn(a, b, vp)
     # the top, which no shadow touches, must run towards the vanishing point: an irregular stone
     # wall's courses put it 7 degrees off its top and base alike (a synthetic Stylite wall), and
     # a base moved towards it went 40 px up onto a stone's edge
-    if turn <= SIDE_TURN_RAD or turn_of(quad[3], quad[2]) > SIDE_TURN_RAD / 2:
+    if turn <= SIDE_TURN_RAD or side_turn(quad[3], quad[2], vp) > SIDE_TURN_RAD / 2:
         return quad, sigma
     centre = quad.mean(axis=0)
     left, right = (quad[0], quad[3] - quad[0]), (quad[1], quad[2] - quad[1])  # the ends, up from the base
@@ -522,6 +529,72 @@ def base_off_shadow(
     sigma[0] = _corner_sigma(ends_sigma[1], best[0])  # LL: the left end and the base
     sigma[1] = _corner_sigma(best[0], ends_sigma[0])  # LR: the base and the right end
     return new, sigma
+
+
+def base_in_pencil(
+    rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray, *, reach_in: float, reach_out: float, to_photo=None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The outline's base sought again among the lines through the bed joints' vanishing point
+    ``vp`` (homogeneous; a fitted camera's, whose top and sides fix it): of those lines from
+    ``reach_in`` px in from the base's middle to ``reach_out`` px out, the outermost along which
+    the colour steps strongly over most of the base (the median over the base of the step across
+    each line, at least :data:`OUTER_EDGE_FRACTION` of the strongest such median and
+    :data:`PENCIL_MIN_STEP`). A cast shadow's
+    far edge, which meets the wall's foot at one end only, does not run through the vanishing
+    point and steps along a few of the lines' points at most; the foot steps along all of them.
+
+    Each profile of :func:`_refine_side` picks its own outermost edge, so a base along which a
+    shadow's edge comes within the profiles' reach over part of the wall is fitted through both
+    (a Blender wall, 12058: its base corners 12 and 20 px low, W 3.9 % and H 5.7 % off with the
+    camera height given). Returns the outline with its two base corners moved along the ends to
+    that line, and the line's edge points ``(n, 2)`` (for :func:`_side_sigma`); None where no line
+    steps. ``quad`` and the result are in the coordinates of ``vp``; ``to_photo`` as in
+    :func:`_refine_side`."""
+    quad = np.asarray(quad, dtype=np.float64)
+    a, b = quad[0], quad[1]
+    length = float(np.linalg.norm(b - a))
+    if length < 10:
+        return None
+    n = side_normal(a, b)  # out of the wall: below the base
+    along = (b - a) / length
+    m = (a + b) / 2
+    offs = np.arange(-reach_in, reach_out + 0.25, 0.5)
+    s = np.linspace(-0.42, 0.42, max(20, int(length / 6))) * length
+    centres = m[None, :] + offs[:, None] * n[None, :]
+    dirs = np.array([_vp_direction(c, vp) for c in centres])
+    dirs *= np.sign(dirs @ along)[:, None]
+    pts = centres[:, None, :] + s[None, :, None] * dirs[:, None, :]  # (offsets, along, 2)
+    if to_photo is not None:
+        pts = to_photo(pts.reshape(-1, 2)).reshape(pts.shape)
+    prof = _blurred_samples(rgb, pts[..., 1].ravel(), pts[..., 0].ravel()).reshape(len(offs), len(s), 3)
+    step = np.median(np.linalg.norm(np.diff(prof, axis=0), axis=-1), axis=1)  # (offsets - 1,)
+    peak = np.zeros_like(step, dtype=bool)
+    peak[1:-1] = (step[1:-1] >= step[:-2]) & (step[1:-1] >= step[2:])
+    strong = peak & (step >= max(OUTER_EDGE_FRACTION * step.max(), PENCIL_MIN_STEP))
+    if not strong.any():
+        return None
+    k = len(step) - 1 - int(np.argmax(strong[::-1]))  # the outermost
+    g0, g1, g2 = step[k - 1], step[k], step[k + 1]
+    den = g0 - 2 * g1 + g2
+    frac = float(np.clip(0.5 * (g0 - g2) / den, -0.5, 0.5)) if abs(den) > 1e-12 else 0.0
+    off = offs[0] + 0.5 * (k + frac) + 0.25
+    c = m + off * n
+    line = (c, _vp_direction(c, vp))
+    left, right = (quad[0], quad[3] - quad[0]), (quad[1], quad[2] - quad[1])
+    try:
+        new = quad.copy()
+        new[0], new[1] = _intersect(line, left), _intersect(line, right)
+        # the line at sub-pixel from the photo's own edge along it, where that runs through the
+        # vanishing point too (the fitted camera's point is itself a few tenths of a degree off)
+        pts: list = []
+        snapped = _refine_side(rgb, new[0], new[1], PENCIL_SNAP_PX, points=pts, to_photo=to_photo)
+        if snapped is None:
+            return None
+        if _off_vp(snapped, vp) <= SIDE_TURN_RAD:
+            new[0], new[1] = _intersect(snapped, left), _intersect(snapped, right)
+    except np.linalg.LinAlgError:
+        return None
+    return new, pts[0]
 
 
 def _corner_sigma(before: float, after: float) -> float:

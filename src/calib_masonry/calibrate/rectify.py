@@ -954,7 +954,9 @@ def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mo
         snapped, snap_sigma = np.asarray(straight[0], dtype=np.float64), np.asarray(straight[1], dtype=np.float64)
     else:
         snapped, snap_sigma = ideal, np.asarray(sigma, dtype=np.float64)
-    if mode != "automatic":  # a click's own uncertainty stays the floor
+    if mode == "automatic":
+        snapped, snap_sigma = _base_through_fit(photo.rgb, result, snapped, snap_sigma, s, lens)
+    else:  # a click's own uncertainty stays the floor
         snap_sigma = np.maximum(snap_sigma, sigma)
     carried, shift = carry_soft_sides(photo.rgb, snapped, to_photo=lens)
     new = result.distort(carried) if lens is not None else carried
@@ -970,6 +972,40 @@ def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mo
     if config.corner_sigma_px is not None:
         new_sigma = np.full(4, config.corner_sigma_px)
     return new, new_sigma, True
+
+
+def _base_through_fit(rgb, result, quad, sigma, scale, lens):
+    """An automatic outline's base (``quad`` in the ideal image, corner sigmas ``sigma``) sought
+    again through the first fit's bed vanishing point where it turns from it by more than
+    :data:`~.lines.SIDE_TURN_RAD` while the top runs to it (:func:`~.lines.base_in_pencil`): the
+    fitted camera's point rests on the top, the ends and the focal length, which no shadow at the
+    foot moves. ``scale``: the detection's working scale (its half-widths are in its pixels)."""
+    from .lines import (
+        SIDE_MOVE_FRACTION,
+        SIDE_TURN_RAD,
+        _corner_sigma,
+        _robust_fit,
+        _side_sigma,
+        base_in_pencil,
+        side_turn,
+    )
+
+    quad = np.asarray(quad, dtype=np.float64)
+    vp = result.image_from_wall[:, 0]
+    if side_turn(quad[0], quad[1], vp) <= SIDE_TURN_RAD or side_turn(quad[3], quad[2], vp) > SIDE_TURN_RAD / 2:
+        return quad, sigma
+    ends = 0.5 * float(np.linalg.norm(quad[3] - quad[0]) + np.linalg.norm(quad[2] - quad[1]))
+    found = base_in_pencil(rgb, quad, vp, reach_in=SIDE_MOVE_FRACTION * ends, reach_out=2.5 / scale, to_photo=lens)
+    if found is None:
+        return quad, sigma
+    new, edge = found
+    line = _robust_fit(edge, pad=0.05)
+    if line is None:
+        return quad, sigma
+    base = _side_sigma(edge, line, float(np.linalg.norm(new[1] - new[0])))
+    sigma = np.array(sigma, dtype=np.float64)
+    sigma[:2] = [_corner_sigma(float(v), base) for v in sigma[:2]]
+    return new, sigma
 
 
 def default_max_rms_px(image_size: tuple[int, int]) -> float:

@@ -430,6 +430,36 @@ def test_a_base_fitted_through_a_shadow_at_both_ends_is_found_in_the_vanishing_p
     assert base_in_pencil(flat, quad, vp, reach_in=45.0, reach_out=3.0) is None
 
 
+def test_the_base_through_the_first_fit_is_kept_only_near_where_that_fit_puts_it():
+    # rectify's use of the pencil: the first fit's camera gives the vanishing point (its
+    # homography's first column) and where the base corners should be. The foot found there is
+    # kept; one more than twice the first fit's corner sigmas from its corners is not (as a
+    # bed joint found instead of a weak foot would be), and neither is anything where the base
+    # already runs to the fit's vanishing point
+    from types import SimpleNamespace
+
+    from calib_masonry.calibrate.rectify import _base_through_fit
+
+    rgb = _wall_over_a_shadow(300, 30.0, seed=10)
+    # the base 12 and 4 px low, 1.5 degrees off; 3 % of the ends' length reaches 12.5 px in
+    quad = np.array([[99.5, 461.5], [399.5, 453.5], [399.5, 49.5], [99.5, 49.5]])
+    sigma = np.full(4, 0.4)
+
+    def fit(base_row: float) -> SimpleNamespace:  # a frontal camera, 100 px/m, the base on base_row
+        h = np.array([[100.0, 0.0, 99.5], [0.0, -100.0, base_row], [0.0, 0.0, 1.0]])
+        return SimpleNamespace(image_from_wall=h, width_m=3.0)
+
+    new, new_sigma = _base_through_fit(rgb, fit(452.0), quad, sigma, 1.0, None, np.full(4, 7.0))
+    assert np.abs(new[:2, 1] - 449.5).max() < 0.5 and np.array_equal(new[2:], quad[2:])
+    assert np.all(new_sigma[:2] >= 0.3) and np.array_equal(new_sigma[2:], sigma[2:])  # the blur's floor at least
+    far, _ = _base_through_fit(rgb, fit(430.0), quad, sigma, 1.0, None, np.full(4, 7.0))
+    assert np.array_equal(far, quad)  # 19.5 px from the fit's corners, 14 allowed
+    level = quad.copy()
+    level[:2, 1] = 455.0  # a base that runs to the vanishing point is the outline's to keep
+    same, _ = _base_through_fit(rgb, fit(452.0), level, sigma, 1.0, None, np.full(4, 7.0))
+    assert np.array_equal(same, level)
+
+
 def test_a_narrow_wall_against_a_flat_sky_is_found():
     # a flat sky touching the photo's border looks like a filled margin; the strip along its edge,
     # taken for surroundings, covered most of a narrow wall's seed and no wall was found (on the

@@ -586,15 +586,15 @@ def base_in_pencil(
         new[0], new[1] = _intersect(line, left), _intersect(line, right)
         # the line at sub-pixel from the photo's own edge along it, where that runs through the
         # vanishing point too (the fitted camera's point is itself a few tenths of a degree off)
-        pts: list = []
-        snapped = _refine_side(rgb, new[0], new[1], PENCIL_SNAP_PX, points=pts, to_photo=to_photo)
+        edge: list = []
+        snapped = _refine_side(rgb, new[0], new[1], PENCIL_SNAP_PX, points=edge, to_photo=to_photo)
         if snapped is None:
             return None
         if _off_vp(snapped, vp) <= SIDE_TURN_RAD:
             new[0], new[1] = _intersect(snapped, left), _intersect(snapped, right)
     except np.linalg.LinAlgError:
         return None
-    return new, pts[0]
+    return new, edge[0]
 
 
 def _corner_sigma(before: float, after: float) -> float:

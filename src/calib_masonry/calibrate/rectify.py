@@ -955,7 +955,7 @@ def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mo
     else:
         snapped, snap_sigma = ideal, np.asarray(sigma, dtype=np.float64)
     if mode == "automatic":
-        snapped, snap_sigma = _base_through_fit(photo.rgb, result, snapped, snap_sigma, s, lens)
+        snapped, snap_sigma = _base_through_fit(photo.rgb, result, snapped, snap_sigma, s, lens, first_sigma)
     else:  # a click's own uncertainty stays the floor
         snap_sigma = np.maximum(snap_sigma, sigma)
     carried, shift = carry_soft_sides(photo.rgb, snapped, to_photo=lens)
@@ -974,12 +974,15 @@ def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mo
     return new, new_sigma, True
 
 
-def _base_through_fit(rgb, result, quad, sigma, scale, lens):
+def _base_through_fit(rgb, result, quad, sigma, scale, lens, first_sigma):
     """An automatic outline's base (``quad`` in the ideal image, corner sigmas ``sigma``) sought
     again through the first fit's bed vanishing point where it turns from it by more than
     :data:`~.lines.SIDE_TURN_RAD` while the top runs to it (:func:`~.lines.base_in_pencil`): the
     fitted camera's point rests on the top, the ends and the focal length, which no shadow at the
-    foot moves. ``scale``: the detection's working scale (its half-widths are in its pixels)."""
+    foot moves. The base found is kept where its corners lie within twice the first fit's corner
+    sigmas ``first_sigma`` of where that fit puts them (not a bed joint further in). ``scale``: the
+    detection's working scale (its half-widths are in its pixels)."""
+    from .camera import project
     from .lines import (
         SIDE_MOVE_FRACTION,
         SIDE_TURN_RAD,
@@ -999,6 +1002,9 @@ def _base_through_fit(rgb, result, quad, sigma, scale, lens):
     if found is None:
         return quad, sigma
     new, edge = found
+    predicted = project(result.image_from_wall, np.array([[0.0, 0.0], [result.width_m, 0.0]]))
+    if np.any(np.linalg.norm(new[:2] - predicted, axis=1) > 2.0 * np.asarray(first_sigma)[:2]):
+        return quad, sigma
     line = _robust_fit(edge, pad=0.05)
     if line is None:
         return quad, sigma

@@ -1003,7 +1003,8 @@ def _base_through_fit(rgb, result, quad, sigma, scale, lens, first_sigma):
         return quad, sigma
     new, edge = found
     predicted = project(result.image_from_wall, np.array([[0.0, 0.0], [result.width_m, 0.0]]))
-    if np.any(np.linalg.norm(new[:2] - predicted, axis=1) > 2.0 * np.asarray(first_sigma)[:2]):
+    allowed = 2.0 * np.broadcast_to(np.asarray(first_sigma, dtype=np.float64), (4,))[:2]
+    if np.any(np.linalg.norm(new[:2] - predicted, axis=1) > allowed):
         return quad, sigma
     line = _robust_fit(edge, pad=0.05)
     if line is None:

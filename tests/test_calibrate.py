@@ -420,7 +420,7 @@ def test_a_base_fitted_through_a_shadow_at_both_ends_is_found_in_the_vanishing_p
     assert kept[0, 1] > 455.0 and kept[1, 1] > 455.0
     found = base_in_pencil(rgb, quad, vp, reach_in=45.0, reach_out=3.0)  # reaches the bed joint on row 425
     assert found is not None
-    new, edge = found
+    new, edge, _ = found
     assert np.abs(new[:2, 1] - 449.5).max() < 0.5
     assert np.abs(new[:2, 0] - [99.5, 399.5]).max() < 0.5  # moved along the ends
     assert np.array_equal(new[2:], quad[2:])

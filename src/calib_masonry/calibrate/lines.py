@@ -258,6 +258,15 @@ def _blurred_samples(rgb: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, gra
     return np.stack([ndimage.map_coordinates(crop[..., k], coords, order=1, mode="nearest") for k in range(3)], -1)
 
 
+def _strong_edges(grad: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """``(n, m)`` True at the strong edges of each profile of colour steps ``grad`` ``(n, m)``: its
+    local maxima of at least :data:`OUTER_EDGE_FRACTION` of the profile's largest step and
+    ``floor``."""
+    peak = np.zeros_like(grad, dtype=bool)
+    peak[:, 1:-1] = (grad[:, 1:-1] >= grad[:, :-2]) & (grad[:, 1:-1] >= grad[:, 2:])
+    return peak & (grad >= np.maximum(OUTER_EDGE_FRACTION * grad.max(axis=1, keepdims=True), floor))
+
+
 def _refine_side(
     rgb: np.ndarray,
     a: np.ndarray,
@@ -287,9 +296,7 @@ def _refine_side(
     # the outermost strong edge (the sides run LL, LR, UR, UL, so +n points out of the wall): a
     # mortar strip along the outline has a weaker edge to the background than to the stones
     # inside, and the strongest edge would put the side on the stones (1-3 px in, measured)
-    peak = np.zeros_like(grad, dtype=bool)
-    peak[:, 1:-1] = (grad[:, 1:-1] >= grad[:, :-2]) & (grad[:, 1:-1] >= grad[:, 2:])
-    strong = peak & (grad >= OUTER_EDGE_FRACTION * grad.max(axis=1, keepdims=True))
+    strong = _strong_edges(grad)
     if inner:  # the innermost strong edge (see base_off_shadow)
         k = np.where(strong.any(axis=1), np.argmax(strong, axis=1), np.argmax(grad, axis=1))
     else:
@@ -533,7 +540,7 @@ def base_off_shadow(
 
 def base_in_pencil(
     rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray, *, reach_in: float, reach_out: float, to_photo=None
-) -> tuple[np.ndarray, np.ndarray] | None:
+) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]] | None:
     """The outline's base sought again among the lines through the bed joints' vanishing point
     ``vp`` (homogeneous; a fitted camera's, whose top and sides fix it): of those lines from
     ``reach_in`` px in from the base's middle to ``reach_out`` px out, the outermost along which
@@ -547,8 +554,8 @@ def base_in_pencil(
     shadow's edge comes within the profiles' reach over part of the wall is fitted through both
     (a Blender wall, 12058: its base corners 12 and 20 px low, W 3.9 % and H 5.7 % off with the
     camera height given). Returns the outline with its two base corners moved along the ends to
-    that line, and the line's edge points ``(n, 2)`` (for :func:`_side_sigma`); None where no line
-    steps. ``quad`` and the result are in the coordinates of ``vp``; ``to_photo`` as in
+    that line, the photo's edge points along it ``(n, 2)`` and the line fitted to them (point,
+    direction; for :func:`_side_sigma`); None where no line steps. ``quad`` and the result are in the coordinates of ``vp``; ``to_photo`` as in
     :func:`_refine_side`."""
     quad = np.asarray(quad, dtype=np.float64)
     a, b = quad[0], quad[1]
@@ -567,18 +574,12 @@ def base_in_pencil(
     if to_photo is not None:
         pts = to_photo(pts.reshape(-1, 2)).reshape(pts.shape)
     prof = _blurred_samples(rgb, pts[..., 1].ravel(), pts[..., 0].ravel()).reshape(len(offs), len(s), 3)
-    step = np.median(np.linalg.norm(np.diff(prof, axis=0), axis=-1), axis=1)  # (offsets - 1,)
-    peak = np.zeros_like(step, dtype=bool)
-    peak[1:-1] = (step[1:-1] >= step[:-2]) & (step[1:-1] >= step[2:])
-    strong = peak & (step >= max(OUTER_EDGE_FRACTION * step.max(), PENCIL_MIN_STEP))
+    step = np.median(np.linalg.norm(np.diff(prof, axis=0), axis=-1), axis=1)[None, :]  # (1, offsets - 1)
+    strong = _strong_edges(step, PENCIL_MIN_STEP)[0]
     if not strong.any():
         return None
-    k = len(step) - 1 - int(np.argmax(strong[::-1]))  # the outermost
-    g0, g1, g2 = step[k - 1], step[k], step[k + 1]
-    den = g0 - 2 * g1 + g2
-    frac = float(np.clip(0.5 * (g0 - g2) / den, -0.5, 0.5)) if abs(den) > 1e-12 else 0.0
-    off = offs[0] + 0.5 * (k + frac) + 0.25
-    c = m + off * n
+    k = step.shape[1] - 1 - int(np.argmax(strong[::-1]))  # the outermost
+    c = _edge_at(step, np.array([k]), offs, m[None, :], n)[0]
     line = (c, _vp_direction(c, vp))
     left, right = (quad[0], quad[3] - quad[0]), (quad[1], quad[2] - quad[1])
     try:
@@ -594,7 +595,7 @@ def base_in_pencil(
             new[0], new[1] = _intersect(snapped, left), _intersect(snapped, right)
     except np.linalg.LinAlgError:
         return None
-    return new, edge[0]
+    return new, edge[0], snapped
 
 
 def _corner_sigma(before: float, after: float) -> float:

@@ -987,7 +987,6 @@ def _base_through_fit(rgb, result, quad, sigma, scale, lens, first_sigma):
         SIDE_MOVE_FRACTION,
         SIDE_TURN_RAD,
         _corner_sigma,
-        _robust_fit,
         _side_sigma,
         base_in_pencil,
         side_turn,
@@ -1001,13 +1000,10 @@ def _base_through_fit(rgb, result, quad, sigma, scale, lens, first_sigma):
     found = base_in_pencil(rgb, quad, vp, reach_in=SIDE_MOVE_FRACTION * ends, reach_out=2.5 / scale, to_photo=lens)
     if found is None:
         return quad, sigma
-    new, edge = found
+    new, edge, line = found
     predicted = project(result.image_from_wall, np.array([[0.0, 0.0], [result.width_m, 0.0]]))
     allowed = 2.0 * np.broadcast_to(np.asarray(first_sigma, dtype=np.float64), (4,))[:2]
     if np.any(np.linalg.norm(new[:2] - predicted, axis=1) > allowed):
-        return quad, sigma
-    line = _robust_fit(edge, pad=0.05)
-    if line is None:
         return quad, sigma
     base = _side_sigma(edge, line, float(np.linalg.norm(new[1] - new[0])))
     sigma = np.array(sigma, dtype=np.float64)

@@ -1414,3 +1414,62 @@ def test_a_shaded_rim_is_carried_but_a_lighter_cast_shadow_at_the_foot_is_not():
     cast = np.where(d < 12, 0.38 + 0.004 * d, 0.7).astype(np.float32)  # a lighter shadow, then lit ground
     kept, moved = carry_soft_sides(photo(cast), quad)
     assert np.allclose(kept, quad, atol=0.5) and np.all(moved == 0.0)
+
+
+def test_the_front_face_found_again_through_the_lens():
+    """Once front_face_ends has moved a side in to the crease, the front face's base and top are
+    found again between the moved corners, and the side not moved is the outline's: the corners
+    the first fit put at the crease (its base ran on along the end face's foot) came 1-2 px out
+    on Blender walls at a large yaw. Through a barrel lens (k1 = -0.2) the base bows by several
+    pixels: its line is straight in the ideal image, so the corners land on the photo's own
+    corners of the front face; a chord in the photo's pixels would miss them by the bow."""
+    from types import SimpleNamespace
+
+    from scipy import ndimage
+
+    from calib_masonry.calibrate.camera import distort, undistort
+    from calib_masonry.calibrate.rectify import _front_face_quad
+
+    size, focal, k1 = (640, 480), 520.0, -0.2
+    pp = ((size[0] - 1) / 2, (size[1] - 1) / 2)
+
+    def to_photo(p):
+        return distort(np.asarray(p, dtype=float), focal, pp, k1, 0.0)
+
+    def to_ideal(p):
+        return undistort(np.asarray(p, dtype=float), focal, pp, k1, 0.0)
+
+    # the front face x 140..470, y 90..400 in the ideal image; its right end face 470..492, its
+    # foot sloping up to 392 at the far edge
+    rgb = np.zeros((size[1], size[0], 3))
+    sub = (np.arange(4) + 0.5) / 4 - 0.5  # each pixel the mean of 4 x 4 samples over its area
+    for dy in sub:
+        for dx in sub:
+            yy, xx = np.mgrid[0 : size[1], 0 : size[0]].astype(float)
+            ideal = to_ideal(np.stack([xx + dx, yy + dy], axis=-1).reshape(-1, 2)).reshape(size[1], size[0], 2)
+            u, v = ideal[..., 0], ideal[..., 1]
+            sample = np.empty_like(rgb)
+            sample[:] = (0.80, 0.85, 0.90)
+            front = (u >= 140) & (u <= 470) & (v >= 90) & (v <= 400)
+            end = (u > 470) & (u <= 492) & (v >= 90 - 3 * (u - 470) / 22) & (v <= 400 - 8 * (u - 470) / 22)
+            sample[front] = (0.55, 0.30, 0.22)
+            sample[end] = (0.85, 0.55, 0.40)
+            rgb += sample / 16
+    rgb = ndimage.gaussian_filter(rgb, (0.5, 0.5, 0))
+    truth = to_photo(np.array([[140.0, 400.0], [470.0, 400.0], [470.0, 90.0], [140.0, 90.0]]))
+    outline = to_photo(np.array([[140.0, 400.0], [492.0, 392.0], [492.0, 87.0], [140.0, 90.0]]))
+    # the first fit's corners at the crease: 1.5 px up along the end face's foot, the left ones
+    # half a pixel off
+    moved_in = to_photo(np.array([[140.5, 399.5], [470.0, 398.5], [470.0, 89.5], [139.5, 90.5]]))
+    result = SimpleNamespace(
+        used=SimpleNamespace(corners_px=outline),
+        undistort=to_ideal,
+        distort=to_photo,
+    )
+    new = _front_face_quad(rgb, result, moved_in, ["right"])
+    assert np.abs(new - truth).max() < 0.3, new - truth
+    # the base bows in the photo: a straight line between its photo corners misses its middle
+    mid_photo = to_photo(np.array([[305.0, 400.0]]))[0]
+    assert abs(((truth[0] + truth[1]) / 2)[1] - mid_photo[1]) > 3.0
+    # with no photo, nothing is done
+    assert _front_face_quad(None, result, moved_in, ["right"]) is moved_in

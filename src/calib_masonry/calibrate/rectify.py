@@ -641,8 +641,7 @@ def front_face_ends(result, segments: np.ndarray, rgb: np.ndarray | None = None)
             moved.append(side)
     if not moved:
         return None
-    outline = np.asarray(result.used.corners_px, dtype=np.float64)
-    return _front_face_quad(rgb, outline, corners, moved), moved
+    return _front_face_quad(rgb, result, corners, moved), moved
 
 
 #: the front face's base and top are found again between the corners moved in to its creases,
@@ -652,17 +651,19 @@ FRONT_FACE_REFIT_PX = 2.0
 FRONT_FACE_MAX_SHIFT_PX = 4.0
 
 
-def _front_face_quad(rgb, outline: np.ndarray, corners: np.ndarray, moved: list[str]) -> np.ndarray:
+def _front_face_quad(rgb, result, corners: np.ndarray, moved: list[str]) -> np.ndarray:
     """The front face's corners (LL, LR, UR, UL, photo pixels) once its ``moved`` ends have been
-    moved in to the creases, ``corners``, from the ``outline`` the first fit was given. That fit,
-    made with an end face in the outline, runs the base on along the end face's foot (which slopes
-    to another vanishing point) and maps the corners at the crease a pixel or two off along it. So
+    moved in to the creases, ``corners``, from the outline the first fit ``result`` was given
+    (``result.used.corners_px``). That fit, made with an end face in the outline, runs the base on
+    along the end face's foot (which slopes to another vanishing point) and maps the corners at
+    the crease a pixel or two off along it. So
     the base and the top are found again over the front face alone (:func:`~.lines._refine_side`
     between the moved corners, the outermost strong edge within :data:`FRONT_FACE_REFIT_PX`); a
     side not moved stays the outline's (the fit's projection of it is a compromise with the end
     face), a moved one where the crease put it; the four corners are where these lines meet.
-    Where anything fails, or a corner would move more than :data:`FRONT_FACE_MAX_SHIFT_PX`,
-    ``corners`` as they are.
+    The lines are straight in the ideal image of the fit's lens (the photo sampled where the lens
+    puts them), as the outline's sides are (:func:`_outline_through_lens`). Where anything fails,
+    or a corner would move more than :data:`FRONT_FACE_MAX_SHIFT_PX`, ``corners`` as they are.
 
     Measured on tall walls rendered by Blender at yaws of 9-35 degrees
     (experiments/bench_tall_walls_blender.py; 12029, 12049, 12103, 12108, 12159): the corners at
@@ -673,13 +674,20 @@ def _front_face_quad(rgb, outline: np.ndarray, corners: np.ndarray, moved: list[
         return corners
     from .lines import _intersect, _refine_side
 
+    outline = np.asarray(result.used.corners_px, dtype=np.float64)
+    ideal = result.undistort(corners)
+    lens = None  # a lens that moves no corner by a twentieth of a pixel is none (the photo's pixels)
+    if np.max(np.linalg.norm(ideal - corners, axis=1)) > 0.05:
+        lens, outline = result.distort, result.undistort(outline)
+    else:
+        ideal = corners
     lines = {}
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        a, b = _side_ends(corners if side in moved else outline, sign)
+        a, b = _side_ends(ideal if side in moved else outline, sign)
         lines[side] = (a, b - a)
     for name, i, j in (("base", 0, 1), ("top", 2, 3)):
-        line = _refine_side(rgb, corners[i], corners[j], FRONT_FACE_REFIT_PX)
-        lines[name] = line if line is not None else (corners[i], corners[j] - corners[i])
+        line = _refine_side(rgb, ideal[i], ideal[j], FRONT_FACE_REFIT_PX, to_photo=lens)
+        lines[name] = line if line is not None else (ideal[i], ideal[j] - ideal[i])
     try:
         new = np.array(
             [
@@ -691,6 +699,8 @@ def _front_face_quad(rgb, outline: np.ndarray, corners: np.ndarray, moved: list[
         )
     except np.linalg.LinAlgError:
         return corners
+    if lens is not None:
+        new = lens(new)
     if not np.all(np.isfinite(new)) or np.abs(new - corners).max() > FRONT_FACE_MAX_SHIFT_PX:
         return corners
     return new

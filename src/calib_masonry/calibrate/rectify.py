@@ -656,11 +656,11 @@ def _front_face_quad(rgb, result, corners: np.ndarray, moved: list[str]) -> np.n
     moved in to the creases, ``corners``, from the outline the first fit ``result`` was given
     (``result.used.corners_px``). That fit, made with an end face in the outline, runs the base on
     along the end face's foot (which slopes to another vanishing point) and maps the corners at
-    the crease a pixel or two off along it. So
-    the base and the top are found again over the front face alone (:func:`~.lines._refine_side`
-    between the moved corners, the outermost strong edge within :data:`FRONT_FACE_REFIT_PX`); a
-    side not moved stays the outline's (the fit's projection of it is a compromise with the end
-    face), a moved one where the crease put it; the four corners are where these lines meet.
+    the crease a pixel or two off along it. So the base and the top are found again over the
+    front face alone (:func:`~.lines._refine_side` between the moved corners, the outermost strong
+    edge within :data:`FRONT_FACE_REFIT_PX`); a side not moved stays the outline's (the fit's
+    projection of it is a compromise with the end face), a moved one where the crease put it; the
+    four corners are where these lines meet.
     The lines are straight in the ideal image of the fit's lens (the photo sampled where the lens
     puts them), as the outline's sides are (:func:`_outline_through_lens`). Where anything fails,
     or a corner would move more than :data:`FRONT_FACE_MAX_SHIFT_PX`, ``corners`` as they are.
@@ -675,12 +675,11 @@ def _front_face_quad(rgb, result, corners: np.ndarray, moved: list[str]) -> np.n
     from .lines import _intersect, _refine_side
 
     outline = np.asarray(result.used.corners_px, dtype=np.float64)
-    ideal = result.undistort(corners)
-    lens = None  # a lens that moves no corner by a twentieth of a pixel is none (the photo's pixels)
-    if np.max(np.linalg.norm(ideal - corners, axis=1)) > 0.05:
-        lens, outline = result.distort, result.undistort(outline)
+    ideal, lens = _through_lens(result, corners)
+    if lens is not None:
+        outline = result.undistort(outline)
     else:
-        ideal = corners
+        ideal = corners  # no lens: the photo's own pixels, as the corners were found
     lines = {}
     for side, sign in (("left", 1.0), ("right", -1.0)):
         a, b = _side_ends(ideal if side in moved else outline, sign)
@@ -992,6 +991,14 @@ def scene_plumb(rgb: np.ndarray, corners: np.ndarray, occluders=()) -> dict:
     }
 
 
+def _through_lens(result, corners: np.ndarray):
+    """``corners`` (photo pixels) in the ideal image of the fit ``result``'s lens, and the lens
+    (ideal -> photo) to sample the photo through, None where it moves no corner by a twentieth of
+    a pixel (the photo's pixels are the ideal image's then)."""
+    ideal = result.undistort(corners)
+    return ideal, (result.distort if np.max(np.linalg.norm(ideal - corners, axis=1)) > 0.05 else None)
+
+
 def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mode, *, straight=None):
     """Corners snapped again (and soft sides carried, :func:`carry_soft_sides`) along sides
     straight in the ideal image of a first fit's lens; returns the corners, their sigmas and
@@ -1006,8 +1013,7 @@ def _outline_through_lens(photo, result, corners, sigma, first_sigma, config, mo
     W 2.4 % short, where the straight side is within half a pixel)."""
     w, h = photo.size
     s = min(1.0, config.detect.work_long_side_px / max(w, h))
-    ideal = result.undistort(corners)
-    lens = result.distort if np.max(np.linalg.norm(ideal - corners, axis=1)) > 0.05 else None
+    ideal, lens = _through_lens(result, corners)
     if lens is not None:
         snapped, snap_sigma = refine_quad(
             photo.rgb, ideal, (6.0 / s, 2.5 / s), with_sigma=True, to_photo=lens, curved=True

@@ -14,7 +14,8 @@ height above the wall's base. The wall's side faces show at an angle, as a real 
 
 A case succeeds, as in bench_tall_walls.py, when the automatic calibration (focal length and eye
 height given, as EXIF and a tape would) converges with W and H within 2 % of the truth. Printed: a
-row per wall, then the count (aim: 18 of 20) and how many failures name the flag to add.
+row per wall (with the W error in the fit's own sigma, z), then the count (aim: 18 of 20), how many
+failures name the flag to add, and how many failures were overconfident (|z| above 2).
 
     .venv/bin/python experiments/bench_tall_walls_blender.py [--first 12001 --count 20] [--keep DIR]
 """
@@ -229,9 +230,10 @@ def main() -> None:
     from calib_masonry.io import read_photo
 
     print(
-        f"{'seed':>5} {'W m':>6} {'H m':>6} {'aspect':>6} {'yaw':>6} {'dist m':>6} {'W err':>7} {'H err':>7} {'s':>5}  result"
+        f"{'seed':>5} {'W m':>6} {'H m':>6} {'aspect':>6} {'yaw':>6} {'dist m':>6} {'W err':>7} {'H err':>7} "
+        f"{'W z':>5} {'s':>5}  result"
     )
-    ok = flagged = 0
+    ok = flagged = overconfident = 0
     for seed, wall, cam, path in cases:
         photo = read_photo(path)
         config = cm.CalibrateConfig(
@@ -247,17 +249,22 @@ def main() -> None:
             if not good and cal.advice():
                 msg += f": {cal.advice()}"
             ew_s, eh_s = f"{ew:+.2%}", f"{eh:+.2%}"
+            # the W error in the fit's own sigmas: beyond 2 on a failure, the fit was overconfident
+            z = (res.width_m - wall.width_m) / res.sigma("width_m")
+            z_s = f"{z:+.1f}"
+            overconfident += not good and abs(z) > 2.0
         except CalibMasonryError as exc:
-            good, msg, ew_s, eh_s = False, f"FAIL: {exc}", "-", "-"
+            good, msg, ew_s, eh_s, z_s = False, f"FAIL: {exc}", "-", "-", "-"
         ok += good
         flagged += not good and "--" in msg
         print(
             f"{seed:5d} {wall.width_m:6.2f} {wall.height_m:6.2f} {wall.height_m / wall.width_m:6.2f} "
-            f"{cam['yaw_deg']:6.1f} {cam['d']:6.1f} {ew_s:>7} {eh_s:>7} {time.perf_counter() - t0:5.1f}  {msg}",
+            f"{cam['yaw_deg']:6.1f} {cam['d']:6.1f} {ew_s:>7} {eh_s:>7} {z_s:>5} {time.perf_counter() - t0:5.1f}  {msg}",
             flush=True,
         )
     print(f"automatic mode on Blender-rendered tall walls: {ok} of {len(seeds)} succeeded (aim: 18 of 20)")
     print(f"failures whose message names the flag to add: {flagged} of {len(seeds) - ok}")
+    print(f"failures with the true W beyond 2 sigma of the fit (overconfident): {overconfident} of {len(seeds) - ok}")
     print(f"photos: {folder}")
 
 

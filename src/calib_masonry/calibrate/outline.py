@@ -499,27 +499,31 @@ def _band_means(prob: np.ndarray, quad: np.ndarray) -> tuple[float, float]:
 #: GrabCut runs on the photo shrunk to this long side (its cost grows with the pixels: 1.3 s at
 #: 891 px, measured)
 GRABCUT_LONG_SIDE_PX = 400
-#: GrabCut learns its background's colours first from a ring out to 1.35 times the first outline
-#: (:func:`_grab_cut`). Where a corner of GrabCut's own outline lies more than half-way out into
-#: that ring (this ratio of its distance from the first outline's centre to the first corner's),
-#: the first outline cut the wall short and the ring lay on the wall; GrabCut runs once more from
+#: GrabCut's ring of "probably not the wall" reaches out to this many times its starting outline
+#: (about the outline's centre); beyond it, surely not (:func:`_grab_cut`)
+GRABCUT_RING = 1.35
+#: GrabCut learns its background's colours first from that ring around the first outline. Where
+#: a corner of GrabCut's own outline lies more than half-way out into the ring (this ratio of its
+#: distance from the first outline's centre to the first corner's), the first outline cut the
+#: wall short and the ring lay on the wall; GrabCut runs once more from
 #: its own outline, and that is kept where its quadrilateral fits its cut at least as well
 #: (intersection over union). Measured: a Blender wall whose first outline stopped two courses
 #: above its foot, and GrabCut one course above it (12196: corners 1.25-1.26, W +45 % -> +0.4 %);
 #: 1.14 at most on the photos looked at before choosing it (a laboratory photo; the paper
 #: example's and five Blender walls 1.05). Of 280 Blender walls it ran on five: one mended, one
 #: not kept, three within 0.03 % of before (docs/photo_path.md, 2026-11-30)
-GRABCUT_REGROW = 1.175
+GRABCUT_REGROW = 1.0 + (GRABCUT_RING - 1.0) / 2.0  # 1.175
 
 
 def _grab_cut(small: np.ndarray, quad: np.ndarray, occluded: np.ndarray | None, iterations: int = 3) -> np.ndarray:
     """The wall's pixels (at ``small``'s size) by OpenCV's GrabCut (colour mixtures of the wall and
     of the rest, and a graph cut whose cost follows the photo's edges), on the photo shrunk to
     :data:`GRABCUT_LONG_SIDE_PX`, started from a first outline ``quad`` (``small``'s pixels): its
-    core (60 %) is the wall, the outline itself probably the wall, a ring out to 1.35 times its size
-    probably not, the rest not. The graph cut carries the wall through its shadowed parts (a darker
-    course at the base) and stops at the beam or footing against it, where the per-pixel model
-    alone did not (measured on the laboratory photos)."""
+    core (60 %) is the wall, the outline itself probably the wall, a ring out to
+    :data:`GRABCUT_RING` (1.35) times its size probably not, the rest not. The graph cut carries
+    the wall through its shadowed parts (a darker course at the base) and stops at the beam or
+    footing against it, where the per-pixel model alone did not (measured on the laboratory
+    photos)."""
     import cv2
 
     from .segments import inside_convex, shrink
@@ -535,7 +539,7 @@ def _grab_cut(small: np.ndarray, quad: np.ndarray, occluded: np.ndarray | None, 
     q = (quad + 0.5) * [fx, fy] - 0.5
     c = q.mean(axis=0)
     mask = np.full(shape, cv2.GC_BGD, np.uint8)
-    mask[inside_convex(shape, c + (q - c) * 1.35)] = cv2.GC_PR_BGD
+    mask[inside_convex(shape, c + (q - c) * GRABCUT_RING)] = cv2.GC_PR_BGD
     mask[inside_convex(shape, q)] = cv2.GC_PR_FGD
     mask[inside_convex(shape, c + (q - c) * 0.6)] = cv2.GC_FGD
     if occluded is not None:

@@ -133,7 +133,7 @@ def inside_convex(shape: tuple[int, int], quad: np.ndarray) -> np.ndarray:
 
 
 def shrink(img: np.ndarray, s: float) -> np.ndarray:
-    """A one-channel image shrunk by ``s`` (< 1; else returned as it is) to ``round(shape * s)``,
+    """An image (rows, cols[, channels]) shrunk by ``s`` (< 1; else returned as it is) to ``round(shape * s)``,
     antialiased, on scikit-image's ``rescale`` grid (output pixel ``o`` samples the input at
     ``(o + 0.5) * n / n_out - 0.5``), its float type kept.
 

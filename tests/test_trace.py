@@ -132,14 +132,24 @@ def test_grey_morphology_is_scipys_erosion_and_dilation(seed):
     from calib_masonry.wall2d.segment import grey_morphology
 
     rng = np.random.default_rng(seed)
-    # disks, a diamond and a rectangle go the fast way (unions of centred rectangles), a ring to scipy
+    # symmetric footprints go to OpenCV (disks, a diamond, a rectangle, a ring), a lopsided one
+    # and an even-sided one to scipy; float32 and float64 images, each as scipy filters them
     ring = disk(3)
-    ring[2:5, 2:5] = False  # a hollow centre: not a union of centred rectangles
-    for fp in [disk(r) for r in range(1, 7)] + [diamond(2), np.ones((3, 7), bool), ring]:
+    ring[2:5, 2:5] = False  # a hollow centre
+    lopsided = disk(2)
+    lopsided[0, 2] = False
+    for fp in [disk(r) for r in range(1, 7)] + [
+        diamond(2),
+        np.ones((3, 7), bool),
+        ring,
+        lopsided,
+        np.ones((2, 4), bool),
+    ]:
         for shape in [(1, 1), (2, 40), (9, 9), (40, 3), (70, 55), (300, 260)]:
-            a = rng.random(shape).astype(np.float32)
-            assert np.array_equal(grey_morphology(a, fp, np.minimum), ndimage.grey_erosion(a, footprint=fp))
-            assert np.array_equal(grey_morphology(a, fp, np.maximum), ndimage.grey_dilation(a, footprint=fp))
+            for dtype in (np.float32, np.float64):
+                a = rng.random(shape).astype(dtype)
+                assert np.array_equal(grey_morphology(a, fp, np.minimum), ndimage.grey_erosion(a, footprint=fp))
+                assert np.array_equal(grey_morphology(a, fp, np.maximum), ndimage.grey_dilation(a, footprint=fp))
 
 
 def test_the_trace_figures_title_stays_inside_the_figure(tmp_path, monkeypatch):

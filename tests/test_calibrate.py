@@ -1478,3 +1478,23 @@ def test_the_front_face_found_again_through_the_lens():
     assert abs(((truth[0] + truth[1]) / 2)[1] - mid_photo[1]) > 3.0
     # with no photo, nothing is done
     assert _front_face_quad(None, result, moved_in, ["right"]) is moved_in
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_outline_binary_morphology_is_scipys(seed):
+    """The outline's erosions and dilations (OpenCV's) give scipy's pixels: iterated, by the
+    default cross and by a disk, with nothing outside the image, on masks of any shape."""
+    from scipy import ndimage
+
+    from calib_masonry.calibrate.outline import _binary
+
+    rng = np.random.default_rng(seed)
+    disk = np.hypot(*np.mgrid[-3:4, -3:4]) <= 3
+    for shape in [(1, 1), (3, 40), (9, 9), (50, 7), (120, 90)]:
+        for density in (0.3, 0.7, 0.95):
+            mask = rng.random(shape) < density
+            for it in (1, 2, 5):
+                assert np.array_equal(_binary("erode", mask, it), ndimage.binary_erosion(mask, iterations=it))
+                assert np.array_equal(_binary("dilate", mask, it), ndimage.binary_dilation(mask, iterations=it))
+            opened = _binary("dilate", _binary("erode", mask, structure=disk), structure=disk)
+            assert np.array_equal(opened, ndimage.binary_opening(mask, structure=disk))

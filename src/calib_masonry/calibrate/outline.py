@@ -219,7 +219,7 @@ def wall_probability(
     outer[:m] = outer[-m:] = True
     outer[:, :m] = outer[:, -m:] = True
     if fill is not None and fill_band:  # a filled margin's edge is where the photo's own border is
-        outer |= ndimage.binary_dilation(fill, iterations=m)
+        outer |= _binary("dilate", fill, m)
     inner = seed & ~outer
     free = np.ones((rows, cols), dtype=bool) if occluded is None else ~occluded
     prob = np.full((rows, cols), 0.5)
@@ -230,11 +230,27 @@ def wall_probability(
         score = ndimage.gaussian_filter(_log_ratio(feats, a, b, config.bins), 2.0)
         prob = 1.0 / (1.0 + np.exp(-np.clip(score, -30.0, 30.0)))
         likely = prob > 0.5
-        inner = ndimage.binary_erosion(likely, iterations=5) & _component_of(likely, seed)
-        outer = ~ndimage.binary_dilation(likely, iterations=5)
+        inner = _binary("erode", likely, 5) & _component_of(likely, seed)
+        outer = ~_binary("dilate", likely, 5)
     if occluded is not None:
         prob = np.where(occluded, 0.5, prob)
     return prob
+
+
+def _binary(op, mask: np.ndarray, iterations: int = 1, structure: np.ndarray | None = None) -> np.ndarray:
+    """scipy's ``binary_erosion`` (``op`` "erode") or ``binary_dilation`` ("dilate") of a 2-D mask,
+    ``iterations`` times by ``structure`` (default scipy's, the 4-neighbour cross; a symmetric
+    one), nothing outside the image: the same pixels by OpenCV's erode and dilate, which took
+    a tenth of scipy's time on the outline's masks (0.05 s of a photo's outline; test)."""
+    import cv2
+
+    kernel = _CROSS if structure is None else np.asarray(structure, dtype=np.uint8)
+    f = cv2.erode if op == "erode" else cv2.dilate
+    m = np.ascontiguousarray(mask, dtype=np.uint8)
+    return f(m, kernel, iterations=iterations, borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
+
+
+_CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=np.uint8)
 
 
 def _border_fill(rgb_small: np.ndarray) -> np.ndarray | None:
@@ -258,7 +274,7 @@ def _border_fill(rgb_small: np.ndarray) -> np.ndarray | None:
     keep = border[sizes[border] >= 0.005 * g.size]
     if len(keep) == 0:
         return None
-    return ndimage.binary_dilation(np.isin(lab, keep), iterations=2)
+    return _binary("dilate", np.isin(lab, keep), 2)
 
 
 def _component_of(mask: np.ndarray, seed: np.ndarray) -> np.ndarray:
@@ -598,7 +614,7 @@ def detect_outline(
 
     rows, cols = rgb.shape[:2]
     s = min(1.0, config.appearance_long_side_px / max(rows, cols))
-    small = np.stack([shrink(np.ascontiguousarray(rgb[..., k], dtype=np.float32), s) for k in range(3)], -1)
+    small = shrink(np.asarray(rgb, dtype=np.float32), s) if s < 1.0 else np.array(rgb, dtype=np.float32)
     srows, scols = small.shape[:2]
     scale_s = scols / cols  # the shrunk photo's pixels per photo pixel (x); rows likewise
     occluded = occluded_mask((srows, scols), occluders, scale_s)
@@ -640,7 +656,7 @@ def detect_outline(
     # the region without its thin bands (a soft horizon joined to the wall's foot)
     r_open = max(2, round(0.015 * max(srows, scols)))
     disk = np.hypot(*np.mgrid[-r_open : r_open + 1, -r_open : r_open + 1]) <= r_open
-    core = _component_of(ndimage.binary_opening(region, structure=disk), seed)
+    core = _component_of(_binary("dilate", _binary("erode", region, structure=disk), structure=disk), seed)
     # long segments of the whole photo at LSD's coarse size, in the shrunk photo's pixels
     gray = small.mean(axis=-1)
     seg = lsd_segments(
@@ -651,7 +667,7 @@ def detect_outline(
     seg = segments_outside(seg, occluded)
     # the wall's own: segments whose middle lies in the region grown by a tenth of its size
     grow = max(2, round(0.05 * math.sqrt(region.sum())))
-    near = ndimage.binary_dilation(region, iterations=grow)
+    near = _binary("dilate", region, grow)
     mid = np.clip(np.round((seg[:, :2] + seg[:, 2:]) / 2).astype(int), 0, [scols - 1, srows - 1])
     seg = seg[near[mid[:, 1], mid[:, 0]]] if len(seg) else seg
     horiz, vert = _families(seg)

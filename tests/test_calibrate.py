@@ -1498,3 +1498,47 @@ def test_outline_binary_morphology_is_scipys(seed):
                 assert np.array_equal(_binary("dilate", mask, it), ndimage.binary_dilation(mask, iterations=it))
             opened = _binary("dilate", _binary("erode", mask, structure=disk), structure=disk)
             assert np.array_equal(opened, ndimage.binary_opening(mask, structure=disk))
+
+
+@pytest.mark.parametrize("lens", [None, (900.0, (310.0, 228.0), -0.15, 0.02)])
+def test_orthophoto_sampling_is_bilinear_to_a_thirty_second_of_a_pixel(lens):
+    """rectify_image samples the photo by OpenCV's remap, whose weights come in steps of 1/32 px:
+    the orthophoto equals scipy's bilinear map_coordinates at the same points (the homography, then
+    the lens) to within one 8-bit level inside the photo and to 1/32 of the photo's value within a
+    pixel of its edge (where it is blended with zero), zero beyond it, RGB and grey alike."""
+    from scipy import ndimage
+
+    from calib_masonry.calibrate.camera import distort
+    from calib_masonry.calibrate.rectify import rect_from_wall, rectify_image
+
+    rng = np.random.default_rng(3)
+    photo = ndimage.gaussian_filter(rng.random((460, 620, 3)), (2.0, 2.0, 0)).astype(np.float32)
+    # a wall 4.5 x 3 m seen at an angle, running past the photo at its right and its top: wall metres -> photo pixels, inverted
+    image_from_wall = np.array([[150.0, 25.0, 80.0], [-12.0, -160.0, 400.0], [0.02, 0.01, 1.0]])
+    wall_from_image = np.linalg.inv(image_from_wall)
+    ppm = 200.0  # no shrink, so no blur before the sampling
+    for img in (photo, photo[..., 1]):
+        got = rectify_image(img, wall_from_image, 4.5, 3.0, ppm, lens=lens)
+        shape = got.shape[:2]
+        image_from_ortho = np.linalg.inv(rect_from_wall(4.5, 3.0, shape) @ wall_from_image)
+        ys, xs = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+        q = image_from_ortho @ np.stack([xs.ravel(), ys.ravel(), np.ones(xs.size)])
+        xy = np.stack([q[0] / q[2], q[1] / q[2]], axis=-1)
+        if lens is not None:
+            xy = distort(xy, *lens)
+        chans = img[..., None] if img.ndim == 2 else img
+        want = np.stack(
+            [
+                ndimage.map_coordinates(chans[..., c], [xy[:, 1], xy[:, 0]], order=1, mode="grid-constant", cval=0.0)
+                for c in range(chans.shape[2])
+            ],
+            -1,
+        ).reshape(got.shape if img.ndim == 3 else shape + (1,))
+        want = want[..., 0] if img.ndim == 2 else want
+        outside = (xy[:, 0] < -1) | (xy[:, 1] < -1) | (xy[:, 0] > 620) | (xy[:, 1] > 460)
+        assert outside.any() and not outside.all()  # the orthophoto runs past the photo's edge
+        inside = (xy[:, 0] > 0) & (xy[:, 1] > 0) & (xy[:, 0] < 619) & (xy[:, 1] < 459)
+        err = np.abs(got - want).reshape(outside.size, -1)
+        assert err[inside].max() < 1.0 / 255
+        assert err.max() <= float(img.max()) / 32 + 1e-4
+        assert np.all(got.reshape(outside.size, -1)[outside] == 0.0)

@@ -240,8 +240,9 @@ def wall_probability(
 def _binary(op, mask: np.ndarray, iterations: int = 1, structure: np.ndarray | None = None) -> np.ndarray:
     """scipy's ``binary_erosion`` (``op`` "erode") or ``binary_dilation`` ("dilate") of a 2-D mask,
     ``iterations`` times by ``structure`` (default scipy's, the 4-neighbour cross; a symmetric
-    one), nothing outside the image: the same pixels by OpenCV's erode and dilate, which took
-    a tenth of scipy's time on the outline's masks (0.05 s of a photo's outline; test)."""
+    one), nothing outside the image: the same pixels (test) by OpenCV's erode and dilate, 2-14
+    times faster than scipy's on a 640 x 427 mask for 2-12 iterations (scipy's took 0.05-0.065 s
+    of a photo's outline, measured)."""
     import cv2
 
     kernel = _CROSS if structure is None else np.asarray(structure, dtype=np.uint8)

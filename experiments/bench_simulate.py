@@ -19,6 +19,12 @@ before). The
 method reports about 2 minutes for this job on an i7-9700; the aim is under 1 minute on 2 cores
 and an overhead ratio <= 1.15.
 
+Each model's line "this machine" gives the speed of one factorisation of its intact tangent and the
+kernels cvxopt's OpenBLAS chose (the joint model's time is mostly factorisations; since the
+thirty-first session, 2026-11-30). Then, on the 2-core Xeon VM (`--repeats 1 --no-paper-example`,
+nothing else running): Stylite's tangent 2.0 ms, "Prescott"; ours 22.6 s against 81.1 s bare
+(ratio 0.28), the joint model 16.3 s, without Bullet 18.1 s, the same verdict.
+
 Each pair is followed by the same call without Bullet (``simulate --no-bullet``: the joint model
 and the verdict's rigid pieces alone, the frames showing those pieces), with whether its verdict
 is the same.
@@ -47,6 +53,23 @@ from calib_masonry.spec import load_structure
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def machine_line(model: Path) -> str:
+    """How fast this machine factorises the model's intact tangent, and which kernels cvxopt's
+    bundled OpenBLAS chose: the joint model's time is mostly those factorisations, and on a
+    processor that OpenBLAS 0.3.15 does not recognise it runs its generic ones ("Prescott"), 1.3-1.9x
+    slower (docs/dynamics.md, "The factorisation's BLAS"), so figures from two machines compare
+    only beside this line."""
+    from joint_solve_cost import factor_size  # experiments/, the script's own folder
+    from threadpoolctl import threadpool_info
+
+    n, _, gflop, ms = factor_size(model)
+    arch = [i.get("architecture") for i in threadpool_info() if "cvxopt" in i.get("filepath", "")]
+    return (
+        f"this machine: a factorisation of the intact tangent ({n} unknowns, {gflop:.2f} GFlop) {ms:.1f} ms; "
+        f"cvxopt's OpenBLAS kernels: {arch[0] if arch else 'unknown'}"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--structure", default=str(ROOT / "data_synthetic" / "stylite" / "structure.toml"))
@@ -66,6 +89,7 @@ def main() -> None:
         build_to_folder(load_structure(args.structure), model, figures=False, progress=False)
         scene = scene_for_model(model, config)
         assert scene.notes["geometry_stored"], "build did not store the simulation geometry"
+        print(machine_line(model))
         t0 = time.perf_counter()
         scene_geometry(*load_model(model)[:3])  # what a call on a model without the stored geometry adds
         t_geometry = time.perf_counter() - t0
@@ -159,6 +183,7 @@ def main() -> None:
                 figures=False,
                 progress=False,
             )
+            print(f"paper example: {machine_line(model)}")
             t0 = time.perf_counter()
             pe = simulate_to_folder(model, Path(tmp) / "sim", config, progress=False)
             t_pe = time.perf_counter() - t0

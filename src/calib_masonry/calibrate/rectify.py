@@ -1309,7 +1309,7 @@ def rectify_image(
     if by_cv2:
         import cv2
 
-        whole = np.stack(planes, axis=-1) if len(planes) > 1 else planes[0] if planes else np.ascontiguousarray(img)
+        whole = np.stack(planes, axis=-1) if blur else np.ascontiguousarray(img)  # the blurred planes, or the photo
 
     def strip(r0: int) -> None:
         ys = np.arange(r0, min(shape[0], r0 + rows_per_strip), dtype=np.float64)[:, None]

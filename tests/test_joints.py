@@ -491,3 +491,40 @@ def test_a_let_go_block_does_not_change_how_far_a_step_may_move_the_others(later
     U = model._last[2].reshape(-1, 6)
     assert U[:3] == pytest.approx(ref._last[2].reshape(-1, 6), rel=1e-12, abs=1e-15)
     assert U[3, :3] == pytest.approx(g / settings.eps_per_s2, rel=1e-12)
+
+
+def test_the_kept_outline_constants_and_the_corner_blocks_change_no_bit():
+    """The joint model keeps each outline's edges and farthest corner instead of computing them at
+    every state, and sums the contact corners' blocks itself instead of through ``einsum``: both
+    for speed only (the paper example's cascade follows the last digits), so both must give the
+    values before bit for bit."""
+    from calib_masonry.simulation.joints import _corner_blocks, _inside_outline, _Tangent
+
+    rng = np.random.default_rng(5)
+    for C in (1, 2, 7, 40, 333, 2500):
+        Lc = rng.normal(size=(C + 3, 3, 12))[rng.integers(0, C + 3, C)] * rng.lognormal(size=(C, 1, 1))
+        TL = rng.normal(size=(C, 3, 3)) @ Lc
+        expected = np.einsum("cap,cap->cp", Lc[:, :, _Tangent.ROW], TL[:, :, _Tangent.COL])
+        np.testing.assert_array_equal(_corner_blocks(Lc, TL), expected)
+
+    sc = _column(3)
+    m = JointModel(sc)
+    U = rng.normal(size=6 * m.nb) * 1e-5
+    rel = np.einsum("jab,jb->ja", m.L[: m.nj], U[m.dofs[: m.nj]])
+    state = m.state_from_relative(rel)
+    for joints in (None, np.array([1]), np.array([2, 0])):
+        sel = slice(None) if joints is None else joints
+        part = m.state_from_relative(rel[sel], joints)
+        np.testing.assert_array_equal(part.utilisation, state.utilisation[sel])
+        np.testing.assert_array_equal(part.mode, state.mode[sel])
+    u, v = rng.normal(size=(2, m.nj)) * 0.2
+    np.testing.assert_array_equal(
+        _inside_outline(m.outline[: m.nj], u, v), _inside_outline(m.outline[: m.nj], u, v, m._outline_edges())
+    )
+    # the kept constants are the formulas the state computed at every call before
+    outline = m.outline[: m.nj]
+    np.testing.assert_array_equal(m._farthest(), np.sqrt((outline**2).sum(axis=2)).max(axis=1))
+    edge, real = m._outline_edges()
+    np.testing.assert_array_equal(edge, np.roll(outline, -1, axis=1) - outline)
+    np.testing.assert_array_equal(real, np.linalg.norm(edge, axis=2) > 1e-12)
+    assert real.any(axis=1).all() and not real.all()  # the padding's repeats are not edges

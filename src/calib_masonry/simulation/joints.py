@@ -323,12 +323,12 @@ def _outline_edges(outline: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _inside_outline(
-    outline: np.ndarray, u: np.ndarray, v: np.ndarray, edges: tuple[np.ndarray, np.ndarray] | None = None
+    outline: np.ndarray, u: np.ndarray, v: np.ndarray, edges: tuple[np.ndarray, np.ndarray]
 ) -> np.ndarray:
     """Whether the points ``(u, v)`` (J,) lie inside each joint's convex outline ``(J, K, 2)``
-    (corners in order, padded by repeats); ``edges``: :func:`_outline_edges` of it, if kept."""
+    (corners in order, padded by repeats), whose :func:`_outline_edges` are ``edges``."""
     a = outline
-    edge, real = _outline_edges(outline) if edges is None else edges
+    edge, real = edges
     rel = np.stack([u, v], axis=1)[:, None] - a
     cross = edge[..., 0] * rel[..., 1] - edge[..., 1] * rel[..., 0]
     pos = np.where(real, cross >= -1e-12, True).all(axis=1)

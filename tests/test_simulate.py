@@ -1220,13 +1220,20 @@ def test_a_run_that_checks_its_pieces_joints_cracks_nothing_the_pieces_hold():
     assert np.abs(b.pieces.displacement_m).max() > 0.005  # it rocks on its contacts
 
 
-def test_bullet_plays_the_verdicts_pieces_and_takes_over_a_fallen_one(tmp_path):
+def test_bullet_plays_the_verdicts_pieces_and_takes_over_a_fallen_one(tmp_path, monkeypatch):
     # the tipping stack (_tipping_stack): Bullet plays the verdict's piece on kinematic bodies, exactly, until
     # the piece has fallen (SolverSettings.bullet_moves "fallen", loop._follow); then the bricks
     # turn dynamic with the velocities the piece fell with and Bullet lays the stack on the ground
     # (z = half the brick's 0.3 m length), where the verdict stops following it. The verdict is
-    # the run without Bullet's, bit for bit, and the saved .blend replays Bullet's frames.
+    # the run without Bullet's, bit for bit, and the saved .blend replays Bullet's frames. Bullet
+    # steps only from three frames before the fall (every body is kinematic until then): the frames
+    # before are the poses put, and the .blend's keys, not its cache, replay them
     bpy = need_bpy()
+    from calib_masonry.simulation.blender import BlenderEngine
+
+    stepped: list[int] = []
+    step_to = BlenderEngine.step_to
+    monkeypatch.setattr(BlenderEngine, "step_to", lambda self, f: (stepped.append(f), step_to(self, f))[1])
     scene = _tipping_stack()
     a = run(scene, progress=False, blend_path=tmp_path / "f.blend")
     b = run(scene, progress=False, bullet=False)
@@ -1241,6 +1248,7 @@ def test_bullet_plays_the_verdicts_pieces_and_takes_over_a_fallen_one(tmp_path):
     np.testing.assert_allclose(v[5, :3] - v[0, :3], np.cross(v[0, 3:], top_to_bottom), atol=0.02)
     assert np.linalg.norm(v[0, 3:]) > 0.5  # tipping over
     hand = scene.solver.warmup_frames + int(np.ceil(float(fell[0]) * FPS - 1e-9))
+    assert hand > 5 and stepped == [0, *range(hand - 3, len(a.time))]
     np.testing.assert_allclose(a.positions[:hand], b.positions[:hand], atol=1e-5)
     assert np.abs(a.positions[hand:] - b.positions[hand:]).max() > 0.1
     assert a.positions[-1, :, 2] == pytest.approx(np.full(6, 0.15), abs=0.01)  # lying on the ground

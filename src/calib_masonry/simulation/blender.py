@@ -7,7 +7,11 @@ Facts it relies on (measured with bpy 5.0.1, see ../shared/ARCHITECTURE.md):
   (no operators besides ``rigidbody.world_add``); each mesh is built around its centroid;
 * convex hulls use ``use_margin = True`` with ``collision_margin = 0`` (a positive margin rounds
   the corners and blocks rock over early); the ground plate uses the BOX shape;
-* the world is stepped with ``scene.frame_set(f)`` frame by frame, the point cache covering the run;
+* the world is stepped with ``scene.frame_set(f)`` frame by frame, the point cache covering the run
+  from its start (a later start, ``BlenderEngine(start=...)``, skips frames where every body is
+  kinematic: Blender builds the live bodies at the step after the start from the objects as they
+  stand, and an object written at that very step has no mesh yet, "no vertices to define Convex
+  Hull", so nothing is written there);
 * every intact mortar joint is one FIXED constraint that never breaks in Bullet: the joint model
   (:class:`~calib_masonry.simulation.joints.JointModel`) decides, before every step after the
   warm-up, which joints the coming step's load cracks, and the run switches those off;
@@ -269,8 +273,9 @@ def _key_gravity(bpy, g: np.ndarray) -> None:
         prefs.keyframe_new_interpolation_type = old
 
 
-def _world(bpy, scene: Scene):
-    """Reset Blender and set up the scene's rigid-body world (frames, substeps, iterations)."""
+def _world(bpy, scene: Scene, start: int = 0):
+    """Reset Blender and set up the scene's rigid-body world (frames, substeps, iterations), its
+    simulation starting at our frame ``start``."""
     _reset(bpy)
     sc = bpy.context.scene
     s = scene.solver
@@ -287,7 +292,7 @@ def _world(bpy, scene: Scene):
     rw.substeps_per_frame = s.substeps
     rw.solver_iterations = s.iterations
     rw.use_split_impulse = scene.solver.split_impulse
-    rw.point_cache.frame_start = 1
+    rw.point_cache.frame_start = start + 1  # our frame f is Blender's frame f + 1
     rw.point_cache.frame_end = frames + 1
     bodies_col = bpy.data.collections.new("Bricks")
     sc.collection.children.link(bodies_col)
@@ -394,9 +399,9 @@ class BlenderEngine:
     objects, which hold the live Bullet bodies and constraints (writing the originals tags the
     depsgraph and crashed Blender in about half the trials)."""
 
-    def __init__(self, scene: Scene, fixed: np.ndarray, gravity: np.ndarray) -> None:
+    def __init__(self, scene: Scene, fixed: np.ndarray, gravity: np.ndarray, start: int = 0) -> None:
         bpy = require_bpy()
-        sc, rw, bodies_col, rb_col = _world(bpy, scene)
+        sc, rw, bodies_col, rb_col = _world(bpy, scene, start)
         self.plate = _add_plate(bpy, scene, sc, rb_col)
         _key_gravity(bpy, gravity)
         self.objects = _add_bodies(bpy, scene, fixed, bodies_col, rb_col)
@@ -426,6 +431,12 @@ class BlenderEngine:
         self.pending = [p for p in self.pending if frame < p[0] + 2]
         self.frame = frame
         self.sc.frame_set(frame + 1)  # our frame f is Blender's frame f + 1
+
+    def skip_to(self, frame: int) -> None:
+        """Pass our ``frame`` without evaluating it: a frame before the simulation's start (the
+        ``start`` the engine was built with), where every body is kinematic and Bullet has nothing
+        to do; the moves :meth:`place` keys there are played from the saved file's keys."""
+        self.frame = frame
 
     def _dynamic(self, j: int) -> None:
         rb = self.objects[j].evaluated_get(self.depsgraph).rigid_body
@@ -457,18 +468,20 @@ class BlenderEngine:
             ob = self.objects[j]
             self.rest[j] = (self.frame + 1, (*ob.location, *ob.rotation_quaternion))
 
-    def place(self, bodies: np.ndarray, locations: np.ndarray, quaternions: np.ndarray) -> None:
+    def place(self, bodies: np.ndarray, locations: np.ndarray, quaternions: np.ndarray, write: bool = True) -> None:
         """Move the kinematic ``bodies`` to ``locations`` ``(n, 3)`` and ``quaternions`` ``(n, 4)``
         (w, x, y, z) over the coming step (a motion computed elsewhere, played by Bullet): their
         *original* objects written, which Blender re-evaluates into the live bodies (and Bullet
-        moves them at the velocity of that step); the moves are keyed in the saved file."""
+        moves them at the velocity of that step); the moves are keyed in the saved file.
+        ``write=False`` only keys them (a frame before the simulation's start, :meth:`skip_to`)."""
         bodies = np.asarray(bodies, dtype=np.int64)
         poses = np.concatenate([np.asarray(locations, np.float64), np.asarray(quaternions, np.float64)], axis=1)
         for j, pose in zip(bodies.tolist(), poses.tolist()):
-            ob = self.objects[j]
             self._rest(j)
-            ob.location = pose[:3]
-            ob.rotation_quaternion = pose[3:]
+            if write:
+                ob = self.objects[j]
+                ob.location = pose[:3]
+                ob.rotation_quaternion = pose[3:]
         self.placed.append((self.frame + 2, bodies, poses))  # our frame + 1
 
     def set_free(self, bodies: np.ndarray, bonds: np.ndarray, velocity: np.ndarray | None = None) -> None:

@@ -568,19 +568,23 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
     at or after its fall, with the velocities it fell with, its held joints Bullet's constraints and
     the joints let go around it bearing as contacts: Bullet animates the fall onto the ground and
     the debris. The verdict, cracks and releases are ``first``'s; the frames are Bullet's (the
-    verdict's pieces exactly until they fall). Yields each frame stepped; returns ``first`` with
-    Bullet's poses.
+    verdict's pieces exactly until they fall). Bullet is stepped only from three frames before
+    the first fall: until then every body is kinematic and its frames are the poses put, keyed in
+    the saved .blend (a structure that stands: three steps, where stepping every frame of the
+    paper example's quake took 18 s). Bullet's debris then differs from a pass stepped from the
+    first frame by its contact caches' history (the verdict does not read it). Yields each frame;
+    returns ``first`` with Bullet's poses.
 
     Why: a freed piece set dynamic on its joints is held together only as far as Bullet's
     iterative solve converges, its motion is not the verdict's, and solving its hundreds of
     constraints was most of a quake's time (docs/dynamics.md)."""
+    from .blender import BlenderEngine
+
     t0 = time.perf_counter()
     s = scene.solver
     nb = len(scene.bodies)
     frames = len(first.time) - 1
     warm = min(s.warmup_frames, frames)
-    eng = _blender_engine(scene, np.ones(nb, dtype=bool), gravity_per_frame(scene))
-    seconds_build = time.perf_counter() - t0
     p = first.pieces
     fell = p.fell_time_s if p is not None and p.fell_time_s is not None else np.full(nb, np.nan)
     fell_v = p.fell_velocity if p is not None and p.fell_velocity is not None else np.full((nb, 6), np.nan)
@@ -588,6 +592,17 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
     ok = np.isfinite(fell)
     hand[ok] = np.maximum(warm + np.ceil(fell[ok] * s.fps - 1e-9).astype(int), warm + 1)
     hand[hand > frames] = -1
+    # Until the first body turns dynamic every body is kinematic: Bullet has nothing to solve, and
+    # its frames are the poses put on the bodies. Its simulation starts three frames before: at
+    # the step after the start Blender builds the live bodies from the objects as they stand (an
+    # object written at that step has no mesh yet to build a body of: Blender's "no vertices to
+    # define Convex Hull"), so that step writes nothing, and the next moves the kinematic bodies
+    # from where Bullet has them, before the first dynamic step (its bodies' velocities are those
+    # of their last kinematic step). The frames before the start are those poses, keyed in the
+    # saved file, not stepped (a structure that stands steps three frames).
+    start = max(min(int(hand[hand > 0].min()) if (hand > 0).any() else frames, frames) - 3, 0)
+    eng = BlenderEngine(scene, np.ones(nb, dtype=bool), gravity_per_frame(scene), start=start)
+    seconds_build = time.perf_counter() - t0
     bond_a = np.array([b.a for b in scene.bonds], dtype=np.int64)
     bond_b = np.array([b.b for b in scene.bonds], dtype=np.int64)
     # when each joint was let go: by the joint model, or inside a piece (--piece-joints)
@@ -606,6 +621,7 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
     plate[0] = eng.read_poses(mats[0])
     if warm == 0:
         eng.end_warmup()
+    keyed = np.zeros(nb, dtype=bool)  # the bodies moved only in the keys so far (frames not stepped)
     for f in _progress(range(1, frames + 1), desc="bullet", unit="frame", enabled=progress):
         go = np.flatnonzero(hand == f)
         if go.size:
@@ -622,11 +638,28 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
         moves = (np.abs(pos[f] - placed_pos).max(axis=1) > 1e-6) | (np.abs(quat[f] - placed_quat).max(axis=1) > 5e-7)
         drive = np.flatnonzero(moves & ((hand < 0) | (hand > f)))
         if drive.size:
-            eng.place(drive, pos[f, drive], quat[f, drive])
             placed_pos[drive], placed_quat[drive] = pos[f, drive], quat[f, drive]
-        eng.step_to(f)
-        plate[f] = eng.read_poses(mats[f])
-        if f == warm:
+        if f < start or (f == start + 1 and not go.size):  # keyed only (above)
+            if drive.size:
+                eng.place(drive, pos[f, drive], quat[f, drive], write=False)
+                keyed[drive] = True
+            if f < start:
+                eng.skip_to(f)
+                plate[f] = plate[0]
+                mats[f] = _matrices(placed_pos, placed_quat)
+            else:
+                eng.step_to(f)
+                plate[f] = eng.read_poses(mats[f])
+                mats[f, keyed] = _matrices(placed_pos[keyed], placed_quat[keyed])
+        else:
+            if keyed.any():  # the bodies put in the keys alone so far, written where they are now
+                drive = np.union1d(drive, np.flatnonzero(keyed))
+                keyed[:] = False
+            if drive.size:
+                eng.place(drive, placed_pos[drive], placed_quat[drive])
+            eng.step_to(f)
+            plate[f] = eng.read_poses(mats[f])
+        if f == max(warm, start + 1):  # with the live bodies (after the start)
             eng.end_warmup()
         yield f
     seconds = time.perf_counter() - t1
@@ -641,6 +674,15 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
         seconds_stepping=first.seconds_stepping + seconds,
         frames_of=PIECES_THEN_BULLET_FRAMES,
     )
+
+
+def _matrices(positions: np.ndarray, quaternions: np.ndarray) -> np.ndarray:
+    """World matrices ``(B, 4, 4)`` (float32, as an engine's frames) of poses ``(B, 3)``, ``(B, 4)``."""
+    out = np.zeros((len(positions), 4, 4), dtype=np.float32)
+    out[:, :3, :3] = rotations(quaternions)
+    out[:, :3, 3] = positions
+    out[:, 3, 3] = 1.0
+    return out
 
 
 def _with_vibration(scene: Scene, first: RunOutput, warm: int) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,10 @@ Each model's line "this machine" gives the speed of one factorisation of its int
 kernels cvxopt's OpenBLAS chose (the joint model's time is mostly factorisations; since the
 thirty-first session, 2026-11-30). Then, on the 2-core Xeon VM (`--repeats 1 --no-paper-example`,
 nothing else running): Stylite's tangent 2.0 ms, "Prescott"; ours 22.6 s against 81.1 s bare
-(ratio 0.28), the joint model 16.3 s, without Bullet 18.1 s, the same verdict.
+(ratio 0.28), the joint model 16.3 s, without Bullet 18.1 s, the same verdict. Since the
+thirty-third session (2026-12-01) Bullet is stepped only from the first fall (every body is
+kinematic before it): `--repeats 1`, Stylite 19.0 s against 83.3 s bare (ratio 0.229), the paper
+example 160.7 s, without Bullet 164.1 s, its joint model 148.8 s (its tangent 21.8 ms that day).
 
 Each pair is followed by the same call without Bullet (``simulate --no-bullet``: the joint model
 and the verdict's rigid pieces alone, the frames showing those pieces), with whether its verdict

@@ -165,22 +165,32 @@ def test_a_bonded_stack_stands_exactly_still_until_its_joints_let_go(monkeypatch
     # bricks follow it, loop._with_vibration: microns here), at any solver setting (Bullet's own
     # rigid constraints let a tall stone tower sway by tens of millimetres, by its settings); with
     # Bullet moving freed pieces itself ("freed") the held stack does not move at all. Where
-    # nothing falls Bullet's pass (loop._follow) steps only its last three frames (and frame 0). The
-    # same stack with a weak mortar cracks, and the part let go falls
+    # nothing falls Bullet's pass (loop._follow) steps only its last three frames (and frame 0), and
+    # makes no constraint (no body turns dynamic). The same stack with a weak mortar cracks, and
+    # the part let go falls
     from calib_masonry.simulation.blender import BlenderEngine
 
     stepped: list[int] = []
+    joints: set[int] = set()
     step_to = BlenderEngine.step_to
-    monkeypatch.setattr(BlenderEngine, "step_to", lambda self, f: (stepped.append(f), step_to(self, f))[1])
+
+    def counted(self, f):
+        stepped.append(f)
+        joints.add(len(self.constraints))
+        return step_to(self, f)
+
+    monkeypatch.setattr(BlenderEngine, "step_to", counted)
     bodies, bonds = _stack_of_six()
     motion = constant_acceleration(0.4 * G, 1.0, dt=0.001)
     for iterations, moves in ((5, "fallen"), (50, "fallen"), (50, "freed")):
         solver = replace(_solver(warmup=0.2), iterations=iterations, bullet_moves=moves)
         stepped.clear()
+        joints.clear()
         out = run(Scene(bodies=bodies, bonds=bonds, duration_s=1.0, solver=solver, motion=motion), progress=False)
         assert not np.isfinite(out.bond_break_time_s).any()
         last = len(out.time) - 1
         assert stepped == ([*range(last + 1)] if moves == "freed" else [0, last - 3, last - 2, last - 1, last])
+        assert joints == {len(bonds) if moves == "freed" else 0}
         if moves == "freed":
             assert np.array_equal(out.positions, np.broadcast_to(out.positions[0], out.positions.shape))
             continue

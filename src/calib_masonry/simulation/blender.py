@@ -351,13 +351,16 @@ def _constraint_collection(bpy, sc, rw):
     return rw.constraints
 
 
-def _add_joints(bpy, scene: Scene, fixed: np.ndarray, objects: list, plate, sc, rw) -> list:
+def _add_joints(bpy, scene: Scene, fixed: np.ndarray, objects: list, plate, sc, rw, joints=None) -> dict:
     """One rigid, unbreakable FIXED constraint per mortar joint (off where its part is held
-    fixed), and the rotation locks of ``scene.held_rotation``."""
-    constraints = []
-    if scene.bonds:
+    fixed), for the ``joints`` given (bond indices; None: every one), by bond index; and the
+    rotation locks of ``scene.held_rotation``."""
+    constraints = {}
+    which = range(len(scene.bonds)) if joints is None else [int(k) for k in joints]
+    if len(which):
         ccol = _constraint_collection(bpy, sc, rw)
-        for k, bond in enumerate(scene.bonds):
+        for k in which:
+            bond = scene.bonds[k]
             e = bpy.data.objects.new(f"bond_{k:05d}", None)
             e.location = tuple(float(x) for x in bond.location)
             e.rotation_mode = "QUATERNION"
@@ -371,7 +374,7 @@ def _add_joints(bpy, scene: Scene, fixed: np.ndarray, objects: list, plate, sc, 
             c.disable_collisions = True  # an intact joint's bricks do not touch: the joint carries the load
             c.use_breaking = False  # the joint model decides when a joint cracks (see joints.py)
             c.enabled = not fixed[bond.a]  # a joint of the part held fixed acts once that part is set free
-            constraints.append(e)
+            constraints[k] = e
     for k in scene.held_rotation:
         # its rotation locked to the ground, its translations free (a generic constraint with angular
         # limits only): it acts once the body is set free
@@ -399,13 +402,15 @@ class BlenderEngine:
     objects, which hold the live Bullet bodies and constraints (writing the originals tags the
     depsgraph and crashed Blender in about half the trials)."""
 
-    def __init__(self, scene: Scene, fixed: np.ndarray, gravity: np.ndarray, start: int = 0) -> None:
+    def __init__(self, scene: Scene, fixed: np.ndarray, gravity: np.ndarray, start: int = 0, joints=None) -> None:
         bpy = require_bpy()
         sc, rw, bodies_col, rb_col = _world(bpy, scene, start)
         self.plate = _add_plate(bpy, scene, sc, rb_col)
         _key_gravity(bpy, gravity)
         self.objects = _add_bodies(bpy, scene, fixed, bodies_col, rb_col)
-        self.constraints = _add_joints(bpy, scene, fixed, self.objects, self.plate, sc, rw)
+        # the joints' constraints by bond index: every joint's, or those of ``joints`` alone (a
+        # pass that switches no other: loop._follow); asking for another is a KeyError
+        self.constraints = _add_joints(bpy, scene, fixed, self.objects, self.plate, sc, rw, joints)
         self.bpy, self.sc, self.bodies_col = bpy, sc, bodies_col
         position = {ob.name: j for j, ob in enumerate(self.objects)}
         self.order = np.array([position[ob.name] for ob in bodies_col.objects], dtype=int)

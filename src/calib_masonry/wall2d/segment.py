@@ -14,6 +14,7 @@ from functools import cached_property
 import numpy as np
 from scipy import ndimage
 
+from .._morphology import opening
 from .._threads import background, thread_map
 
 __all__ = [
@@ -243,7 +244,7 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
     mortar = (best > 0.5 * level) & (best > config.floor)
     bricks = ~mortar
     if config.separate_px > 0:
-        bricks = ndimage.binary_opening(bricks, disk(config.separate_px))
+        bricks = opening(bricks, disk(config.separate_px))  # scipy's binary_opening's pixels
     return bricks
 
 

@@ -603,13 +603,22 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
     start = max(min(int(hand[hand > 0].min()) if (hand > 0).any() else frames, frames) - 3, 0)
     bond_a = np.array([b.a for b in scene.bonds], dtype=np.int64)
     bond_b = np.array([b.b for b in scene.bonds], dtype=np.int64)
+
+    def ends_in(group: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per bond, whether both its bodies are in ``group`` (B,) (the plate is in none), and
+        whether one is."""
+        a, b = group[bond_a], (bond_b >= 0) & group[np.maximum(bond_b, 0)]
+        return a & b, a | b
+
     # Bullet's constraints only for the joints of the bodies that turn dynamic (the others join
     # kinematic bodies, where a constraint is off and does nothing: 1.3 of the 2.0 s it took to
     # build the paper example's scene in Blender)
-    dynamic = hand >= 0
-    touch = dynamic[bond_a] | ((bond_b >= 0) & dynamic[np.maximum(bond_b, 0)])
     eng = BlenderEngine(
-        scene, np.ones(nb, dtype=bool), gravity_per_frame(scene), start=start, joints=np.flatnonzero(touch)
+        scene,
+        np.ones(nb, dtype=bool),
+        gravity_per_frame(scene),
+        start=start,
+        joints=np.flatnonzero(ends_in(hand >= 0)[1]),
     )
     seconds_build = time.perf_counter() - t0
     # when each joint was let go: by the joint model, or inside a piece (--piece-joints)
@@ -634,8 +643,7 @@ def _follow(scene: Scene, first: RunOutput, blend_path: Path | None, progress: b
         if go.size:
             group = np.zeros(nb, dtype=bool)
             group[go] = True
-            inner = group[bond_a] & (bond_b >= 0) & group[np.maximum(bond_b, 0)]
-            touching = group[bond_a] | ((bond_b >= 0) & group[np.maximum(bond_b, 0)])
+            inner, touching = ends_in(group)
             gone = release <= (f - warm) / s.fps + 1e-9
             eng.switch_off(np.flatnonzero(touching & gone))  # those joints' bricks bear on each other
             eng.set_free(go, np.flatnonzero(inner & ~gone), _start_velocity(fell_v[go]))

@@ -116,8 +116,10 @@ def main() -> None:
                             own if tol is None else (lambda sc, tol=tol: replace(own(sc), tol=tol))
                         )
                         t0 = time.perf_counter()
-                        out = _run_scene(scene, t["unit"], progress=False, blend_path=None)
-                        CrackTracker.default_settings = staticmethod(own)
+                        try:
+                            out = _run_scene(scene, t["unit"], progress=False, blend_path=None)
+                        finally:
+                            CrackTracker.default_settings = staticmethod(own)
                         s = out.summary
                         lam = s.get("collapse_multiplier_g")
                         ratio = lam / non if lam is not None and non else float("nan")

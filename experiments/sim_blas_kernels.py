@@ -89,7 +89,7 @@ def chosen(kernel: str) -> str:
 
 def run(model: Path, kernel: str, out: Path, extra: list[str]) -> dict:
     cli = Path(sys.executable).with_name("calib-masonry")
-    cmd = [str(cli), "simulate", str(model), "--no-figures", "--out", str(out), *extra]
+    cmd = [str(cli), "simulate", str(model), "--no-figures", "--out", str(out), "--overwrite", *extra]
     t = time.perf_counter()
     proc = subprocess.run(cmd, env=environment(kernel), capture_output=True, text=True)
     seconds = time.perf_counter() - t

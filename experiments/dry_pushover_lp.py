@@ -55,6 +55,20 @@ def geometry(test: dict, folder: Path):
     return simulation_geometry(build(load_structure(folder / "structure.toml"), progress=False).structure)
 
 
+def pushover(scene) -> tuple[float | None, dict | None]:
+    """The collapse multiplier (g) and the mechanism of a pushover scene, as ``simulate`` finds them
+    (Bullet on, the ramp stopped after the collapse, one BLAS thread)."""
+    from threadpoolctl import threadpool_limits
+
+    from calib_masonry.simulation.loop import run
+    from calib_masonry.simulation.results import collapse_multiplier, mechanism, metrics, pushover_stop
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        out = run(scene, progress=False, stop=pushover_stop(scene))
+    m = metrics(scene, out)
+    return collapse_multiplier(scene, out, m)[0], mechanism(scene, out, m)
+
+
 def _g(value, stands: bool) -> str:
     if not stands:
         return "cannot stand under gravity alone"
@@ -74,7 +88,6 @@ def main() -> None:
     p.add_argument("--db", type=Path, default=DB)
     args = p.parse_args()
 
-    from calib_masonry.simulation.run import _run_scene
     from calib_masonry.simulation.scene import Material, Pushover, scene_from_geometry
     from calib_masonry.simulation.tracker import CrackTracker
     from tests.limit_analysis import limit_load
@@ -117,17 +130,15 @@ def main() -> None:
                         )
                         t0 = time.perf_counter()
                         try:
-                            out = _run_scene(scene, t["unit"], progress=False, blend_path=None)
+                            lam, mech = pushover(scene)
                         finally:
                             CrackTracker.default_settings = staticmethod(own)
-                        s = out.summary
-                        lam = s.get("collapse_multiplier_g")
                         ratio = lam / non if lam is not None and non else float("nan")
                         if math.isfinite(ratio) and rate == 0.01 and tol is None:
                             ratios.append(ratio)
                         print(
                             f"    pushover at {rate:g} g/s, tol {tol or own(scene).tol:g}: {_g(lam, True)}, "
-                            f"ratio {ratio:.3f}, mechanism {(s.get('mechanism') or {}).get('mechanism')} "
+                            f"ratio {ratio:.3f}, mechanism {(mech or {}).get('mechanism')} "
                             f"({time.perf_counter() - t0:.0f} s)",
                             flush=True,
                         )

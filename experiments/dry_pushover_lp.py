@@ -55,9 +55,10 @@ def geometry(test: dict, folder: Path):
     return simulation_geometry(build(load_structure(folder / "structure.toml"), progress=False).structure)
 
 
-def pushover(scene) -> tuple[float | None, dict | None]:
-    """The collapse multiplier (g) and the mechanism of a pushover scene, as ``simulate`` finds them
-    (Bullet on, the ramp stopped after the collapse, one BLAS thread)."""
+def pushover(scene) -> tuple[float | None, dict | None, dict | None]:
+    """The collapse multiplier (g), the mechanism and the joint model's contact solves (how many
+    ended unconverged) of a pushover scene, as ``simulate`` finds them (Bullet on, the ramp stopped
+    after the collapse, one BLAS thread)."""
     from threadpoolctl import threadpool_limits
 
     from calib_masonry.simulation.loop import run
@@ -66,7 +67,7 @@ def pushover(scene) -> tuple[float | None, dict | None]:
     with threadpool_limits(limits=1, user_api="blas"):
         out = run(scene, progress=False, stop=pushover_stop(scene))
     m = metrics(scene, out)
-    return collapse_multiplier(scene, out, m)[0], mechanism(scene, out, m)
+    return collapse_multiplier(scene, out, m)[0], mechanism(scene, out, m), out.contact_solves
 
 
 def _g(value, stands: bool) -> str:
@@ -130,7 +131,7 @@ def main() -> None:
                         )
                         t0 = time.perf_counter()
                         try:
-                            lam, mech = pushover(scene)
+                            lam, mech, solves = pushover(scene)
                         finally:
                             CrackTracker.default_settings = staticmethod(own)
                         ratio = lam / non if lam is not None and non else float("nan")
@@ -138,7 +139,7 @@ def main() -> None:
                             ratios.append(ratio)
                         print(
                             f"    pushover at {rate:g} g/s, tol {tol or own(scene).tol:g}: {_g(lam, True)}, "
-                            f"ratio {ratio:.3f}, mechanism {(mech or {}).get('mechanism')} "
+                            f"ratio {ratio:.3f}, mechanism {(mech or {}).get('mechanism')}, contact solves {solves} "
                             f"({time.perf_counter() - t0:.0f} s)",
                             flush=True,
                         )

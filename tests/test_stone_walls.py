@@ -168,6 +168,11 @@ def test_a_single_block_on_its_footing_cracks_then_rocks_as_the_closed_forms_say
     tol = 0.03 if f_t == 0 else 0.10
     assert out.summary["collapse_multiplier_g"] == pytest.approx(expected, rel=tol)
     assert out.summary["joints"]["cracked_by"]["tension"] == 1
+    # one block on its footing: every contact solve of the ramp meets its tolerance, and the
+    # summary says how many there were (a collapse read from an unconverged one would show here)
+    solves = out.summary["joints"]["contact_solves"]
+    assert solves["solves"] > 100 and solves["unconverged"] == 0
+    assert solves["worst_unconverged_in_tolerances"] is None
 
 
 @pytest.mark.parametrize("gap", [0.01, 0.05, 0.07])

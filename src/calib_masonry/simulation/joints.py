@@ -495,6 +495,11 @@ class JointModel:
         self._last: tuple | None = None
         self.newton_iterations = 0  # of the last solve
         self.converged = True  # whether the last solve met ``settings.tol``
+        # over the model's life: its solves, those that ended without meeting the tolerance, and the
+        # largest out-of-balance force (or moment) one of those ended with, in tolerances
+        self.solves = 0
+        self.unconverged_solves = 0
+        self.worst_unconverged = 0.0
         self.n_all = len(bonds)
         # each mortar joint's farthest corner from its centroid, and its outline's edges
         # (:func:`_outline_edges`): constants of the outline, made at first use (each check's
@@ -866,6 +871,7 @@ class JointModel:
         without convergence when ``settings.stall_iter`` (ten) iterations have neither halved the
         out-of-balance force nor grown the motion tenfold (a mechanism's run-away)."""
         self.converged = True
+        self.solves += 1
         if jc.size == 0:
             return self._solve(intact, np.zeros((self.n_all, self.outline.shape[1]), bool), rhs)
         if start is not None:
@@ -931,6 +937,9 @@ class JointModel:
             U = U + a * dU
             r, st = r_new, st_new
             self.newton_iterations = it + 1
+        if not self.converged:
+            self.unconverged_solves += 1
+            self.worst_unconverged = max(self.worst_unconverged, float(np.max(np.abs(r) / limit)))
         return U
 
     def _tolerance(self, rhs: np.ndarray) -> np.ndarray | float:

@@ -55,6 +55,9 @@ class RunOutput:
     bond_release_time_s: np.ndarray | None = None  # when Bullet let each cracked bond go, NaN if never
     max_utilisation: np.ndarray | None = None  # (F,) the intact joints' largest utilisation at each frame
     seconds_joints: float = 0.0  # wall time spent in the joint model
+    # the joint model's contact solves: how many, how many ended without meeting their tolerance,
+    # and the largest out-of-balance one of those ended with, in tolerances (None without it)
+    contact_solves: dict | None = None
     # the elastic vibration of the structure the intact joints hold (simulation/dynamics.py), per
     # joint-model step after the warm-up: time_s, roof_drift_m, base_shear_n, first_mode (arrays),
     # first_period_s and damping_ratio; None for a quasi-static run
@@ -539,12 +542,25 @@ def steps(
         bond_release_time_s=tracker.release_time_s if tracker is not None else None,
         max_utilisation=utilisation if record else None,
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
+        contact_solves=_contact_solves(tracker),
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
         vibration=_vibration(tracker),
         pieces=pieces,
         frames_of=BULLET_FRAMES if bullet else PIECES_FRAMES,
         freed_velocity=started,
     )
+
+
+def _contact_solves(tracker) -> dict | None:
+    """The joint model's contact solves over the run (:class:`RunOutput`'s ``contact_solves``)."""
+    if tracker is None:
+        return None
+    m = tracker.model
+    return {
+        "solves": int(m.solves),
+        "unconverged": int(m.unconverged_solves),
+        "worst_unconverged_in_tolerances": round(float(m.worst_unconverged), 3) if m.unconverged_solves else None,
+    }
 
 
 def _start_velocity(velocity: np.ndarray | None) -> np.ndarray | None:

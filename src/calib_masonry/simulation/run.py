@@ -412,6 +412,10 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
             if out.max_utilisation is not None and len(out.time)
             else None,
             "seconds": round(out.seconds_joints, 3),
+            # solves that end without meeting the tolerance: a pushover's or shear test's collapse
+            # is read where one runs away, which a stalled iteration may do where an equilibrium
+            # exists (docs/stone_walls.md, "The database's walls, dry")
+            "contact_solves": out.contact_solves,
         },
         # the material of the run, as a [material] table (its units in its keys), and where it came from
         "material": {**material_table(mat), "source": scene.notes.get("material_source", "given")},

@@ -35,24 +35,16 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "experiments"), str(ROOT)]
 
-from lab_walls import DB, stone_mask, tests  # noqa: E402
+from lab_walls import DB, tests, write_wall  # noqa: E402
 
 
 def geometry(test: dict, folder: Path):
-    """The simulation geometry of the wall drawn for ``test``, built at its real size."""
-    from PIL import Image
+    """The simulation geometry of the wall drawn for ``test``, built at its real size (in this
+    process; its material is this experiment's, not the row's)."""
+    from tests.test_stone_walls import _structure_geometry
 
-    from calib_masonry.build_folder import simulation_geometry
-    from calib_masonry.pipeline import build
-    from calib_masonry.spec import load_structure
-
-    folder.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(stone_mask(test["drawing"], test["L"], test["H"], mortar=test["mortar"])).save(folder / "mask.png")
-    (folder / "structure.toml").write_text(
-        f'[structure]\nname = "w"\nthickness_m = {test["t"]}\nvertices = 8\nclosed = false\n\n'
-        f'[[wall]]\nname = "w"\nmask = "mask.png"\nwidth_m = {test["L"]}\nheight_m = {test["H"]}\ntheta_deg = 0\n'
-    )
-    return simulation_geometry(build(load_structure(folder / "structure.toml"), progress=False).structure)
+    write_wall(test, folder, material=False)
+    return _structure_geometry(folder)
 
 
 def pushover(scene) -> tuple[float | None, dict | None, dict | None]:

@@ -248,20 +248,27 @@ def tests(db: Path = DB) -> list[dict]:
     return out
 
 
-def build_wall(test: dict, folder: Path) -> Path:
-    """Mask (from the row's ``drawing``), structure and build of one wall in ``folder``; the model folder."""
+def write_wall(test: dict, folder: Path, material: bool = True) -> Path:
+    """The mask (from the row's ``drawing``) and structure file of one wall in ``folder``, with the
+    row's ``[material]`` table unless ``material`` is False; the structure file."""
     from PIL import Image
 
     folder.mkdir(parents=True, exist_ok=True)
     mask = stone_mask(test["drawing"], test["L"], test["H"], mortar=test["mortar"])
     Image.fromarray(mask).save(folder / "mask.png")
-    material = "\n".join(f"{k} = {v}" for k, v in test["material"].items())
+    table = "\n".join(f"{k} = {v}" for k, v in test["material"].items())
     (folder / "structure.toml").write_text(
         f'[structure]\nname = "{test["unit"]}"\nthickness_m = {test["t"]}\nvertices = 8\nclosed = false\n\n'
-        f'[[wall]]\nname = "w"\nmask = "mask.png"\nwidth_m = {test["L"]}\nheight_m = {test["H"]}\ntheta_deg = 0\n\n'
-        f"[material]\n{material}\n"
+        f'[[wall]]\nname = "w"\nmask = "mask.png"\nwidth_m = {test["L"]}\nheight_m = {test["H"]}\ntheta_deg = 0\n'
+        + (f"\n[material]\n{table}\n" if material else "")
     )
-    call([*CLI, "build", str(folder / "structure.toml"), "--out", str(folder / "model"), "--overwrite"])
+    return folder / "structure.toml"
+
+
+def build_wall(test: dict, folder: Path) -> Path:
+    """Mask (from the row's ``drawing``), structure and build of one wall in ``folder``; the model folder."""
+    structure = write_wall(test, folder)
+    call([*CLI, "build", str(structure), "--out", str(folder / "model"), "--overwrite"])
     return folder / "model"
 
 

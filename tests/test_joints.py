@@ -1,6 +1,7 @@
 """The elastic joint model against statics and the analytic failure moments (no Blender)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -272,6 +273,20 @@ def test_a_block_standing_on_the_plate_bears_on_it():
     assert abs(st.forces[0, 2]) == pytest.approx(sc.bodies[1].mass * G, rel=1e-6)
 
 
+def _dry_block(size, direction, mu):
+    """One block ``size`` (l_x, l_y, h) on a dry footing joint of friction ``mu``, and the lateral
+    load factor along ``direction`` (d_x, d_y) at which it tips (its resultant at the footing's edge)."""
+    lx, ly, h = size
+    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=mu)
+    sc = Scene(
+        bodies=(_block("b", size, (0, 0, h / 2)),),
+        bonds=(Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, lx, ly),),
+        material=dry,
+    )
+    dx, dy = direction
+    return sc, min(lx / (h * abs(dx)) if dx else np.inf, ly / (h * abs(dy)) if dy else np.inf)
+
+
 @pytest.mark.parametrize(
     "size, direction", [((0.2, 0.3, 0.8), (1.0, 0.0)), ((0.3, 0.2, 1.0), (0.6, 0.8)), ((0.9, 0.6, 0.3), (0.6, 0.8))]
 )
@@ -282,16 +297,9 @@ def test_a_block_on_a_cracked_joint_tips_or_slides_where_statics_says(size, dire
     # lam h / 2 |d_y| = l_y / 2), and runs away (motion over 1 mm) at the next step; the slender
     # blocks tip, the squat one slides
     mu = 0.5
-    lx, ly, h = size
-    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=mu)
-    sc = Scene(
-        bodies=(_block("b", size, (0, 0, h / 2)),),
-        bonds=(Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, lx, ly),),
-        material=dry,
-    )
+    sc, tips = _dry_block(size, direction, mu)
     jm = JointModel(sc)
     dx, dy = direction
-    tips = min(lx / (h * abs(dx)) if dx else np.inf, ly / (h * abs(dy)) if dy else np.inf)
     expected = min(mu, tips)
     intact = np.ones(1, bool)
     onset = None
@@ -524,3 +532,63 @@ def test_the_kept_outline_constants_and_the_corner_blocks_change_no_bit():
     np.testing.assert_array_equal(edge, np.roll(outline, -1, axis=1) - outline)
     np.testing.assert_array_equal(real, np.linalg.norm(edge, axis=2) > 1e-12)
     assert real.any(axis=1).all() and not real.all()  # the padding's repeats are not edges
+
+
+@pytest.mark.parametrize(
+    "size, direction", [((0.2, 0.3, 0.8), (1.0, 0.0)), ((0.3, 0.2, 1.0), (0.6, 0.8)), ((0.9, 0.6, 0.3), (0.6, 0.8))]
+)
+def test_the_static_programme_finds_an_equilibrium_up_to_tipping_or_sliding(size, direction):
+    # one block on a cracked (dry) footing joint: its corners bear any compression with friction
+    # inside the square inscribed in Coulomb's cone (|t_u| + |t_v| <= mu N: mu / (|d_u| + |d_v|)
+    # along d, mu along an axis); the load has an equilibrium below the smaller of that and
+    # tipping (lam h / 2 |d| = l / 2), none above the smaller of mu and tipping
+    mu = 0.5
+    sc, tips = _dry_block(size, direction, mu)
+    jm = JointModel(sc)
+    dx, dy = direction
+    jc, kc = np.nonzero(jm.corner_mask)
+    intact = np.zeros(1, bool)
+    free = np.zeros(1, bool)
+
+    def stands(lam):
+        return jm.has_equilibrium(intact, jc, kc, jm._load(np.array([lam * G * dx, lam * G * dy, -G])), free)
+
+    assert stands(0.0)
+    assert stands(0.99 * min(mu / (abs(dx) + abs(dy)), tips))
+    assert not stands(1.01 * min(mu, tips))
+    # friction held to a fixed capacity as well: none, and only the weight stands
+    zero = np.zeros(jc.size)
+    assert jm.has_equilibrium(intact, jc, kc, jm._load(np.array([0.0, 0.0, -G])), free, shear_capacity=zero)
+    assert not jm.has_equilibrium(
+        intact, jc, kc, jm._load(np.array([0.01 * G * dx, 0.01 * G * dy, -G])), free, shear_capacity=zero
+    )
+    # an intact dry joint bears as the contact does; with a strong mortar it carries far more
+    lam = 1.01 * min(mu, tips)
+    assert not jm.has_equilibrium(
+        np.ones(1, bool), jc[:0], kc[:0], jm._load(np.array([lam * dx, lam * dy, -1]) * G), free
+    )
+    wet = JointModel(replace(sc, material=Material(tensile_strength=1e6, shear_strength=1.5e6, friction=mu)))
+    assert wet.has_equilibrium(np.ones(1, bool), jc[:0], kc[:0], wet._load(np.array([5 * dx, 5 * dy, -1]) * G), free)
+
+
+def test_a_stalled_solve_with_an_equilibrium_ends_at_its_least_out_of_balance_iterate():
+    # a block on a dry footing under a load it can carry, solved with an iteration cut short (two
+    # steps, no convergence): with the check it ends at its best iterate and counts the stall;
+    # without, where it stopped
+    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6)
+    sc = Scene(
+        bodies=(_block("b", (0.4, 0.3, 0.6), (0, 0, 0.3)),),
+        bonds=(Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, 0.4, 0.3),),
+        material=dry,
+    )
+    g = np.array([0.3 * G, 0.0, -G])
+    for check in (True, False):
+        jm = JointModel(sc, settings=ContactSettings(max_iter=2, check_equilibrium=check))
+        jm.solve(g, np.zeros(1, bool))
+        assert not jm.converged
+        assert jm.unconverged_solves == 1
+        assert jm.stalled_in_equilibrium == (1 if check else 0)
+    # beyond sliding there is no equilibrium: the stall is not excused
+    jm = JointModel(sc, settings=ContactSettings(max_iter=2, check_equilibrium=True))
+    jm.solve(np.array([0.8 * G, 0.0, -G]), np.zeros(1, bool))
+    assert jm.stalled_in_equilibrium == 0

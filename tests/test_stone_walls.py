@@ -171,7 +171,9 @@ def test_a_single_block_on_its_footing_cracks_then_rocks_as_the_closed_forms_say
     # one block on its footing: every contact solve of the ramp meets its tolerance, and the
     # summary says how many there were (a collapse read from an unconverged one would show here)
     solves = out.summary["joints"]["contact_solves"]
-    assert solves["solves"] > 100 and solves["unconverged"] == 0
+    # (counted up to the run's last check: a check thread running ahead of the engine solves frames
+    # past the run's end, which made the count follow the machine's load)
+    assert solves["solves"] > 0 and solves["unconverged"] == 0
     assert solves["worst_unconverged_in_tolerances"] is None
 
 

@@ -74,7 +74,16 @@ out-of-balance force falls (where no halving does, one step on the touching corn
 stiffness instead), to an out-of-balance force of ``tol`` (1e-3) of the heaviest body's load (these
 numerical settings are :class:`ContactSettings`); an iteration that has stalled
 (ten steps without halving that force or growing the motion tenfold) stops where it is, and
-:attr:`JointModel.converged` says so. A structure whose cracked joints leave a mechanism has no
+:attr:`JointModel.converged` says so. Where the load rises slowly (a pushover, a shear test, gravity
+alone) a solve that ends unconverged asks a static programme on its own joints and contacts whether
+the load has an equilibrium at all (:meth:`JointModel.has_equilibrium`, with each contact's friction
+bounded by both Coulomb's cone and ``mu N`` of the iteration's least out-of-balance iterate: one
+step of Gilbert, Casapulla & Ahmed's non-associative programme, from the model's own state); if it
+has, the iteration failed and not the structure, and the solve ends at that iterate instead of where
+its last steps threw it (a fallback step is taken whatever it does: on a dry stone wall, WI2.175,
+kilometres and 1e11 N out of balance at 0.10 g, read as the collapse, where the programme says
+0.23 g; with the check its pushover collapses at 0.232-0.234 g at three load rates and three
+tolerances, experiments/dry_pushover_lp.py). A structure whose cracked joints leave a mechanism has no
 such equilibrium: the iteration then runs away along the mechanism (held only by the weak springs
 below), and the joints that move by more than
 ``release_m`` (1 mm; an equilibrium moves them by microns) are the ones Bullet lets go (see
@@ -180,6 +189,12 @@ class ContactSettings:
     stall_iter: int = 10  # a solve stops when this many iterations neither halved the out-of-balance force nor grew the motion tenfold
     max_rounds: int = 40  # crack rounds per load
     release_m: float = 1e-3  # a joint whose corners move further than this in a solve has run away, m
+    # a solve that ends without converging asks a static programme on its own joints and contacts
+    # whether any equilibrium of the load exists (:meth:`JointModel.has_equilibrium`): if one does,
+    # the iteration failed, not the structure, and the solve ends at its least out-of-balance iterate
+    # instead of wherever it stopped (a diverged fallback step was read as a collapse). On where the
+    # load rises slowly (CrackTracker.default_settings); under a ground motion not yet measured
+    check_equilibrium: bool = False
 
     def __post_init__(self) -> None:
         for name in (
@@ -500,6 +515,9 @@ class JointModel:
         self.solves = 0
         self.unconverged_solves = 0
         self.worst_unconverged = 0.0
+        # of those, the ones whose load the static programme found an equilibrium for (ended at
+        # their least out-of-balance iterate: ``settings.check_equilibrium``)
+        self.stalled_in_equilibrium = 0
         self.n_all = len(bonds)
         # each mortar joint's farthest corner from its centroid, and its outline's edges
         # (:func:`_outline_edges`): constants of the outline, made at first use (each check's
@@ -534,7 +552,8 @@ class JointModel:
         D[:, 3, 4] = D[:, 4, 3] = -kn * self.iuv
         D[:, 5, 5] = ks * (self.iuu + self.ivv)
         self.D = D
-        if getattr(scene, "held_rotation", ()):
+        self.held_rotation = tuple(getattr(scene, "held_rotation", ()))
+        if self.held_rotation:
             # a body whose rotation is held (a shear test's beam between fixed ends): a spring on its
             # rotations a thousand times stiffer than the whole joint network's in bending
             span = float(np.ptp(self.x, axis=0).max()) + 1.0
@@ -893,6 +912,9 @@ class JointModel:
         self.newton_iterations = 0
         self.converged = False
         history = []
+        best = (float(np.max(np.abs(r) / limit)), U)  # the least out-of-balance iterate, in tolerances
+        equilibrium = None  # the static programme's answer, once asked
+        stall = self.settings.stall_iter
         for it in range(self.settings.max_iter):
             # a stop (SIGTERM) ends a check at its next iteration: one check of a large tower's
             # crack rounds can take minutes, and the run waits for its thread before it leaves
@@ -903,11 +925,19 @@ class JointModel:
             # the motion of the bodies something holds (a free body's place, g / eps, is a kilometre)
             moved = float(np.abs(U[~free]).max(initial=0.0))
             history.append((np.linalg.norm(r), moved))
-            stall = self.settings.stall_iter
             if len(history) > stall:
                 (r10, u10), (rn, un) = history[-stall - 1], history[-1]
                 if rn > 0.5 * r10 and un < 10.0 * u10:
-                    break  # stalled
+                    if not self.settings.check_equilibrium:
+                        break  # stalled
+                    equilibrium = self.has_equilibrium(
+                        intact, jc, kc, rhs, free_bodies, self._friction_capacity(jc, kc, P @ best[1])
+                    )
+                    if equilibrium:
+                        break  # stalled short of an equilibrium that exists
+                    # no equilibrium: a mechanism, which the iteration follows to its end (its
+                    # motion is what lets the moving joints go)
+                    stall = self.settings.max_iter
             gap, T = st
             norm0 = np.linalg.norm(r)
             dU = self._newton_step(intact, jc, kc, K0, P, T, r, held)
@@ -937,10 +967,112 @@ class JointModel:
             U = U + a * dU
             r, st = r_new, st_new
             self.newton_iterations = it + 1
+            off = float(np.max(np.abs(r) / limit))
+            if off < best[0]:
+                best = (off, U)
         if not self.converged:
             self.unconverged_solves += 1
+            if self.settings.check_equilibrium and equilibrium is None:
+                equilibrium = self.has_equilibrium(
+                    intact, jc, kc, rhs, free_bodies, self._friction_capacity(jc, kc, P @ best[1])
+                )
+            if equilibrium:
+                # the load has an equilibrium on these joints and contacts: the iteration stalled
+                # short of it, and where its last steps took it (a fallback step is taken whatever
+                # it does: kilometres, 1e11 N out of balance on a dry stone wall) is no mechanism
+                self.stalled_in_equilibrium += 1
+                U = best[1]
+                r = self._residual(K0, P, jc, kc, U, rhs)[0]
             self.worst_unconverged = max(self.worst_unconverged, float(np.max(np.abs(r) / limit)))
         return U
+
+    def _friction_capacity(self, jc, kc, gap: np.ndarray) -> np.ndarray:
+        """``(C,)`` Coulomb's ``mu N`` of the contact corners ``jc, kc`` at their gaps ``gap`` (3 C,)."""
+        F, _ = self._contact_forces(jc, kc, gap.reshape(-1, 3))
+        return self.material.friction * np.maximum(-F[:, 2], 0.0)
+
+    def has_equilibrium(
+        self,
+        intact: np.ndarray,
+        jc: np.ndarray,
+        kc: np.ndarray,
+        rhs: np.ndarray,
+        free_bodies: np.ndarray,
+        shear_capacity: np.ndarray | None = None,
+    ) -> bool:
+        """Whether the load ``rhs`` (6 B,) on the bodies that something ties to the ground (not
+        ``free_bodies``) is balanced by some set of forces that the joints ``intact`` (J',) and
+        the contact corners ``jc, kc`` can carry: a static (lower-bound) programme, solved by HiGHS.
+
+        A contact corner carries any compression ``N >= 0`` with its shear inside Coulomb's cone
+        ``mu N``, taken as the inscribed square ``|F_u| + |F_v| <= mu N`` (exact along the joint's
+        u and v axes, sqrt(2) weak along a diagonal: walls in their plane slide along an axis), and,
+        given ``shear_capacity`` (C,) N, each of ``|F_u|`` and ``|F_v|`` within it too. An intact joint bears at its corners as contacts with its strength, each over
+        its share ``A / k`` of the patch: a tension up to ``f_t A / k`` and a shear up to
+        ``c A / k + mu N`` (a plastic joint: more than the elastic stresses its crack criterion
+        reads, so a load the programme refuses would crack it; carrying anything, an intact dry
+        footing let a laboratory wall stand in the programme at 1.13 times its sliding load); a body whose rotation is held (a shear
+        test's beam between fixed ends) is given any moment. The weak springs hold nothing.
+
+        With the cone alone the programme is associative limit analysis: it finds equilibria the
+        contacts, which slide without dilating, cannot reach (a stalled solve excused by it let the
+        dry wall WI2.175 stand to its associative load, 0.259 g, on six of nine load rates and
+        tolerances, where the non-associative programme gives 0.226 g). With the friction also held
+        to ``mu N`` of the iteration's own state (the capacities a step of Gilbert, Casapulla &
+        Ahmed's non-associative programme fixes) it excused the stalls below 0.23 g and none
+        after: 0.232-0.234 g at all nine."""
+        from scipy.optimize import linprog
+
+        keep_rows = np.repeat(~free_bodies, 6)
+        # the corners: the contacts' and every corner of each intact joint, which bears as a contact
+        # with the joint's strength: a tension up to f_t and a cohesion c over its share of the patch
+        ij, ik = np.nonzero(intact[:, None] & self.corner_mask)
+        cj, ck = np.concatenate([jc, ij]), np.concatenate([kc, ik])
+        C, n_contact = cj.size, jc.size
+        share = np.concatenate([np.zeros(n_contact), (self.area / self.corner_mask.sum(axis=1))[ij]])
+        tension = np.zeros(C)
+        cohesion = np.zeros(C)
+        if ij.size:
+            tension[n_contact:] = self.tensile_strength[ij] * share[n_contact:]
+            cohesion[n_contact:] = self.cohesion[ij] * share[n_contact:]
+        nvar = 3 * C + 3 * len(self.held_rotation)
+        if nvar == 0:
+            return not np.any(rhs[keep_rows])
+        # on the bodies: each corner's force (u, v, n in its joint's frame, on b) as L^T F
+        Lc = self._corner_L[cj, ck]  # (C, 3, 12)
+        rows = [np.repeat(self.dofs[cj][:, :, None], 3, axis=2).ravel()]
+        cols = [np.broadcast_to(3 * np.arange(C)[:, None, None] + np.arange(3), (C, 12, 3)).ravel()]
+        vals = [np.transpose(Lc, (0, 2, 1)).ravel()]
+        # a held rotation: any moment on that body
+        for q, k in enumerate(self.held_rotation):
+            rows.append(6 * k + np.arange(3, 6))
+            cols.append(3 * C + 3 * q + np.arange(3))
+            vals.append(np.ones(3))
+        A = sp.coo_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(6 * self.nb, nvar)
+        ).tocsr()[keep_rows]
+        bounds = np.column_stack([np.full(nvar, -np.inf), np.full(nvar, np.inf)])
+        bounds[3 * np.arange(C) + 2, 1] = tension  # F_n <= f_t A_c (0 for a contact: no tension)
+        # friction inside the square inscribed in Coulomb's cone c A_c + mu N (four rows a corner:
+        # exact along the joint's u and v, sqrt(2) weak along a diagonal; the octagon's eight rows,
+        # 7.6 % weak, made the programme twice as slow on a laboratory wall's 1,400 corners)
+        k = np.repeat(np.arange(C), 4)
+        row = np.arange(4 * C)
+        su = np.tile([1.0, 1.0, -1.0, -1.0], C)
+        sv = np.tile([1.0, -1.0, 1.0, -1.0], C)
+        ur = np.column_stack([row, row, row]).ravel()
+        uc = np.column_stack([3 * k, 3 * k + 1, 3 * k + 2]).ravel()
+        uv = np.column_stack([su, sv, np.full(4 * C, self.material.friction)]).ravel()
+        b_ub = np.repeat(cohesion, 4)
+        if shear_capacity is not None and n_contact:
+            # and the contacts' friction within ``shear_capacity`` along u and along v (bounds)
+            cap = np.asarray(shear_capacity, np.float64)
+            for e in (0, 1):
+                bounds[3 * np.arange(n_contact) + e, 0] = -cap
+                bounds[3 * np.arange(n_contact) + e, 1] = cap
+        A_ub = sp.csr_matrix((uv, (ur, uc)), shape=(len(b_ub), nvar))
+        res = linprog(np.zeros(nvar), A_ub=A_ub, b_ub=b_ub, A_eq=A, b_eq=rhs[keep_rows], bounds=bounds, method="highs")
+        return res.status == 0
 
     def _tolerance(self, rhs: np.ndarray) -> np.ndarray | float:
         """The out-of-balance force (and moment) at which the contact iteration has converged:

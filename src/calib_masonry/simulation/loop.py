@@ -379,6 +379,10 @@ def steps(
     bond_a = np.array([b.a for b in scene.bonds], dtype=np.int64)
     freed_at = np.full(nb, -1)  # the frame at which each body held fixed was set free
     started = np.full((nb, 6), np.nan)  # the velocities they were set free with (NaN: from rest)
+    # the joint model's contact solves up to the last check the run used (a check thread running
+    # ahead of the engine may have solved frames past the run's end: counted, they made the summary
+    # follow the machine's load, 56-949 solves for one block's pushover)
+    solves_used: list[dict | None] = [None]
 
     def switch_off(bonds, frame: int, velocity: np.ndarray | None = None) -> None:
         eng.switch_off(bonds)
@@ -410,7 +414,7 @@ def steps(
         )
         # the vibration's velocities at the step's last release (its pieces start with them)
         velocity = tracker.free_velocity[max(tracker.free_velocity)] if len(release) and tracker.free_velocity else None
-        return release, tracker.max_utilisation, velocity
+        return release, tracker.max_utilisation, velocity, _contact_solves(tracker)
 
     # A tracker that reads no pose (no body bears on the plate without a joint) decides every step
     # from the load history and its own state alone, so it runs ahead on the other core, frame
@@ -490,7 +494,7 @@ def steps(
                         waiting=waiting,
                     )
                 p = i - 1
-                release, utilisation[p], velocity = next(ahead) if ahead is not None else check(f, p)
+                release, utilisation[p], velocity, solves_used[0] = next(ahead) if ahead is not None else check(f, p)
                 if waited[0]:
                     frames_bar.set_postfix_str("")
                     waited[0] = False
@@ -542,7 +546,7 @@ def steps(
         bond_release_time_s=tracker.release_time_s if tracker is not None else None,
         max_utilisation=utilisation if record else None,
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
-        contact_solves=_contact_solves(tracker),
+        contact_solves=solves_used[0] if solves_used[0] is not None else _contact_solves(tracker),
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
         vibration=_vibration(tracker),
         pieces=pieces,
@@ -560,6 +564,7 @@ def _contact_solves(tracker) -> dict | None:
         "solves": int(m.solves),
         "unconverged": int(m.unconverged_solves),
         "worst_unconverged_in_tolerances": round(float(m.worst_unconverged), 3) if m.unconverged_solves else None,
+        "stalled_in_equilibrium": int(m.stalled_in_equilibrium),
     }
 
 

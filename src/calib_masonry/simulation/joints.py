@@ -74,12 +74,13 @@ out-of-balance force falls (where no halving does, one step on the touching corn
 stiffness instead), to an out-of-balance force of ``tol`` (1e-3) of the heaviest body's load (these
 numerical settings are :class:`ContactSettings`); an iteration that has stalled
 (ten steps without halving that force or growing the motion tenfold) stops where it is, and
-:attr:`JointModel.converged` says so. Where the load rises slowly (a pushover, a shear test, gravity
-alone) a solve that ends unconverged asks a static programme on its own joints and contacts whether
-the load has an equilibrium at all (:meth:`JointModel.has_equilibrium`, with each contact's friction
-bounded by both Coulomb's cone and ``mu N`` of the iteration's least out-of-balance iterate: one
-step of Gilbert, Casapulla & Ahmed's non-associative programme, from the model's own state); if it
-has, the iteration failed and not the structure, and the solve ends at that iterate instead of where
+:attr:`JointModel.converged` says so. In a pushover and under gravity alone (not yet in a
+shear test, nor under a ground motion: :meth:`CrackTracker.default_settings`) a solve that ends
+unconverged asks a static programme on its own joints and contacts whether the load has an
+equilibrium at all (:meth:`JointModel.has_equilibrium`, with each contact's friction bounded by
+both Coulomb's cone and ``mu N`` of the iteration's least out-of-balance iterate: one step of
+Gilbert, Casapulla & Ahmed's non-associative programme, from the model's own state); if it has,
+the iteration failed and not the structure, and the solve ends at that iterate instead of where
 its last steps threw it (a fallback step is taken whatever it does: on a dry stone wall, WI2.175,
 kilometres and 1e11 N out of balance at 0.10 g, read as the collapse, where the programme says
 0.23 g; with the check its pushover collapses at 0.232-0.234 g at three load rates and three
@@ -1006,13 +1007,15 @@ class JointModel:
 
         A contact corner carries any compression ``N >= 0`` with its shear inside Coulomb's cone
         ``mu N``, taken as the inscribed square ``|F_u| + |F_v| <= mu N`` (exact along the joint's
-        u and v axes, sqrt(2) weak along a diagonal: walls in their plane slide along an axis), and,
-        given ``shear_capacity`` (C,) N, each of ``|F_u|`` and ``|F_v|`` within it too. An intact joint bears at its corners as contacts with its strength, each over
-        its share ``A / k`` of the patch: a tension up to ``f_t A / k`` and a shear up to
-        ``c A / k + mu N`` (a plastic joint: more than the elastic stresses its crack criterion
-        reads, so a load the programme refuses would crack it; carrying anything, an intact dry
-        footing let a laboratory wall stand in the programme at 1.13 times its sliding load); a body whose rotation is held (a shear
-        test's beam between fixed ends) is given any moment. The weak springs hold nothing.
+        u and v axes, sqrt(2) weak along a diagonal: walls in their plane slide along an axis),
+        and, given ``shear_capacity`` (C,) N, each of ``|F_u|`` and ``|F_v|`` within it too.
+
+        An intact joint bears at its corners as contacts with its strength, each over its share
+        ``A / k`` of the patch: a tension up to ``f_t A / k`` and a shear up to ``c A / k + mu N``
+        (a plastic joint: more than the elastic stresses its crack criterion reads, so a load the
+        programme refuses would crack it; carrying anything, an intact dry footing let a laboratory
+        wall stand in the programme at 1.13 times its sliding load). A body whose rotation is held
+        (a shear test's beam between fixed ends) is given any moment. The weak springs hold nothing.
 
         With the cone alone the programme is associative limit analysis: it finds equilibria the
         contacts, which slide without dilating, cannot reach (a stalled solve excused by it let the
@@ -1055,7 +1058,7 @@ class JointModel:
         bounds[3 * np.arange(C) + 2, 1] = tension  # F_n <= f_t A_c (0 for a contact: no tension)
         # friction inside the square inscribed in Coulomb's cone c A_c + mu N (four rows a corner:
         # exact along the joint's u and v, sqrt(2) weak along a diagonal; the octagon's eight rows,
-        # 7.6 % weak, made the programme twice as slow on a laboratory wall's 1,400 corners)
+        # 7.6 % weak, made the programme 1.6 times as slow on a laboratory wall's 1,400 corners)
         k = np.repeat(np.arange(C), 4)
         row = np.arange(4 * C)
         su = np.tile([1.0, 1.0, -1.0, -1.0], C)

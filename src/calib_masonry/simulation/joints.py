@@ -913,8 +913,9 @@ class JointModel:
         self.newton_iterations = 0
         self.converged = False
         history = []
-        best = (float(np.max(np.abs(r) / limit)), U)  # the least out-of-balance iterate, in tolerances
-        equilibrium = None  # the static programme's answer, once asked
+        check = self.settings.check_equilibrium
+        # the least out-of-balance iterate, in tolerances (kept only where a stall may be excused)
+        best = (float(np.max(np.abs(r) / limit)), U) if check else None
         stall = self.settings.stall_iter
         for it in range(self.settings.max_iter):
             # a stop (SIGTERM) ends a check at its next iteration: one check of a large tower's
@@ -929,16 +930,7 @@ class JointModel:
             if len(history) > stall:
                 (r10, u10), (rn, un) = history[-stall - 1], history[-1]
                 if rn > 0.5 * r10 and un < 10.0 * u10:
-                    if not self.settings.check_equilibrium:
-                        break  # stalled
-                    equilibrium = self.has_equilibrium(
-                        intact, jc, kc, rhs, free_bodies, self._friction_capacity(jc, kc, P @ best[1])
-                    )
-                    if equilibrium:
-                        break  # stalled short of an equilibrium that exists
-                    # no equilibrium: a mechanism, which the iteration follows to its end (its
-                    # motion is what lets the moving joints go)
-                    stall = self.settings.max_iter
+                    break  # stalled
             gap, T = st
             norm0 = np.linalg.norm(r)
             dU = self._newton_step(intact, jc, kc, K0, P, T, r, held)
@@ -968,16 +960,15 @@ class JointModel:
             U = U + a * dU
             r, st = r_new, st_new
             self.newton_iterations = it + 1
-            off = float(np.max(np.abs(r) / limit))
-            if off < best[0]:
-                best = (off, U)
+            if check:
+                off = float(np.max(np.abs(r) / limit))
+                if off < best[0]:
+                    best = (off, U)
         if not self.converged:
             self.unconverged_solves += 1
-            if self.settings.check_equilibrium and equilibrium is None:
-                equilibrium = self.has_equilibrium(
-                    intact, jc, kc, rhs, free_bodies, self._friction_capacity(jc, kc, P @ best[1])
-                )
-            if equilibrium:
+            if check and self.has_equilibrium(
+                intact, jc, kc, rhs, free_bodies, self._friction_capacity(jc, kc, P @ best[1])
+            ):
                 # the load has an equilibrium on these joints and contacts: the iteration stalled
                 # short of it, and where its last steps took it (a fallback step is taken whatever
                 # it does: kilometres, 1e11 N out of balance on a dry stone wall) is no mechanism

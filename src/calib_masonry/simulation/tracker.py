@@ -142,7 +142,7 @@ class CrackTracker:
         second (docs/stone_walls.md, experiments/shear_test_convergence.py). A pushover's solve that
         ends unconverged asks whether the load has an equilibrium at all
         (:attr:`ContactSettings.check_equilibrium`); a shear test's not yet: a dry laboratory wall
-        (SW.30.2) stalls in most crack rounds of its frames past half its peak, and each question
+        (SW.30.2) stalls in most crack rounds of its frames from 50 s of its ramp, and each question
         (a linear programme on 1,400 corners) costs HiGHS about a second, from scratch."""
         if scene.motion is not None:
             return ContactSettings()

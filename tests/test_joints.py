@@ -571,6 +571,38 @@ def test_the_static_programme_finds_an_equilibrium_up_to_tipping_or_sliding(size
     assert wet.has_equilibrium(np.ones(1, bool), jc[:0], kc[:0], wet._load(np.array([5 * dx, 5 * dy, -1]) * G), free)
 
 
+def test_the_static_programme_answers_each_question_as_if_asked_first():
+    # the programme is kept between questions on the same joints (HiGHS starts from its last
+    # answer); a dry column of three blocks tips as a whole at lam = b / h = 0.444: loads up and
+    # down across it, friction capacities that change, and a change of the intact joints between,
+    # each answered as a model asked nothing before answers it
+    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6)
+    sc = _column(3, material=dry)
+    jc, kc = np.nonzero(JointModel(sc).corner_mask)
+    free = np.zeros(3, bool)
+    questions = []
+    for lam in (0.2, 0.5, 0.3, 0.6, 0.99 * 0.4 / 0.9, 1.01 * 0.4 / 0.9, 0.1):
+        questions.append((np.zeros(3, bool), lam, None))
+    # a corner's friction capacity, in shares of the footing's shear W / n: half of what 0.1 W needs
+    # (no equilibrium), then twice what 0.3 W needs
+    share = 3 * 1800 * 0.024 * G / int(JointModel(sc).corner_mask[0].sum())
+    for lam, c in ((0.1, 0.05 * share), (0.1, 0.6 * share), (0.3, 0.6 * share), (0.05, 0.02 * share)):
+        questions.append((np.zeros(3, bool), lam, c))
+    questions.append((np.array([False, True, True]), 0.3, None))
+    questions.append((np.zeros(3, bool), 0.3, None))
+    kept = JointModel(sc)
+    answers = []
+    for intact, lam, c in questions:
+        load = kept._load(np.array([lam * G, 0.0, -G]))
+        pick = ~intact[jc]
+        caps = None if c is None else np.full(int(pick.sum()), c)
+        got = kept.has_equilibrium(intact, jc[pick], kc[pick], load, free, shear_capacity=caps)
+        fresh = JointModel(sc).has_equilibrium(intact, jc[pick], kc[pick], load, free, shear_capacity=caps)
+        assert got == fresh, (intact, lam, c)
+        answers.append(got)
+    assert answers == [True, False, True, False, True, False, True] + [False, True, True, False] + [True, True]
+
+
 def test_a_stalled_solve_with_an_equilibrium_ends_at_its_least_out_of_balance_iterate():
     # a block on a dry footing under a load it can carry, solved with an iteration cut short (two
     # steps, no convergence): with the check it ends at its best iterate and counts the stall;

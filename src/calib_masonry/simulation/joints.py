@@ -74,8 +74,8 @@ out-of-balance force falls (where no halving does, one step on the touching corn
 stiffness instead), to an out-of-balance force of ``tol`` (1e-3) of the heaviest body's load (these
 numerical settings are :class:`ContactSettings`); an iteration that has stalled
 (ten steps without halving that force or growing the motion tenfold) stops where it is, and
-:attr:`JointModel.converged` says so. In a pushover and under gravity alone (not yet in a
-shear test, nor under a ground motion: :meth:`CrackTracker.default_settings`) a solve that ends
+:attr:`JointModel.converged` says so. In a pushover, a shear test and under gravity alone (not
+yet under a ground motion: :meth:`CrackTracker.default_settings`) a solve that ends
 unconverged asks a static programme on its own joints and contacts whether the load has an
 equilibrium at all (:meth:`JointModel.has_equilibrium`, with each contact's friction bounded by
 both Coulomb's cone and ``mu N`` of the iteration's least out-of-balance iterate: one step of
@@ -465,6 +465,35 @@ class _Tangent:
         return np.array(x).ravel()
 
 
+def _highs_bounds(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds in HiGHS's terms: its own infinity for numpy's."""
+    import highspy
+
+    inf = highspy.kHighsInf
+    return np.where(np.isfinite(lo), lo, -inf), np.where(np.isfinite(hi), hi, inf)
+
+
+def _feasibility_programme(A: sp.csc_matrix, lo, hi, row_lo, row_hi):
+    """A HiGHS model (``highspy.Highs``) of the linear programme ``row_lo <= A x <= row_hi``,
+    ``lo <= x <= hi`` with no objective (is there any such ``x``?), quiet and on one thread."""
+    import highspy
+
+    lp = highspy.HighsLp()
+    lp.num_row_, lp.num_col_ = A.shape
+    lp.col_cost_ = np.zeros(A.shape[1])
+    lp.col_lower_, lp.col_upper_ = _highs_bounds(lo, hi)
+    lp.row_lower_, lp.row_upper_ = _highs_bounds(row_lo, row_hi)
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = A.indptr
+    lp.a_matrix_.index_ = A.indices
+    lp.a_matrix_.value_ = A.data
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("threads", 1)
+    h.passModel(lp)
+    return h
+
+
 class JointModel:
     """The elastic joint network of a scene's bonds (see the module docstring).
 
@@ -502,6 +531,8 @@ class JointModel:
         self._joint_part: tuple | None = None
         self._tangent: _Tangent | None = None  # the contact iteration's matrix and its analysis, made at first use
         self._sub_tangents: dict = {}  # the same over the bodies still held, by their set (_tangent_of)
+        # the equilibrium question's HiGHS model, kept for its matrix (:meth:`has_equilibrium`)
+        self._programme: tuple | None = None
         self.factorisations = 0  # sparse factorisations (LU or Cholesky), over the model's life
         # the crack rounds of the :meth:`crack` under way (or last): its round and the joints it has
         # cracked so far, read by another thread to show what a long check is doing
@@ -1015,8 +1046,6 @@ class JointModel:
         to ``mu N`` of the iteration's own state (the capacities a step of Gilbert, Casapulla &
         Ahmed's non-associative programme fixes) it excused the stalls below 0.23 g and none
         after: 0.232-0.234 g at all nine."""
-        from scipy.optimize import linprog
-
         keep_rows = np.repeat(~free_bodies, 6)
         # the corners: the contacts' and every corner of each intact joint, which bears as a contact
         # with the joint's strength: a tension up to f_t and a cohesion c over its share of the patch
@@ -1029,44 +1058,65 @@ class JointModel:
         if ij.size:
             tension[n_contact:] = self.tensile_strength[ij] * share[n_contact:]
             cohesion[n_contact:] = self.cohesion[ij] * share[n_contact:]
-        nvar = 3 * C + 3 * len(self.held_rotation)
-        if nvar == 0:
+        H = len(self.held_rotation)
+        if C + H == 0:
             return not np.any(rhs[keep_rows])
-        # on the bodies: each corner's force (u, v, n in its joint's frame, on b) as L^T F
-        Lc = self._corner_L[cj, ck]  # (C, 3, 12)
-        rows = [np.repeat(self.dofs[cj][:, :, None], 3, axis=2).ravel()]
-        cols = [np.broadcast_to(3 * np.arange(C)[:, None, None] + np.arange(3), (C, 12, 3)).ravel()]
-        vals = [np.transpose(Lc, (0, 2, 1)).ravel()]
-        # a held rotation: any moment on that body
-        for q, k in enumerate(self.held_rotation):
+        # the unknowns: each corner's normal force F_n (in its joint's frame, on b; F_n < 0
+        # presses), its shear in four non-negative parts F_u = u+ - u-, F_v = v+ - v-, and a held
+        # rotation's moments: [F_n (C), u+ (C), u- (C), v+ (C), v- (C), M (3 H)]
+        Lc = self._corner_L[cj, ck]  # (C, 3, 12): each corner's (u, v, n) from its two bodies' motion
+        dof = self.dofs[cj]  # (C, 12)
+        rows, cols, vals = [], [], []
+        for part, (e, sign) in enumerate(((2, 1.0), (0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):
+            rows.append(dof.ravel())
+            cols.append(np.repeat(part * C + np.arange(C), 12))
+            vals.append(sign * Lc[:, e, :].ravel())  # on the bodies: L^T F
+        for q, k in enumerate(self.held_rotation):  # a held rotation: any moment on that body
             rows.append(6 * k + np.arange(3, 6))
-            cols.append(3 * C + 3 * q + np.arange(3))
+            cols.append(5 * C + 3 * q + np.arange(3))
             vals.append(np.ones(3))
+        nvar = 5 * C + 3 * H
         A = sp.coo_matrix(
             (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(6 * self.nb, nvar)
         ).tocsr()[keep_rows]
-        bounds = np.column_stack([np.full(nvar, -np.inf), np.full(nvar, np.inf)])
-        bounds[3 * np.arange(C) + 2, 1] = tension  # F_n <= f_t A_c (0 for a contact: no tension)
-        # friction inside the square inscribed in Coulomb's cone c A_c + mu N (four rows a corner:
-        # exact along the joint's u and v, sqrt(2) weak along a diagonal; the octagon's eight rows,
-        # 7.6 % weak, made the programme 1.6 times as slow on a laboratory wall's 1,400 corners)
-        k = np.repeat(np.arange(C), 4)
-        row = np.arange(4 * C)
-        su = np.tile([1.0, 1.0, -1.0, -1.0], C)
-        sv = np.tile([1.0, -1.0, 1.0, -1.0], C)
-        ur = np.column_stack([row, row, row]).ravel()
-        uc = np.column_stack([3 * k, 3 * k + 1, 3 * k + 2]).ravel()
-        uv = np.column_stack([su, sv, np.full(4 * C, self.material.friction)]).ravel()
-        b_ub = np.repeat(cohesion, 4)
+        lo, hi = np.zeros(nvar), np.full(nvar, np.inf)
+        lo[:C] = -np.inf
+        hi[:C] = tension  # F_n <= f_t A_c (0 for a contact: no tension)
+        lo[5 * C :] = -np.inf
         if shear_capacity is not None and n_contact:
-            # and the contacts' friction within ``shear_capacity`` along u and along v (bounds)
+            # and the contacts' friction within ``shear_capacity`` along u and along v
             cap = np.asarray(shear_capacity, np.float64)
-            for e in (0, 1):
-                bounds[3 * np.arange(n_contact) + e, 0] = -cap
-                bounds[3 * np.arange(n_contact) + e, 1] = cap
-        A_ub = sp.csr_matrix((uv, (ur, uc)), shape=(len(b_ub), nvar))
-        res = linprog(np.zeros(nvar), A_ub=A_ub, b_ub=b_ub, A_eq=A, b_eq=rhs[keep_rows], bounds=bounds, method="highs")
-        return res.status == 0
+            for part in range(1, 5):
+                hi[part * C : part * C + n_contact] = cap
+        # friction inside the square inscribed in Coulomb's cone, c A_c + mu N: one row a corner,
+        # u+ + u- + v+ + v- + mu F_n <= c A_c (exact along the joint's u and v, sqrt(2) weak along
+        # a diagonal; the octagon, 7.6 % weak, made the programme 1.6 times as slow on a laboratory
+        # wall's 1,400 corners)
+        r = np.arange(C)
+        A_ub = sp.csr_matrix(
+            (np.concatenate([np.full(C, self.material.friction), np.ones(4 * C)]), (np.tile(r, 5), np.arange(5 * C))),
+            shape=(C, nvar),
+        )
+        b_eq = rhs[keep_rows]
+        row_lo = np.concatenate([b_eq, np.full(C, -np.inf)])
+        row_hi = np.concatenate([b_eq, cohesion])
+        # the programme's matrix is fixed by which joints are intact, which corners may touch and
+        # which bodies float; the load and the friction's bounds change from question to question.
+        # HiGHS keeps its last basis, so a question on the same matrix starts from the last answer:
+        # 0.004-0.015 s against 0.45-0.6 s from scratch on a laboratory wall's 1,400 corners
+        # (a shear test asks a few times a frame while it stalls)
+        key = (intact.tobytes(), jc.tobytes(), kc.tobytes(), free_bodies.tobytes())
+        lp = self._programme
+        if lp is None or lp[0] != key:
+            lp = self._programme = (key, _feasibility_programme(sp.vstack([A, A_ub]).tocsc(), lo, hi, row_lo, row_hi))
+        else:
+            lp[1].changeColsBounds(nvar, np.arange(nvar, dtype=np.int32), *_highs_bounds(lo, hi))
+            lp[1].changeRowsBounds(row_lo.size, np.arange(row_lo.size, dtype=np.int32), *_highs_bounds(row_lo, row_hi))
+        h = lp[1]
+        h.run()
+        import highspy
+
+        return h.getModelStatus() == highspy.HighsModelStatus.kOptimal
 
     def _tolerance(self, rhs: np.ndarray) -> np.ndarray | float:
         """The out-of-balance force (and moment) at which the contact iteration has converged:

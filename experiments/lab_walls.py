@@ -43,7 +43,8 @@ mortar between stones of a mortared wall, one network of low solidity, is droppe
 prints per test: sigma0, measured Vmax (the larger of the two directions), predicted, ratio,
 mechanism (model) and failure type (test); then per series the mean and the coefficient of
 variation of the ratios. Measured on 2026-11-26, 11-27 and 11-28 (the last after the contacts'
-friction law stopped creeping at every load step): see docs/stone_walls.md. Whether a wall's peak
+friction law stopped creeping at every load step) and 2026-12-01 (the shear test's stalled solves
+asking whether the load has an equilibrium): see docs/stone_walls.md. Whether a wall's peak
 is converged in the joint model's settings: experiments/shear_test_convergence.py.
 """
 

@@ -1061,24 +1061,12 @@ class JointModel:
         H = len(self.held_rotation)
         if C + H == 0:
             return not np.any(rhs[keep_rows])
+        import highspy
+
         # the unknowns: each corner's normal force F_n (in its joint's frame, on b; F_n < 0
         # presses), its shear in four non-negative parts F_u = u+ - u-, F_v = v+ - v-, and a held
         # rotation's moments: [F_n (C), u+ (C), u- (C), v+ (C), v- (C), M (3 H)]
-        Lc = self._corner_L[cj, ck]  # (C, 3, 12): each corner's (u, v, n) from its two bodies' motion
-        dof = self.dofs[cj]  # (C, 12)
-        rows, cols, vals = [], [], []
-        for part, (e, sign) in enumerate(((2, 1.0), (0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):
-            rows.append(dof.ravel())
-            cols.append(np.repeat(part * C + np.arange(C), 12))
-            vals.append(sign * Lc[:, e, :].ravel())  # on the bodies: L^T F
-        for q, k in enumerate(self.held_rotation):  # a held rotation: any moment on that body
-            rows.append(6 * k + np.arange(3, 6))
-            cols.append(5 * C + 3 * q + np.arange(3))
-            vals.append(np.ones(3))
         nvar = 5 * C + 3 * H
-        A = sp.coo_matrix(
-            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(6 * self.nb, nvar)
-        ).tocsr()[keep_rows]
         lo, hi = np.zeros(nvar), np.full(nvar, np.inf)
         lo[:C] = -np.inf
         hi[:C] = tension  # F_n <= f_t A_c (0 for a contact: no tension)
@@ -1088,15 +1076,8 @@ class JointModel:
             cap = np.asarray(shear_capacity, np.float64)
             for part in range(1, 5):
                 hi[part * C : part * C + n_contact] = cap
-        # friction inside the square inscribed in Coulomb's cone, c A_c + mu N: one row a corner,
-        # u+ + u- + v+ + v- + mu F_n <= c A_c (exact along the joint's u and v, sqrt(2) weak along
-        # a diagonal; the octagon, 7.6 % weak, made the programme 1.6 times as slow on a laboratory
-        # wall's 1,400 corners)
-        r = np.arange(C)
-        A_ub = sp.csr_matrix(
-            (np.concatenate([np.full(C, self.material.friction), np.ones(4 * C)]), (np.tile(r, 5), np.arange(5 * C))),
-            shape=(C, nvar),
-        )
+        # the bodies' equilibrium, then friction inside the square inscribed in Coulomb's cone,
+        # c A_c + mu N, one row a corner (:meth:`_programme_matrix`)
         b_eq = rhs[keep_rows]
         row_lo = np.concatenate([b_eq, np.full(C, -np.inf)])
         row_hi = np.concatenate([b_eq, cohesion])
@@ -1104,19 +1085,50 @@ class JointModel:
         # which bodies float; the load and the friction's bounds change from question to question.
         # HiGHS keeps its last basis, so a question on the same matrix starts from the last answer:
         # 0.004-0.015 s against 0.45-0.6 s from scratch on a laboratory wall's 1,400 corners
-        # (a shear test asks a few times a frame while it stalls)
+        # (a shear test asks a few times a frame while it stalls); the matrix is built only then
         key = (intact.tobytes(), jc.tobytes(), kc.tobytes(), free_bodies.tobytes())
         lp = self._programme
         if lp is None or lp[0] != key:
-            lp = self._programme = (key, _feasibility_programme(sp.vstack([A, A_ub]).tocsc(), lo, hi, row_lo, row_hi))
+            A = self._programme_matrix(cj, ck, keep_rows)
+            lp = self._programme = (key, _feasibility_programme(A, lo, hi, row_lo, row_hi))
         else:
             lp[1].changeColsBounds(nvar, np.arange(nvar, dtype=np.int32), *_highs_bounds(lo, hi))
             lp[1].changeRowsBounds(row_lo.size, np.arange(row_lo.size, dtype=np.int32), *_highs_bounds(row_lo, row_hi))
         h = lp[1]
         h.run()
-        import highspy
-
         return h.getModelStatus() == highspy.HighsModelStatus.kOptimal
+
+    def _programme_matrix(self, cj: np.ndarray, ck: np.ndarray, keep_rows: np.ndarray) -> sp.csc_matrix:
+        """The matrix of :meth:`has_equilibrium`'s programme on the corners ``cj, ck`` (C,): the
+        equilibrium rows of the bodies ``keep_rows`` (6 B,) (each corner's force on its two bodies,
+        ``L^T F``; a held rotation's moments), then one friction row a corner,
+        ``u+ + u- + v+ + v- + mu F_n`` (the square inscribed in Coulomb's cone: exact along the
+        joint's u and v, sqrt(2) weak along a diagonal; the octagon, 7.6 % weak, made the programme
+        1.6 times as slow on a laboratory wall's 1,400 corners). Unknowns as there."""
+        C, H = cj.size, len(self.held_rotation)
+        nvar = 5 * C + 3 * H
+        Lc = self._corner_L[cj, ck]  # (C, 3, 12): each corner's (u, v, n) from its two bodies' motion
+        dof = self.dofs[cj]  # (C, 12)
+        rows, cols, vals = [], [], []
+        for part, (e, sign) in enumerate(((2, 1.0), (0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):
+            rows.append(dof.ravel())
+            cols.append(np.repeat(part * C + np.arange(C), 12))
+            vals.append(sign * Lc[:, e, :].ravel())
+        for q, k in enumerate(self.held_rotation):  # a held rotation: any moment on that body
+            rows.append(6 * k + np.arange(3, 6))
+            cols.append(5 * C + 3 * q + np.arange(3))
+            vals.append(np.ones(3))
+        A_eq = sp.coo_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(6 * self.nb, nvar)
+        ).tocsr()[keep_rows]
+        A_ub = sp.csr_matrix(
+            (
+                np.concatenate([np.full(C, self.material.friction), np.ones(4 * C)]),
+                (np.tile(np.arange(C), 5), np.arange(5 * C)),
+            ),
+            shape=(C, nvar),
+        )
+        return sp.vstack([A_eq, A_ub]).tocsc()
 
     def _tolerance(self, rhs: np.ndarray) -> np.ndarray | float:
         """The out-of-balance force (and moment) at which the contact iteration has converged:

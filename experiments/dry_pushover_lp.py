@@ -53,15 +53,10 @@ def pushover(scene) -> tuple[float | None, dict | None, dict | None]:
     """The collapse multiplier (g), the mechanism and the joint model's contact solves (how many
     ended unconverged) of a pushover scene, as ``simulate`` finds them (Bullet on, the ramp stopped
     after the collapse, one BLAS thread)."""
-    from threadpoolctl import threadpool_limits
+    from calib_masonry.simulation.run import simulate_scene
 
-    from calib_masonry.simulation.loop import run
-    from calib_masonry.simulation.results import collapse_multiplier, mechanism, metrics, pushover_stop
-
-    with threadpool_limits(limits=1, user_api="blas"):
-        out = run(scene, progress=False, stop=pushover_stop(scene))
-    m = metrics(scene, out)
-    return collapse_multiplier(scene, out, m)[0], mechanism(scene, out, m), out.contact_solves
+    r = simulate_scene(scene, "wall", progress=False)
+    return r.curve[0], r.summary["mechanism"], r.output.contact_solves
 
 
 def _g(value, stands: bool) -> str:

@@ -402,7 +402,7 @@ def test_simulate_off_the_main_thread_warns(monkeypatch):
     import warnings
 
     from calib_masonry.simulation import blender
-    from calib_masonry.simulation.run import _run_scene
+    from calib_masonry.simulation.run import simulate_scene
 
     class Stop(Exception):
         pass
@@ -417,7 +417,7 @@ def test_simulate_off_the_main_thread_warns(monkeypatch):
         with warnings.catch_warnings(record=True) as w:
             warnings.simplefilter("always")
             try:
-                _run_scene(None, "x", progress=False, blend_path=None)
+                simulate_scene(None, "x", progress=False, blend_path=None)
             except Stop:
                 pass
         caught.extend(w)
@@ -429,4 +429,4 @@ def test_simulate_off_the_main_thread_warns(monkeypatch):
     with pytest.raises(Stop):  # and not on the main thread
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            _run_scene(None, "x", progress=False, blend_path=None)
+            simulate_scene(None, "x", progress=False, blend_path=None)

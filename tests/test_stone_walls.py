@@ -97,7 +97,7 @@ def _unsupported(scene: Scene) -> set[int]:
 @pytest.mark.slow
 def test_a_dry_stone_wall_that_limit_analysis_says_stands_does_not_move(tmp_path):
     need_bpy()
-    from calib_masonry.simulation.run import _run_scene
+    from calib_masonry.simulation.run import simulate_scene
 
     scene = scene_from_geometry(_swat_geometry(tmp_path), duration_s=10.0, material=DRY, foundation=True)
     # a stone that cannot stand even with its neighbours held (a wedge cut by the photo's edge on a
@@ -108,7 +108,7 @@ def test_a_dry_stone_wall_that_limit_analysis_says_stands_does_not_move(tmp_path
     assert limit_load(wall, 0.6, gravity_only=True) == 0.0  # the programme: it stands
     assert limit_load(wall, 0.6, gravity_only=True, associative=False) == 0.0  # with either flow rule
     assert limit_load(wall, 0.6) > 0.1
-    out = _run_scene(wall, "swat", progress=False, blend_path=None)
+    out = simulate_scene(wall, "swat", progress=False, blend_path=None)
     assert out.summary["max_brick_displacement_m"] < 1e-3
     assert out.summary["outcome"] == "standing"
 
@@ -121,7 +121,7 @@ def test_a_dry_stone_wall_pushed_in_its_plane_matches_non_associative_limit_anal
     # one bounds it from above; on this wall pushed along -X it is five times higher, because a
     # stone there can slide out only by dilating against its neighbours.
     need_bpy()
-    from calib_masonry.simulation.run import _run_scene
+    from calib_masonry.simulation.run import simulate_scene
 
     p = Pushover(rate_g_per_s=0.01, max_g=1.0, direction_deg=direction_deg)
     scene = scene_from_geometry(
@@ -132,7 +132,7 @@ def test_a_dry_stone_wall_pushed_in_its_plane_matches_non_associative_limit_anal
     associative = limit_load(wall, DRY.friction, d)
     expected = limit_load(wall, DRY.friction, d, associative=False)
     assert 0.0 < expected <= associative * (1 + 1e-6)
-    out = _run_scene(wall, "swat", progress=False, blend_path=None)
+    out = simulate_scene(wall, "swat", progress=False, blend_path=None)
     assert out.summary["collapse_multiplier_g"] == pytest.approx(expected, rel=0.10)
     assert out.summary["mechanism"] is not None
 
@@ -157,11 +157,11 @@ def test_a_single_block_on_its_footing_cracks_then_rocks_as_the_closed_forms_say
     # it falls at the larger of the two moments. The only joint cracking ended in a traceback once.
     need_bpy()
     from calib_masonry.simulation.ground_motion import G
-    from calib_masonry.simulation.run import _run_scene
+    from calib_masonry.simulation.run import simulate_scene
 
     b, h, t = 0.2, 1.0, 0.3
     mat = Material(tensile_strength=f_t, shear_strength=1.5 * f_t, friction=0.6)
-    out = _run_scene(_single_block(mat, b, h, t), "block", progress=False, blend_path=None)
+    out = simulate_scene(_single_block(mat, b, h, t), "block", progress=False, blend_path=None)
     N = 1800 * b * h * t * G
     onset = (f_t * t * b**2 / 6 + N * b / 6) / (N * h / 2)
     expected = max(onset, b / h)
@@ -217,7 +217,7 @@ def test_a_built_dry_panel_pushed_in_its_plane_matches_limit_analysis_with_or_wi
     need_bpy()
     from calib_masonry.build_folder import simulation_geometry
     from calib_masonry.pipeline import build
-    from calib_masonry.simulation.run import _run_scene
+    from calib_masonry.simulation.run import simulate_scene
     from calib_masonry.spec import load_structure
     from calib_masonry.synthetic.truth import synthesize_to_folder
 
@@ -243,7 +243,7 @@ def test_a_built_dry_panel_pushed_in_its_plane_matches_limit_analysis_with_or_wi
     assert g.coverage_summary()["median"] == pytest.approx(1.0, abs=0.01)
     expected = limit_load(scene, DRY.friction, associative=False)
     assert expected <= limit_load(scene, DRY.friction) * (1 + 1e-6)
-    out = _run_scene(scene, "panel", progress=False, blend_path=None)
+    out = simulate_scene(scene, "panel", progress=False, blend_path=None)
     assert out.summary["collapse_multiplier_g"] == pytest.approx(expected, rel=0.05)
     assert out.summary["mechanism"] is not None
     assert out.summary["ground_contacts" if not foundation else "foundation_bonds"] > 0
@@ -276,7 +276,7 @@ def test_the_shear_test_of_one_dry_block_rocks_or_slides_as_statics_says(tmp_pat
     # same overturning moment) of (N + W) L / (2 H0); held, they cannot rotate and slide at mu (N + W)
     need_bpy()
     from calib_masonry.simulation.ground_motion import G
-    from calib_masonry.simulation.run import _run_scene
+    from calib_masonry.simulation.run import simulate_scene
     from calib_masonry.simulation.scene import ShearTest, shear_test_scene
 
     g = _one_stone_geometry(tmp_path)
@@ -288,7 +288,7 @@ def test_the_shear_test_of_one_dry_block_rocks_or_slides_as_statics_says(tmp_pat
     n, w = st["vertical_load_kn"], st["wall_weight_kn"]
     assert n == pytest.approx(0.2e6 * st["length_m"] * st["thickness_m"] / 1e3)
     assert scene.bodies[-1].mass * G / 1e3 == pytest.approx(n)
-    out = _run_scene(scene, "block", progress=False, blend_path=None)
+    out = simulate_scene(scene, "block", progress=False, blend_path=None)
     s = out.summary["shear_test"]
     if boundary == "cantilever":
         expected = (n + w) * st["length_m"] / (2 * st["shear_span_m"])

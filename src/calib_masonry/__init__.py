@@ -73,6 +73,7 @@ _API = {
     "SimulationResult": (".simulation.run", "SimulationResult"),
     "simulate": (".simulation.run", "simulate"),
     "simulate_async": (".simulation.run", "simulate_async"),
+    "simulate_scene": (".simulation.run", "simulate_scene"),
     "simulate_to_folder": (".simulation.run", "simulate_to_folder"),
     "write_simulation": (".simulation.run", "write_simulation"),
     "Material": (".simulation.scene", "Material"),
@@ -169,6 +170,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and IDEs
     from .simulation.run import SimulationResult as SimulationResult
     from .simulation.run import simulate as simulate
     from .simulation.run import simulate_async as simulate_async
+    from .simulation.run import simulate_scene as simulate_scene
     from .simulation.run import simulate_to_folder as simulate_to_folder
     from .simulation.run import write_simulation as write_simulation
     from .simulation.scene import Material as Material

@@ -50,6 +50,7 @@ __all__ = [
     "SimulationResult",
     "simulate",
     "simulate_async",
+    "simulate_scene",
     "write_simulation",
     "simulate_to_folder",
     "scene_for",
@@ -491,15 +492,20 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
     return summary
 
 
-def _run_scene(
+def simulate_scene(
     scene: Scene,
-    name: str,
+    name: str = "scene",
     *,
-    progress: bool | None,
-    blend_path: Path | None,
+    progress: bool | None = None,
+    blend_path: Path | None = None,
     joints_ahead: bool = True,
     bullet: bool = True,
 ) -> SimulationResult:
+    """Simulate a :class:`~calib_masonry.simulation.scene.Scene` as it is (one made by
+    :func:`scene_for`, :func:`scene_for_model` or by hand: a wall without some stones, a scene
+    with its own material), as :func:`simulate` does a model's: one BLAS thread for the joint
+    model, a pushover stopped after its collapse, the metrics, the pushover's multiplier and the
+    shear test's curve in the result; ``name`` is the summary's model name."""
     from .loop import drain
 
     return drain(
@@ -608,7 +614,9 @@ def simulate(
     releases bit for bit, the frames showing the verdict's rigid pieces instead of Bullet's
     animation of them (:func:`calib_masonry.simulation.loop.steps`)."""
     scene, name = _scene(model, load, settings, material, foundation, duration_s)
-    return _run_scene(scene, name, progress=progress, blend_path=blend_path, joints_ahead=joints_ahead, bullet=bullet)
+    return simulate_scene(
+        scene, name, progress=progress, blend_path=blend_path, joints_ahead=joints_ahead, bullet=bullet
+    )
 
 
 async def simulate_async(
@@ -733,7 +741,7 @@ def simulate_to_folder(
     with staged_output(
         out, "simulate", overwrite=overwrite, keep=[config.accelerogram, config.accelerogram_y]
     ) as stage:
-        result = _run_scene(
+        result = simulate_scene(
             scene,
             str(model_dir),
             progress=progress,

@@ -65,6 +65,11 @@ ROOT = Path(__file__).resolve().parents[1]
 DB = ROOT.parent / "shared" / "data" / "external" / "stone_masonry_db"
 PX_PER_M = 1000
 STONE = {"friction": 0.6, "density_kg_m3": 2650.0}  # every wall: mu (Lourenco 1996), granite's density
+# the unit weight the database adds to the applied stress in its sigma0,tot, N/m^3 ("total vertical
+# stress at the base of the wall, deriving from the applied load and the self weight (rho = 20
+# kN/m3)", fields_definition.csv): the beam's load is sigma0,tot - 20 kN/m^3 H, the model's stones
+# add their own weight
+DB_UNIT_WEIGHT_N_M3 = 20e3
 DRY = {"tensile_strength_mpa": 0.0, "cohesion_mpa": 0.0}
 
 
@@ -198,6 +203,7 @@ def tests(db: Path = DB) -> list[dict]:
             "t": t / 1000 if t else None,
             "H0": H0 / 1000 if H0 else None,
             "sigma0": _num(row, "σ0,tot [MPa]"),
+            "applied": None,
             "vmax": max(vmax) if vmax else None,
             "failure": _field(row, "From test report: Failure type") or "?",
             "skip": "",
@@ -224,8 +230,8 @@ def tests(db: Path = DB) -> list[dict]:
             test["skip"] = "no H, L or t"
         elif leaves is not None and leaves != 1:
             test["skip"] = f"{leaves:g} leaves: the model is a single wythe"
-        elif not test["sigma0"] or test["sigma0"] <= 0:
-            test["skip"] = "no precompression"
+        elif not test["sigma0"] or test["sigma0"] <= DB_UNIT_WEIGHT_N_M3 * H / 1e9:
+            test["skip"] = "no precompression beyond the wall's own weight"
         elif test["vmax"] is None:
             test["skip"] = "no measured Vmax"
         elif not H0:
@@ -236,6 +242,7 @@ def tests(db: Path = DB) -> list[dict]:
                 test["H0"] = test["H"] + 0.05
                 test["note"] = (test["note"] + "; " if test["note"] else "") + "H0 <= H: the load 5 cm above the top"
         if not test["skip"]:
+            test["applied"] = round(test["sigma0"] - DB_UNIT_WEIGHT_N_M3 * test["H"] / 1e6, 6)  # MPa, on the beam
             try:
                 test["drawing"] = drawing_of(unit, db)
             except FileNotFoundError:
@@ -288,7 +295,7 @@ def run(test: dict, folder: Path, boundary: str | None = None) -> dict:
     boundary = boundary or test["boundary"]
     build_wall(test, folder)
     call(
-        [*CLI, "simulate", str(folder / "model"), "--shear-test", "--precompression-mpa", str(test["sigma0"])]
+        [*CLI, "simulate", str(folder / "model"), "--shear-test", "--precompression-mpa", str(test["applied"])]
         + ["--boundary", boundary]
         + (["--shear-span-ratio", str(test["H0"] / test["L"])] if boundary == "cantilever" else [])
         + ["--out", str(folder / "shear"), "--overwrite", "--gif-frames", "0"]
@@ -315,7 +322,9 @@ def main() -> None:
         raise SystemExit(2)
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="lab_walls_"))
     ratios: dict[str, list[float]] = {}
-    print(f"{'test':>10} {'sigma0':>7} {'Vmax':>7} {'model':>7} {'ratio':>6}  mechanism (model) / failure (test)")
+    print(
+        f"{'test':>10} {'sigma0':>7} {'beam':>6} {'Vmax':>7} {'model':>7} {'ratio':>6}  mechanism (model) / failure (test)"
+    )
     for t in tests(args.db):
         if args.only and t["unit"] not in args.only:
             continue
@@ -328,7 +337,7 @@ def main() -> None:
         ratio = peak / t["vmax"] if peak is not None else float("nan")
         ratios.setdefault(t["series"], []).append(ratio)
         print(
-            f"{t['unit']:>10} {t['sigma0']:7.3f} {t['vmax']:7.1f} {peak if peak is not None else float('nan'):7.1f} "
+            f"{t['unit']:>10} {t['sigma0']:7.3f} {t['applied']:6.3f} {t['vmax']:7.1f} {peak if peak is not None else float('nan'):7.1f} "
             f"{ratio:6.2f}  {st['mechanism']} / {t['failure']}  ({st['boundary']}, coverage "
             f"{s['joint_coverage']['median']}{'; ' + t['note'] if t['note'] else ''})",
             flush=True,

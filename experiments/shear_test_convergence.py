@@ -108,7 +108,7 @@ def main() -> None:
         for name in args.variants:
             fps, over = VARIANTS[name]
             config = SimulationConfig(
-                shear_test=ShearTest(precompression_pa=test["sigma0"] * 1e6, shear_span_ratio=test["H0"] / test["L"]),
+                shear_test=ShearTest(precompression_pa=test["applied"] * 1e6, shear_span_ratio=test["H0"] / test["L"]),
                 solver=SolverSettings(fps=fps),
             )
             scene = scene_for_model(model, config)
@@ -116,7 +116,7 @@ def main() -> None:
             if name == args.variants[0]:
                 bound = (st["vertical_load_kn"] + st["wall_weight_kn"]) * st["length_m"] / (2 * st["shear_span_m"])
                 print(
-                    f"{test['unit']}: sigma0 {test['sigma0']:.3f} MPa, measured Vmax {test['vmax']:.1f} kN, rigid "
+                    f"{test['unit']}: sigma0 {test['sigma0']:.3f} MPa (on the beam {test['applied']:.3f}), measured Vmax {test['vmax']:.1f} kN, rigid "
                     f"rocking bound {bound:.1f} kN; {len(scene.bodies) - 1} stones, {len(scene.bonds)} joints",
                     flush=True,
                 )

@@ -373,6 +373,8 @@ def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path)
     assert a2["boundary"] == "cantilever" and a2["H0"] > a2["H"] and a2["vmax"] == 85.0
     assert not b1["mortar"] and b1["material"]["tensile_strength_mpa"] == 0.0 and b1["material"]["cohesion_mpa"] == 0.0
     assert b1["boundary"] == "cantilever" and b1["H0"] == 1.3
+    # sigma0,tot is at the base with the database's 20 kN/m^3 of wall above: the beam carries the rest
+    assert a1["applied"] == pytest.approx(0.4 - 20e3 * 1.6 / 1e6) and b1["applied"] == pytest.approx(0.2 - 0.02)
     assert "leaves" in got["C-1"]["skip"]
     assert "partly restrained" in got["D-1"]["skip"]
     assert "precompression" in got["E-1"]["skip"]

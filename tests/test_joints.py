@@ -9,10 +9,12 @@ import scipy.sparse as sp
 import shapely
 
 from calib_masonry.build3d.contacts import OUTLINE_POINTS, joint_axes, patch_section
+from calib_masonry.errors import InputError
 from calib_masonry.simulation.ground_motion import G
 from calib_masonry.simulation.joints import FAILURE_MODES, ContactSettings, JointModel, joint_stiffness
 from calib_masonry.simulation.results import rotations
-from calib_masonry.simulation.scene import Body, Bond, Material, Scene, box_mesh, quaternions_from_matrices
+from calib_masonry.simulation.scene import Body, Bond, Material, Pushover, Scene, box_mesh, quaternions_from_matrices
+from calib_masonry.simulation.tracker import CrackTracker
 
 DOWN = np.array([0.0, 0.0, -1.0])
 X = np.array([1.0, 0.0, 0.0])
@@ -208,6 +210,27 @@ def test_cracks_cascade_event_by_event_in_one_load():
     cracked, modes, st = jm.crack(g, np.ones(jm.nj, bool), np.ones((jm.nj, OUTLINE_POINTS), bool))
     assert cracked[0] == worst
     assert FAILURE_MODES[modes[0]] == "tension"
+
+
+def test_a_crack_round_cracks_the_joints_within_its_band_of_the_worst():
+    # crack_band: the joints over their strength within this fraction of the worst crack in one
+    # round, the others wait for the next round's solve (0, where the load rises slowly: the worst
+    # alone, one event at a time)
+    sc = _column(12)
+    g = np.array([0.2 * G, 0.0, -G])
+    probe = JointModel(sc)
+    u = probe.solve(g, np.ones(probe.nj, bool))[0].utilisation
+    assert u[0] == u.max() and 0.8 * u[0] <= u[1] < 0.9 * u[0] and u[1] > 1.0 and u[2] < 0.8 * u[0]
+    closed = np.ones((probe.nj, OUTLINE_POINTS), bool)
+    for band, first_round in ((0.2, {0, 1}), (0.1, {0}), (0.0, {0})):
+        jm = JointModel(sc, settings=ContactSettings(crack_band=band, max_rounds=1))
+        cracked, _, _ = jm.crack(g, np.ones(jm.nj, bool), closed)
+        assert set(cracked.tolist()) == first_round
+    with pytest.raises(InputError, match="crack_band"):
+        ContactSettings(crack_band=1.0)
+    pushed = replace(sc, pushover=Pushover(rate_g_per_s=0.01, max_g=1.0))
+    assert CrackTracker.default_settings(pushed).crack_band == 0.0
+    assert ContactSettings().crack_band == 0.1  # a ground motion's
 
 
 @pytest.mark.parametrize("load", [2.0, 3.0])

@@ -114,8 +114,9 @@ the default moduli, a mechanism by metres (``g / eps``), and ``release_m`` lies 
 a thousand times softer than the default would need a larger one).
 
 When a frame's load cracks a joint, the load is re-solved on the structure without it, and the
-joints that this overloads crack in the same frame (event by event: those within 10 % of the
-worst at each round), up to ``max_rounds``. Every round cracks from an equilibrium: once a round's
+joints that this overloads crack in the same frame (event by event: those within
+``crack_band`` of the worst at each round, 10 % under a ground motion, the worst alone where the
+load rises slowly), up to ``max_rounds``. Every round cracks from an equilibrium: once a round's
 solve has run away (a mechanism), the rounds end and nothing more cracks in that frame. The
 run-away iterate is no state the structure passes through: how far it has gone, and so the
 forces in the joints it carries, are set by where the iteration stopped (cracking every joint over
@@ -189,6 +190,10 @@ class ContactSettings:
     slip_band: float = 0.05
     stall_iter: int = 10  # a solve stops when this many iterations neither halved the out-of-balance force nor grew the motion tenfold
     max_rounds: int = 40  # crack rounds per load
+    # a crack round cracks the intact joints over their strength whose utilisation is within this
+    # fraction of the worst (0: the worst alone, event by event); the rest wait for the next round's
+    # solve, which the first ones' load may have moved onto others or off them
+    crack_band: float = 0.1
     release_m: float = 1e-3  # a joint whose corners move further than this in a solve has run away, m
     # a solve that ends without converging asks a static programme on its own joints and contacts
     # whether any equilibrium of the load exists (:meth:`JointModel.has_equilibrium`): if one does,
@@ -211,6 +216,8 @@ class ContactSettings:
         ):
             if not getattr(self, name) > 0:
                 raise InputError(f"contact settings: {name} = {getattr(self, name)} must be > 0")
+        if not 0.0 <= self.crack_band < 1.0:
+            raise InputError(f"contact settings: crack_band = {self.crack_band} must be in [0, 1)")
 
 
 @dataclass(frozen=True)
@@ -1250,7 +1257,8 @@ class JointModel:
         start: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, JointState]:
         """The joints that crack under the load ``m g``, event by event: solve, crack the intact
-        joints whose utilisation is over 1 and within 10 % of the worst, solve again on what is
+        joints whose utilisation is over 1 and within ``settings.crack_band`` of the worst (10 % by
+        default, the worst alone at 0), solve again on what is
         left, until no intact joint is over 1 (or ``max_rounds``). Once a solve has run away (a
         corner of a cracked joint still in the model, a contact that may touch, moving by more
         than ``runaway_m``: a mechanism), the rounds end and nothing more cracks in this load:
@@ -1285,7 +1293,7 @@ class JointModel:
             worst = float(util.max(initial=0.0))
             if worst <= 1.0 or rounds == self.settings.max_rounds:
                 break
-            new = np.flatnonzero(util >= max(1.0, 0.9 * worst))
+            new = np.flatnonzero(util >= max(1.0, (1.0 - self.settings.crack_band) * worst))
             intact[new] = False
             if closed is not None:
                 closed[new] = True  # a joint that has just cracked still touches

@@ -17,7 +17,7 @@ check against real walls. Two single-leaf series of the Stone Masonry Database (
 Any other single-leaf wall of the database is run the same way (``--db DIR``: a folder with the
 database's tests.csv and crackmaps/), its inputs read from its own row, never from its name:
 
-- material: ``Joints`` "Dry" -> f_t = c = 0, mu 0.6; any mortar -> the package's default mortar with
+- material: ``Joints`` "Dry" -> f_t = c = 0, mu 0.6, crushing at the masonry's f_c; any mortar -> the package's default mortar with
   the row's f_c,m (a row without one: the mean of its reference's rows, else the package default)
   and E_m where given; the units' modulus E_b where given (else the package's 10 GPa); the stones'
   density 2650 kg/m^3 (granite; the database gives none) and mu 0.6 for every wall;
@@ -40,11 +40,15 @@ mortar between stones of a mortared wall, one network of low solidity, is droppe
 
     .venv/bin/python experiments/lab_walls.py [--out DIR] [--only SW.30.1 WI1.100] [--db DIR]
 
-prints per test: sigma0, measured Vmax (the larger of the two directions), predicted, ratio,
-mechanism (model) and failure type (test); then per series the mean and the coefficient of
-variation of the ratios. Measured on 2026-11-26, 11-27 and 11-28 (the last after the contacts'
-friction law stopped creeping at every load step) and 2026-12-01 (the shear test's stalled solves
-asking whether the load has an equilibrium): see docs/stone_walls.md. Whether a wall's peak
+The beam carries the row's sigma0,tot less the database's own 20 kN/m^3 of wall above the base
+(``DB_UNIT_WEIGHT_N_M3``): the model's stones add their weight themselves.
+
+prints per test: sigma0 (the database's), the beam's stress, measured Vmax (the larger of the two
+directions), predicted, ratio, mechanism (model) and failure type (test); then per series the mean
+and the coefficient of variation of the ratios. Measured on 2026-11-26, 11-27 and 11-28 (the last
+after the contacts' friction law stopped creeping at every load step) and 2026-12-01 (the shear
+test's stalled solves asking whether the load has an equilibrium; then the beam's load without the
+wall's weight, and a crack round cracking the worst joint alone): see docs/stone_walls.md. Whether a wall's peak
 is converged in the joint model's settings: experiments/shear_test_convergence.py.
 """
 
@@ -217,6 +221,10 @@ def tests(db: Path = DB) -> list[dict]:
             material["mortar_youngs_modulus_mpa"] = em
         if dry:
             material.update(DRY)
+            # a dry joint crushes at the masonry's strength (the row's f_c, from its wallets), not
+            # at the package's mortar default of 10 MPa
+            if (fc := _num(row, "fc [MPa]")) is not None and fc > 0:
+                material["compressive_strength_mpa"] = fc
         else:
             own = _num(row, "fc,m [MPa]")
             if own is not None and own > 0:

@@ -67,13 +67,13 @@ VARIANTS = {
     "tol per body, 100 fps": (100, {"tol_per_body": True}),
     "tol per body, 200 fps": (200, {"tol_per_body": True}),
     "tol 1e-4 per body": (25, {"tol": 1e-4, "tol_per_body": True}),
-    # a ground motion's settings (ContactSettings' defaults): release at 1 mm, a solve stops after
-    # 10 iterations without progress or 50 in all
     # a crack round cracking every joint within 10 % of the worst at once (the shear test's until
     # 2026-12-01; a ground motion's still), against the worst alone (the default since)
     "band 10 %": (25, {"crack_band": 0.1}),
     "band 10 %, 50 fps": (50, {"crack_band": 0.1}),
     "band 10 %, 100 fps": (100, {"crack_band": 0.1}),
+    # a ground motion's settings (ContactSettings' defaults): release at 1 mm, a solve stops after
+    # 10 iterations without progress or 50 in all
     "quake settings": (25, "quake"),
     "quake settings, 100 fps": (100, "quake"),
 }

@@ -72,6 +72,11 @@ VARIANTS = {
     "band 10 %": (25, {"crack_band": 0.1}),
     "band 10 %, 50 fps": (50, {"crack_band": 0.1}),
     "band 10 %, 100 fps": (100, {"crack_band": 0.1}),
+    # a solve that stalls for 50 iterations (its out-of-balance force not halved) asks the
+    # programme then, instead of running on to 400
+    "stall 50": (25, {"stall_iter": 50}),
+    "stall 50, 50 fps": (50, {"stall_iter": 50}),
+    "stall 50, 100 fps": (100, {"stall_iter": 50}),
     # a ground motion's settings (ContactSettings' defaults): release at 1 mm, a solve stops after
     # 10 iterations without progress or 50 in all
     "quake settings": (25, "quake"),
@@ -97,7 +102,13 @@ def replay(scene, settings: ContactSettings) -> dict:
         if not tracker.model.grounded(tracker.held)[beam]:
             free = (lam, int((~tracker.intact).sum()))
             break
-    return {"first": first, "free": free, "stalled": stalled, "seconds": time.perf_counter() - t0}
+    return {
+        "first": first,
+        "free": free,
+        "stalled": stalled,
+        "unanswered": tracker.model.unanswered,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 def main() -> None:
@@ -136,7 +147,7 @@ def main() -> None:
 
             print(
                 f"  {name:>28}: first release {at(r['first'])}, beam free {at(r['free'])}; "
-                f"{r['stalled']} solves unconverged, {r['seconds']:.1f} s",
+                f"{r['stalled']} solves unconverged, {r['unanswered']} questions unanswered, {r['seconds']:.1f} s",
                 flush=True,
             )
 

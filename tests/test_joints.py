@@ -2,6 +2,7 @@
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -647,3 +648,50 @@ def test_a_stalled_solve_with_an_equilibrium_ends_at_its_least_out_of_balance_it
     jm = JointModel(sc, settings=ContactSettings(max_iter=2, check_equilibrium=True))
     jm.solve(np.array([0.8 * G, 0.0, -G]), np.zeros(1, bool))
     assert jm.stalled_in_equilibrium == 0
+
+
+def test_a_question_the_simplex_leaves_open_is_answered_by_the_interior_point_solver(monkeypatch):
+    # the dual simplex from the last basis can run without end on these programmes (a laboratory
+    # wall's shear test sat in one question for 20 minutes): it gets a number of iterations, then
+    # the interior-point solver answers from scratch; a question neither answers is taken for no
+    # and counted
+    from calib_masonry.simulation import joints
+
+    sc, _ = _dry_block((0.2, 0.3, 0.8), (1.0, 0.0), 0.5)
+
+    def answers():
+        jm = JointModel(sc)
+        jc, kc = np.nonzero(jm.corner_mask)
+        free = np.zeros(1, bool)
+        got = [
+            jm.has_equilibrium(np.zeros(1, bool), jc, kc, jm._load(np.array([lam * G, 0.0, -G])), free)
+            for lam in (0.2, 0.3, 0.1)
+        ]
+        return got, jm.unanswered
+
+    assert answers() == ([True, False, True], 0)  # sliding at mu = 0.5, tipping at 0.25
+    monkeypatch.setattr(joints, "_simplex_iterations", lambda rows, cols: 0)
+    assert answers() == ([True, False, True], 0)
+    monkeypatch.setattr(joints, "IPM_ITERATIONS", 0)
+    got, unanswered = answers()
+    assert unanswered >= 2 and not any(got[1:])
+
+
+def test_the_question_a_dry_walls_shear_test_stuck_in_is_answered(tmp_path):
+    # the static programme of SW.30.2's shear test (58 stones; 1,748 rows, 7,000 columns) at 51.56 s
+    # of its ramp, written by HiGHS as it was asked: its dual simplex ran 10,000 iterations in 46 s
+    # and ended in a solve error, and without a limit sat there for minutes; infeasible (the
+    # interior-point and the primal simplex solvers agree)
+    import lzma
+
+    import highspy
+
+    from calib_masonry.simulation.joints import _feasible
+
+    mps = tmp_path / "question.mps"
+    mps.write_bytes(lzma.decompress((Path(__file__).parent / "data" / "shear_test_question.mps.xz").read_bytes()))
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("threads", 1)
+    h.readModel(str(mps))
+    assert _feasible(h) is False

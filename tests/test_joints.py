@@ -653,8 +653,8 @@ def test_a_stalled_solve_with_an_equilibrium_ends_at_its_least_out_of_balance_it
 def test_a_question_the_simplex_leaves_open_is_answered_by_the_interior_point_solver(monkeypatch):
     # the dual simplex from the last basis can run without end on these programmes (a laboratory
     # wall's shear test sat in one question for 20 minutes): it gets a number of iterations, then
-    # the interior-point solver answers from scratch; a question neither answers is taken for no
-    # and counted
+    # the interior-point solver answers from scratch, then the primal simplex; a question none
+    # answers is taken for no and counted
     from calib_masonry.simulation import joints
 
     sc, _ = _dry_block((0.2, 0.3, 0.8), (1.0, 0.0), 0.5)
@@ -672,7 +672,9 @@ def test_a_question_the_simplex_leaves_open_is_answered_by_the_interior_point_so
     assert answers() == ([True, False, True], 0)  # sliding at mu = 0.5, tipping at 0.25
     monkeypatch.setattr(joints, "_simplex_iterations", lambda rows, cols: 0)
     assert answers() == ([True, False, True], 0)
-    monkeypatch.setattr(joints, "IPM_ITERATIONS", 0)
+    monkeypatch.setattr(joints, "IPM_ITERATIONS", 0)  # the primal simplex answers
+    assert answers() == ([True, False, True], 0)
+    monkeypatch.setattr(joints, "PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN", 0)
     got, unanswered = answers()
     assert unanswered >= 2 and not any(got[1:])
 

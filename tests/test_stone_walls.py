@@ -344,11 +344,11 @@ def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path)
 
     header = ["Test unit name", "Reference", "Joints", "Leaves", "H [mm]", "L [mm]", "t [mm]", "H0 [mm]"]
     header += ["fc\nm  [MPa]", "σ0\ntot [MPa]", "Vmax\n+ [kN]", "Vmax\n- [kN]", "From test report: Failure type"]
-    header += ["Eb [MPa]", "Em [MPa]"]
+    header += ["Eb [MPa]", "Em [MPa]", "fc [MPa]"]
     rows = [  # the columns of the header; a row may end early (DictReader leaves the rest None)
         "A-1,Someone (2020),Lime mortar,1,1600,1200,300,800,2.0,0.4,90,,S,30000,900",
         "A-2,Someone (2020),Lime mortar,1,1600,1200,300,1600,,0.4,80,85,R,,",
-        "B-1,Other (2021),Dry,1,1000,1000,200,1300,,0.2,20,,R",
+        "B-1,Other (2021),Dry,1,1000,1000,200,1300,,0.2,20,,R,,,40",
         "C-1,Other (2021),Cement mortar,2,1000,1000,500,1300,5,0.2,60,,S",
         "D-1,Other (2021),Lime mortar,1,1000,1000,200,700,,0.2,60,,S",
         "E-1,Other (2021),Lime mortar,1,1000,1000,200,1300,,,60,,S",
@@ -372,6 +372,8 @@ def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path)
     assert a2["material"]["compressive_strength_mpa"] == 2.0 and "mean of its reference" in a2["note"]
     assert a2["boundary"] == "cantilever" and a2["H0"] > a2["H"] and a2["vmax"] == 85.0
     assert not b1["mortar"] and b1["material"]["tensile_strength_mpa"] == 0.0 and b1["material"]["cohesion_mpa"] == 0.0
+    # a dry joint crushes at the masonry's f_c (the row's), a mortared one at its mortar's
+    assert b1["material"]["compressive_strength_mpa"] == 40.0
     assert b1["boundary"] == "cantilever" and b1["H0"] == 1.3
     # sigma0,tot is at the base with the database's 20 kN/m^3 of wall above: the beam carries the rest
     assert a1["applied"] == pytest.approx(0.4 - 20e3 * 1.6 / 1e6) and b1["applied"] == pytest.approx(0.2 - 0.02)

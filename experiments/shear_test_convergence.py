@@ -28,7 +28,8 @@ rigid cantilever's rocking bound ``(N + W) L / (2 H0)`` is printed beside the me
 
 Measured on 2026-11-28: see docs/stone_walls.md ("Is the peak converged?"); on 2026-12-01 with the
 beam's load corrected and a crack round cracking the worst joint alone ("The beam's load, and one
-joint a crack round").
+joint a crack round"), then with a stall window of 50 iterations ("stall 50": not converged) and
+the static programme's questions limited ("Where a shear test's time goes").
 """
 
 from __future__ import annotations

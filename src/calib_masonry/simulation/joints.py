@@ -501,17 +501,13 @@ def _feasibility_programme(A: sp.csc_matrix, lo, hi, row_lo, row_hi):
     return h
 
 
-# the static programme's iterations: the dual simplex from the last basis, per row and column of
-# the programme; then the interior-point solver from scratch; then the primal simplex from scratch,
-# per row and column (:func:`_feasible`)
-SIMPLEX_ITERATIONS_PER_ROW_AND_COLUMN = 0.5
+# the static programme's iterations (:func:`_feasible`): the dual simplex from the last basis; then
+# the primal simplex from scratch, per row and column; then the interior-point solver from scratch;
+# and each solver's seconds, a net for a solver stuck within its iterations
+DUAL_ITERATIONS = 1000
 IPM_ITERATIONS = 1000
 PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN = 2
-
-
-def _simplex_iterations(rows: int, cols: int) -> int:
-    """The dual simplex's iterations for a question of ``rows`` x ``cols`` (:func:`_feasible`)."""
-    return max(1000, int(SIMPLEX_ITERATIONS_PER_ROW_AND_COLUMN * (rows + cols)))
+SOLVER_SECONDS = 30.0
 
 
 def _feasible(h) -> bool | None:
@@ -519,26 +515,30 @@ def _feasible(h) -> bool | None:
     where no solver answers.
 
     HiGHS's dual simplex can run for minutes on these programmes: a dry laboratory wall's shear
-    test (SW.250.1) sat in one question for 20 minutes, and SW.30.2's question of 1,748 rows and
-    7,000 columns ran 5,000 iterations in 0.9 s, 10,000 in 46 s (then a solve error), where the
-    interior-point solver found it infeasible in 16 iterations (0.4 s) and the primal simplex in
-    4,317 (0.7 s). The dual simplex is given :data:`SIMPLEX_ITERATIONS_PER_ROW_AND_COLUMN` of an
-    iteration per row and column (at least 1,000; a question from scratch on 1,400 corners took
-    3,500), and a question it leaves open is put again from scratch to the interior-point solver
-    without crossover (:data:`IPM_ITERATIONS`), then to the primal simplex
-    (:data:`PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN`): on SW.200.1's and SW.250.1's shear tests with
-    the dry joints crushing at 56.8 MPa one question each was left open by the first two. Iteration
-    limits, not a time: the same question gets the same answer on any machine."""
+    test (SW.250.1) sat in one question for 20 minutes. SW.30.2's question (1,748 rows, 7,000
+    columns; tests/data/shear_test_question.mps.xz) slows down after about 3,500 dual iterations:
+    highspy 1.15.1 ran 5,000 in 0.9 s and 10,000 in 46 s (then a solve error), 1.16.0 ran 3,507 in
+    3 s and 4,374 in more than 30; the interior-point solver finds it infeasible in 16 iterations
+    (0.4 s), the primal simplex in 4,172-4,317 (0.7 s). The dual simplex, which a question on the
+    same matrix starts from the last answer's basis (0-39 iterations where measured), is given
+    :data:`DUAL_ITERATIONS`; a question it leaves open is put again from scratch to the primal
+    simplex (:data:`PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN`), whose basis the next question's dual
+    simplex starts from, then to the interior-point solver without crossover
+    (:data:`IPM_ITERATIONS`; on SW.200.1's and SW.250.1's shear tests with the dry joints crushing at
+    56.8 MPa it left one question each open, which the primal simplex answered). Limits on
+    iterations, so that a question gets the same answer on any machine; :data:`SOLVER_SECONDS` is a
+    net for a solver stuck within them, after which the next solver answers the same question."""
     import highspy
 
     answered = (highspy.HighsModelStatus.kOptimal, highspy.HighsModelStatus.kInfeasible)
     lp = h.getLp()
-    h.setOptionValue("simplex_iteration_limit", _simplex_iterations(lp.num_row_, lp.num_col_))
+    h.setOptionValue("simplex_iteration_limit", DUAL_ITERATIONS)
+    h.setOptionValue("time_limit", SOLVER_SECONDS)
     h.run()
     status = h.getModelStatus()
     for solver, option, limit in (
-        ("ipm", "ipm_iteration_limit", IPM_ITERATIONS),
         ("simplex", "simplex_iteration_limit", PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN * (lp.num_row_ + lp.num_col_)),
+        ("ipm", "ipm_iteration_limit", IPM_ITERATIONS),
     ):
         if status in answered:
             break
@@ -553,8 +553,10 @@ def _feasible(h) -> bool | None:
         finally:
             h.setOptionValue("solver", "choose")
             h.setOptionValue("simplex_strategy", 1)
-            h.setOptionValue("simplex_iteration_limit", _simplex_iterations(lp.num_row_, lp.num_col_))
-            h.clearSolver()  # the next question starts from scratch, not from another solver's end
+            h.setOptionValue("simplex_iteration_limit", DUAL_ITERATIONS)
+            if solver == "ipm":
+                h.clearSolver()  # the next question starts from scratch, not from an interior point
+            # (the primal simplex's basis is where the next question's dual simplex starts)
     if status not in answered:
         return None
     return status == highspy.HighsModelStatus.kOptimal

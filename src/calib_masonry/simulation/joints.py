@@ -536,26 +536,27 @@ def _feasible(h) -> bool | None:
     h.setOptionValue("time_limit", SOLVER_SECONDS)
     h.run()
     status = h.getModelStatus()
-    for solver, option, limit in (
-        ("simplex", "simplex_iteration_limit", PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN * (lp.num_row_ + lp.num_col_)),
-        ("ipm", "ipm_iteration_limit", IPM_ITERATIONS),
-    ):
+    primal = {
+        "solver": "simplex",
+        "simplex_strategy": 4,  # the primal simplex
+        "simplex_iteration_limit": int(PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN * (lp.num_row_ + lp.num_col_)),
+    }
+    ipm = {"solver": "ipm", "run_crossover": "off", "ipm_iteration_limit": IPM_ITERATIONS}
+    for options in (primal, ipm):
         if status in answered:
             break
         h.clearSolver()
-        h.setOptionValue("solver", solver)
-        h.setOptionValue("run_crossover", "off")
-        h.setOptionValue("simplex_strategy", 4 if solver == "simplex" else 1)  # the primal simplex
-        h.setOptionValue(option, int(limit))
+        for name, value in options.items():
+            h.setOptionValue(name, value)
         try:
             h.run()
             status = h.getModelStatus()
         finally:
+            # the next question's dual simplex (its iteration limit is set above, at every question)
             h.setOptionValue("solver", "choose")
             h.setOptionValue("simplex_strategy", 1)
-            h.setOptionValue("simplex_iteration_limit", DUAL_ITERATIONS)
-            if solver == "ipm":
-                h.clearSolver()  # the next question starts from scratch, not from an interior point
+            if options is ipm:
+                h.clearSolver()  # from scratch, not from an interior point
             # (the primal simplex's basis is where the next question's dual simplex starts)
     if status not in answered:
         return None

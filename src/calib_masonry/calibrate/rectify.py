@@ -605,7 +605,8 @@ def front_face_ends(result, segments: np.ndarray, rgb: np.ndarray | None = None)
     crease's x exactly. ``segments`` ``(n, 4)``: the photo's segments inside the outline. Where an
     end face is too narrow for its courses to be found (a few pixels at a yaw of 10-20 degrees) and
     the photo ``rgb`` is given, the crease is found by its shading instead
-    (:func:`crease_by_shading`). Returns the four corners (photo pixels) and the ends moved
+    (:func:`crease_by_shading`), or, shaded as the front face, by the slope of its courses on the
+    fitted plane (:func:`crease_by_slope`). Returns the four corners (photo pixels) and the ends moved
     (``"left"``, ``"right"``), or None.
 
     Measured on tall walls rendered by Blender as 0.4 m thick boxes: W came out 2.3-7.9 % wide
@@ -619,6 +620,8 @@ def front_face_ends(result, segments: np.ndarray, rgb: np.ndarray | None = None)
         crease = courses.get(side)
         if crease is None and rgb is not None:
             crease = crease_by_shading(rgb, result, sign)
+        if crease is None and rgb is not None:
+            crease = crease_by_slope(rgb, result, sign)
         if crease is None:
             continue
         x_new[0 if sign > 0 else 1] = crease if sign > 0 else w - crease
@@ -849,6 +852,29 @@ CREASE_WEAK_CONTRAST = 5.0
 CREASE_AGREE_FRACTION = 0.1
 
 
+def _end_face_band(result, sign: float, min_px: float) -> tuple[float, float, float] | None:
+    """The band an end face can take along the left (``sign`` 1) or right (-1) end of the fitted
+    outline: the end's x (m), the band's width (m) and the photo's pixels per metre across it; None
+    where the camera does not stand beyond that end (no end face shows). An end face takes at most
+    ``b t / (|y| + t)`` of the wall's plane (``b`` how far beyond the end the camera stands, ``y``
+    its distance from the wall's plane, ``t`` up to :data:`END_FACE_MAX_THICKNESS_M`), and no more
+    than :data:`END_FACE_REACH` of W. None too where that band is under ``min_px`` pixels wide."""
+    p = result.params
+    w, ht = float(result.width_m), float(result.height_m)
+    cx, cy = float(p[4]), float(p[5])
+    beyond = -cx if sign > 0 else cx - w
+    if beyond <= 0.0:
+        return None
+    t = END_FACE_MAX_THICKNESS_M
+    reach = min(END_FACE_REACH * w, beyond * t / (abs(cy) + t))
+    x_end = 0.0 if sign > 0 else w
+    a, b = result.photo_from_wall(np.array([[x_end, 0.5 * ht], [x_end + sign * reach, 0.5 * ht]]))
+    ppm = float(np.linalg.norm(b - a)) / reach  # photo pixels per metre across the side
+    if not np.isfinite(ppm) or reach * ppm < min_px:
+        return None
+    return x_end, reach, ppm
+
+
 def crease_by_shading(rgb: np.ndarray, result, sign: float) -> float | None:
     """The crease between a wall's front face and its end face, found by its shading: its distance
     (m, on the wall's plane) in from the left (``sign`` 1) or right (-1) end of the fitted outline,
@@ -875,19 +901,11 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> float | None:
     crease already (the end face outside it), and None."""
     from .lines import _blurred_samples
 
-    p = result.params
     w, ht = float(result.width_m), float(result.height_m)
-    cx, cy = float(p[4]), float(p[5])
-    beyond = -cx if sign > 0 else cx - w
-    if beyond <= 0.0:
+    band = _end_face_band(result, sign, 8.0)
+    if band is None:
         return None
-    t = END_FACE_MAX_THICKNESS_M
-    reach = min(END_FACE_REACH * w, beyond * t / (abs(cy) + t))
-    x_end = 0.0 if sign > 0 else w
-    a, b = result.photo_from_wall(np.array([[x_end, 0.5 * ht], [x_end + sign * reach, 0.5 * ht]]))
-    ppm = float(np.linalg.norm(b - a)) / reach  # photo pixels per metre across the side
-    if not np.isfinite(ppm) or reach * ppm < 8.0:
-        return None
+    x_end, reach, ppm = band
     # sampled twice as far in, or 16 px: the front face's texture beyond the band is the contrast
     # the crease must stand out of
     span = min(END_FACE_REACH * w, max(2.0 * reach, reach + 16.0 / ppm))
@@ -952,6 +970,108 @@ def crease_by_shading(rgb: np.ndarray, result, sign: float) -> float | None:
     # perpends 0.35 m in for another crease: W 11 % short)
     far = outside(reach + 3.0 / ppm)
     if float(np.median(np.linalg.norm(near - far, axis=-1)[agree])) >= 0.75 * strength:
+        return None
+    return crease
+
+
+#: :func:`crease_by_slope`: a height slab is read where an end face's courses drop or rise by at
+#: least this many pixels a pixel across (their slope on the wall's plane, ``(z_eye - z) / (x_eye -
+#: x_end)``: none at eye height), and the crease is taken where at least this many slabs agree
+CREASE_SLOPE_MIN = 0.5
+CREASE_SLOPE_SLABS = 4
+#: and where, over the slabs that agree, the sloped courses explain the band (the pairs' relative
+#: gain, -1 to 1) by at least this much, and the level ones the front face beyond it as much
+CREASE_SLOPE_GAIN = 0.3
+
+
+def crease_by_slope(rgb: np.ndarray, result, sign: float) -> float | None:
+    """The crease between a wall's front face and its end face, found by the slope of the end
+    face's courses: its distance (m, on the wall's plane) in from the left (``sign`` 1) or right
+    (-1) end of the fitted outline, or None.
+
+    A course is level in the world on both faces. On the front face (the fitted plane) it is level
+    on the fitted wall; the end face's courses run to the vanishing point of the wall's normal, and
+    on the fitted plane (which the end face is not on) a course at height ``z`` drops or rises
+    outward at ``(z_eye - z) / (x_eye - x_end)`` (``x_eye, z_eye``: the fitted camera's place): steep
+    on a tall wall far above the eye, whatever the end face's shading. So across the band an end
+    face can take (:func:`crease_by_shading`'s, for a thickness up to
+    :data:`END_FACE_MAX_THICKNESS_M`), each pair of columns a pixel apart is compared twice in
+    eight slabs of the height: the two columns level (``e_level``, the mean squared difference of
+    their grey) and the outer one shifted along that slope (``e_slope``); the pair's gain
+    ``(e_level - e_slope) / (e_level + e_slope)`` is near 1 on the end face, near -1 on the front
+    face's joints. Each slab's crease is the change point (the sloped pairs outside, the level
+    inside), at least 1.5 px in (clear of the side's own edge); it is taken where
+    :data:`CREASE_SLOPE_SLABS` slabs steep enough to tell (:data:`CREASE_SLOPE_MIN`) agree within
+    a pixel (or :data:`CREASE_AGREE_FRACTION` of the crease's distance) and both sides of it hold
+    (:data:`CREASE_SLOPE_GAIN`).
+
+    Measured on a wall rendered by Blender at a yaw of 18.5 degrees, seed 12291 of
+    experiments/bench_tall_walls_blender.py: an end face 8.7 px wide, lit like the front face
+    (its step of shading 0.031, which :func:`crease_by_shading` does not take), left in the
+    outline with W 3.1 % wide; the slabs above 5 m gave gains of 0.54-0.74 outside and under
+    -0.9 inside, and the crease within 0.2 px."""
+    from .lines import _blurred_samples
+
+    w, ht = float(result.width_m), float(result.height_m)
+    band = _end_face_band(result, sign, 3.0)
+    if band is None:
+        return None
+    x_end, reach, ppm = band
+    cx, cz = float(result.params[4]), float(result.params[6])  # the camera's x and height on the wall's axes
+    span = min(END_FACE_REACH * w, max(2.0 * reach, reach + 8.0 / ppm))
+    n = int(2.0 * span * ppm) + 1  # two samples a pixel
+    d = np.linspace(0.0, span, n)
+    x = x_end + sign * d
+    k = 2  # the pairs' columns a pixel apart
+    dx = x[k:] - x[:-k]
+    pair = d[:-k]
+    usable = pair >= 1.5 / ppm
+    if usable.sum() < 4:
+        return None
+    # the slabs steep enough to tell, each sampled level and along its slope (one call each)
+    slabs = []
+    for s in range(8):
+        z = np.linspace((0.05 + 0.1125 * s) * ht, (0.05 + 0.1125 * (s + 1)) * ht, max(int(0.1125 * ht * ppm), 8))
+        slope = (cz - float(z.mean())) / (cx - x_end)  # dz / dx of an end face's course on the plane
+        if abs(slope) >= CREASE_SLOPE_MIN:
+            slabs.append((z, slope))
+    if len(slabs) < CREASE_SLOPE_SLABS:
+        return None
+    level, sloped = [], []
+    for z, slope in slabs:
+        xx, zz = np.meshgrid(x, z)
+        level.append(np.c_[xx.ravel(), zz.ravel()])
+        sloped.append(np.c_[xx[:, k:].ravel(), (zz[:, k:] + slope * dx[None, :]).ravel()])
+
+    def grey(xz: list[np.ndarray]) -> list[np.ndarray]:
+        pts = result.photo_from_wall(np.concatenate(xz))
+        g = _blurred_samples(rgb, pts[:, 1], pts[:, 0], gray=True)
+        return np.split(g, np.cumsum([len(q) for q in xz])[:-1])
+
+    found = []  # (crease, gain outside, gain inside) per slab
+    for (z, _), g, shifted in zip(slabs, grey(level), grey(sloped)):
+        g = g.reshape(len(z), n)
+        shifted = shifted.reshape(len(z), n - k)
+        e_level = np.mean((g[:, :-k] - g[:, k:]) ** 2, axis=0)
+        e_slope = np.mean((g[:, :-k] - shifted) ** 2, axis=0)
+        gain = (e_level - e_slope) / np.maximum(e_level + e_slope, 1e-12)
+        r = np.where(usable, gain, 0.0)
+        cs = np.cumsum(r)
+        i = int(np.argmax(2.0 * cs - cs[-1]))  # the last pair of the sloped band
+        crease = float(pair[i]) + 0.75 / ppm  # the pair's middle, half a sample on
+        outside = usable & (pair <= pair[i])
+        inside = usable & (pair > pair[i]) & (pair <= pair[i] + max(crease, 4.0 / ppm))
+        if not outside.any() or not inside.any() or crease > reach:
+            continue
+        found.append((crease, float(gain[outside].mean()), float(gain[inside].mean())))
+    if len(found) < CREASE_SLOPE_SLABS:
+        return None
+    c = np.array(found)
+    crease = float(np.median(c[:, 0]))
+    agree = np.abs(c[:, 0] - crease) <= max(1.0 / ppm, CREASE_AGREE_FRACTION * crease)
+    if agree.sum() < CREASE_SLOPE_SLABS or crease < 2.0 / ppm:
+        return None
+    if not (np.median(c[agree, 1]) >= CREASE_SLOPE_GAIN and np.median(c[agree, 2]) <= -CREASE_SLOPE_GAIN):
         return None
     return crease
 

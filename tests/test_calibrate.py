@@ -497,6 +497,7 @@ def test_a_narrow_wall_against_a_flat_sky_is_found():
         "tall12029.jpg",
         "tall12196.jpg",
         "tall12291.jpg",
+        "tall12196b.jpg",
     ],
 )
 def test_blender_walls_against_a_flat_sky(name):
@@ -513,7 +514,10 @@ def test_blender_walls_against_a_flat_sky(name):
     # background colours on those courses, stopped one course above it (W +45 %, H +40 %) until it
     # ran again from its own outline. 12291, at a yaw of 18.5 degrees, shows its right end face
     # 8.7 px wide and lit like the front face: it stayed in the outline (W +3.1 %) until the
-    # crease was found by the slope of the end face's courses. Focal length and eye height given,
+    # crease was found by the slope of the end face's courses. 12196b is 12196 rendered again (1,436
+    # pixels differ, by up to 10 levels): its third cut reached the foot but fitted it 0.9891
+    # against the second's 0.9892 and was not kept (W +45 %) until a tie within a pixel row of the
+    # outline's height counted as as good. Focal length and eye height given,
     # as the benchmark gives them: W and H within 2 %, each corner within 3 px of Blender's.
     from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
     from calib_masonry.io import read_photo

@@ -510,8 +510,9 @@ GRABCUT_RING = 1.35
 #: its own outline, and that is kept where its quadrilateral fits its cut at least as well
 #: (intersection over union), or within one pixel row's share of the outline's height of it (a
 #: re-render of 12196 whose third cut reached the foot fitted it 0.9891 against the second's
-#: 0.9892, a tie: W +45 %; 12277's third cut, which lost a course, 0.979 against 0.988). Measured: a Blender wall whose first outline stopped two courses
-#: above its foot, and GrabCut one course above it (12196: corners 1.25-1.26, W +45 % -> +0.4 %);
+#: 0.9892, a tie: W +45 %; 12277's third cut, which lost a course, 0.979 against 0.988).
+#: Measured: a Blender wall whose first outline stopped two courses above its foot, and GrabCut
+#: one course above it (12196: corners 1.25-1.26, W +45 % -> +0.4 %);
 #: 1.14 at most on the photos looked at before choosing it (a laboratory photo; the paper
 #: example's and five Blender walls 1.05). Of 280 Blender walls it ran on five: one mended, one
 #: not kept, three within 0.03 % of before (docs/photo_path.md, 2026-11-30)

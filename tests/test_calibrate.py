@@ -430,6 +430,38 @@ def test_a_base_fitted_through_a_shadow_at_both_ends_is_found_in_the_vanishing_p
     assert base_in_pencil(flat, quad, vp, reach_in=45.0, reach_out=3.0) is None
 
 
+def test_a_base_that_lost_a_course_at_one_end_is_put_on_the_foot_its_head_joints_give():
+    # an outline whose base lost the bottom course at its left end (as GrabCut's cut did where
+    # those bricks lay in the foot's shadow, on Blender walls 12325, 12364 and 12393: a base
+    # corner 66-78 px high, W -62 to +43 %): the head joints run down to the foot, so the base goes
+    # on the line through their lowest ends towards the bed joints' vanishing point, snapped to the
+    # foot's edge, within half a pixel at both ends. A base near that foot is left as it is, and
+    # so is any base where fewer than two head joints end between the wall's ends, or where no
+    # edge of the photo runs along the foot they give
+    from calib_masonry.calibrate.lines import base_from_heads, joint_segments
+
+    rgb = _wall_over_a_shadow(300, 10.0, seed=8)  # the foot on row 449.5, head joints every 60 px
+    seg = joint_segments(rgb)
+    bed, head = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])  # a frontal view
+    short = np.array([[99.5, 424.5], [399.5, 449.5], [399.5, 49.5], [99.5, 49.5]])
+    new, sigma = base_from_heads(rgb, short, np.full(4, 0.5), seg, bed, head, 2.5)
+    assert np.abs(new[:2, 1] - 449.5).max() < 0.5, new
+    assert np.abs(new[:2, 0] - [99.5, 399.5]).max() < 0.5 and np.array_equal(new[2:], short[2:])
+    assert np.all(sigma[:2] >= 0.3) and np.array_equal(sigma[2:], np.full(2, 0.5))
+    near = short.copy()
+    near[0, 1] = 444.5  # 5 px high: under the 10 px (1 % of the photo's long side) it acts from
+    assert np.array_equal(base_from_heads(rgb, near, np.full(4, 0.5), seg, bed, head, 2.5)[0], near)
+    vertical = np.abs(seg[:, 0] - seg[:, 2]) < 2.0
+    one = seg[~vertical | (seg[:, 1] + seg[:, 3] < 2 * 430.0)]  # no head joint of the bottom course
+    one = np.vstack([one, [[279.0, 427.5, 279.0, 447.5]]])  # but one
+    assert np.array_equal(base_from_heads(rgb, short, np.full(4, 0.5), one, bed, head, 2.5)[0], short)
+    # where the colour does not step across the foot they give (a footing of the wall's own grey:
+    # on a laboratory photo, cracks taken for head joints put a foot through the stones), no move
+    footing = rgb.copy()
+    footing[452:, 100:400] = footing[300:310, 100:400].mean(axis=(0, 1))
+    assert np.array_equal(base_from_heads(footing, short, np.full(4, 0.5), seg, bed, head, 2.5)[0], short)
+
+
 def test_the_base_through_the_first_fit_is_kept_only_near_where_that_fit_puts_it():
     # rectify's use of the pencil: the first fit's camera gives the vanishing point (its
     # homography's first column) and where the base corners should be. The foot found there is
@@ -498,6 +530,10 @@ def test_a_narrow_wall_against_a_flat_sky_is_found():
         "tall12196.jpg",
         "tall12291.jpg",
         "tall12196b.jpg",
+        "tall12325.jpg",
+        "tall12364.jpg",
+        "tall12393.jpg",
+        "tall12277.jpg",
     ],
 )
 def test_blender_walls_against_a_flat_sky(name):
@@ -517,8 +553,12 @@ def test_blender_walls_against_a_flat_sky(name):
     # crease was found by the slope of the end face's courses. 12196b is 12196 rendered again (1,436
     # pixels differ, by up to 10 levels): its third cut reached the foot but fitted it 0.9891
     # against the second's 0.9892 and was not kept (W +45 %) until a tie within a pixel row of the
-    # outline's height counted as as good. Focal length and eye height given,
-    # as the benchmark gives them: W and H within 2 %, each corner within 3 px of Blender's.
+    # outline's height counted as as good. On 12325, 12364 and 12393 the outline lost the
+    # bottom course at one end (its bricks in the foot's shadow; a base corner 66-78 px high:
+    # W -62 %, +43 %, -52 %, the first and last refused for their corners), on 12277 at both
+    # (W +29 %), until the base was put on the foot the head joints give. Focal length and eye
+    # height given, as the benchmark gives them: W and H within 2 %, each corner within 3 px of
+    # Blender's.
     from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
     from calib_masonry.io import read_photo
 
@@ -578,12 +618,16 @@ def test_a_fit_its_joints_contradict_is_refused_not_moved_to_an_end_face(monkeyp
     # corners moved to the fit's own projections, so the last fit agreed with itself (1.7 px) and
     # passed as converged at W -62 %, H -67 %. Now the end face is not looked for from such a fit:
     # the photo is refused with the advice to click the corners, and front_face_ends is not asked
+    import calib_masonry.calibrate.lines as lines
     import calib_masonry.calibrate.rectify as rectify
     from calib_masonry.errors import FitFailed
     from calib_masonry.io import read_photo
 
     folder = ROOT / "data_external" / "blender_walls"
     truth = next(p for p in json.loads((folder / "truth.json").read_text())["photos"] if p["name"] == "tall12325.jpg")
+    # the outline as the code of that day found it: its base's lost course not yet put back on
+    # the foot its head joints give (base_from_heads, which now finds this wall within 2 %)
+    monkeypatch.setattr(lines, "base_from_heads", lambda rgb, quad, sigma, *rest: (quad, sigma))
     asked = []
     real = rectify.front_face_ends
     monkeypatch.setattr(rectify, "front_face_ends", lambda res, seg, rgb=None: asked.append(res) or real(res, seg, rgb))

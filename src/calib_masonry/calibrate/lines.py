@@ -538,6 +538,122 @@ def base_off_shadow(
     return new, sigma
 
 
+#: a base is put on the foot its head joints give where either of its corners lies further than this
+#: fraction of the photo's long side from it (and at least HEAD_FOOT_MIN_PX): a course lost or
+#: gained at an end (its bricks shaded as the ground, or the ground's shadow joined to them)
+HEAD_FOOT_FRACTION = 0.01
+HEAD_FOOT_MIN_PX = 10.0
+#: the foot is the second lowest lower end of the head joints between the ends, where the lowest
+#: lies within this many px below it (two head joints of the bottom course agree)
+HEAD_FOOT_AGREE_PX = 6.0
+#: and the colour steps across the new base (the median along it) by at least this share of the
+#: step across the weaker of the wall's ends: 0.19-0.47 on the Blender walls whose lost course it
+#: puts back, 0.09 on a laboratory stone wall whose cracks put a foot through its stones
+HEAD_FOOT_STEP_SHARE = 0.15
+
+
+def base_from_heads(
+    rgb: np.ndarray,
+    quad: np.ndarray,
+    sigma: np.ndarray,
+    seg: np.ndarray,
+    vp_bed: np.ndarray,
+    vp_head: np.ndarray,
+    half: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The outline ``quad`` (LL, LR, UR, UL, corner sigmas ``sigma``) with its base put on the wall's
+    foot as its head joints give it, where a base corner lies far from it. A wall's head joints run
+    down to its foot: those of the bottom course end on it. Of the photo's segments ``seg`` that
+    run to the head joints' vanishing point ``vp_head`` and end between the outline's ends, the
+    lower ends are carried along the bed joints' direction (``vp_bed``) onto the left end; the
+    second lowest, where the lowest agrees with it within :data:`HEAD_FOOT_AGREE_PX`, is the foot.
+    Where either base corner lies further than :data:`HEAD_FOOT_FRACTION` of the photo's long side
+    (at least :data:`HEAD_FOOT_MIN_PX`) from the line through that foot towards ``vp_bed``, the
+    base is that line snapped to the outermost strong edge within ``half`` px, where that edge runs
+    towards ``vp_bed`` too (within :data:`SIDE_TURN_RAD`) and the colour steps across it by
+    :data:`HEAD_FOOT_STEP_SHARE` of the step across the wall's ends; elsewhere the outline is kept
+    (no edge of the photo confirms a foot there). The two corners it moves get their sigma from
+    the new base's edge evidence (:func:`_side_sigma`), as :func:`base_off_shadow` gives it.
+
+    Measured on tall walls rendered by Blender (experiments/bench_tall_walls_blender.py): an
+    outline that lost the bottom course at one end (its bricks in the foot's shadow) put a base
+    corner 66-78 px high, W -62 to +43 %; the second lowest head joint's end lay 0.5-4.9 px above
+    the foot on those walls."""
+    from .segments import dist_to_vp
+
+    quad = np.asarray(quad, dtype=np.float64)
+    seg = np.asarray(seg, dtype=np.float64).reshape(-1, 4)
+    rows, cols = rgb.shape[:2]
+    if len(seg) < 2 or vp_bed is None or vp_head is None:
+        return quad, sigma
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    heads = seg[(dist_to_vp(seg, vp_head) < 1.5) & (length >= 8.0)]
+    if len(heads) < 2:
+        return quad, sigma
+    left, right = (quad[3], quad[0] - quad[3]), (quad[2], quad[1] - quad[2])  # down each end
+    # each segment's lower end: the one farther down the left end once carried along the beds
+    ends = heads.reshape(-1, 2, 2)
+    down = []
+    for pair in ends:
+        ts = []
+        for p in pair:
+            try:
+                q = _intersect((p, _vp_direction(p, vp_bed)), left)
+            except np.linalg.LinAlgError:
+                ts.append(np.nan)
+                continue
+            ts.append(float((q - left[0]) @ left[1] / (left[1] @ left[1])))
+        k = int(np.nanargmax(ts)) if np.any(np.isfinite(ts)) else 0
+        down.append((ts[k], pair[k]))
+    # between the ends (3 px in from each) only
+    nl, nr = side_normal(quad[3], quad[0]), side_normal(quad[1], quad[2])
+    keep = [(t, p) for t, p in down if np.isfinite(t) and (p - quad[0]) @ nl < -3.0 and (p - quad[1]) @ nr < -3.0]
+    if len(keep) < 2:
+        return quad, sigma
+    keep.sort(key=lambda tp: -tp[0])
+    (t0, _), (t1, p1) = keep[0], keep[1]
+    along = float(np.linalg.norm(left[1]))
+    if (t0 - t1) * along > HEAD_FOOT_AGREE_PX:
+        return quad, sigma
+    try:
+        foot = (p1, _vp_direction(p1, vp_bed))
+        at = np.array([_intersect(foot, left), _intersect(foot, right)])
+    except np.linalg.LinAlgError:
+        return quad, sigma
+    limit = max(HEAD_FOOT_MIN_PX, HEAD_FOOT_FRACTION * max(rows, cols))
+    shift = np.linalg.norm(at - quad[:2], axis=1)
+    if shift.max() <= limit:
+        return quad, sigma
+    new = quad.copy()
+    pts: list = []
+    line = _refine_side(rgb, at[0], at[1], half, points=pts)
+    if line is None or _off_vp(line, vp_bed) > SIDE_TURN_RAD:
+        return quad, sigma  # no edge of the photo runs there: no foot confirmed
+    try:
+        new[0], new[1] = _intersect(line, left), _intersect(line, right)
+    except np.linalg.LinAlgError:
+        return quad, sigma
+    # a foot is an edge of the photo along its length, as the wall's ends are: a laboratory stone
+    # wall's cracks, taken for head joints, put a foot through its stones
+    weaker_end = min(_step_across(rgb, quad[3], quad[0]), _step_across(rgb, quad[1], quad[2]))
+    if _step_across(rgb, new[0], new[1]) < HEAD_FOOT_STEP_SHARE * weaker_end:
+        return quad, sigma
+    base = _side_sigma(pts[0], line, float(np.linalg.norm(new[1] - new[0])))
+    sigma = np.array(sigma, dtype=np.float64)
+    sigma[:2] = [_corner_sigma(float(v), base) for v in sigma[:2]]
+    return new, sigma
+
+
+def _step_across(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, off: float = 2.5) -> float:
+    """The median, along the side a-b, of the colour's step across it (RGB distance between the
+    photo ``off`` px either side)."""
+    n = side_normal(a, b)
+    p = a[None, :] + np.linspace(0.05, 0.95, max(20, int(np.linalg.norm(b - a) / 6)))[:, None] * (b - a)[None, :]
+    inner = _blurred_samples(rgb, (p - off * n)[:, 1], (p - off * n)[:, 0])
+    outer = _blurred_samples(rgb, (p + off * n)[:, 1], (p + off * n)[:, 0])
+    return float(np.median(np.linalg.norm(inner - outer, axis=-1)))
+
+
 def base_in_pencil(
     rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray, *, reach_in: float, reach_out: float, to_photo=None
 ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]] | None:
@@ -771,14 +887,20 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
         if np.array_equal(straight[0], quad):
             straight = None
     rows, cols = rgb.shape[:2]
+    every = segments_outside(joint_segments(rgb, config), occluded_mask((rows, cols), occluders))
+    if outline.vp_bed is not None and outline.vp_head is not None and not set(bowed) - {0}:
+        # a base that lost (or gained) a course at an end, put on the foot the head joints give;
+        # not where an end or the top bowed as well (a lens, whose curves the foot is not carried
+        # along straight: a corner of the lens photos of calibration_coverage.py moved 40-118 px)
+        quad, sigma = base_from_heads(rgb, quad, sigma, every, outline.vp_bed, outline.vp_head, halfwidths[-1])
+        if straight is not None:
+            straight = base_from_heads(rgb, *straight, every, outline.vp_bed, outline.vp_head, halfwidths[-1])
     slack = 0.02 * max(rows, cols)
     if np.any(quad < -slack) or np.any(quad[:, 0] > cols - 1 + slack) or np.any(quad[:, 1] > rows - 1 + slack):
         raise FitFailed(
             "automatic mode: the outline found runs outside the photo; click the wall's corners with " + CORNERS_FLAG
         )
-    seg = joint_segments(rgb, config)
-    seg = segments_outside(seg, occluded_mask((rows, cols), occluders))
-    seg = segments_in_quad(seg, quad)
+    seg = segments_in_quad(every, quad)
     ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
     from_h = np.minimum(ang, 180.0 - ang)
     bed, head = seg[from_h < config.horizontal_max_deg], seg[np.abs(ang - 90.0) < config.vertical_max_deg]

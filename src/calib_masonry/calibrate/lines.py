@@ -547,8 +547,8 @@ HEAD_FOOT_MIN_PX = 10.0
 #: lies within this many px below it (two head joints of the bottom course agree)
 HEAD_FOOT_AGREE_PX = 6.0
 #: and the colour steps across the new base (the median along it) by at least this share of the
-#: step across the weaker of the wall's ends: 0.19-0.47 on the Blender walls whose lost course it
-#: puts back, 0.09 on a laboratory stone wall whose cracks put a foot through its stones
+#: step across the weaker of the wall's ends: 0.19-0.53 on the Blender walls it mends, 0.07-0.10 on
+#: a laboratory stone wall (SC4) whose cracks, taken for head joints, put a foot through its stones
 HEAD_FOOT_STEP_SHARE = 0.15
 
 
@@ -576,9 +576,9 @@ def base_from_heads(
     the new base's edge evidence (:func:`_side_sigma`), as :func:`base_off_shadow` gives it.
 
     Measured on tall walls rendered by Blender (experiments/bench_tall_walls_blender.py): an
-    outline that lost the bottom course at one end (its bricks in the foot's shadow) put a base
-    corner 66-78 px high, W -62 to +43 %; the second lowest head joint's end lay 0.5-4.9 px above
-    the foot on those walls."""
+    outline that lost the bottom course at one or both ends (its bricks in the foot's shadow) put a
+    base corner 66-80 px high, W -62 to +43 %; the second lowest head joint's end lay 0.5-4.9 px
+    above the foot on those walls."""
     from .segments import dist_to_vp
 
     quad = np.asarray(quad, dtype=np.float64)

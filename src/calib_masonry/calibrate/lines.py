@@ -591,29 +591,25 @@ def base_from_heads(
     if len(heads) < 2:
         return quad, sigma
     left, right = (quad[3], quad[0] - quad[3]), (quad[2], quad[1] - quad[2])  # down each end
-    # each segment's lower end: the one farther down the left end once carried along the beds
+    # every end carried along the beds onto the left end (homogeneous: the line through it and
+    # the vanishing point, met with the left end's line), as the fraction down that end
     ends = heads.reshape(-1, 2, 2)
-    down = []
-    for pair in ends:
-        ts = []
-        for p in pair:
-            try:
-                q = _intersect((p, _vp_direction(p, vp_bed)), left)
-            except np.linalg.LinAlgError:
-                ts.append(np.nan)
-                continue
-            ts.append(float((q - left[0]) @ left[1] / (left[1] @ left[1])))
-        k = int(np.nanargmax(ts)) if np.any(np.isfinite(ts)) else 0
-        down.append((ts[k], pair[k]))
-    # between the ends (3 px in from each) only
+    pts = np.concatenate([ends.reshape(-1, 2), np.ones((2 * len(heads), 1))], axis=1)
+    met = np.cross(np.cross(pts, vp_bed), np.cross(np.r_[quad[3], 1.0], np.r_[quad[0], 1.0]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((met[:, :2] / met[:, 2:] - left[0]) @ left[1] / (left[1] @ left[1])).reshape(-1, 2)
+    t[~np.isfinite(t)] = -np.inf
+    # each segment's lower end (the one farther down), between the ends (3 px in from each) only
+    k = np.argmax(t, axis=1)
+    t, low = t[np.arange(len(t)), k], ends[np.arange(len(t)), k]
     nl, nr = side_normal(quad[3], quad[0]), side_normal(quad[1], quad[2])
-    keep = [(t, p) for t, p in down if np.isfinite(t) and (p - quad[0]) @ nl < -3.0 and (p - quad[1]) @ nr < -3.0]
-    if len(keep) < 2:
+    ok = np.isfinite(t) & ((low - quad[0]) @ nl < -3.0) & ((low - quad[1]) @ nr < -3.0)
+    if ok.sum() < 2:
         return quad, sigma
-    keep.sort(key=lambda tp: -tp[0])
-    (t0, _), (t1, p1) = keep[0], keep[1]
-    along = float(np.linalg.norm(left[1]))
-    if (t0 - t1) * along > HEAD_FOOT_AGREE_PX:
+    order = np.argsort(-t[ok], kind="stable")
+    t0, t1 = t[ok][order[:2]]
+    p1 = low[ok][order[1]]
+    if (t0 - t1) * float(np.linalg.norm(left[1])) > HEAD_FOOT_AGREE_PX:
         return quad, sigma
     try:
         foot = (p1, _vp_direction(p1, vp_bed))

@@ -449,7 +449,7 @@ def test_a_base_that_lost_a_course_at_one_end_is_put_on_the_foot_its_head_joints
     assert np.abs(new[:2, 0] - [99.5, 399.5]).max() < 0.5 and np.array_equal(new[2:], short[2:])
     assert np.all(sigma[:2] >= 0.3) and np.array_equal(sigma[2:], np.full(2, 0.5))
     near = short.copy()
-    near[0, 1] = 444.5  # 5 px high: under the 10 px (1 % of the photo's long side) it acts from
+    near[0, 1] = 444.5  # 5 px high: under the 10 px it acts from (HEAD_FOOT_MIN_PX; 0.5 % of 560 px is less)
     assert np.array_equal(base_from_heads(rgb, near, np.full(4, 0.5), seg, bed, head, 2.5)[0], near)
     vertical = np.abs(seg[:, 0] - seg[:, 2]) < 2.0
     one = seg[~vertical | (seg[:, 1] + seg[:, 3] < 2 * 430.0)]  # no head joint of the bottom course

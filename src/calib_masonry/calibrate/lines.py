@@ -597,8 +597,8 @@ def base_from_heads(
     # every end carried along the beds onto the left end (homogeneous: the line through it and
     # the vanishing point, met with the left end's line), as the fraction down that end
     ends = heads.reshape(-1, 2, 2)
-    pts = np.concatenate([ends.reshape(-1, 2), np.ones((2 * len(heads), 1))], axis=1)
-    met = np.cross(np.cross(pts, vp_bed), np.cross(np.r_[quad[3], 1.0], np.r_[quad[0], 1.0]))
+    hom = np.concatenate([ends.reshape(-1, 2), np.ones((2 * len(heads), 1))], axis=1)
+    met = np.cross(np.cross(hom, vp_bed), np.cross(np.r_[quad[3], 1.0], np.r_[quad[0], 1.0]))
     with np.errstate(divide="ignore", invalid="ignore"):
         t = ((met[:, :2] / met[:, 2:] - left[0]) @ left[1] / (left[1] @ left[1])).reshape(-1, 2)
     t[~np.isfinite(t)] = -np.inf

@@ -380,6 +380,52 @@ def test_a_base_found_along_a_cast_shadow_is_put_back_on_the_walls_foot():
     assert np.array_equal(base_off_shadow(rgb, far, sigma, vp, 2.5)[0], far)
 
 
+def _wall_under_an_eave(eave_px: int, *, plain: bool = False, seed: int = 3) -> np.ndarray:
+    """A brick wall (rows 50-450, columns 100-400; bricks 25 x 30 px of their own shades, light
+    mortar) under a uniform band ``eave_px`` high that overhangs it by 20 px at either end (an
+    eave's fascia and soffit), against a light sky and ground (RGB, blurred as a photo is).
+    ``plain``: the wall one shade (a rendered facade)."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(seed)
+    img = np.full((560, 520), 0.78) + rng.normal(0, 0.01, (560, 520))
+    shades = 0.45 + (0.0 if plain else 1.0) * rng.normal(0, 0.05, (16, 11))
+    rows, cols = np.mgrid[0:400, 0:300]
+    course = rows // 25
+    wall = shades[course, (cols + 15 * (course % 2)) // 30] + rng.normal(0, 0.01, (400, 300))
+    if not plain:
+        wall[24::25, :] = 0.85  # the bed joints, under each course (the top course meets the eave)
+        wall[(cols + 15 * (course % 2)) % 30 == 0] = 0.85  # the head joints
+    img[50:450, 100:400] = wall
+    img[50 - eave_px : 50, 80:420] = 0.30 + rng.normal(0, 0.01, (eave_px, 340))
+    return np.repeat(ndimage.gaussian_filter(img, 0.8)[..., None], 3, -1).astype(np.float32)
+
+
+def test_an_eave_taken_in_with_the_wall_is_cut_off_its_top():
+    # a facade's eave is unlike the sky and the ground the wall's appearance is learnt against, so
+    # the outline takes it in (Blender-rendered facades: the top 30-67 px high, H 4-10 % too tall
+    # at a sigma of 0.1 % with the width given). The rows under the outline's top are followed
+    # down until they are textured as masonry is: the top goes on the wall's own edge there.
+    # Not where the band is thinner than 3 % of the height (a mortar bed belongs to the wall), nor
+    # on a wall no more textured than the band (plaster)
+    from calib_masonry.calibrate.lines import band_top, with_top
+
+    outline = np.array([[99.5, 449.5], [399.5, 449.5], [399.5, 19.5], [99.5, 19.5]])  # the eave's top
+    vp = np.array([1.0, 0.0, 0.0])
+    top = band_top(_wall_under_an_eave(30), outline, vp, 6.0)
+    assert top is not None
+    quad, sigma = with_top(_wall_under_an_eave(30), outline, np.full(4, 2.0), top, 2.5)
+    assert np.abs(quad[2:, 1] - 49.5).max() < 0.5  # the wall's top edge, row 50
+    assert np.abs(quad[:2] - outline[:2]).max() < 1e-9  # the base, as it was
+    assert np.all(sigma[2:] < 1.0)
+    assert band_top(_wall_under_an_eave(30), outline, None, 6.0) is not None  # no vanishing point
+    thin = outline + [[0, 0], [0, 0], [0, 22.0], [0, 22.0]]  # 8 px of band: 2 % of the height
+    assert band_top(_wall_under_an_eave(8), thin, vp, 6.0) is None
+    assert band_top(_wall_under_an_eave(30, plain=True), outline, vp, 6.0) is None
+    on_wall = outline + [[0, 0], [0, 0], [0, 30.0], [0, 30.0]]  # an outline already on the wall's top
+    assert band_top(_wall_under_an_eave(30), on_wall, vp, 6.0) is None
+
+
 def test_a_base_turned_steeply_by_a_long_shadow_is_put_back_further():
     # a narrow wall (200 x 400 px) whose base the outline found from the foot of its right end to
     # a long shadow's far edge 20 px below its left corner: 5.7 degrees off the level bed joints,

@@ -54,7 +54,7 @@ def wall_and_texture(seed: int):
     return wall, wall_texture(wall, pieces[0], TEXTURE_PX_PER_M, rng)
 
 
-def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
+def look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
     """World -> camera rotation (rows: camera x right, y down, z forward) of a camera at ``eye``
     looking at ``target`` with no roll."""
     z = target - eye
@@ -63,6 +63,25 @@ def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     return np.stack([x, y, z])
+
+
+def framing(box: np.ndarray, target: np.ndarray, eye_h: float, yaw: float, f_px: float, res, spare: float, near: float):
+    """``(eye, distance)``: the camera ``eye_h`` m high, turned ``yaw`` (rad) from square on to the
+    wall's plane y = 0, aimed at ``target``, at the smallest distance from ``near`` m (in 0.25 m
+    steps, from ``target``'s x) at which every point of ``box`` ``(n, 3)`` lies inside a
+    ``res`` px frame with ``spare`` of it to spare on every side."""
+    for d in np.arange(near, near + 300.0, 0.25):
+        eye = np.array([target[0] + d * math.sin(yaw), -d * math.cos(yaw), eye_h])
+        r = look_at(eye, target)
+        cam = (box - eye) @ r.T
+        if np.any(cam[:, 2] <= 0.1):
+            continue
+        u = f_px * cam[:, 0] / cam[:, 2] + res[0] / 2
+        v = f_px * cam[:, 1] / cam[:, 2] + res[1] / 2
+        mx, my = spare * res[0], spare * res[1]
+        if u.min() > mx and u.max() < res[0] - mx and v.min() > my and v.max() < res[1] - my:
+            return eye, d
+    raise RuntimeError("no distance frames the wall")
 
 
 def camera(width: float, height: float, rng: np.random.Generator) -> dict:
@@ -76,24 +95,14 @@ def camera(width: float, height: float, rng: np.random.Generator) -> dict:
     box = np.array(
         [[x, y, z] for x in (0.0, width) for y in (0.0, THICKNESS_M) for z in (0.0, height)], dtype=np.float64
     )
-    for d in np.arange(2.0, 200.0, 0.25):
-        eye = np.array([width / 2 + d * math.sin(yaw), -d * math.cos(yaw), eye_h])
-        r = _look_at(eye, target)
-        cam = (box - eye) @ r.T
-        if np.any(cam[:, 2] <= 0.1):
-            continue
-        u = f_px * cam[:, 0] / cam[:, 2] + RES[0] / 2
-        v = f_px * cam[:, 1] / cam[:, 2] + RES[1] / 2
-        mx, my = 0.06 * RES[0], 0.06 * RES[1]
-        if u.min() > mx and u.max() < RES[0] - mx and v.min() > my and v.max() < RES[1] - my:
-            return {"eye": eye, "target": target, "f_mm": f_mm, "f_px": f_px, "yaw_deg": math.degrees(yaw), "d": d}
-    raise RuntimeError("no distance frames the wall")
+    eye, d = framing(box, target, eye_h, yaw, f_px, RES, 0.06, 2.0)
+    return {"eye": eye, "target": target, "f_mm": f_mm, "f_px": f_px, "yaw_deg": math.degrees(yaw), "d": d}
 
 
-def render(width: float, height: float, texture: np.ndarray, cam: dict, rng: np.random.Generator, out: Path) -> None:
-    """The scene rendered by Cycles to the JPEG ``out``."""
+def cycles_scene(res: tuple[int, int], rng: np.random.Generator, out: Path):
+    """Blender's scene emptied and set to render by Cycles (16 samples, no denoising: its noise is
+    the sensor's; its seed drawn from ``rng``) at ``res`` px to the JPEG ``out``."""
     import bpy
-    from mathutils import Matrix
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     sc = bpy.context.scene
@@ -103,43 +112,64 @@ def render(width: float, height: float, texture: np.ndarray, cam: dict, rng: np.
     sc.cycles.use_denoising = False
     sc.cycles.max_bounces = 2
     sc.cycles.seed = int(rng.integers(0, 2**31 - 1))
-    sc.render.resolution_x, sc.render.resolution_y = RES
+    sc.render.resolution_x, sc.render.resolution_y = res
     sc.render.resolution_percentage = 100
     sc.view_settings.view_transform = "Standard"
     sc.render.image_settings.file_format = "JPEG"
     sc.render.image_settings.quality = 90
     sc.render.filepath = str(out)
+    return sc
 
-    # the wall's face texture as a Blender image (bottom row first)
+
+def packed_image(name: str, texture: np.ndarray):
+    """A texture ``(rows, cols, 3)`` in [0, 1] as a Blender image packed in the scene (Blender's
+    rows run bottom first)."""
+    import bpy
+
     rows, cols = texture.shape[:2]
-    img = bpy.data.images.new("stones", cols, rows, alpha=False)
+    img = bpy.data.images.new(name, cols, rows, alpha=False)
     rgba = np.concatenate([texture[::-1], np.ones((rows, cols, 1), np.float32)], axis=-1).astype(np.float32)
     img.pixels.foreach_set(rgba.ravel())
     img.update()
     img.pack()
+    return img
 
-    def material(name, colour=None, image=None, noise=False):
-        m = bpy.data.materials.new(name)
-        m.use_nodes = True
-        nt = m.node_tree
-        bsdf = nt.nodes["Principled BSDF"]
-        bsdf.inputs["Roughness"].default_value = 0.9
-        if image is not None:
-            tex = nt.nodes.new("ShaderNodeTexImage")
-            tex.image = image
-            tex.interpolation = "Cubic"
-            nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
-        elif noise:
-            tex = nt.nodes.new("ShaderNodeTexNoise")
-            tex.inputs["Scale"].default_value = 40.0
-            ramp = nt.nodes.new("ShaderNodeValToRGB")
-            ramp.color_ramp.elements[0].color = (*colour, 1.0)
-            ramp.color_ramp.elements[1].color = (*(0.6 * np.array(colour)), 1.0)
-            nt.links.new(tex.outputs["Fac"], ramp.inputs["Fac"])
-            nt.links.new(ramp.outputs["Color"], bsdf.inputs["Base Color"])
-        else:
-            bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
-        return m
+
+def material(name: str, colour=None, image=None, noise: bool = False, rough: float = 0.9):
+    """A Principled material of one ``colour``, the packed ``image`` or (``noise``) a procedural
+    mottle of ``colour`` down to 0.6 of it."""
+    import bpy
+
+    m = bpy.data.materials.new(name)
+    m.use_nodes = True
+    nt = m.node_tree
+    bsdf = nt.nodes["Principled BSDF"]
+    bsdf.inputs["Roughness"].default_value = rough
+    if image is not None:
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = image
+        tex.interpolation = "Cubic"
+        nt.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    elif noise:
+        tex = nt.nodes.new("ShaderNodeTexNoise")
+        tex.inputs["Scale"].default_value = 40.0
+        ramp = nt.nodes.new("ShaderNodeValToRGB")
+        ramp.color_ramp.elements[0].color = (*colour, 1.0)
+        ramp.color_ramp.elements[1].color = (*(0.6 * np.array(colour)), 1.0)
+        nt.links.new(tex.outputs["Fac"], ramp.inputs["Fac"])
+        nt.links.new(ramp.outputs["Color"], bsdf.inputs["Base Color"])
+    else:
+        bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
+    return m
+
+
+def render(width: float, height: float, texture: np.ndarray, cam: dict, rng: np.random.Generator, out: Path) -> None:
+    """The scene rendered by Cycles to the JPEG ``out``."""
+    import bpy
+    from mathutils import Matrix
+
+    sc = cycles_scene(RES, rng, out)
+    img = packed_image("stones", texture)  # the wall's face
 
     # the wall: a box, its front (y = 0) carrying the texture, the other faces a strip of it
     w, t, h = width, THICKNESS_M, height
@@ -185,7 +215,7 @@ def render(width: float, height: float, texture: np.ndarray, cam: dict, rng: np.
     cam_data.lens = cam["f_mm"]
     cam_data.clip_end = 1000.0
     cam_obj = bpy.data.objects.new("camera", cam_data)
-    r = _look_at(cam["eye"], cam["target"])  # rows: x right, y down, z forward
+    r = look_at(cam["eye"], cam["target"])  # rows: x right, y down, z forward
     # Blender's camera looks along its -Z with +Y up: its axes in the world are x, -y, -z
     world_from_cam = np.stack([r[0], -r[1], -r[2]], axis=1)
     m = np.eye(4)

@@ -4,10 +4,22 @@ height.
 
 Why: every other benchmark photographs a wall alone against the sky and the ground. A facade is what
 users photograph most, and its eave (a soffit and a fascia, unlike the sky and the ground that the
-wall's appearance is learnt against) is taken in with the wall. Measured 2026-12-02 on the code
-before `calibrate.lines.band_top`: the top 30-67 px too high on 10 of 12 facades, H 3.4-9.6 % too
-tall, with a sigma of 0.1 % when the width was given (z up to 90): the wall's height was wrong and
-the fit sure of it.
+wall's appearance is learnt against) is taken in with the wall: on the code before
+`calibrate.lines.band_top` (9af7fbc) the top ran 30-67 px too high on most facades, H up to +9.6 %,
+with a sigma of 0.1 % when the width was given (z up to 100): wrong and sure of it.
+
+Measured 2026-12-02 (this script on 9af7fbc in a worktree and on the change, the same renders;
+within 2 %: focal and eye height given / width given):
+
+| seeds | before | after |
+|---|---|---|
+| 13001-13012 (looked at while making the change) | 3 / 3 of 12 | 9 / 10 of 12 |
+| 13013-13024 (rendered after it) | 5 / 5 of 12 | 6 / 7 of 12 |
+| 13025-13036 (rendered at the session's end, never looked at) | 5 / 5 of 12 | 7 / 8 of 12 |
+
+The failures left (width given): a shaded soffit under 3 % of the height kept as wall (7, H +2.1
+to +3.6 %), an eave band found in fewer than five parts of eight (13025 +8.5 %, 13007 +4.0 %), a
+top 75 px low (13028, -9.6 %) and one 15 px low (13014, -2.4 %); every one overconfident.
 
 The scene: the wall (7-12 m wide, 4.5-7.5 m high, 0.4 m thick) carries the project's brick texture
 (the paper example's scenario, 150 px/m) on its front; windows (dark glass in white frames, a floor

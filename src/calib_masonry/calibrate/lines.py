@@ -280,9 +280,9 @@ def _refine_side(
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """Sub-pixel line (point, direction) of the strongest colour edge along the side a-b (the edge
     points it was fitted to appended to ``points``, when given): of the strong edges across each
-    profile, the outermost, or with ``inner`` the innermost, or with ``strongest`` the strongest. ``to_photo``: a map of ideal image
-    points ``(..., 2)`` to the photo's (a lens): the side is then straight in ideal coordinates and
-    the photo is sampled where the lens put each of its points."""
+    profile, the outermost, or with ``inner`` the innermost, or with ``strongest`` the strongest.
+    ``to_photo``: a map of ideal image points ``(..., 2)`` to the photo's (a lens): the side is then
+    straight in ideal coordinates and the photo is sampled where the lens put each of its points."""
     length = float(np.linalg.norm(b - a))
     if length < 10:
         return None
@@ -529,16 +529,24 @@ def base_off_shadow(
         new = np.array([_intersect(lines[(j - 1) % 4], lines[j]) for j in range(4)])
     except np.linalg.LinAlgError:
         return quad, sigma
-    ends_sigma = []
-    for j in (1, 3):  # the ends' own edge evidence, for the two corners on the new base
-        pts = []
-        line = _refine_side(rgb, new[j], new[(j + 1) % 4], half, points=pts)
-        length = float(np.linalg.norm(new[(j + 1) % 4] - new[j]))
-        ends_sigma.append(_side_sigma(pts[0], line, length) if line is not None else float(sigma[j]))
+    right, left = _end_sigmas(rgb, new, half, (sigma[1], sigma[3]))  # for the two corners on the new base
     sigma = sigma.copy()
-    sigma[0] = _corner_sigma(ends_sigma[1], best[0])  # LL: the left end and the base
-    sigma[1] = _corner_sigma(best[0], ends_sigma[0])  # LR: the base and the right end
+    sigma[0] = _corner_sigma(left, best[0])  # LL: the left end and the base
+    sigma[1] = _corner_sigma(best[0], right)  # LR: the base and the right end
     return new, sigma
+
+
+def _end_sigmas(rgb: np.ndarray, quad: np.ndarray, half: float, fallback) -> tuple[float, float]:
+    """The sigmas (px) of the outline ``quad``'s right end (LR -> UR) and left end (UL -> LL), each
+    from its own edge evidence (:func:`_side_sigma`), or ``fallback`` ``(right, left)`` where an end
+    finds no edge."""
+    out = []
+    for j, f in zip((1, 3), fallback):
+        pts: list = []
+        line = _refine_side(rgb, quad[j], quad[(j + 1) % 4], half, points=pts)
+        length = float(np.linalg.norm(quad[(j + 1) % 4] - quad[j]))
+        out.append(_side_sigma(pts[0], line, length) if line is not None else float(f))
+    return out[0], out[1]
 
 
 #: a band along the outline's top whose rows are this much less textured than the wall's (the
@@ -649,25 +657,30 @@ def band_top(rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray | None, half: flo
     return line[0], line[1], pts[0]
 
 
-def with_top(rgb: np.ndarray, quad: np.ndarray, sigma: np.ndarray, top: tuple, half: float):
-    """The outline ``quad`` (LL, LR, UR, UL, corner sigmas ``sigma``) with its top on the line
-    ``top`` (:func:`band_top`), its two top corners' sigmas from that line's edge evidence and the
-    ends' (:func:`_side_sigma`)."""
+def _top_on(quad: np.ndarray, top: tuple) -> np.ndarray | None:
+    """The outline ``quad`` (LL, LR, UR, UL) with its top on the line ``top`` (:func:`band_top`):
+    its two ends met with that line; None where one runs parallel to it."""
     line = (top[0], top[1])
     new = np.asarray(quad, dtype=np.float64).copy()
     try:
         new[2] = _intersect((new[1], new[2] - new[1]), line)
         new[3] = _intersect((new[0], new[3] - new[0]), line)
     except np.linalg.LinAlgError:
+        return None
+    return new
+
+
+def with_top(rgb: np.ndarray, quad: np.ndarray, sigma: np.ndarray, top: tuple, half: float):
+    """The outline ``quad`` (LL, LR, UR, UL, corner sigmas ``sigma``) with its top on the line
+    ``top`` (:func:`band_top`; :func:`_top_on`), its two top corners' sigmas from that line's edge
+    evidence and the ends' (:func:`_side_sigma`)."""
+    new = _top_on(quad, top)
+    if new is None:
         return quad, sigma
-    t = _side_sigma(top[2], line, float(np.linalg.norm(new[3] - new[2])))
-    ends = []
-    for j0, j1 in ((1, 2), (3, 0)):  # the right end (LR -> UR) and the left one (UL -> LL)
-        e: list = []
-        ln = _refine_side(rgb, new[j0], new[j1], half, points=e)
-        ends.append(_side_sigma(e[0], ln, float(np.linalg.norm(new[j1] - new[j0]))) if ln is not None else 2.0)
+    t = _side_sigma(top[2], (top[0], top[1]), float(np.linalg.norm(new[3] - new[2])))
+    right, left = _end_sigmas(rgb, new, half, (2.0, 2.0))
     sigma = np.asarray(sigma, dtype=np.float64).copy()
-    sigma[2], sigma[3] = _corner_sigma(ends[0], t), _corner_sigma(t, ends[1])
+    sigma[2], sigma[3] = _corner_sigma(right, t), _corner_sigma(t, left)
     return new, sigma
 
 
@@ -1011,8 +1024,9 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
     # bend where it overhangs them, which read as a lens's bow
     start = outline.corners_px
     top = band_top(rgb, start, outline.vp_bed, 2.0)
-    if top is not None:
-        start = with_top(rgb, start, np.full(4, 2.0), top, halfwidths[-1])[0]
+    if top is not None:  # only its corners: refine_quad gives the sigmas
+        start = _top_on(start, top)
+        start = outline.corners_px if start is None else start
     bowed: list = []
     quad, sigma = refine_quad(rgb, start, halfwidths, with_sigma=True, curved=True, bowed=bowed)
     if top is not None:  # the sides snapped below the band, the top kept on its own edge

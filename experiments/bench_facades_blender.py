@@ -38,7 +38,7 @@ Printed: a row per facade and mode (the errors, H's error in the fit's own sigma
 distance of a fitted top corner from the truth), then per mode the count and how many failures were
 overconfident (|z| above 2).
 
-    .venv/bin/python experiments/bench_facades_blender.py [--first 13001 --count 12] [--keep DIR]
+    .venv/bin/python experiments/bench_facades_blender.py [--first 13001] [--count 12] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -47,13 +47,11 @@ import argparse
 import math
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from bench_tall_walls_blender import cycles_scene, framing, look_at, material, packed_image
+from bench_tall_walls_blender import cycles_scene, framing, look_at, material, packed_image, shoot, textured_wall
 
-ROOT = Path(__file__).resolve().parents[1]
 RES = (2000, 1334)  # landscape, px
 SENSOR_MM = 36.0  # along the long side
 THICKNESS_M = 0.4
@@ -65,17 +63,10 @@ def facade(seed: int):
     """The seed's wall, its face's texture, its openings (x0, z0, w, h in metres), its roof's rise
     (m) and the camera (:func:`camera`), drawn in that order from one generator (returned too, for
     the render's own draws)."""
-    import calib_masonry as cm
-    from calib_masonry.synthetic.photo import wall_texture
-
     rng = np.random.default_rng(seed)
     width = float(rng.uniform(7.0, 12.0))
     height = float(rng.uniform(4.5, 7.5))
-    base = cm.load_structure(ROOT / "data_synthetic" / "paper_example" / "scenario.toml", require_sources=False)
-    wall = replace(base.walls[0], name=f"facade{seed}", width_m=width, height_m=height)
-    scenario = replace(base, walls=(wall,), closed=False, synthetic=replace(base.synthetic, seed=seed))
-    pieces, _ = cm.truth_structure(scenario)
-    texture = wall_texture(wall, pieces[0], TEXTURE_PX_PER_M, rng)
+    wall, texture = textured_wall("paper_example", f"facade{seed}", width, height, seed, TEXTURE_PX_PER_M, rng)
     rise = float(rng.uniform(1.5, 3.0))
     holes = openings(width, height, rng)
     return wall, texture, holes, rise, camera(width, height, rise, rng), rng
@@ -125,7 +116,6 @@ def truth_corners(width: float, height: float, cam: dict) -> np.ndarray:
 def render(wall, texture, holes, rise: float, cam: dict, rng: np.random.Generator, out: Path) -> None:
     """The scene rendered by Cycles to the JPEG ``out``."""
     import bpy
-    from mathutils import Matrix
 
     sc = cycles_scene(RES, rng, out)
     img = packed_image("bricks", texture)
@@ -190,20 +180,7 @@ def render(wall, texture, holes, rise: float, cam: dict, rng: np.random.Generato
     sun_obj.rotation_euler = (math.radians(-rng.uniform(30, 60)), 0.0, math.radians(rng.uniform(-60, 60)))
     sc.collection.objects.link(sun_obj)
 
-    cam_data = bpy.data.cameras.new("camera")
-    cam_data.sensor_fit = "HORIZONTAL"
-    cam_data.sensor_width = SENSOR_MM
-    cam_data.lens = cam["f_mm"]
-    cam_data.clip_end = 1000.0
-    cam_obj = bpy.data.objects.new("camera", cam_data)
-    r = look_at(cam["eye"], cam["target"])  # rows: x right, y down, z forward
-    m = np.eye(4)
-    m[:3, :3] = np.stack([r[0], -r[1], -r[2]], axis=1)  # Blender's camera looks along its -Z, +Y up
-    m[:3, 3] = cam["eye"]
-    cam_obj.matrix_world = Matrix(m.tolist())
-    sc.collection.objects.link(cam_obj)
-    sc.camera = cam_obj
-    bpy.ops.render.render(write_still=True)
+    shoot(sc, cam, RES)
 
 
 def main() -> None:

@@ -39,19 +39,27 @@ TEXTURE_PX_PER_M = 200.0
 OVERHEAD_SUN = False  # --overhead-sun
 
 
-def wall_and_texture(seed: int):
-    """The seed's wall (as bench_tall_walls.py draws it) and its face's texture (rows, cols, 3)."""
+def textured_wall(scenario: str, name: str, width: float, height: float, seed: int, px_per_m: float, rng):
+    """The first wall of ``data_synthetic/<scenario>/scenario.toml`` made ``width`` x ``height`` m
+    and named ``name``, its units drawn by the project's generator with ``seed``, and its face's
+    texture ``(rows, cols, 3)`` at ``px_per_m`` (colours drawn from ``rng``)."""
     import calib_masonry as cm
     from calib_masonry.synthetic.photo import wall_texture
 
+    base = cm.load_structure(ROOT / "data_synthetic" / scenario / "scenario.toml", require_sources=False)
+    wall = replace(base.walls[0], name=name, width_m=width, height_m=height)
+    pieces, _ = cm.truth_structure(
+        replace(base, walls=(wall,), closed=False, synthetic=replace(base.synthetic, seed=seed))
+    )
+    return wall, wall_texture(wall, pieces[0], px_per_m, rng)
+
+
+def wall_and_texture(seed: int):
+    """The seed's wall (as bench_tall_walls.py draws it) and its face's texture (rows, cols, 3)."""
     rng = np.random.default_rng(seed)
     width = float(rng.uniform(2.0, 3.2))
     height = float(width * rng.uniform(4.0, 6.5))
-    base = cm.load_structure(ROOT / "data_synthetic" / "stylite" / "scenario.toml", require_sources=False)
-    wall = replace(base.walls[0], name=f"tall{seed}", width_m=width, height_m=height)
-    scenario = replace(base, walls=(wall,), closed=False, synthetic=replace(base.synthetic, seed=seed))
-    pieces, _ = cm.truth_structure(scenario)
-    return wall, wall_texture(wall, pieces[0], TEXTURE_PX_PER_M, rng)
+    return textured_wall("stylite", f"tall{seed}", width, height, seed, TEXTURE_PX_PER_M, rng)
 
 
 def look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -163,10 +171,37 @@ def material(name: str, colour=None, image=None, noise: bool = False, rough: flo
     return m
 
 
+def shoot(sc, cam: dict, res: tuple[int, int]) -> None:
+    """Blender's camera at ``cam["eye"]`` aimed at ``cam["target"]`` with no roll (:func:`look_at`),
+    ``cam["f_mm"]`` on a :data:`SENSOR_MM` sensor along the ``res`` px frame's long side, and the
+    scene ``sc`` rendered through it to its file."""
+    import bpy
+    from mathutils import Matrix
+
+    cam_data = bpy.data.cameras.new("camera")
+    if res[0] >= res[1]:
+        cam_data.sensor_fit = "HORIZONTAL"
+        cam_data.sensor_width = SENSOR_MM
+    else:
+        cam_data.sensor_fit = "VERTICAL"
+        cam_data.sensor_height = SENSOR_MM
+    cam_data.lens = cam["f_mm"]
+    cam_data.clip_end = 1000.0
+    cam_obj = bpy.data.objects.new("camera", cam_data)
+    r = look_at(cam["eye"], cam["target"])  # rows: x right, y down, z forward
+    # Blender's camera looks along its -Z with +Y up: its axes in the world are x, -y, -z
+    m = np.eye(4)
+    m[:3, :3] = np.stack([r[0], -r[1], -r[2]], axis=1)
+    m[:3, 3] = cam["eye"]
+    cam_obj.matrix_world = Matrix(m.tolist())
+    sc.collection.objects.link(cam_obj)
+    sc.camera = cam_obj
+    bpy.ops.render.render(write_still=True)
+
+
 def render(width: float, height: float, texture: np.ndarray, cam: dict, rng: np.random.Generator, out: Path) -> None:
     """The scene rendered by Cycles to the JPEG ``out``."""
     import bpy
-    from mathutils import Matrix
 
     sc = cycles_scene(RES, rng, out)
     img = packed_image("stones", texture)  # the wall's face
@@ -209,22 +244,7 @@ def render(width: float, height: float, texture: np.ndarray, cam: dict, rng: np.
         sun_obj.rotation_euler = (0.0, 0.0, 0.0)
     sc.collection.objects.link(sun_obj)
 
-    cam_data = bpy.data.cameras.new("camera")
-    cam_data.sensor_fit = "VERTICAL"
-    cam_data.sensor_height = SENSOR_MM
-    cam_data.lens = cam["f_mm"]
-    cam_data.clip_end = 1000.0
-    cam_obj = bpy.data.objects.new("camera", cam_data)
-    r = look_at(cam["eye"], cam["target"])  # rows: x right, y down, z forward
-    # Blender's camera looks along its -Z with +Y up: its axes in the world are x, -y, -z
-    world_from_cam = np.stack([r[0], -r[1], -r[2]], axis=1)
-    m = np.eye(4)
-    m[:3, :3] = world_from_cam
-    m[:3, 3] = cam["eye"]
-    cam_obj.matrix_world = Matrix(m.tolist())
-    sc.collection.objects.link(cam_obj)
-    sc.camera = cam_obj
-    bpy.ops.render.render(write_still=True)
+    shoot(sc, cam, RES)
 
 
 def main() -> None:

@@ -380,11 +380,12 @@ def test_a_base_found_along_a_cast_shadow_is_put_back_on_the_walls_foot():
     assert np.array_equal(base_off_shadow(rgb, far, sigma, vp, 2.5)[0], far)
 
 
-def _wall_under_an_eave(eave_px: int, *, plain: bool = False, seed: int = 3) -> np.ndarray:
+def _wall_under_an_eave(eave_px: int, *, plain: bool = False, bed: bool = False, seed: int = 3) -> np.ndarray:
     """A brick wall (rows 50-450, columns 100-400; bricks 25 x 30 px of their own shades, light
     mortar) under a uniform band ``eave_px`` high that overhangs it by 20 px at either end (an
     eave's fascia and soffit), against a light sky and ground (RGB, blurred as a photo is).
-    ``plain``: the wall one shade (a rendered facade)."""
+    ``plain``: the wall one shade (a rendered facade). ``bed``: the band is a mortar bed on the
+    wall's top instead, as wide as the wall and of the sky's own lightness."""
     from scipy import ndimage
 
     rng = np.random.default_rng(seed)
@@ -397,7 +398,10 @@ def _wall_under_an_eave(eave_px: int, *, plain: bool = False, seed: int = 3) -> 
         wall[24::25, :] = 0.85  # the bed joints, under each course (the top course meets the eave)
         wall[(cols + 15 * (course % 2)) % 30 == 0] = 0.85  # the head joints
     img[50:450, 100:400] = wall
-    img[50 - eave_px : 50, 80:420] = 0.30 + rng.normal(0, 0.01, (eave_px, 340))
+    if bed:
+        img[50 - eave_px : 50, 100:400] = 0.80 + rng.normal(0, 0.01, (eave_px, 300))
+    else:
+        img[50 - eave_px : 50, 80:420] = 0.30 + rng.normal(0, 0.01, (eave_px, 340))
     return np.repeat(ndimage.gaussian_filter(img, 0.8)[..., None], 3, -1).astype(np.float32)
 
 
@@ -405,9 +409,11 @@ def test_an_eave_taken_in_with_the_wall_is_cut_off_its_top():
     # a facade's eave is unlike the sky and the ground the wall's appearance is learnt against, so
     # the outline takes it in (Blender-rendered facades: the top 30-67 px high, H 4-10 % too tall
     # at a sigma of 0.1 % with the width given). The rows under the outline's top are followed
-    # down until they are textured as masonry is: the top goes on the wall's own edge there.
-    # Not where the band is thinner than 3 % of the height (a mortar bed belongs to the wall), nor
-    # on a wall no more textured than the band (plaster)
+    # down until they are textured as masonry is, or, where the band is too thin to tell from a
+    # mortar bed by its texture (Blender facades' shaded soffits, 11-23 px: H +2 to +4 %), down
+    # the wall's ends until they show an edge under the band that runs on past them: the top goes
+    # on the wall's own edge there. Not on a mortar bed on the wall's top (it ends where the wall
+    # does, even where the sky beside it is as light as it is)
     from calib_masonry.calibrate.lines import band_top, with_top
 
     outline = np.array([[99.5, 449.5], [399.5, 449.5], [399.5, 19.5], [99.5, 19.5]])  # the eave's top
@@ -420,8 +426,12 @@ def test_an_eave_taken_in_with_the_wall_is_cut_off_its_top():
     assert np.all(sigma[2:] < 1.0)
     assert band_top(_wall_under_an_eave(30), outline, None, 6.0) is not None  # no vanishing point
     thin = outline + [[0, 0], [0, 0], [0, 22.0], [0, 22.0]]  # 8 px of band: 2 % of the height
-    assert band_top(_wall_under_an_eave(8), thin, vp, 6.0) is None
-    assert band_top(_wall_under_an_eave(30, plain=True), outline, vp, 6.0) is None
+    for rgb, start in ((_wall_under_an_eave(8), thin), (_wall_under_an_eave(30, plain=True), outline)):
+        top = band_top(rgb, start, vp, 6.0)  # by the ends alone: too thin, or a wall as plain as its band
+        assert top is not None
+        assert abs(top[0][1] + (250.0 - top[0][0]) * top[1][1] / top[1][0] - 49.5) < 0.5  # row 50 at mid-wall
+    bed = _wall_under_an_eave(8, bed=True)  # a mortar bed on the top, of the sky's own lightness
+    assert band_top(bed, thin, vp, 6.0) is None
     on_wall = outline + [[0, 0], [0, 0], [0, 30.0], [0, 30.0]]  # an outline already on the wall's top
     assert band_top(_wall_under_an_eave(30), on_wall, vp, 6.0) is None
 

@@ -560,6 +560,9 @@ MASONRY_TEXTURE_RATIO = 0.6
 BAND_MIN_FRACTION = 0.03
 #: how far down from the top the band is sought, of the wall's height
 BAND_REACH_FRACTION = 0.15
+#: a band that overhangs the wall's ends (:func:`_ends_onset`) is cut away when at least this deep
+#: (px): a photo's blur and a corner's anti-aliasing leave the ends' edges 1-3 px short of the top
+BAND_MIN_PX = 6.0
 
 
 def _row_texture(
@@ -578,7 +581,29 @@ def _row_texture(
     return np.stack([np.median(q, axis=1) for q in np.array_split(dev, parts, axis=1)], axis=1)
 
 
-def band_top(rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray | None, half: float) -> tuple | None:
+def _band_end(t: np.ndarray, wall: float, least: float) -> float | None:
+    """Where a band ends on the profile ``t`` (one value a pixel, from the outline's top down):
+    the rows down to where three in a row reach :data:`MASONRY_TEXTURE_RATIO` of ``wall`` (the
+    value the wall's own rows have), to a sub-pixel where ``t`` crosses halfway from the band's
+    median to ``wall`` (each row is blurred across the edge); None where that is under ``least``
+    px deep or the band's median is over :data:`BAND_TEXTURE_RATIO` of ``wall``."""
+    run = np.convolve((t >= MASONRY_TEXTURE_RATIO * wall).astype(int), np.ones(3, dtype=int), mode="valid") == 3
+    if not run.any():
+        return None
+    k = int(np.argmax(run))
+    if k < least or float(np.median(t[:k])) > BAND_TEXTURE_RATIO * wall:
+        return None
+    level = 0.5 * (float(np.median(t[:k])) + wall)
+    j = k - 1
+    while j > 0 and t[j] >= level:
+        j -= 1
+    lo, hi = float(t[j]), float(t[j + 1])
+    return float(j) + (float(np.clip((level - lo) / (hi - lo), 0.0, 1.0)) if hi > lo else 1.0)
+
+
+def band_top(
+    rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray | None, half: float, side_half: float = 6.0
+) -> tuple | None:
     """The top line ``(point, direction, edge points)`` of the outline ``quad`` (LL, LR, UR, UL) put
     down off a band of the photo that is no masonry, or None where there is none: an eave (its
     soffit and fascia), a cornice or a coping that the wall's appearance takes in, because it is
@@ -594,8 +619,12 @@ def band_top(rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray | None, half: flo
     deep and its rows' median texture under :data:`BAND_TEXTURE_RATIO` of the wall's, and its
     edge is where the texture crosses halfway. Where five parts or more have a band, the top is
     the strongest step within ``half`` px of the line through their edges (its direction within
-    :data:`SIDE_TURN_RAD` of that line's), half the bands' depth down at least. A wall
-    textured no more than its band (plaster, a rendered facade) has none."""
+    :data:`SIDE_TURN_RAD` of that line's), half the bands' depth down at least. Where they have
+    none, or their line leads to no such step, the line through the places where the wall's two
+    ends start to show an edge (:func:`_ends_onset`, each end sought within ``side_half`` px) is
+    tried the same way: a band that overhangs the wall, too thin to tell from a mortar bed by its
+    texture (a shaded soffit, 11-23 px of a 650-850 px facade), or on a wall no more textured than
+    it (plaster, a rendered facade)."""
     quad = np.asarray(quad, dtype=np.float64)
     ur, ul = quad[2], quad[3]
     if vp is not None:  # the rows run along the courses: the top turned through the vanishing point
@@ -619,42 +648,89 @@ def band_top(rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray | None, half: flo
         t = tex[:, q]
         if wall[q] < 2e-3:  # no texture to tell masonry by
             continue
-        # the band: the rows from the top down to where three rows in a row are textured
-        run = np.convolve((t >= MASONRY_TEXTURE_RATIO * wall[q]).astype(int), np.ones(3, dtype=int), mode="valid") == 3
-        if not run.any():
+        edge = _band_end(t, float(wall[q]), max(BAND_MIN_PX, BAND_MIN_FRACTION * height))
+        if edge is not None:
+            at.append(q)
+            onset.append(edge)
+    guides = []
+    if len(at) >= 5:  # a band along most of the top: the line through the parts' crossings
+        mids = ur[None, :] + (0.15 + 0.7 * (np.asarray(at) + 0.5) / parts)[:, None] * (ul - ur)[None, :]
+        guides.append((_robust_fit(mids - np.asarray(onset)[:, None] * n[None, :]), np.array([ur, ul])))
+    # or, where there is none (or it leads to no edge), the line where both ends' edges start below
+    # the outline's own top corners: a band that overhangs the wall, too thin to tell from a mortar
+    # bed by its texture
+    ends = _ends_onset(rgb, quad, quad[2], quad[3], height, side_half)
+    if ends is not None:
+        guides.append((ends, quad[2:]))
+    for guide, corners in guides:
+        if guide is None:
             continue
-        k = int(np.argmax(run))
-        if depths[k] < max(6.0, BAND_MIN_FRACTION * height) or float(np.median(t[:k])) > BAND_TEXTURE_RATIO * wall[q]:
+        band = -float(np.mean(across(guide, corners, n)))
+        gur, gul = _intersect((quad[1], quad[2] - quad[1]), guide), _intersect((quad[0], quad[3] - quad[0]), guide)
+        # then the strongest step within ``half`` px of that line (the outermost strong one may be
+        # a pixel out: a blurred step sampled every half pixel has a shoulder beside its peak; a
+        # joint under the top course steps as much as the edge does)
+        pts: list = []
+        line = _refine_side(rgb, gur, gul, half, points=pts, strongest=True)
+        if line is None or abs(float(np.cross(guide[1], line[1]))) > math.sin(SIDE_TURN_RAD):
             continue
-        # where the texture crosses halfway from the band's to the wall's: the edge, to a pixel
-        # or so (each row is blurred across it)
-        level = 0.5 * (float(np.median(t[:k])) + wall[q])
-        j = k - 1
-        while j > 0 and t[j] >= level:
-            j -= 1
-        lo, hi = float(t[j]), float(t[j + 1])
-        at.append(q)
-        onset.append(float(depths[j]) + (float(np.clip((level - lo) / (hi - lo), 0.0, 1.0)) if hi > lo else 1.0))
-    if len(at) < 5:  # a band along most of the top, or none
+        place = across(line, corners, n)
+        if np.all((-2.0 * band <= place) & (place <= -0.5 * band)):  # down in the band, not on the top
+            return line[0], line[1], pts[0]
+    return None
+
+
+def _ends_onset(
+    rgb: np.ndarray, quad: np.ndarray, ur: np.ndarray, ul: np.ndarray, height: float, half: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The line (point, direction) through the places where the outline ``quad``'s two ends (LR ->
+    UR, LL -> UL) start to show an edge, below its top ``ur``-``ul``, or None where either end
+    shows one from the top down (to within :data:`BAND_MIN_PX`): a band that overhangs the wall (an
+    eave's soffit and fascia, a loading beam) hides the ends, where a mortar bed on the wall's top,
+    which the texture cannot tell from a soffit, does not. Along each end, down to
+    :data:`BAND_REACH_FRACTION` of the height, the strongest colour step across it within ``half``
+    px; its edge starts where three rows in a row step by at least :data:`MASONRY_TEXTURE_RATIO` of
+    the end's median step further down (and the rows above step under :data:`BAND_TEXTURE_RATIO`
+    of it), to a sub-pixel by where the step crosses halfway."""
+    depths = np.arange(0.0, BAND_REACH_FRACTION * height, 1.0)
+    offs = np.arange(-half, half + 0.25, 0.5)
+    centre = np.asarray(quad, dtype=np.float64).mean(axis=0)
+    points = []
+    for lo, top in ((quad[1], ur), (quad[0], ul)):
+        down = (lo - top) / max(float(np.linalg.norm(lo - top)), 1e-9)
+        n = np.array([down[1], -down[0]])
+        pts = top[None, None, :] + depths[:, None, None] * down[None, None, :] + offs[None, :, None] * n[None, None, :]
+        prof = _blurred_samples(rgb, pts[..., 1].ravel(), pts[..., 0].ravel()).reshape(len(depths), len(offs), 3)
+        step = np.linalg.norm(np.diff(prof, axis=1), axis=-1).max(axis=1)
+        end = float(np.median(step[len(depths) // 2 :]))
+        if end < 0.02:  # no edge to the end at all (a wall on a background of its own colour)
+            return None
+        at = _band_end(step, end, BAND_MIN_PX)
+        if at is None:
+            return None
+        # the band runs on past the end: beside the wall, the colour changes where the band ends by
+        # at least BAND_TEXTURE_RATIO of the change across the end below it (an eave's shaded
+        # soffit against the sky: 0.5; a mortar bed of the sky's own colour does not change it)
+        out = n if float(n @ (top - centre)) > 0 else -n
+        beside = top[None, :] + np.arange(half + 1.0, half + 5.5)[:, None] * out[None, :]
+        band, below, inner = (
+            _blurred_samples(rgb, q[..., 1].ravel(), q[..., 0].ravel()).reshape(-1, 3).mean(axis=0)
+            for q in (
+                beside[None, :, :] + depths[: max(1, int(at) - 1), None, None] * down[None, None, :],
+                beside[None, :, :] + depths[int(at) + 3 : 2 * int(at) + 3, None, None] * down[None, None, :],
+                beside[None, :, :]
+                - (2 * half + 6.0) * out[None, None, :]
+                + depths[int(at) + 3 : 2 * int(at) + 3, None, None] * down[None, None, :],
+            )
+        )
+        if np.linalg.norm(band - below) < BAND_TEXTURE_RATIO * np.linalg.norm(inner - below):
+            return None
+        points.append(top + at * down)
+    d = points[1] - points[0]
+    length = float(np.linalg.norm(d))
+    if length < 1e-9:
         return None
-    # the line through the parts' crossings (at their middles along the side)
-    mids = ur[None, :] + (0.15 + 0.7 * (np.asarray(at) + 0.5) / parts)[:, None] * (ul - ur)[None, :]
-    guide = _robust_fit(mids - np.asarray(onset)[:, None] * n[None, :])
-    if guide is None:
-        return None
-    gur, gul = _intersect((quad[1], quad[2] - quad[1]), guide), _intersect((quad[0], quad[3] - quad[0]), guide)
-    # then the strongest step within ``half`` px of that line (the outermost strong one may be a
-    # pixel out: a blurred step sampled every half pixel has a shoulder beside its peak; a joint
-    # under the top course steps as much as the edge does)
-    pts: list = []
-    line = _refine_side(rgb, gur, gul, half, points=pts, strongest=True)
-    if line is None or abs(float(np.cross(guide[1], line[1]))) > math.sin(SIDE_TURN_RAD):
-        return None
-    place = across(line, np.array([ur, ul]), n)
-    band = float(np.median(onset))
-    if not np.all((-2.0 * band <= place) & (place <= -0.5 * band)):  # down in the band, not on the top
-        return None
-    return line[0], line[1], pts[0]
+    return points[0], d / length
 
 
 def _top_on(quad: np.ndarray, top: tuple) -> np.ndarray | None:
@@ -1023,7 +1099,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
     # an eave or a cornice taken in with the wall is cut away before the sides are snapped: they
     # bend where it overhangs them, which read as a lens's bow
     start = outline.corners_px
-    top = band_top(rgb, start, outline.vp_bed, 2.0)
+    top = band_top(rgb, start, outline.vp_bed, 2.0, halfwidths[0])
     if top is not None:  # only its corners: refine_quad gives the sigmas
         start = _top_on(start, top)
         start = outline.corners_px if start is None else start

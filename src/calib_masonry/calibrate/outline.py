@@ -274,6 +274,21 @@ def _component_of(mask: np.ndarray, seed: np.ndarray) -> np.ndarray:
     return lab == int(np.argmax(counts))
 
 
+def _with_openings(prob: np.ndarray, region: np.ndarray, occluded: np.ndarray | None) -> np.ndarray:
+    """``prob`` with the holes of the wall's ``region`` as sure wall (but where ``occluded``:
+    neutral, as before), for the outline's rectangle (:func:`_fit_rectangle`) alone: a facade's
+    windows lie within its outline, but their glass and frames are unlike its masonry, and where
+    they fill half a floor's width the rows through them held less wall than not, so the
+    rectangle stopped on their heads (a Blender facade with a row of ground-floor windows: its
+    base 240-310 px high, H -48 % at a sigma of 0.15 % with the width given). The region itself
+    is left as it is: it also chooses the segments the vanishing points are found from, and
+    filled it moved them on 99 of 440 Blender walls."""
+    holes = ndimage.binary_fill_holes(region) & ~region
+    if occluded is not None:
+        holes &= ~occluded
+    return np.where(holes, 1.0, prob) if holes.any() else prob
+
+
 def _rectifying_map(vp_bed: np.ndarray, vp_head: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """A projective map of photo pixels that sends the bed vanishing point to infinity along +u and
     the head one along +v, fixing the photo's ``centre`` (homogeneous points in, ``(u, v, 1)`` out)."""
@@ -568,6 +583,7 @@ def _cut_outline(small, start, occluded, no_wall, rect_from_px, grid):
     cut = _component_of(_grab_cut(small, start, occluded), _inside_convex_mask(shape, start, 0.5))
     if cut.sum() <= 0.25 * _inside_convex_mask(shape, start, 1.0).sum():
         return None
+    cut = ndimage.binary_fill_holes(cut)  # the windows are the wall's (see _with_openings)
     prob = ndimage.gaussian_filter(cut.astype(np.float64), 1.0)
     if occluded is not None:
         prob = np.where(occluded, 0.5, prob)
@@ -636,6 +652,7 @@ def detect_outline(
         region_nb = _component_of(prob_nb > 0.5, seed)
         if region_nb.sum() > 2.0 * region.sum() or region.sum() < small_wall <= region_nb.sum():
             prob, region = prob_nb, region_nb
+    prob = _with_openings(prob, region, occluded)
     if region.sum() < small_wall:
         raise FitFailed(
             "automatic mode: no wall found (no region at the photo's centre looks unlike its surroundings); "

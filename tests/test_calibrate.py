@@ -436,6 +436,29 @@ def test_an_eave_taken_in_with_the_wall_is_cut_off_its_top():
     assert band_top(_wall_under_an_eave(30), on_wall, vp, 6.0) is None
 
 
+def test_a_plain_end_face_taken_in_with_the_wall_is_cut_off_its_end():
+    # a house's plain side wall seen beyond the facade's corner (yaw 24 degrees) is as unlike the
+    # sky as the eave is, so the outline took it in (Blender facades: an end 70-80 px out, W +8 %
+    # and H -9.6 % with the width given). The top's rule turned to the ends finds it: the columns
+    # along the end, through the head joints' vanishing point, untextured until the masonry starts
+    from scipy import ndimage
+
+    from calib_masonry.calibrate.lines import _with_ends, band_top
+
+    gray = _wall_under_an_eave(30)[..., 0].astype(np.float64)
+    gray[50:450, 400:420] = 0.62  # a plain end face beyond the right end, 20 px wide
+    rgb = np.repeat(ndimage.gaussian_filter(gray, 0.8)[..., None], 3, -1).astype(np.float32)
+    outline = np.array([[99.5, 449.5], [419.5, 449.5], [419.5, 49.5], [99.5, 49.5]])
+    vp = np.array([0.0, 1.0, 0.0])  # the head joints are plumb
+    right = band_top(rgb, np.roll(outline, 1, axis=0), vp, 6.0, overhang=False)
+    assert right is not None
+    assert band_top(rgb, np.roll(outline, -1, axis=0), vp, 6.0, overhang=False) is None  # the left end is the wall's
+    quad, sigma = _with_ends(rgb, outline, np.full(4, 2.0), {1: right}, 2.5)
+    assert np.abs(quad[1:3, 0] - 399.5).max() < 1.0  # the wall's right edge, after column 399
+    assert np.abs(quad[[0, 3]] - outline[[0, 3]]).max() < 1e-9 and np.abs(quad[1:3, 1] - outline[1:3, 1]).max() < 1e-9
+    assert np.all(sigma[1:3] < 1.0)
+
+
 @pytest.mark.parametrize("name", ["facade13006.jpg", "facade13021.jpg"])
 def test_blender_facades_under_an_eave(name):
     # facades rendered by Blender (data_external/blender_facades): a brick wall with windows and a

@@ -602,7 +602,13 @@ def _band_end(t: np.ndarray, wall: float, least: float) -> float | None:
 
 
 def band_top(
-    rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray | None, half: float, side_half: float = 6.0
+    rgb: np.ndarray,
+    quad: np.ndarray,
+    vp: np.ndarray | None,
+    half: float,
+    side_half: float = 6.0,
+    *,
+    overhang: bool = True,
 ) -> tuple | None:
     """The top line ``(point, direction, edge points)`` of the outline ``quad`` (LL, LR, UR, UL) put
     down off a band of the photo that is no masonry, or None where there is none: an eave (its
@@ -659,7 +665,7 @@ def band_top(
     # or, where there is none (or it leads to no edge), the line where both ends' edges start below
     # the outline's own top corners: a band that overhangs the wall, too thin to tell from a mortar
     # bed by its texture
-    ends = _ends_onset(rgb, quad, quad[2], quad[3], height, side_half)
+    ends = _ends_onset(rgb, quad, quad[2], quad[3], height, side_half) if overhang else None
     if ends is not None:
         guides.append((ends, quad[2:]))
     for guide, corners in guides:
@@ -731,6 +737,16 @@ def _ends_onset(
     if length < 1e-9:
         return None
     return points[0], d / length
+
+
+def _with_ends(rgb: np.ndarray, quad: np.ndarray, sigma: np.ndarray, ends: dict, half: float):
+    """The outline ``quad`` (corner sigmas ``sigma``) with each end in ``ends`` (rolled by its
+    key, 1 for the right end and -1 for the left, as :func:`band_top` found it) put on its line,
+    as :func:`with_top` puts the top."""
+    for k, band in ends.items():
+        q, sg = with_top(rgb, np.roll(quad, k, axis=0), np.roll(np.asarray(sigma, dtype=np.float64), k), band, half)
+        quad, sigma = np.roll(q, -k, axis=0), np.roll(sg, -k)
+    return quad, sigma
 
 
 def _top_on(quad: np.ndarray, top: tuple) -> np.ndarray | None:
@@ -1103,10 +1119,19 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
     if top is not None:  # only its corners: refine_quad gives the sigmas
         start = _top_on(start, top)
         start = outline.corners_px if start is None else start
+    # so is a plain end face (a house's side wall beyond the facade's corner), by the same rule
+    # turned to the ends: the columns along an end through the head joints' vanishing point
+    ends = {}
+    for k in (1, -1):  # the quad rolled so that the right (1) or the left (-1) end is its "top"
+        band = band_top(rgb, np.roll(start, k, axis=0), outline.vp_head, 2.0, overhang=False)
+        moved = None if band is None else _top_on(np.roll(start, k, axis=0), band)
+        if moved is not None:
+            ends[k], start = band, np.roll(moved, -k, axis=0)
     bowed: list = []
     quad, sigma = refine_quad(rgb, start, halfwidths, with_sigma=True, curved=True, bowed=bowed)
     if top is not None:  # the sides snapped below the band, the top kept on its own edge
         quad, sigma = with_top(rgb, quad, sigma, top, halfwidths[-1])
+    quad, sigma = _with_ends(rgb, quad, sigma, ends, halfwidths[-1])
     if outline.vp_bed is not None and not bowed:
         quad, sigma = base_off_shadow(rgb, quad, sigma, outline.vp_bed, halfwidths[-1])
     straight = None
@@ -1114,6 +1139,7 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
         straight = refine_quad(rgb, start, halfwidths, with_sigma=True, curved=False)
         if top is not None:
             straight = with_top(rgb, *straight, top, halfwidths[-1])
+        straight = _with_ends(rgb, *straight, ends, halfwidths[-1])
         if outline.vp_bed is not None:
             straight = base_off_shadow(rgb, *straight, outline.vp_bed, halfwidths[-1])
         if np.array_equal(straight[0], quad):

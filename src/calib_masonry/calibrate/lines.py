@@ -719,14 +719,17 @@ def _ends_onset(
         # soffit against the sky: 0.5; a mortar bed of the sky's own colour does not change it)
         out = n if float(n @ (top - centre)) > 0 else -n
         beside = top[None, :] + np.arange(half + 1.0, half + 5.5)[:, None] * out[None, :]
+        deeper = depths[int(at) + 3 : 2 * int(at) + 3]
+        if len(deeper) == 0:  # the band reaches the end of the search: nothing below it to compare
+            return None
         band, below, inner = (
             _blurred_samples(rgb, q[..., 1].ravel(), q[..., 0].ravel()).reshape(-1, 3).mean(axis=0)
             for q in (
                 beside[None, :, :] + depths[: max(1, int(at) - 1), None, None] * down[None, None, :],
-                beside[None, :, :] + depths[int(at) + 3 : 2 * int(at) + 3, None, None] * down[None, None, :],
+                beside[None, :, :] + deeper[:, None, None] * down[None, None, :],
                 beside[None, :, :]
                 - (2 * half + 6.0) * out[None, None, :]
-                + depths[int(at) + 3 : 2 * int(at) + 3, None, None] * down[None, None, :],
+                + deeper[:, None, None] * down[None, None, :],
             )
         )
         if np.linalg.norm(band - below) < BAND_TEXTURE_RATIO * np.linalg.norm(inner - below):

@@ -560,6 +560,11 @@ MASONRY_TEXTURE_RATIO = 0.6
 BAND_MIN_FRACTION = 0.03
 #: how far down from the top the band is sought, of the wall's height
 BAND_REACH_FRACTION = 0.15
+#: the parts' band edges are kept for the line through them when within this many px of it, or
+#: three robust sigmas if more: a crossing on a blurred, textured row is good to a pixel or two,
+#: and seven parts 33-41 px deep along a plain end face (a Blender facade) kept fewer than five
+#: at three sigmas of their 1-px median residual
+BAND_FIT_FLOOR_PX = 3.0
 #: a band that overhangs the wall's ends (:func:`_ends_onset`) is cut away when at least this deep
 #: (px): a photo's blur and a corner's anti-aliasing leave the ends' edges 1-3 px short of the top
 BAND_MIN_PX = 6.0
@@ -661,7 +666,9 @@ def band_top(
     guides = []
     if len(at) >= 5:  # a band along most of the top: the line through the parts' crossings
         mids = ur[None, :] + (0.15 + 0.7 * (np.asarray(at) + 0.5) / parts)[:, None] * (ul - ur)[None, :]
-        guides.append((_robust_fit(mids - np.asarray(onset)[:, None] * n[None, :]), np.array([ur, ul])))
+        guides.append(
+            (_robust_fit(mids - np.asarray(onset)[:, None] * n[None, :], floor=BAND_FIT_FLOOR_PX), np.array([ur, ul]))
+        )
     # or, where there is none (or it leads to no edge), the line where both ends' edges start below
     # the outline's own top corners: a band that overhangs the wall, too thin to tell from a mortar
     # bed by its texture
@@ -672,18 +679,75 @@ def band_top(
         if guide is None:
             continue
         band = -float(np.mean(across(guide, corners, n)))
-        gur, gul = _intersect((quad[1], quad[2] - quad[1]), guide), _intersect((quad[0], quad[3] - quad[0]), guide)
-        # then the strongest step within ``half`` px of that line (the outermost strong one may be
-        # a pixel out: a blurred step sampled every half pixel has a shoulder beside its peak; a
-        # joint under the top course steps as much as the edge does)
-        pts: list = []
-        line = _refine_side(rgb, gur, gul, half, points=pts, strongest=True)
-        if line is None or abs(float(np.cross(guide[1], line[1]))) > math.sin(SIDE_TURN_RAD):
+        found = _step_along(rgb, quad, guide, half)
+        if found is None:
             continue
+        line, pts = found
         place = across(line, corners, n)
         if np.all((-2.0 * band <= place) & (place <= -0.5 * band)):  # down in the band, not on the top
-            return line[0], line[1], pts[0]
+            return line[0], line[1], pts
     return None
+
+
+def _step_along(rgb: np.ndarray, quad: np.ndarray, guide: tuple, half: float):
+    """The strongest colour step within ``half`` px of the line ``guide`` (point, direction)
+    between the outline ``quad``'s two ends, its direction within :data:`SIDE_TURN_RAD` of the
+    guide's: ``(line, edge points)``, or None. The strongest, not the outermost strong one, which
+    may be a pixel out (a blurred step sampled every half pixel has a shoulder beside its peak),
+    and a joint under the top course steps as much as the wall's edge does."""
+    try:
+        gur, gul = _intersect((quad[1], quad[2] - quad[1]), guide), _intersect((quad[0], quad[3] - quad[0]), guide)
+    except np.linalg.LinAlgError:
+        return None
+    pts: list = []
+    line = _refine_side(rgb, gur, gul, half, points=pts, strongest=True)
+    if line is None or abs(float(np.cross(guide[1], line[1]))) > math.sin(SIDE_TURN_RAD):
+        return None
+    return line, pts[0]
+
+
+def _end_steps(
+    rgb: np.ndarray, lo: np.ndarray, top: np.ndarray, depths: np.ndarray, half: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Along the outline's end ``lo`` -> ``top``, at ``depths`` px below ``top`` (negative: above
+    it, on the end's line carried on), the strongest colour step across the end within ``half`` px
+    ``(len(depths),)``; with the unit directions down the end and across it."""
+    down = (lo - top) / max(float(np.linalg.norm(lo - top)), 1e-9)
+    n = np.array([down[1], -down[0]])
+    offs = np.arange(-half, half + 0.25, 0.5)
+    pts = top[None, None, :] + depths[:, None, None] * down[None, None, :] + offs[None, :, None] * n[None, None, :]
+    prof = _blurred_samples(rgb, pts[..., 1].ravel(), pts[..., 0].ravel()).reshape(len(depths), len(offs), 3)
+    return np.linalg.norm(np.diff(prof, axis=1), axis=-1).max(axis=1), down, n
+
+
+def _band_beside(
+    rgb: np.ndarray, top: np.ndarray, down: np.ndarray, out: np.ndarray, at: float, depths: np.ndarray, half: float
+) -> bool | None:
+    """Whether, beside an end whose edge starts ``at`` px below ``top`` (``down`` the end's
+    direction, ``out`` away from the wall), the colour changes where that band ends by at least
+    :data:`BAND_TEXTURE_RATIO` of the change across the end below it: a band that runs on past the
+    end (an eave's shaded soffit against the sky: 0.5), not a mortar bed of the sky's own colour,
+    which ends with the wall. None where the search ``depths`` holds nothing below the band."""
+    beside = top[None, :] + np.arange(half + 1.0, half + 5.5)[:, None] * out[None, :]
+    deeper = depths[int(at) + 3 : 2 * int(at) + 3]
+    if len(deeper) == 0:  # the band reaches the end of the search: nothing below it to compare
+        return None
+    band, below, inner = (
+        _blurred_samples(rgb, q[..., 1].ravel(), q[..., 0].ravel()).reshape(-1, 3).mean(axis=0)
+        for q in (
+            beside[None, :, :] + depths[: max(1, int(at) - 1), None, None] * down[None, None, :],
+            beside[None, :, :] + deeper[:, None, None] * down[None, None, :],
+            beside[None, :, :] - (2 * half + 6.0) * out[None, None, :] + deeper[:, None, None] * down[None, None, :],
+        )
+    )
+    return bool(np.linalg.norm(band - below) >= BAND_TEXTURE_RATIO * np.linalg.norm(inner - below))
+
+
+def _line_through(points: list) -> tuple[np.ndarray, np.ndarray] | None:
+    """The line (point, unit direction) through two points, None where they coincide."""
+    d = points[1] - points[0]
+    length = float(np.linalg.norm(d))
+    return None if length < 1e-9 else (points[0], d / length)
 
 
 def _ends_onset(
@@ -693,53 +757,111 @@ def _ends_onset(
     UR, LL -> UL) start to show an edge, below its top ``ur``-``ul``, or None where either end
     shows one from the top down (to within :data:`BAND_MIN_PX`): a band that overhangs the wall (an
     eave's soffit and fascia, a loading beam) hides the ends, where a mortar bed on the wall's top,
-    which the texture cannot tell from a soffit, does not. Along each end, down to
-    :data:`BAND_REACH_FRACTION` of the height, the strongest colour step across it within ``half``
-    px; its edge starts where three rows in a row step by at least :data:`MASONRY_TEXTURE_RATIO` of
-    the end's median step further down (and the rows above step under :data:`BAND_TEXTURE_RATIO`
-    of it), to a sub-pixel by where the step crosses halfway."""
+    which the texture cannot tell from a soffit, does not (:func:`_band_beside`). Along each end,
+    down to :data:`BAND_REACH_FRACTION` of the height, the strongest colour step across it within
+    ``half`` px (:func:`_end_steps`); its edge starts where three rows in a row step by at least
+    :data:`MASONRY_TEXTURE_RATIO` of the end's median step further down (and the rows above step
+    under :data:`BAND_TEXTURE_RATIO` of it), to a sub-pixel by where the step crosses halfway."""
     depths = np.arange(0.0, BAND_REACH_FRACTION * height, 1.0)
-    offs = np.arange(-half, half + 0.25, 0.5)
     centre = np.asarray(quad, dtype=np.float64).mean(axis=0)
     points = []
     for lo, top in ((quad[1], ur), (quad[0], ul)):
-        down = (lo - top) / max(float(np.linalg.norm(lo - top)), 1e-9)
-        n = np.array([down[1], -down[0]])
-        pts = top[None, None, :] + depths[:, None, None] * down[None, None, :] + offs[None, :, None] * n[None, None, :]
-        prof = _blurred_samples(rgb, pts[..., 1].ravel(), pts[..., 0].ravel()).reshape(len(depths), len(offs), 3)
-        step = np.linalg.norm(np.diff(prof, axis=1), axis=-1).max(axis=1)
+        step, down, n = _end_steps(rgb, lo, top, depths, half)
         end = float(np.median(step[len(depths) // 2 :]))
         if end < 0.02:  # no edge to the end at all (a wall on a background of its own colour)
             return None
         at = _band_end(step, end, BAND_MIN_PX)
         if at is None:
             return None
-        # the band runs on past the end: beside the wall, the colour changes where the band ends by
-        # at least BAND_TEXTURE_RATIO of the change across the end below it (an eave's shaded
-        # soffit against the sky: 0.5; a mortar bed of the sky's own colour does not change it)
         out = n if float(n @ (top - centre)) > 0 else -n
-        beside = top[None, :] + np.arange(half + 1.0, half + 5.5)[:, None] * out[None, :]
-        deeper = depths[int(at) + 3 : 2 * int(at) + 3]
-        if len(deeper) == 0:  # the band reaches the end of the search: nothing below it to compare
-            return None
-        band, below, inner = (
-            _blurred_samples(rgb, q[..., 1].ravel(), q[..., 0].ravel()).reshape(-1, 3).mean(axis=0)
-            for q in (
-                beside[None, :, :] + depths[: max(1, int(at) - 1), None, None] * down[None, None, :],
-                beside[None, :, :] + deeper[:, None, None] * down[None, None, :],
-                beside[None, :, :]
-                - (2 * half + 6.0) * out[None, None, :]
-                + deeper[:, None, None] * down[None, None, :],
-            )
-        )
-        if np.linalg.norm(band - below) < BAND_TEXTURE_RATIO * np.linalg.norm(inner - below):
+        if not _band_beside(rgb, top, down, out, at, depths, half):
             return None
         points.append(top + at * down)
-    d = points[1] - points[0]
-    length = float(np.linalg.norm(d))
-    if length < 1e-9:
+    return _line_through(points)
+
+
+def _end_stop(rgb: np.ndarray, lo: np.ndarray, top: np.ndarray, reach: float, half: float, centre: np.ndarray):
+    """Where the edge along the outline's end ``lo`` -> ``top`` stops going up: px above ``top``
+    (negative: below it), to a sub-pixel where its step crosses halfway, or None where the end
+    shows no edge, the edge runs on past ``reach`` px above the top, or it starts
+    :data:`BAND_MIN_PX` or more below the top beside no band (:func:`_band_beside`: a mortar bed
+    of the background's colour on the wall's top). An edge that runs on above the top is one
+    whose rows step by at least :data:`MASONRY_TEXTURE_RATIO` of the end's median (over the rows
+    below the top) up to three in a row under half of it."""
+    depths = np.arange(-math.floor(reach), math.floor(reach) + 1.0, 1.0)
+    step, down, n = _end_steps(rgb, lo, top, depths, half)
+    i0 = int(np.flatnonzero(depths == 0.0)[0])
+    end = float(np.median(step[i0:]))
+    if end < 0.02:
         return None
-    return points[0], d / length
+    if step[i0] < 0.5 * end:  # no edge at the top: where it starts below it
+        at = _band_end(step[i0:], end, 0.0)
+        if at is None:
+            return None
+        out = n if float(n @ (top - centre)) > 0 else -n
+        if at >= BAND_MIN_PX and not _band_beside(rgb, top, down, out, at, depths[i0:], half):
+            return None
+        return -at
+    up = step[: i0 + 1][::-1]  # from the top row upward, a row a pixel
+    run = np.convolve((up < 0.5 * end).astype(int), np.ones(3, dtype=int), mode="valid") == 3
+    if not run.any():
+        return None
+    k = int(np.argmax(run))
+    if k == 0:
+        return 0.0
+    edge = float(np.median(up[:k]))
+    if edge < MASONRY_TEXTURE_RATIO * end:
+        return None
+    level = 0.5 * (edge + float(np.median(up[k : k + max(3, k)])))
+    under = np.flatnonzero(up < level)
+    if not under.size:
+        return None
+    j = int(under[0])  # the first row above the crossing
+    if j == 0:
+        return 0.0
+    a, b = float(up[j - 1]), float(up[j])
+    return (j - 1) + ((a - level) / (a - b) if a > b else 1.0)
+
+
+def top_by_ends(rgb: np.ndarray, quad: np.ndarray, vp: np.ndarray | None, half: float) -> tuple | None:
+    """The top line ``(point, direction, edge points)`` of the outline ``quad`` (LL, LR, UR, UL)
+    put where its two ends' edges stop (:func:`_end_stop`), or None where both stop within
+    :data:`BAND_MIN_PX` of its top corners: a top snapped a few px off the wall's, onto a band
+    whose colour the wall's appearance leaves out or takes in (a top mortar course like the
+    soffit above it: the ends' edges run on 7-9 px above the top; an eave's fascia edge, which
+    steps more than the crease under it, at one end: 6-18 px, on Blender-rendered facades). The
+    top is then the strongest step within 2 px of the line through the two places, its direction
+    within :data:`SIDE_TURN_RAD` of that line's and of the bed joints' vanishing point ``vp``'s
+    (none without one) and within half each end's offset (2 px at least) of where that end stops;
+    each end is sought within ``half`` px. (Without the vanishing point a Blender tall wall's top,
+    10-16 px under a top mortar course of the sky's lightness, went to a line 2.5 degrees off
+    the courses: an end's edge through the mortar steps less than through the bricks.)"""
+    quad = np.asarray(quad, dtype=np.float64)
+    height = 0.5 * float(np.linalg.norm(quad[3] - quad[0]) + np.linalg.norm(quad[2] - quad[1]))
+    if vp is None or height < 40:
+        return None
+    centre = quad.mean(axis=0)
+    stops, points = [], []
+    for lo, top in ((quad[1], quad[2]), (quad[0], quad[3])):
+        at = _end_stop(rgb, lo, top, BAND_REACH_FRACTION * height, half, centre)
+        if at is None:
+            return None
+        stops.append(at)
+        points.append(top - at * (lo - top) / max(float(np.linalg.norm(lo - top)), 1e-9))
+    guide = _line_through(points)
+    if guide is None or max(abs(v) for v in stops) < BAND_MIN_PX:
+        return None
+    found = _step_along(rgb, quad, guide, 2.0)
+    if found is None:
+        return None
+    (point, direction), pts = found
+    if _off_vp((point, direction), vp) > SIDE_TURN_RAD:
+        return None
+    stops = np.asarray(stops)
+    place = across((point, direction), quad[2:], side_normal(quad[2], quad[3]))
+    if np.all(np.abs(place - stops) <= np.maximum(2.0, 0.5 * np.abs(stops))):
+        return point, direction, pts
+    return None
 
 
 def _with_ends(rgb: np.ndarray, quad: np.ndarray, sigma: np.ndarray, ends: dict, half: float):
@@ -1132,7 +1254,18 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
             ends[k], start = band, np.roll(moved, -k, axis=0)
     bowed: list = []
     quad, sigma = refine_quad(rgb, start, halfwidths, with_sigma=True, curved=True, bowed=bowed)
+    if top is None:
+        # the snap carries a top that stopped inside a thin eave out to the eave's own edge, which
+        # steps more than the crease under it: the rule again on the snapped outline, whose ends
+        # now start a band's depth below its top
+        top = band_top(rgb, quad, outline.vp_bed, 2.0, halfwidths[0])
     if top is not None:  # the sides snapped below the band, the top kept on its own edge
+        quad, sigma = with_top(rgb, quad, sigma, top, halfwidths[-1])
+    # a top a few px off the wall's at one end or both (either rule's, or the snap's): where the
+    # ends' edges stop
+    by_ends = top_by_ends(rgb, quad, outline.vp_bed, halfwidths[0])
+    if by_ends is not None:
+        top = by_ends
         quad, sigma = with_top(rgb, quad, sigma, top, halfwidths[-1])
     quad, sigma = _with_ends(rgb, quad, sigma, ends, halfwidths[-1])
     if outline.vp_bed is not None and not bowed:

@@ -27,8 +27,8 @@ parts fitted with a floor (`BAND_FIT_FLOOR_PX`):
 
 The failures left with the width given, each overconfident: a top corner 15 px off along the top
 (13014, -2.4 %), and a roof and eave of the bricks' own colour 113 px deep, beyond `band_top`'s
-reach of 15 % of the height (13070, +16.8 %). H's truth lies within 2 of its sigmas in 60 of the 72
-fits with the width given (51 on 54d504f).
+reach of 15 % of the height (13070, +16.8 %). H's truth lies within 2 of its sigmas in 59 of the 72
+fits with the width given (52 on 54d504f).
 
 The scene: the wall (7-12 m wide, 4.5-7.5 m high, 0.4 m thick) carries the project's brick texture
 (the paper example's scenario, 150 px/m) on its front; windows (dark glass in white frames, a floor

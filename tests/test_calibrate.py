@@ -491,6 +491,17 @@ def test_a_plain_end_face_taken_in_with_the_wall_is_cut_off_its_end():
     assert np.abs(quad[1:3, 0] - 399.5).max() < 1.0  # the wall's right edge, after column 399
     assert np.abs(quad[[0, 3]] - outline[[0, 3]]).max() < 1e-9 and np.abs(quad[1:3, 1] - outline[1:3, 1]).max() < 1e-9
     assert np.all(sigma[1:3] < 1.0)
+    # 8 px wide, thinner than 3 % of the wall's width, the least a top's band needs (a mortar bed
+    # on a wall's top belongs to it): an end's may be as thin as BAND_MIN_PX (Blender facades: the
+    # side wall beyond the corner a wedge 0-40 px wide under the eave, the end 15-21 px out)
+    gray = _wall_under_an_eave(30)[..., 0].astype(np.float64)
+    gray[50:450, 400:408] = 0.62
+    rgb = np.repeat(ndimage.gaussian_filter(gray, 0.8)[..., None], 3, -1).astype(np.float32)
+    outline = np.array([[99.5, 449.5], [407.5, 449.5], [407.5, 49.5], [99.5, 49.5]])
+    right = band_top(rgb, np.roll(outline, 1, axis=0), vp, 6.0, overhang=False)
+    assert right is not None
+    quad, _ = _with_ends(rgb, outline, np.full(4, 2.0), {1: right}, 2.5)
+    assert np.abs(quad[1:3, 0] - 399.5).max() < 1.0
 
 
 @pytest.mark.parametrize("name", ["facade13006.jpg", "facade13021.jpg", "facade13065.jpg", "facade13071.jpg"])
@@ -766,8 +777,20 @@ def test_a_fit_its_joints_contradict_is_refused_not_moved_to_an_end_face(monkeyp
     folder = ROOT / "data_external" / "blender_walls"
     truth = next(p for p in json.loads((folder / "truth.json").read_text())["photos"] if p["name"] == "tall12325.jpg")
     # the outline as the code of that day found it: its base's lost course not yet put back on
-    # the foot its head joints give (base_from_heads, which now finds this wall within 2 %)
+    # the foot its head joints give (base_from_heads, which now finds this wall within 2 %), nor
+    # the region's pockets open at the bottom taken in as openings (outline._openings: holes alone)
+    from scipy import ndimage
+
+    import calib_masonry.calibrate.outline as outline
+
+    def holes_alone(region):
+        holes = ndimage.binary_fill_holes(region) & ~region
+        lab, n = ndimage.label(holes)
+        size = ndimage.sum(holes, lab, np.arange(1, n + 1))
+        return np.r_[False, size >= outline.OPENING_MIN_FRACTION * float(region.sum() + holes.sum())][lab]
+
     monkeypatch.setattr(lines, "base_from_heads", lambda rgb, quad, sigma, *rest: (quad, sigma))
+    monkeypatch.setattr(outline, "_openings", holes_alone)
     asked = []
     real = rectify.front_face_ends
     monkeypatch.setattr(rectify, "front_face_ends", lambda res, seg, rgb=None: asked.append(res) or real(res, seg, rgb))
@@ -799,11 +822,11 @@ def test_the_outline_rectangle_takes_no_rows_without_evidence():
     assert np.abs(np.sort(quad[:, 0]) - [29.5, 29.5, 59.5, 59.5]).max() < 0.6
 
 
-def _facade_with_windows(seed: int = 5) -> np.ndarray:
+def _facade_with_windows(seed: int = 5, *, doors: bool = False) -> np.ndarray:
     """A brick wall (rows 150-449, columns 150-649: bricks 40 x 20 px of their own shades, light
     mortar) against a blue sky and a grey-green ground, with a row of four ground-floor windows
     (dark glass 60 x 90 px in white frames, half of every 125 px of the wall's width), 36 px above
-    its foot; RGB, blurred as a photo is."""
+    its foot (``doors``: down to the foot, a shopfront's doors); RGB, blurred as a photo is."""
     from scipy import ndimage
 
     rng = np.random.default_rng(seed)
@@ -817,9 +840,10 @@ def _facade_with_windows(seed: int = 5) -> np.ndarray:
     brick = brick + rng.normal(0, 0.01, brick.shape)
     brick[(rows % 20 == 19) | ((cols + 20 * (course % 2)) % 40 == 0)] = [0.8, 0.78, 0.74]
     img[150:450, 150:650] = brick
+    foot = 450 if doors else 414
     for c0 in (190, 315, 440, 565):
-        img[316:414, c0 - 4 : c0 + 64] = 0.92
-        img[320:410, c0 : c0 + 60] = [0.15, 0.17, 0.2]
+        img[316:foot, c0 - 4 : c0 + 64] = 0.92
+        img[320 : foot - 4 * (not doors), c0 : c0 + 60] = [0.15, 0.17, 0.2]
     return np.clip(ndimage.gaussian_filter(img, (0.8, 0.8, 0)), 0, 1).astype(np.float32)
 
 
@@ -831,10 +855,11 @@ def test_the_outline_takes_in_a_facades_windows():
     from calib_masonry.calibrate.lines import DetectConfig
     from calib_masonry.calibrate.outline import detect_outline
 
-    quad = detect_outline(_facade_with_windows(), config=DetectConfig().outline).corners_px
-    assert np.abs(quad[:2, 1] - 449.5).max() < 4.0  # the foot (the windows' heads: row 316)
-    assert np.abs(quad[2:, 1] - 149.5).max() < 4.0
-    assert np.abs(quad[[0, 3], 0] - 149.5).max() < 4.0 and np.abs(quad[[1, 2], 0] - 649.5).max() < 4.0
+    for doors in (False, True):  # doors open the region's holes at the bottom: pockets, taken in too
+        quad = detect_outline(_facade_with_windows(doors=doors), config=DetectConfig().outline).corners_px
+        assert np.abs(quad[:2, 1] - 449.5).max() < 4.0  # the foot (the windows' heads: row 316)
+        assert np.abs(quad[2:, 1] - 149.5).max() < 4.0
+        assert np.abs(quad[[0, 3], 0] - 149.5).max() < 4.0 and np.abs(quad[[1, 2], 0] - 649.5).max() < 4.0
 
 
 def test_covariance_shrinks_as_observations_are_added():

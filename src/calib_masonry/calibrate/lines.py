@@ -654,12 +654,16 @@ def band_top(
     parts = 8
     tex = _row_texture(rgb, ur, ul, n, depths, parts)
     wall = np.median(tex[len(depths) // 2 :], axis=0)
+    # a band on the top as thin as a mortar bed is the wall's; an end's (``overhang`` False) may
+    # narrow to nothing at one end (a house's plain side wall beyond the facade's corner, hidden
+    # under the eave: a wedge 0-40 px wide)
+    least = max(BAND_MIN_PX, BAND_MIN_FRACTION * height) if overhang else BAND_MIN_PX
     at, onset = [], []
     for q in range(parts):
         t = tex[:, q]
         if wall[q] < 2e-3:  # no texture to tell masonry by
             continue
-        edge = _band_end(t, float(wall[q]), max(BAND_MIN_PX, BAND_MIN_FRACTION * height))
+        edge = _band_end(t, float(wall[q]), least)
         if edge is not None:
             at.append(q)
             onset.append(edge)
@@ -684,7 +688,10 @@ def band_top(
             continue
         line, pts = found
         place = across(line, corners, n)
-        if np.all((-2.0 * band <= place) & (place <= -0.5 * band)):  # down in the band, not on the top
+        if overhang and np.all((-2.0 * band <= place) & (place <= -0.5 * band)):  # down in the band, not on the top
+            return line[0], line[1], pts
+        deep = -across(guide, corners, n)  # an end's band, corner by corner: near the guide
+        if not overhang and np.all(np.abs(place + deep) <= np.maximum(2.0, 0.5 * deep)) and deep.max() >= least:
             return line[0], line[1], pts
     return None
 

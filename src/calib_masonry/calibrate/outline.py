@@ -281,8 +281,16 @@ OPENING_MIN_FRACTION = 0.01
 
 
 def _openings(region: np.ndarray) -> np.ndarray:
-    """The holes of ``region`` that are openings (:data:`OPENING_MIN_FRACTION`), as a mask."""
-    holes = ndimage.binary_fill_holes(region) & ~region
+    """The holes of ``region`` that are openings (:data:`OPENING_MIN_FRACTION`), as a mask: its
+    holes, and its pockets open at the bottom alone (the region to the left and to the right in
+    the same row and above in the same column: a door, or a row of windows whose sills the region
+    does not close under them; a Blender facade's ground floor, its base on the windows' heads,
+    H -44 %)."""
+    filled = ndimage.binary_fill_holes(region)
+    left = np.maximum.accumulate(region, axis=1)
+    right = np.maximum.accumulate(region[:, ::-1], axis=1)[:, ::-1]
+    above = np.maximum.accumulate(region, axis=0)
+    holes = (filled | (left & right & above)) & ~region
     if not holes.any():
         return holes
     lab, n = ndimage.label(holes)

@@ -667,19 +667,21 @@ def band_top(
         if edge is not None:
             at.append(q)
             onset.append(edge)
-    guides = []
-    if len(at) >= 5:  # a band along most of the top: the line through the parts' crossings
-        mids = ur[None, :] + (0.15 + 0.7 * (np.asarray(at) + 0.5) / parts)[:, None] * (ul - ur)[None, :]
-        guides.append(
-            (_robust_fit(mids - np.asarray(onset)[:, None] * n[None, :], floor=BAND_FIT_FLOOR_PX), np.array([ur, ul]))
-        )
-    # or, where there is none (or it leads to no edge), the line where both ends' edges start below
-    # the outline's own top corners: a band that overhangs the wall, too thin to tell from a mortar
-    # bed by its texture
-    ends = _ends_onset(rgb, quad, quad[2], quad[3], height, side_half) if overhang else None
-    if ends is not None:
-        guides.append((ends, quad[2:]))
-    for guide, corners in guides:
+
+    def guides():
+        if len(at) >= 5:  # a band along most of the top: the line through the parts' crossings
+            mids = ur[None, :] + (0.15 + 0.7 * (np.asarray(at) + 0.5) / parts)[:, None] * (ul - ur)[None, :]
+            yield (
+                _robust_fit(mids - np.asarray(onset)[:, None] * n[None, :], floor=BAND_FIT_FLOOR_PX),
+                np.array([ur, ul]),
+            )
+        # or, where there is none (or it leads to no edge), the line where both ends' edges start
+        # below the outline's own top corners: a band that overhangs the wall, too thin to tell
+        # from a mortar bed by its texture (looked for only then: two ends' profiles)
+        if overhang:
+            yield _ends_onset(rgb, quad, quad[2], quad[3], height, side_half), quad[2:]
+
+    for guide, corners in guides():
         if guide is None:
             continue
         band = -float(np.mean(across(guide, corners, n)))
@@ -728,13 +730,22 @@ def _end_steps(
 
 
 def _band_beside(
-    rgb: np.ndarray, top: np.ndarray, down: np.ndarray, out: np.ndarray, at: float, depths: np.ndarray, half: float
+    rgb: np.ndarray,
+    top: np.ndarray,
+    down: np.ndarray,
+    across: np.ndarray,
+    centre: np.ndarray,
+    at: float,
+    depths: np.ndarray,
+    half: float,
 ) -> bool | None:
     """Whether, beside an end whose edge starts ``at`` px below ``top`` (``down`` the end's
-    direction, ``out`` away from the wall), the colour changes where that band ends by at least
+    direction, ``across`` it either way; the side away from the wall's ``centre`` is looked at),
+    the colour changes where that band ends by at least
     :data:`BAND_TEXTURE_RATIO` of the change across the end below it: a band that runs on past the
     end (an eave's shaded soffit against the sky: 0.5), not a mortar bed of the sky's own colour,
     which ends with the wall. None where the search ``depths`` holds nothing below the band."""
+    out = across if float(across @ (top - centre)) > 0 else -across
     beside = top[None, :] + np.arange(half + 1.0, half + 5.5)[:, None] * out[None, :]
     deeper = depths[int(at) + 3 : 2 * int(at) + 3]
     if len(deeper) == 0:  # the band reaches the end of the search: nothing below it to compare
@@ -780,8 +791,7 @@ def _ends_onset(
         at = _band_end(step, end, BAND_MIN_PX)
         if at is None:
             return None
-        out = n if float(n @ (top - centre)) > 0 else -n
-        if not _band_beside(rgb, top, down, out, at, depths, half):
+        if not _band_beside(rgb, top, down, n, centre, at, depths, half):
             return None
         points.append(top + at * down)
     return _line_through(points)
@@ -805,8 +815,7 @@ def _end_stop(rgb: np.ndarray, lo: np.ndarray, top: np.ndarray, reach: float, ha
         at = _band_end(step[i0:], end, 0.0)
         if at is None:
             return None
-        out = n if float(n @ (top - centre)) > 0 else -n
-        if at >= BAND_MIN_PX and not _band_beside(rgb, top, down, out, at, depths[i0:], half):
+        if at >= BAND_MIN_PX and not _band_beside(rgb, top, down, n, centre, at, depths[i0:], half):
             return None
         return -at
     up = step[: i0 + 1][::-1]  # from the top row upward, a row a pixel

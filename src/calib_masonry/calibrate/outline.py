@@ -285,12 +285,12 @@ def _openings(region: np.ndarray) -> np.ndarray:
     holes, and its pockets open at the bottom alone (the region to the left and to the right in
     the same row and above in the same column: a door, or a row of windows whose sills the region
     does not close under them; a Blender facade's ground floor, its base on the windows' heads,
-    H -44 %)."""
-    filled = ndimage.binary_fill_holes(region)
+    H -44 %). A hole is such a pocket too: walking along its row or up its column from any of its
+    pixels meets the region before the photo's border."""
     left = np.maximum.accumulate(region, axis=1)
     right = np.maximum.accumulate(region[:, ::-1], axis=1)[:, ::-1]
     above = np.maximum.accumulate(region, axis=0)
-    holes = (filled | (left & right & above)) & ~region
+    holes = left & right & above & ~region
     if not holes.any():
         return holes
     lab, n = ndimage.label(holes)

@@ -28,6 +28,9 @@ __all__ = [
     "angles_from_rotation",
     "distort",
     "focal_px_from_35mm",
+    "focal_prior_px",
+    "FOCAL_PRIOR_35MM",
+    "FOCAL_PRIOR_LOG_SIGMA",
     "heading_from_theta",
     "image_from_wall_homography",
     "intrinsics",
@@ -215,6 +218,17 @@ def focal_px_from_35mm(focal_35mm: float, image_size: tuple[int, int]) -> float:
     """Focal length in pixels from a 35 mm-equivalent focal length (diagonal convention)."""
     w, h = image_size
     return focal_35mm * math.hypot(w, h) / math.hypot(36.0, 24.0)
+
+
+#: Without EXIF or --focal-px, the focal length's prior: log-normal about a 35 mm-equivalent of
+#: 35 mm, sigma 0.3 in log (phones and compacts shoot at about 24-50 mm: -1.3 to +1.2 sigma).
+FOCAL_PRIOR_35MM = 35.0
+FOCAL_PRIOR_LOG_SIGMA = 0.3
+
+
+def focal_prior_px(image_size: tuple[int, int]) -> float:
+    """The focal length's prior median in pixels (:data:`FOCAL_PRIOR_35MM`) for a photo of ``image_size``."""
+    return focal_px_from_35mm(FOCAL_PRIOR_35MM, image_size)
 
 
 #: the flag that gives the wall's corners by hand, named by every message of a failed detection

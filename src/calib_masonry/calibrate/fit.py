@@ -30,10 +30,11 @@ from ..errors import FitFailed, InputError
 from .camera import (
     CORNERS_FLAG,
     DISTORTION_MODEL,
+    FOCAL_PRIOR_LOG_SIGMA,
     PARAM_NAMES,
     angles_from_rotation,
     distort,
-    focal_px_from_35mm,
+    focal_prior_px,
     image_from_wall_homography,
     order_corners,
     principal_point,
@@ -57,10 +58,6 @@ __all__ = [
 # Parameter scales: the solver works on params / SCALE so every unknown is of order one.
 SCALE = np.array([1000.0, 0.1, 0.1, 0.1, 1.0, 1.0, 1.0, 1.0, 1.0, 0.1, 0.1])
 
-#: Without EXIF or --focal-px, the focal length's prior: log-normal about a 35 mm-equivalent of
-#: 35 mm, sigma 0.3 in log (phones and compacts shoot at about 24-50 mm: -1.3 to +1.2 sigma).
-FOCAL_PRIOR_35MM = 35.0
-FOCAL_PRIOR_LOG_SIGMA = 0.3
 #: The lens's radial distortion without a profile: k1 ~ N(0, 0.15), k2 ~ N(0, 0.05) (OpenCV's
 #: convention; consumer lenses lie within about -0.3..0.15, and most JPEGs are corrected in the
 #: camera; k2 is nearly the same curve as k1 over a photo's radii, so its prior keeps the pair apart)
@@ -266,7 +263,7 @@ def homography_dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
 
 
 def _focal_guess(inp: CalibrationInput) -> float:
-    return inp.focal_px or inp.focal_prior_px or focal_px_from_35mm(FOCAL_PRIOR_35MM, inp.image_size)
+    return inp.focal_px or inp.focal_prior_px or focal_prior_px(inp.image_size)
 
 
 def initial_params(inp: CalibrationInput) -> np.ndarray:
@@ -379,7 +376,7 @@ def pack(inp: CalibrationInput) -> dict:
     head, head_w = _pad_segments(inp.head_segments, inp.line_sigma_px, inp.max_effective_segments)
     f0 = inp.focal_px or 0.0
     f_sigma = inp.focal_sigma_px if inp.focal_sigma_px else (0.002 * f0 if f0 else None)
-    f_prior = inp.focal_prior_px or focal_px_from_35mm(FOCAL_PRIOR_35MM, inp.image_size)
+    f_prior = inp.focal_prior_px or focal_prior_px(inp.image_size)
     # held: a sigma of 1e-3 (a tighter one made J^T J singular by its condition number)
     k_w = (1.0 / inp.k1_sigma, 1.0 / inp.k2_sigma) if inp.fit_distortion else (1e3, 1e3)
     length = inp.known_length

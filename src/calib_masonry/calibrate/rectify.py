@@ -434,10 +434,10 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     lens = None
     lens_source = "fitted (no profile)" if config.fit_distortion else "none (held at 0)"
     if config.lens_profile and photo.lens and config.fit_distortion:
-        from .camera import focal_px_from_35mm
+        from .camera import focal_prior_px
         from .lens import lensfun_profile
 
-        lens = lensfun_profile(photo.lens, (w, h), focal or focal_px_from_35mm(35.0, (w, h)))
+        lens = lensfun_profile(photo.lens, (w, h), focal or focal_prior_px((w, h)))
         if lens is not None:
             lens_source = lens.source
     height_m, height_sigma = config.eye_height()
@@ -559,14 +559,14 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         inp = replace(inp, known_height_m=courses["height_m"], known_height_sigma_m=courses["height_sigma_m"])
         result = calibrate(inp, start=result.params)
     if focal is None:
-        from .camera import focal_px_from_35mm
+        from .camera import FOCAL_PRIOR_35MM, focal_prior_px
 
-        prior = focal_px_from_35mm(35.0, (w, h))
+        prior = inp.focal_prior_px or focal_prior_px((w, h))
         rel = result.sigma("focal_px") / result.value("focal_px")
         focal_source = (
             "vanishing points"
             if rel < 0.5 * inp.focal_prior_log_sigma
-            else f"prior (35 mm equivalent, {prior:.0f} px, x/: 1.35)"
+            else f"prior ({FOCAL_PRIOR_35MM:g} mm equivalent, {prior:.0f} px, x/: {math.exp(inp.focal_prior_log_sigma):.2f})"
         )
     scale_source = config.scale_source
     if scale_source == ScaleSource.KNOWN_WIDTH:

@@ -927,6 +927,35 @@ def test_corners_alone_without_focal_are_not_singular_and_the_scale_says_where_i
     assert abs(known.result.height_m - 6.0) < 2 * known.result.sigma("height_m") + 1e-9
 
 
+def test_the_focal_prior_s_spread_is_a_setting_that_the_fit_and_its_message_follow(tmp_path):
+    """Without EXIF, on a fronto-parallel photo (whose corners say little of the focal length),
+    the fitted focal length's relative sigma follows the prior's log sigma, the package's 0.3 (no
+    wider than it) or a wider one given (``focal_prior_log_sigma``), and the printed source
+    names that spread; a spread that is not a positive number is refused naming the field."""
+    from calib_masonry.calibrate.camera import FOCAL_PRIOR_LOG_SIGMA
+    from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
+    from calib_masonry.io import read_photo
+
+    truth = _camera(yaw=0.0, pitch=0.0, roll=0.0, eye=3.0, f=900.0, d=12.0)
+    corners, _, _ = _observations(truth, size=(1200, 800))
+    from PIL import Image
+
+    Image.fromarray(np.full((800, 1200, 3), 128, np.uint8)).save(tmp_path / "flat.png")
+    photo = read_photo(tmp_path / "flat.png")
+    cfg = CalibrateConfig(corners_px=tuple(corners.ravel()), use_lines=False, snap_corners=False, known_width_m=5.0)
+    rel = []
+    for spread in (None, 1.0):
+        cal = calibrate_photo(photo, replace(cfg, focal_prior_log_sigma=spread))
+        s = FOCAL_PRIOR_LOG_SIGMA if spread is None else spread
+        rel.append(cal.result.sigma("focal_px") / cal.result.value("focal_px"))
+        assert f"x/: {math.exp(s):.2f}" in cal.focal_source
+    assert 0.5 * FOCAL_PRIOR_LOG_SIGMA < rel[0] <= 1.05 * FOCAL_PRIOR_LOG_SIGMA  # 0.25 measured
+    assert rel[1] > 2.0 * rel[0]  # 0.63 measured
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(InputError, match="focal_prior_log_sigma"):
+            CalibrateConfig(focal_prior_log_sigma=bad)
+
+
 # ----------------------------------------------------------------------------------------------
 # synthetic photos: detection, rectification, segmentation
 

@@ -124,6 +124,8 @@ class CalibrateConfig:
     camera_height_sigma_m: float | None = None
     focal_px: float | None = None  # overrides EXIF
     focal_sigma_px: float | None = None
+    # without EXIF or focal_px: the log sigma of the focal length's prior (camera.FOCAL_PRIOR_LOG_SIGMA)
+    focal_prior_log_sigma: float | None = None
     known_width_m: float | None = None
     known_height_m: float | None = None
     known_length: tuple[float, float, float, float, float] | None = None
@@ -148,6 +150,10 @@ class CalibrateConfig:
     detect: DetectConfig = field(default_factory=DetectConfig)
 
     def __post_init__(self) -> None:
+        if self.focal_prior_log_sigma is not None and not (
+            math.isfinite(self.focal_prior_log_sigma) and self.focal_prior_log_sigma > 0
+        ):
+            raise InputError(f"focal_prior_log_sigma {self.focal_prior_log_sigma}: must be > 0")
         if self.camera_height_m is not None and not (
             math.isfinite(self.camera_height_m) and 0 < self.camera_height_m < 100
         ):
@@ -467,6 +473,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         known_length=known_length,
         known_length_sigma_m=config.known_sigma_m,
         fit_distortion=config.fit_distortion,
+        **({} if config.focal_prior_log_sigma is None else {"focal_prior_log_sigma": config.focal_prior_log_sigma}),
         **(
             {"k1_prior": lens.k1, "k1_sigma": lens.k1_sigma, "k2_prior": lens.k2, "k2_sigma": lens.k2_sigma}
             if lens is not None

@@ -733,19 +733,19 @@ def _band_beside(
     rgb: np.ndarray,
     top: np.ndarray,
     down: np.ndarray,
-    across: np.ndarray,
+    normal: np.ndarray,
     centre: np.ndarray,
     at: float,
     depths: np.ndarray,
     half: float,
 ) -> bool | None:
     """Whether, beside an end whose edge starts ``at`` px below ``top`` (``down`` the end's
-    direction, ``across`` it either way; the side away from the wall's ``centre`` is looked at),
+    direction, ``normal`` across it either way; the side away from the wall's ``centre`` is looked at),
     the colour changes where that band ends by at least
     :data:`BAND_TEXTURE_RATIO` of the change across the end below it: a band that runs on past the
     end (an eave's shaded soffit against the sky: 0.5), not a mortar bed of the sky's own colour,
     which ends with the wall. None where the search ``depths`` holds nothing below the band."""
-    out = across if float(across @ (top - centre)) > 0 else -across
+    out = normal if float(normal @ (top - centre)) > 0 else -normal
     beside = top[None, :] + np.arange(half + 1.0, half + 5.5)[:, None] * out[None, :]
     deeper = depths[int(at) + 3 : 2 * int(at) + 3]
     if len(deeper) == 0:  # the band reaches the end of the search: nothing below it to compare

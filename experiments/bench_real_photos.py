@@ -44,11 +44,11 @@ def warped(photo, rng: np.random.Generator):
     from scipy import ndimage
 
     import calib_masonry as cm
-    from calib_masonry.calibrate.camera import focal_px_from_35mm, wall_from_camera_rotation
+    from calib_masonry.calibrate.camera import focal_prior_px, wall_from_camera_rotation
 
     rgb = photo.rgb
     rows, cols = rgb.shape[:2]
-    f = focal_px_from_35mm(35.0, (cols, rows))
+    f = focal_prior_px((cols, rows))
     zoom = rng.uniform(0.75, 0.9)  # zoomed out: the walls fill these photos to 35 px of their sides
     k = np.array([[f, 0, (cols - 1) / 2], [0, f, (rows - 1) / 2], [0, 0, 1.0]])
     k2 = np.array([[f * zoom, 0, (cols - 1) / 2], [0, f * zoom, (rows - 1) / 2], [0, 0, 1.0]])

@@ -18,7 +18,7 @@ from .._threads import background, thread_map
 from ..errors import FitFailed, InputError
 from ..io import Photo, check_output, read_photo, staged_output, write_json, write_mask, write_rgb
 from ..preload import preload_in_background
-from .camera import CORNERS_FLAG, order_corners, px_per_m
+from .camera import CORNERS_FLAG, FOCAL_PRIOR_35MM, FOCAL_PRIOR_LOG_SIGMA, focal_prior_px, order_corners, px_per_m
 from .lines import (
     DetectConfig,
     Detection,
@@ -124,8 +124,7 @@ class CalibrateConfig:
     camera_height_sigma_m: float | None = None
     focal_px: float | None = None  # overrides EXIF
     focal_sigma_px: float | None = None
-    # without EXIF or focal_px: the log sigma of the focal length's prior (camera.FOCAL_PRIOR_LOG_SIGMA)
-    focal_prior_log_sigma: float | None = None
+    focal_prior_log_sigma: float = FOCAL_PRIOR_LOG_SIGMA  # without EXIF or focal_px: the prior's log sigma
     known_width_m: float | None = None
     known_height_m: float | None = None
     known_length: tuple[float, float, float, float, float] | None = None
@@ -150,9 +149,7 @@ class CalibrateConfig:
     detect: DetectConfig = field(default_factory=DetectConfig)
 
     def __post_init__(self) -> None:
-        if self.focal_prior_log_sigma is not None and not (
-            math.isfinite(self.focal_prior_log_sigma) and self.focal_prior_log_sigma > 0
-        ):
+        if not (math.isfinite(self.focal_prior_log_sigma) and self.focal_prior_log_sigma > 0):
             raise InputError(f"focal_prior_log_sigma {self.focal_prior_log_sigma}: must be > 0")
         if self.camera_height_m is not None and not (
             math.isfinite(self.camera_height_m) and 0 < self.camera_height_m < 100
@@ -440,7 +437,6 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     lens = None
     lens_source = "fitted (no profile)" if config.fit_distortion else "none (held at 0)"
     if config.lens_profile and photo.lens and config.fit_distortion:
-        from .camera import focal_prior_px
         from .lens import lensfun_profile
 
         lens = lensfun_profile(photo.lens, (w, h), focal or focal_prior_px((w, h)))
@@ -473,7 +469,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         known_length=known_length,
         known_length_sigma_m=config.known_sigma_m,
         fit_distortion=config.fit_distortion,
-        **({} if config.focal_prior_log_sigma is None else {"focal_prior_log_sigma": config.focal_prior_log_sigma}),
+        focal_prior_log_sigma=config.focal_prior_log_sigma,
         **(
             {"k1_prior": lens.k1, "k1_sigma": lens.k1_sigma, "k2_prior": lens.k2, "k2_sigma": lens.k2_sigma}
             if lens is not None
@@ -566,9 +562,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         inp = replace(inp, known_height_m=courses["height_m"], known_height_sigma_m=courses["height_sigma_m"])
         result = calibrate(inp, start=result.params)
     if focal is None:
-        from .camera import FOCAL_PRIOR_35MM, focal_prior_px
-
-        prior = inp.focal_prior_px or focal_prior_px((w, h))
+        prior = focal_prior_px((w, h))
         rel = result.sigma("focal_px") / result.value("focal_px")
         focal_source = (
             "vanishing points"

@@ -928,7 +928,7 @@ class _Pieces:
             return None
         try:
             hull = ConvexHull(support[:, :2])
-        except QhullError:
+        except QhullError:  # on one line: a knife edge, no support polygon
             return None
         edges = []
         for q in range(len(hull.vertices)):
@@ -968,7 +968,8 @@ class _Pieces:
         R = self.R[i]
         Iw = R @ self.I0[i] @ R.T
         kinetic = 0.5 * self.M[i] * float(self.v[i] @ self.v[i]) + 0.5 * float(self.w[i] @ Iw @ self.w[i])
-        # a Python bool: check_fallen asks ``is not False`` (numpy's False is not ``False``)
+        # a Python bool: numpy's False is not the ``False`` singleton (an ``is not False`` once took
+        # every answer for yes)
         return bool(kinetic >= max(work, 0.0) + self.M[i] * g * self.settings.settle_fraction * self.size[i])
 
     def falls(self, i: int, ground_peak: float) -> bool | None:

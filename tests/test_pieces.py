@@ -171,7 +171,7 @@ def test_the_verdict_does_not_read_where_a_rocking_piece_is():
         assert not pm.toppled[0] and not pm.fallen[0]
 
 
-def _column(factor, motion, times):
+def _column(factor, motion, times, settings=None):
     """A squat column (2 x 2 x 8 m: its tipping angle 14 degrees, its top 0.5 m out at 3.6) on a
     let-go footing, set rocking about its +x toe with ``factor`` times the angular velocity whose
     energy lifts its centroid over the toe on still ground; the verdict's pieces at ``times``."""
@@ -184,7 +184,19 @@ def _column(factor, motion, times):
     v = np.zeros((1, 6))
     v[0, :3] = np.cross(w, r)
     v[0, 3:] = w
-    return piece_motion(sc, np.array([0.0]), np.asarray(times, dtype=float), velocity={0.0: v})
+    return piece_motion(sc, np.array([0.0]), np.asarray(times, dtype=float), velocity={0.0: v}, settings=settings)
+
+
+def _push(start_s, for_s, total_s, a=0.2 * G, dt=0.001):
+    """A record that pushes the column back (+x, 0.2 g by default) from ``start_s`` for ``for_s``
+    seconds, the ground still otherwise, ``total_s`` long."""
+    from calib_masonry.simulation.ground_motion import GroundMotion
+
+    tt = np.arange(int(round(total_s / dt)) + 1) * dt
+    acc = np.where((tt >= start_s) & (tt < start_s + for_s), a, 0.0)
+    vel = np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * dt)])
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt)])
+    return GroundMotion(dt=dt, displacement=np.column_stack([x, 0 * x]), acceleration=np.column_stack([acc, 0 * acc]))
 
 
 def test_a_piece_that_swings_past_fallen_m_below_its_overturn_energy_swings_back():
@@ -204,19 +216,32 @@ def test_a_piece_the_ground_pushes_back_has_not_fallen():
     # passes fallen_m, with the still-ground bound still saying "overturns", and it comes back.
     # Integrated on without a stop (fallen_m 100 m) it does not overturn either: the stop while
     # the ground moves waits until the piece falls whatever the ground does (_Pieces.falls)
-    from calib_masonry.simulation.ground_motion import GroundMotion
-
-    dt, a = 0.001, 0.2 * G
-    tt = np.arange(int(3.0 / dt) + 1) * dt
-    acc = np.where((tt >= 0.2) & (tt < 0.7), a, 0.0)
-    vel = np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:] + acc[:-1]) * dt)])
-    x = np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt)])
-    motion = GroundMotion(dt=dt, displacement=np.column_stack([x, 0 * x]), acceleration=np.column_stack([acc, 0 * acc]))
     assert _column(1.3, constant_acceleration(0.0, 3.0), [0.0, 1e-3]).toppled[0]
-    pm = _column(1.3, motion, np.linspace(0.0, 3.0, 301))
+    pm = _column(1.3, _push(0.2, 0.5, 3.0), np.linspace(0.0, 3.0, 301))
     d = pm.distance_m()[:, 0]
     assert d.max() > PieceSettings().fallen_m
     assert not pm.fallen[0] and not pm.toppled[0]
+
+
+def test_a_piece_still_rocking_when_the_record_ends_is_played_out_on_still_ground():
+    # 1.3 times the energy that tips it, pushed back by the ground for 1 s from 0.2 s, the record
+    # ending with the push: the column is then 0.67 m out, swinging back, with more energy than
+    # lifts it over an edge (the bound, play_out_s = 0, says it overturns), but its next impact
+    # takes enough: integrated on, it never tips. Played out on still ground, it rests
+    end = 1.2
+    times = np.linspace(0.0, end, 121)
+    assert _column(1.3, _push(0.2, 1.0, end), times, PieceSettings(play_out_s=0.0)).toppled[0]
+    pm = _column(1.3, _push(0.2, 1.0, end), times)
+    assert not pm.toppled[0] and not pm.fallen[0]
+    on = _column(1.3, _push(0.2, 1.0, 8.0), np.linspace(0.0, 8.0, 801), PieceSettings(fallen_m=100.0))
+    d = on.distance_m()[:, 0]
+    assert np.allclose(
+        d[: len(times)], pm.distance_m()[:, 0], atol=2e-3
+    )  # the same motion up to the end (its steps differ)
+    assert d.max() < 0.8 and d[-1] < 0.5  # its top tips at 2 m out (8 tan 14 degrees)
+    # and one that falls as it is played out: 1.3 times the tipping energy on still ground
+    assert _column(1.3, constant_acceleration(0.0, 1e-3), [0.0, 1e-3]).toppled[0]
+    assert not _column(0.9, constant_acceleration(0.0, 1e-3), [0.0, 1e-3]).toppled[0]
 
 
 def _arm_on_a_column(tensile_strength, motion, arm=(0.1, 0.3, 0.4)):

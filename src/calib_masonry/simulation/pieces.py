@@ -37,10 +37,14 @@ The model (small strains, finite motion):
   about that edge above what the record's largest acceleration still to come can turn against
   it: ``_Pieces.falls``) has fallen: it is no longer integrated (its bodies count as moved), and
   its contacts with other pieces are dropped.
-* A piece still moving when the run ends *overturns* when its kinetic energy reaches the least work
-  that lifts its centroid over an edge of its support (``_Pieces.overturns``): with the ground
-  still the contacts only dissipate, so this does not depend on where in a swing a rocking piece
-  is. (A bound, not a proof: it leaves out the energy the next impact takes, so it says "may".)
+* A piece still moving when the run ends whose kinetic energy reaches the least work that lifts its
+  centroid over an edge of its support *may* overturn (``_Pieces.overturns``: with the ground still
+  the contacts only dissipate, so below that bound it comes to rest, at whatever phase of a swing
+  it is read); the bound leaves out the energy the next impact takes, so such a piece is played
+  out: integrated on with the ground still until it falls (as above, with no acceleration to come)
+  or its energy is below the bound, for at most ``play_out_s`` (then the bound answers;
+  ``_Pieces.play_out``). Until 2026-12-03 the bound answered alone, and a tower swinging back
+  with a little more than its tipping energy when the record ended counted as toppled.
 
 A piece's own joints (``check_joints``; ``simulate --piece-joints``, off by default). Held together
 by its joints, a rocking or sliding piece loads them with the forces that keep it rigid; without
@@ -113,6 +117,10 @@ class PieceSettings:
     # step to about a millisecond instead of the joints' ~20 microseconds
     settle_fraction: float = 1e-4
     fallen_m: float = 0.5  # a piece that has moved this far (any body) has fallen
+    # a piece still moving when the times asked end whose energy may overturn it (the bound of
+    # _Pieces.overturns) is integrated on with the ground still, for at most this long, until it
+    # rests or falls (_Pieces.play_out); one still undecided then is judged by the bound; 0: the bound
+    play_out_s: float = 20.0
     # check the joints inside every piece against the forces that keep it rigid, once per joint-model
     # check interval (module docstring, "A piece's own joints"); False: a piece never cracks
     check_joints: bool = False
@@ -128,6 +136,8 @@ class PieceSettings:
             raise InputError(f"piece contact_damping {self.contact_damping}: a ratio of critical in [0, 2] (default 1)")
         if not self.stiffness_factor > 0.0 or not self.fallen_m > 0.0 or not self.settle_fraction > 0.0:
             raise InputError("piece stiffness_factor, settle_fraction and fallen_m must be > 0")
+        if not self.play_out_s >= 0.0:
+            raise InputError(f"piece play_out_s {self.play_out_s}: seconds, at least 0 (default 20)")
 
 
 @dataclass(frozen=True)
@@ -135,7 +145,8 @@ class PieceMotion:
     """The freed pieces' motion at the asked times: ``displacement_m`` ``(T, B, 3)`` of every body's
     centroid from its place (0 for a body the joints hold; float32), ``pieces`` how many pieces
     there were at the end, ``fallen`` ``(B,)`` the bodies of pieces that fell, ``toppled`` ``(B,)``
-    those and the bodies of pieces that overturn from where they are at the last time asked,
+    those and the bodies of pieces that overturn from where they are at the last time asked
+    (played out on still ground, :meth:`_Pieces.play_out`),
     ``dt_s`` the (last) step, ``steps`` how many were taken and ``seconds`` the wall time."""
 
     time_s: np.ndarray
@@ -146,7 +157,8 @@ class PieceMotion:
     steps: int
     seconds: float = 0.0
     # (B,) the bodies of pieces that fell or overturn from their state at the last time asked
-    # (_Pieces.overturns): the verdict's, which does not read where a rocking piece happens to be
+    # (played out on still ground, _Pieces.play_out): the verdict's, which does not read where a
+    # rocking piece happens to be
     toppled: np.ndarray | None = None
     # (T, B, 3, 3) every body's rotation from its place (the identity for a body the joints hold;
     # float32), if asked for (``piece_motion(..., rotations=True)``): with ``displacement_m`` the
@@ -941,15 +953,11 @@ class _Pieces:
             edges.append((p1, axis, out / max(float(np.linalg.norm(out)), 1e-300)))
         return edges, c
 
-    def overturns(self, i: int) -> bool | None:
-        """Whether piece ``i`` overturns from its present state with the ground still: its kinetic
-        energy reaches the least work that lifts its centroid over an edge of its support
-        (:meth:`_support`; zero work over an edge the centroid is already beyond), plus its weight
-        times the contacts' settling (``settle_fraction`` of its size, what the penalty springs
-        allow). Mechanical energy only falls once the ground is still (the contacts dissipate), so
-        a piece below that bound comes to rest and one above it may overturn: the answer does not
-        depend on where in its rocking the piece is. While the ground still moves it may put
-        energy in or take it out: :meth:`falls` then. None where the piece has no support."""
+    def _energy(self, i: int) -> tuple[float, float, float] | None:
+        """Piece ``i``'s kinetic energy, the least work that lifts its centroid over an edge of its
+        support (:meth:`_support`; zero over an edge the centroid is already beyond) and the
+        weight times the contacts' settling (``settle_fraction`` of its size, what the penalty
+        springs allow): J each; None where it has no support."""
         found = self._support(i)
         if found is None:
             return None
@@ -968,9 +976,23 @@ class _Pieces:
         R = self.R[i]
         Iw = R @ self.I0[i] @ R.T
         kinetic = 0.5 * self.M[i] * float(self.v[i] @ self.v[i]) + 0.5 * float(self.w[i] @ Iw @ self.w[i])
+        return kinetic, max(work, 0.0), self.M[i] * g * self.settings.settle_fraction * self.size[i]
+
+    def overturns(self, i: int) -> bool | None:
+        """Whether piece ``i`` may overturn from its present state with the ground still: its
+        kinetic energy reaches the least work that lifts its centroid over an edge of its support,
+        plus the contacts' settling (:meth:`_energy`). Mechanical energy only falls once the ground
+        is still (the contacts dissipate), so a piece below that bound comes to rest and one above
+        it may overturn (the next impact may take what it has above): the answer does not depend on
+        where in its rocking the piece is. While the ground still moves it may put energy in or
+        take it out: :meth:`falls` then. None where the piece has no support."""
+        found = self._energy(i)
+        if found is None:
+            return None
+        kinetic, work, settle = found
         # a Python bool: numpy's False is not the ``False`` singleton (an ``is not False`` once took
         # every answer for yes)
-        return bool(kinetic >= max(work, 0.0) + self.M[i] * g * self.settings.settle_fraction * self.size[i])
+        return bool(kinetic >= work + settle)
 
     def falls(self, i: int, ground_peak: float) -> bool | None:
         """Whether piece ``i`` falls whatever the ground does from now on, its acceleration at most
@@ -992,6 +1014,45 @@ class _Pieces:
             if e > 0.0 and float(out @ self.v[i][:2]) >= 0.0 and self.gravity * e > ground_peak * max(h, 0.0):
                 return True
         return False
+
+    def play_out(
+        self, pieces: np.ndarray, limit_s: float, stopped: Callable[[], bool] | None = None
+    ) -> np.ndarray | None:
+        """Whether each of ``pieces`` (indices) topples, integrated on with the ground still from
+        where they are: a piece falls once a body has moved ``fallen_m`` and it falls (:meth:`falls`
+        with no ground acceleration; by the distance alone where it has no bed support, as
+        :meth:`check_fallen`), and rests once its energy is below the bound of :meth:`overturns`
+        by the contacts' settling (:meth:`_energy`: it cannot lift its centroid over an edge any
+        more, with the ground still the contacts only take energy out). Every piece moves on meanwhile (those decided too: a resting one
+        still bears on its neighbours); none is stopped, so :attr:`fallen` and the motion read
+        so far are left as they were. A piece neither rests nor falls within ``limit_s``: the bound
+        answers for it. ``stopped()`` asked every 64 steps: None at once if it says so."""
+        pieces = np.asarray(pieces, dtype=np.int64)
+        answer: dict[int, bool] = {}
+        dt = self.step_size()
+        if pieces.size and np.isfinite(dt) and limit_s > 0.0:
+            chunk = 64
+            loads = np.repeat(np.array([[0.0, 0.0, -self.gravity]]), chunk, axis=0)
+            end = self.t + limit_s
+            while len(answer) < pieces.size and self.t < end - 1e-12:
+                self.advance_many(loads, dt)
+                self.t += chunk * dt
+                if stopped is not None and stopped():
+                    return None
+                dist = np.linalg.norm(self.displacement(), axis=1)
+                for i in pieces:
+                    i = int(i)
+                    if i in answer:
+                        continue
+                    if dist[self.piece_of == i].max() > self.settings.fallen_m and self.falls(i, 0.0) is not False:
+                        answer[i] = True
+                        continue
+                    energy = self._energy(i)
+                    # below the lift by the settling's margin (a piece left at its apex's energy by
+                    # an impact creeps over it or back as the springs' energy decides: played on)
+                    if energy is not None and energy[0] + energy[2] < energy[1]:
+                        answer[i] = False
+        return np.array([answer[int(i)] if int(i) in answer else bool(self.overturns(int(i))) for i in pieces], bool)
 
     def check_fallen(self) -> bool:
         """Stop the pieces that have fallen; True if any did (their contacts are dropped). A piece has
@@ -1208,8 +1269,14 @@ def piece_motion(
         state.check_fallen()
     read(np.inf)
     toppled = state.fallen.copy()
-    for i in np.flatnonzero(state.alive):
-        if state.overturns(int(i)):
+    # a piece still moving that may overturn (the energy bound) is played out on still ground
+    may = np.array([i for i in np.flatnonzero(state.alive) if state.overturns(int(i))], dtype=np.int64)
+    if may.size:
+        state.t = max(state.t, float(times_s[-1]))
+        goes = state.play_out(may, settings.play_out_s, stopped)
+        if goes is None:
+            return None
+        for i in may[goes]:
             toppled[state.piece_of == i] = True
     return PieceMotion(
         times_s,

@@ -22,10 +22,24 @@ the joint model's contact iteration run further ("no stall, 400 iterations", "re
 ``--quasi-static`` holds the intact structure rigid under the quake instead of letting it vibrate
 (simulation/dynamics.py).
 
+``--fragility`` runs every PGA of every seed (no stop at the first collapse) and fits, per model
+and setting, a lognormal fragility curve to all the verdicts (the study's maximum-likelihood fit,
+``calib_masonry.study.analysis.fit_fragility``): its median (the PGA at which half of the records
+collapse) and dispersion, and the median's change from the first setting, each with a 90 % band
+from resampling the records (the same resample at every setting, so the change's band is that of
+a paired comparison). Near a rocking tower's overturning threshold one record's first collapse
+on a PGA grid flips with a thousandth of the record's scale (docs/dynamics.md, "The fall that was
+not one"); the median over records is the quantity that can converge.
+
     .venv/bin/python experiments/sim_convergence.py                      # everything (hours on 2 cores)
     .venv/bin/python experiments/sim_convergence.py --models paper_example --seeds 0 --pga 0.2 0.3 0.4
     .venv/bin/python experiments/sim_convergence.py --models stylite --settings default "2x fps" \
         "1/2 check interval" --without-bullet --gravity-s 0   # frame rate and checks, without Bullet
+    .venv/bin/python experiments/sim_convergence.py --models stylite --settings default \
+        "1/2 check interval" --without-bullet --gravity-s 0 --fragility --seeds 0 1 2 3 4 5 6 7 8 9 \
+        --pga 0.4 0.5 0.6 0.7 0.8 0.9 1.0 1.1 1.2 1.3 1.4   # the median collapse PGA over ten records
+    .venv/bin/python experiments/sim_convergence.py --fragility --logs A.txt B.txt   # from runs printed
+        # by processes of their own (one setting each, on two cores): their sweep lines, refitted
 
 Each model is built into a temporary folder from data_synthetic/<model>/structure.toml, or from
 any structure file given by its path (``--models path/to/structure.toml``: a structure never used
@@ -35,6 +49,7 @@ in tuning).
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import tempfile
 import time
@@ -159,9 +174,26 @@ def main() -> None:
     p.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2], help="none: gravity only")
     p.add_argument("--duration", type=float, default=10.0, help="seconds of ground motion per quake run")
     p.add_argument("--gravity-s", type=float, default=20.0, help="seconds under gravity alone (0: skip)")
+    p.add_argument(
+        "--fragility",
+        action="store_true",
+        help="run every PGA (no stop at the first collapse) and fit a fragility curve per setting over the seeds",
+    )
+    p.add_argument(
+        "--logs",
+        nargs="+",
+        type=Path,
+        help="with --fragility: fit from the sweep lines these earlier runs printed instead of running",
+    )
     args = p.parse_args()
+    if args.logs:
+        verdicts, models, settings, seeds = read_logs(args.logs)
+        print_fragility(verdicts, models, settings, seeds)
+        return
 
     collapse: dict[tuple[str, str, int], float | None] = {}
+    # every verdict: (model, setting) -> [(seed, pga, collapsed)]
+    verdicts: dict[tuple[str, str], list[tuple[int, float, bool]]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.models:
             model = Path(tmp) / Path(name).stem
@@ -195,9 +227,11 @@ def main() -> None:
                             f"toppled {_percent(r['toppled'])}: {r['outcome']}  ({r['seconds']:.0f} s)",
                             flush=True,
                         )
-                        if r["outcome"] == "collapsed":
+                        verdicts.setdefault((name, setting), []).append((seed, pga, r["outcome"] == "collapsed"))
+                        if r["outcome"] == "collapsed" and collapse[(name, setting, seed)] is None:
                             collapse[(name, setting, seed)] = pga
-                            break
+                            if not args.fragility:
+                                break
 
     print("\ncollapse PGA (g; '>' = none up to the largest PGA run), and its spread over the settings")
     print(f"{'model':14s} {'seed':>4s} " + " ".join(f"{s:>14s}" for s in args.settings) + f" {'max change':>11s}")
@@ -213,6 +247,80 @@ def main() -> None:
             else:
                 change = f"{max(vals) - min(vals):11.2f}"
             print(f"{name:14s} {seed:4d} " + " ".join(cells) + f" {change}")
+    if args.fragility:
+        print_fragility(verdicts, args.models, args.settings, args.seeds)
+
+
+_LINE = re.compile(
+    r"^(?P<model>.+?) (?P<setting>"
+    + "|".join(re.escape(k) for k in sorted(SETTINGS, key=len, reverse=True))
+    + r") +seed +(?P<seed>\d+) PGA +(?P<pga>[\d.]+) g: .*: (?P<outcome>\w+) +\("
+)
+
+
+def read_logs(paths):
+    """The verdicts of the sweep lines in these printed runs: ``(verdicts, models, settings, seeds)``
+    in the order first met."""
+    verdicts: dict[tuple[str, str], list[tuple[int, float, bool]]] = {}
+    models: list[str] = []
+    settings: list[str] = []
+    seeds: list[int] = []
+    for path in paths:
+        for line in Path(path).read_text().splitlines():
+            m = _LINE.match(line)
+            if m is None:
+                continue
+            name, setting, seed = m["model"].strip(), m["setting"].strip(), int(m["seed"])
+            for seen, x in ((models, name), (settings, setting), (seeds, seed)):
+                if x not in seen:
+                    seen.append(x)
+            verdicts.setdefault((name, setting), []).append((seed, float(m["pga"]), m["outcome"] == "collapsed"))
+    if not verdicts:
+        raise SystemExit(f"no sweep lines in {', '.join(map(str, paths))}")
+    return verdicts, models, settings, seeds
+
+
+def _median(rows: list[tuple[int, float, bool]], seeds) -> tuple[float, float] | None:
+    """The lognormal fragility (median g, dispersion) of the verdicts of these seeds (a seed
+    drawn twice counts twice); None where the verdicts do not fix one."""
+    from calib_masonry.study.analysis import fit_fragility
+
+    picked = [(p, c) for s in seeds for (k, p, c) in rows if k == s]
+    if not picked:
+        return None
+    pga, col = np.array(picked, dtype=float).T
+    return fit_fragility(pga, col)
+
+
+def print_fragility(verdicts, models, settings, seeds, resamples: int = 400) -> None:
+    """Per model and setting: the fragility's median and dispersion over all the seeds' verdicts,
+    the median's 90 % band over resampled seeds, and its change from the first setting (paired:
+    the same resample at every setting)."""
+    rng = np.random.default_rng(0)
+    draws = [rng.choice(seeds, len(seeds)) for _ in range(resamples)]
+    print(f"\nfragility over {len(seeds)} records (median g, dispersion; 90 % band from resampling the records)")
+    for name in models:
+        base = [_median(verdicts.get((name, settings[0]), []), d) for d in draws]
+        for setting in settings:
+            rows = verdicts.get((name, setting), [])
+            fit = _median(rows, seeds)
+            if fit is None:
+                print(
+                    f"{name:14s} {setting:20s} no curve (all or none collapsed, or the outcomes separate at one step)"
+                )
+                continue
+            boot = [_median(rows, d) for d in draws]
+            med = np.array([b[0] for b in boot if b is not None])
+            line = f"{name:14s} {setting:20s} median {fit[0]:.3f} g (90 %: {np.percentile(med, 5):.3f}-{np.percentile(med, 95):.3f}), beta {fit[1]:.3f}"
+            if setting != settings[0]:
+                diff = np.array([b[0] - a[0] for a, b in zip(base, boot) if a is not None and b is not None])
+                first = _median(verdicts.get((name, settings[0]), []), seeds)
+                if first is not None and len(diff):
+                    line += (
+                        f"; change {fit[0] - first[0]:+.3f} g (90 %: {np.percentile(diff, 5):+.3f} to "
+                        f"{np.percentile(diff, 95):+.3f})"
+                    )
+            print(line, flush=True)
 
 
 if __name__ == "__main__":

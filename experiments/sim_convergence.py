@@ -151,6 +151,17 @@ def _percent(x: float | None) -> str:
     return f"{'-':>6s}" if x is None else f"{x:6.1%}"
 
 
+def sweep_line(name: str, setting: str, seed: int, pga: float, r: dict) -> str:
+    """The line the sweep prints for one run ``r`` (:func:`one_run`), which :func:`read_logs` reads."""
+    return (
+        f"{name:14s} {setting:14s} seed {seed} PGA {pga:4.2f} g: cracked {r['cracked']:6.1%}"
+        + (f" (+{r['in_pieces']:6.1%} in pieces)" if r["in_pieces"] is not None else "")
+        + "  set free "
+        f"{r['freed']:6.1%}  moved {r['moved']:6.1%} (Bullet's {r['bullet_moved']:6.1%})  "
+        f"toppled {_percent(r['toppled'])}: {r['outcome']}  ({r['seconds']:.0f} s)"
+    )
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument(
@@ -219,14 +230,7 @@ def main() -> None:
                         r = (verdict_without_bullet if args.without_bullet else one_run)(
                             model, solver, pga, seed, args.duration
                         )
-                        print(
-                            f"{label} seed {seed} PGA {pga:4.2f} g: cracked {r['cracked']:6.1%}"
-                            + (f" (+{r['in_pieces']:6.1%} in pieces)" if r["in_pieces"] is not None else "")
-                            + "  set free "
-                            f"{r['freed']:6.1%}  moved {r['moved']:6.1%} (Bullet's {r['bullet_moved']:6.1%})  "
-                            f"toppled {_percent(r['toppled'])}: {r['outcome']}  ({r['seconds']:.0f} s)",
-                            flush=True,
-                        )
+                        print(sweep_line(name, setting, seed, pga, r), flush=True)
                         verdicts.setdefault((name, setting), []).append((seed, pga, r["outcome"] == "collapsed"))
                         if r["outcome"] == "collapsed" and collapse[(name, setting, seed)] is None:
                             collapse[(name, setting, seed)] = pga
@@ -292,35 +296,48 @@ def _median(rows: list[tuple[int, float, bool]], seeds) -> tuple[float, float] |
     return fit_fragility(pga, col)
 
 
-def print_fragility(verdicts, models, settings, seeds, resamples: int = 400) -> None:
-    """Per model and setting: the fragility's median and dispersion over all the seeds' verdicts,
-    the median's 90 % band over resampled seeds, and its change from the first setting (paired:
-    the same resample at every setting)."""
+def fragility(verdicts, models, settings, seeds, resamples: int = 400) -> list[dict]:
+    """Per model and setting: the fragility's ``median`` (g) and ``beta`` over all the seeds'
+    verdicts (None where they fix no curve), the median's 90 % ``band`` over resampled seeds and,
+    for every setting after the first, its ``change`` from the first and that change's
+    ``change_band`` (paired: the same resample at every setting)."""
     rng = np.random.default_rng(0)
     draws = [rng.choice(seeds, len(seeds)) for _ in range(resamples)]
-    print(f"\nfragility over {len(seeds)} records (median g, dispersion; 90 % band from resampling the records)")
+    out = []
     for name in models:
+        first = _median(verdicts.get((name, settings[0]), []), seeds)
         base = [_median(verdicts.get((name, settings[0]), []), d) for d in draws]
         for setting in settings:
             rows = verdicts.get((name, setting), [])
             fit = _median(rows, seeds)
+            row = {"model": name, "setting": setting, "median": None, "beta": None}
+            out.append(row)
             if fit is None:
-                print(
-                    f"{name:14s} {setting:20s} no curve (all or none collapsed, or the outcomes separate at one step)"
-                )
                 continue
             boot = [_median(rows, d) for d in draws]
             med = np.array([b[0] for b in boot if b is not None])
-            line = f"{name:14s} {setting:20s} median {fit[0]:.3f} g (90 %: {np.percentile(med, 5):.3f}-{np.percentile(med, 95):.3f}), beta {fit[1]:.3f}"
-            if setting != settings[0]:
-                diff = np.array([b[0] - a[0] for a, b in zip(base, boot) if a is not None and b is not None])
-                first = _median(verdicts.get((name, settings[0]), []), seeds)
-                if first is not None and len(diff):
-                    line += (
-                        f"; change {fit[0] - first[0]:+.3f} g (90 %: {np.percentile(diff, 5):+.3f} to "
-                        f"{np.percentile(diff, 95):+.3f})"
-                    )
-            print(line, flush=True)
+            row.update(median=fit[0], beta=fit[1], band=(float(np.percentile(med, 5)), float(np.percentile(med, 95))))
+            diff = np.array([b[0] - a[0] for a, b in zip(base, boot) if a is not None and b is not None])
+            if setting != settings[0] and first is not None and len(diff):
+                row["change"] = fit[0] - first[0]
+                row["change_band"] = (float(np.percentile(diff, 5)), float(np.percentile(diff, 95)))
+    return out
+
+
+def print_fragility(verdicts, models, settings, seeds) -> None:
+    """:func:`fragility`, a line per model and setting."""
+    print(f"\nfragility over {len(seeds)} records (median g, dispersion; 90 % band from resampling the records)")
+    for row in fragility(verdicts, models, settings, seeds):
+        head = f"{row['model']:14s} {row['setting']:20s}"
+        if row["median"] is None:
+            print(f"{head} no curve (all or none collapsed, or the outcomes separate at one step)")
+            continue
+        (lo, hi), line = row["band"], f"{head} median {row['median']:.3f} g"
+        line += f" (90 %: {lo:.3f}-{hi:.3f}), beta {row['beta']:.3f}"
+        if "change" in row:
+            a, b = row["change_band"]
+            line += f"; change {row['change']:+.3f} g (90 %: {a:+.3f} to {b:+.3f})"
+        print(line, flush=True)
 
 
 if __name__ == "__main__":

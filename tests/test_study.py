@@ -54,6 +54,43 @@ def test_lognormal_fragility_fit_recovers_the_curve_it_was_drawn_from():
     assert fit_fragility(np.array([0.1, 0.2, 0.4, 0.8]), np.array([0, 0, 1, 1])) is None
 
 
+def test_the_convergence_sweeps_fragility_reads_its_own_lines_and_finds_a_known_median(tmp_path):
+    # experiments/sim_convergence.py --fragility --logs: sweep lines printed by two processes (one
+    # setting each, a model given by a long path) read back, and the median over records of
+    # verdicts made from known thresholds: each record collapses from its own threshold on, the
+    # thresholds the quantiles of a lognormal (median 0.9 g, beta 0.3), the second setting's 10 %
+    # higher. The fit finds each median and their change, and its paired band holds the change
+    from scipy.stats import norm
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+    import sim_convergence as sc
+
+    seeds = list(range(40))
+    grid = np.round(np.arange(0.4, 1.65, 0.1), 2)
+    model = "/a/long/path/to/an/unseen/tower/structure.toml"
+    logs = []
+    for setting, scale in (("default", 1.0), ("1/2 check interval", 1.1)):
+        lines = []
+        for s in seeds:
+            threshold = scale * 0.9 * math.exp(0.3 * norm.ppf((s + 0.5) / len(seeds)))
+            for pga in grid:
+                outcome = "collapsed" if pga >= threshold else "damaged"
+                r = dict(cracked=0.1, in_pieces=None, freed=1.0, moved=0.5, bullet_moved=float("nan"))
+                lines.append(
+                    sc.sweep_line(model, setting, s, float(pga), dict(r, toppled=0.0, outcome=outcome, seconds=9))
+                )
+        logs.append(tmp_path / f"{len(logs)}.txt")
+        logs[-1].write_text("\n".join(["a line that is not a run's", *lines, ""]))
+    verdicts, models, settings, read = sc.read_logs(logs)
+    assert models == [model] and settings == ["default", "1/2 check interval"] and read == seeds
+    assert len(verdicts[(model, "default")]) == len(seeds) * len(grid)
+    rows = sc.fragility(verdicts, models, settings, read, resamples=50)
+    assert rows[0]["median"] == pytest.approx(0.9, rel=0.05) and rows[1]["median"] == pytest.approx(0.99, rel=0.05)
+    assert rows[1]["change"] == pytest.approx(0.09, abs=0.03)
+    assert rows[1]["change_band"][0] <= rows[1]["change"] <= rows[1]["change_band"][1]
+    assert "change" not in rows[0]
+
+
 def test_the_design_is_a_pure_function_of_the_study(tmp_path, small_structure):
     text = (
         f'[study]\nname = "d"\nstructure = "{small_structure}"\n[sampling]\nmethod = "lhs"\nn = 8\nseed = 4\n'

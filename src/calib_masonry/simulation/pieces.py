@@ -1026,10 +1026,11 @@ class _Pieces:
         with no ground acceleration; by the distance alone where it has no bed support, as
         :meth:`check_fallen`), and rests once its energy is below the bound of :meth:`overturns`
         by the contacts' settling (:meth:`_energy`: it cannot lift its centroid over an edge any
-        more, with the ground still the contacts only take energy out). Every piece moves on meanwhile (those decided too: a resting one
-        still bears on its neighbours); none is stopped, so :attr:`fallen` and the motion read
-        so far are left as they were. A piece neither rests nor falls within ``limit_s``: the bound
-        answers for it. ``stopped()`` asked every 64 steps: None at once if it says so."""
+        more, with the ground still the contacts only take energy out). Every piece moves on
+        meanwhile (those decided too: a resting one still bears on its neighbours); none is
+        stopped, so :attr:`fallen` and the motion read so far are left as they were. A piece that
+        neither rests nor falls within ``limit_s``: the bound answers for it. ``stopped()`` asked
+        every 64 steps: None at once if it says so."""
         pieces = np.asarray(pieces, dtype=np.int64)
         answer: dict[int, bool] = {}
         dt = self.step_size()

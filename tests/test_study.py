@@ -251,6 +251,29 @@ def _rows_of(folder: Path) -> dict[int, dict]:
     return out
 
 
+def test_a_study_runs_its_simulations_at_the_check_interval_it_names(tmp_path, small_structure, monkeypatch):
+    # [simulate] check_interval_s: the joint model's accuracy setting, so that a fragility's median
+    # can be run again at half of it (the default: the solver's own)
+    import calib_masonry.simulation.run as simulation_run
+    from calib_masonry.simulation.scene import SolverSettings
+    from calib_masonry.study.sample import run_sample
+
+    head = f'[study]\nname = "ci"\nstructure = "{small_structure}"\n[simulate]\npga_g = [0.1]\nbullet = false\n'
+    default = load_study(_study(tmp_path, head, "a.toml"))
+    half = load_study(_study(tmp_path, head + "check_interval_s = 0.0025\n", "b.toml"))
+    assert default.simulate.solver == SolverSettings() and half.simulate.solver.check_interval_s == 0.0025
+    assert default.fingerprint() != half.fingerprint()  # a resumed study does not mix the two
+    seen = []
+
+    def simulate(geometry, load, settings, **kw):  # a stand-in: only what the sample hands on is tested
+        seen.append(settings)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(simulation_run, "simulate", simulate)
+    row = run_sample(half, samples(half)[0])
+    assert seen == [half.simulate.solver] and row["status"] != "ok"
+
+
 @pytest.mark.slow
 def test_a_fragility_study_without_bullet_gives_the_same_samples(tmp_path):
     # its outputs are the verdict's (the joint model and the rigid pieces it sets free), which no
@@ -411,6 +434,8 @@ BAD = {
     "no record file": ('[simulate]\npga_g = [0.1]\naccelerograms = ["gone.AT2"]\n', "gone.AT2: file not found"),
     "records and files": ('[simulate]\npga_g = [0.1]\nrecords = 2\naccelerograms = ["a.csv"]\n', "keep one"),
     "three components": ('[simulate]\npga_g = [0.1]\naccelerograms = [["a", "b", "c"]]\n', "give a file name, or"),
+    "check interval 0": ("[simulate]\npga_g = [0.1]\ncheck_interval_s = 0\n", "check_interval_s = 0: must be > 0"),
+    "check interval": ("[simulate]\npga_g = [0.1]\ncheck_interval_s = 0.5\n", "check_interval_s = 0.5: the joints'"),
 }
 
 

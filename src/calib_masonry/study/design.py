@@ -41,6 +41,9 @@ simulation every sample runs::
     #                        # motions (a file, or its X and Y components), each scaled to every PGA
     #                        # and run for its whole length
     # pushover = true        # instead: the collapse multiplier
+    # check_interval_s = 0.0025  # the joint model's check interval (default 0.005 s, simulate
+    #                        # --check-interval): a fragility's median run again at half of it
+    #                        # says whether it has converged
 
 Each input maps one coordinate ``u`` of the unit hypercube to a value (normal: ``mu + sigma
 Phi^-1(u)``; uniform: ``a + (b - a) u``; choices: the ``floor(k u)``-th; calibration: ``mu + L
@@ -171,6 +174,16 @@ class SimulateSpec:
     # False: each run without Bullet (simulate's bullet=False): the same outputs, which the verdict's
     # pieces decide, without Bullet's animation of the freed pieces (most of a run's time)
     bullet: bool = True
+    # the joint model's check interval (s; SolverSettings.check_interval_s's default, simulate
+    # --check-interval)
+    check_interval_s: float = 0.005
+
+    @property
+    def solver(self):
+        """The :class:`~calib_masonry.simulation.scene.SolverSettings` every run of the study uses."""
+        from ..simulation.scene import SolverSettings
+
+        return SolverSettings(check_interval_s=self.check_interval_s)
 
     @property
     def loads(self) -> tuple[dict, ...]:
@@ -461,6 +474,7 @@ def parse_study(data: dict, path: Path) -> Study:
                 "rate_g_per_s",
                 "max_g",
                 "bullet",
+                "check_interval_s",
             ),
         )
         pushover = s.get("pushover", False)
@@ -499,7 +513,18 @@ def parse_study(data: dict, path: Path) -> Study:
             pushover_rate_g_per_s=_number(path, "[simulate] rate_g_per_s", s.get("rate_g_per_s", 0.05), positive=True),
             pushover_max_g=_number(path, "[simulate] max_g", s.get("max_g", 5.0), positive=True),
             bullet=bullet,
+            check_interval_s=_number(
+                path,
+                "[simulate] check_interval_s",
+                s.get("check_interval_s", SimulateSpec.check_interval_s),
+                positive=True,
+            ),
         )
+        if sim.check_interval_s > 0.1:
+            raise InputError(
+                f"{path}: [simulate] check_interval_s = {sim.check_interval_s:g}: the joints' check interval must be "
+                "in (0, 0.1] s (default 0.005)"
+            )
         if sim.duration_s > 600:
             raise InputError(f"{path}: [simulate] duration_s = {sim.duration_s:g}: at most 600 s per run")
     study = Study(

@@ -483,6 +483,7 @@ def run_sample(study: Study, sample: Sample) -> dict:
                     simulate(
                         geometry,
                         load,
+                        study.simulate.solver,
                         material=material,
                         progress=False,
                         joints_ahead=False,
@@ -515,7 +516,12 @@ async def run_sample_async(study: Study, sample: Sample) -> dict:
                 outputs.update(
                     outcome(
                         await simulate_async(
-                            geometry, load, material=material, progress=False, bullet=study.simulate.bullet
+                            geometry,
+                            load,
+                            study.simulate.solver,
+                            material=material,
+                            progress=False,
+                            bullet=study.simulate.bullet,
                         )
                     )
                 )

@@ -523,7 +523,7 @@ def parse_study(data: dict, path: Path) -> Study:
         if sim.check_interval_s > 0.1:
             raise InputError(
                 f"{path}: [simulate] check_interval_s = {sim.check_interval_s:g}: the joints' check interval must be "
-                "in (0, 0.1] s (default 0.005)"
+                f"in (0, 0.1] s (default {SimulateSpec.check_interval_s:g})"
             )
         if sim.duration_s > 600:
             raise InputError(f"{path}: [simulate] duration_s = {sim.duration_s:g}: at most 600 s per run")

@@ -456,3 +456,33 @@ def test_the_compiled_step_moves_the_pieces_as_the_numpy_step_does(monkeypatch):
     assert moved > 0.02  # the pieces do move
     assert np.abs(fast.displacement_m - slow.displacement_m).max() < 1e-6 * moved
     assert np.abs(fast.rotation - slow.rotation).max() < 1e-6
+
+
+@pytest.mark.parametrize("factor, overturns", [(0.98, False), (1.02, True)])
+def test_the_rocking_threshold_experiment_s_block_overturns_at_housner_s_pulse_threshold(factor, overturns):
+    # experiments/rocking_threshold.py integrates Housner's block: under a rectangular pulse of
+    # psi g for t_p (then still ground), the linearised block overturns from psi = alpha / (1 -
+    # exp(-p t_p)) (theta = (psi - alpha)(cosh p t - 1) during the pulse, then the free motion's
+    # invariant omega^2 / p^2 - (theta - alpha)^2 decides whether it passes alpha). A slender block
+    # (alpha 0.05 rad: the linearisation holds to a fraction of a per cent; measured within 0.5 %), p t_p = 1
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+    import rocking_threshold as rt
+
+    alpha, R = 0.05, 2.0
+    p2 = 3 * G / (4 * R)
+    t_p = 1.0 / math.sqrt(p2)
+    psi = factor * alpha / (1.0 - math.exp(-1.0))
+    dt = 1e-4
+    acc = np.zeros(int(round(t_p / dt)) + 2)
+    acc[:-1] = -psi * G  # pushes the block onto its +theta side
+    r = 1.0 - 1.5 * math.sin(alpha) ** 2
+    assert rt.rock(acc, dt, 0.0, alpha, p2, r, 2.5e-4) is overturns
+    # let go on a check grid: at the first check at or after the exact moment, within one interval
+    wave = 2.0 * np.sin(np.arange(301) * 0.01)  # 2 sin t sampled every 0.01 s
+    exact = rt.release_time(wave, 0.01, 1.5, 0.0)
+    assert exact == pytest.approx(math.asin(0.75), abs=1e-4)
+    on_grid = rt.release_time(wave, 0.01, 1.5, 0.005)
+    assert exact <= on_grid < exact + 0.005

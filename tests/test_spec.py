@@ -44,6 +44,35 @@ def test_impossible_dimensions(tmp_path, walls, extra, field):
         load_structure(p, require_sources=False)
 
 
+def test_a_thickness_the_corners_have_no_room_for_is_refused_before_any_work(tmp_path):
+    """A square tower's wall 1.0 m wide between two corners: the others' bricks cover t of each end,
+    so t = 0.5 m or more leaves it no width (its inner faces would cross its neighbours' and the
+    bricks overlap; a thickness in centimetres read as metres built such a model without a word).
+    Refused when the structure is read, naming the wall, its width and the thicknesses; 0.45 m
+    builds. A collinear joint (no corner) takes nothing; a wall thinner than any unit is refused."""
+    square = [(1.0, 2.0, 0), (1.0, 2.0, 90), (1.0, 2.0, 180), (1.0, 2.0, 270)]
+    p = tmp_path / "s.toml"
+    p.write_text(scenario_text(square, t=0.5, closed=True))
+    with pytest.raises(
+        InputError, match=r"s\.toml: wall 'w\d': width_m = 1 is not more than the 1 m .*thickness_m = 0\.5"
+    ):
+        load_structure(p, require_sources=False)
+    p.write_text(scenario_text(square, t=0.45, closed=True))
+    spec = load_structure(p, require_sources=False)
+    from calib_masonry.build3d.place import corners
+
+    assert len(corners(spec)) == 4
+    # open: the first and last walls have one corner each (t of them), the middle two have two
+    p.write_text(scenario_text(square, t=0.6, closed=False))
+    with pytest.raises(InputError, match=r"wall 'w[12]': width_m = 1 is not more than the 1\.2 m"):
+        load_structure(p, require_sources=False)
+    p.write_text(scenario_text([(1.0, 2.0, 0), (1.0, 2.0, 0), (1.0, 2.0, 0)], t=0.9, closed=False))
+    assert len(load_structure(p, require_sources=False).walls) == 3  # collinear: no corner takes room
+    p.write_text(scenario_text(square, t=0.005, closed=True))
+    with pytest.raises(InputError, match=r"thickness_m = 0\.005 is thinner than any masonry unit"):
+        load_structure(p, require_sources=False)
+
+
 def test_vertices_too_few(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text(scenario_text([(2.0, 2.0, 0)], vertices=2))

@@ -60,6 +60,9 @@ LAYOUTS = ("stretcher", "stones")
 MAX_SYNTH_PIXELS = 2e8
 #: the largest wall dimension accepted (m): above any masonry wall; a value beyond it is a unit error
 MAX_WALL_M = 1000.0
+#: the thinnest wall accepted (m): below any masonry unit's depth (a brick on edge is about 0.05 m);
+#: a thickness under it is a unit error (millimetres or centimetres divided once too often)
+MIN_THICKNESS_M = 0.01
 
 
 @dataclass(frozen=True)
@@ -101,9 +104,10 @@ class WallSpec:
                     f"{where}: {key} = {value:.6g} m is larger than any masonry wall (at most {MAX_WALL_M:g} m); "
                     "give it in metres"
                 )
-        if not (math.isfinite(self.thickness_m) and 0 < self.thickness_m <= MAX_WALL_M):
+        if not (math.isfinite(self.thickness_m) and MIN_THICKNESS_M <= self.thickness_m <= MAX_WALL_M):
             raise InputError(
-                f"{where}: thickness_m = {self.thickness_m:.6g} must be > 0 and at most {MAX_WALL_M:g} (metres)"
+                f"{where}: thickness_m = {self.thickness_m:.6g} must lie in {MIN_THICKNESS_M:g}..{MAX_WALL_M:g} "
+                "(metres: the units' depth, about 0.1-0.6 m for brick and stone)"
             )
         if not math.isfinite(self.theta_rad):
             raise InputError(f"{where}: theta = {self.theta_rad} must be a finite angle")
@@ -461,6 +465,11 @@ def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_so
         raise InputError(f"{where}: no thickness; set thickness_m here or in [structure]")
     if t <= 0:
         raise InputError(f"{where}: thickness_m = {t:.6g} must be > 0 (metres)")
+    if t < MIN_THICKNESS_M:
+        raise InputError(
+            f"{where}: thickness_m = {t:.6g} is thinner than any masonry unit (at least {MIN_THICKNESS_M:g} m); "
+            "give the units' depth in metres"
+        )
     if t >= width and not math.isnan(width):
         raise InputError(f"{where}: thickness_m = {t:.6g} is not smaller than width_m = {width:.6g}; check both")
     n, d = _vertices_or_dice(w, where, n_default, d_default)
@@ -613,7 +622,7 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         material_from_table(data["material"], str(path))  # checked here, before any work
         material = tuple((str(k), float(v)) for k, v in data["material"].items())
     t_default = defaults["thickness_m"]
-    return StructureSpec(
+    spec = StructureSpec(
         name=defaults["name"],
         walls=tuple(walls),
         thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),
@@ -632,6 +641,14 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         material=material,
         source=path,
     )
+    if not any(w.size_from_photo for w in walls):  # the corners' room, before any work (else at the build)
+        from .build3d.place import corners as footprint_corners
+
+        try:
+            footprint_corners(spec)
+        except InputError as e:
+            raise InputError(f"{path.name}: {e}") from None
+    return spec
 
 
 # ----------------------------------------------------------------------------------------------

@@ -171,4 +171,29 @@ def corners(footprint: Footprint) -> list[Corner]:
     pairs = [(i, i + 1) for i in range(n - 1)]
     if footprint_is_closed(spec) and n >= 3:
         pairs.append((n - 1, 0))
-    return [Corner(a, b, _wrap(spec.walls[b].theta_rad - spec.walls[a].theta_rad)) for a, b in pairs]
+    found = [Corner(a, b, _wrap(spec.walls[b].theta_rad - spec.walls[a].theta_rad)) for a, b in pairs]
+    _check_end_widths(spec, found)
+    return found
+
+
+def _check_end_widths(spec: Footprint, found: list[Corner]) -> None:
+    """Refuse walls whose convex corners take their whole width: at a corner the other wall's
+    bricks cover ``t_other / sin(turn)`` of this wall's end (the end faces its photo shows), so a
+    wall needs ``W`` larger than the two ends' sum; else its inner faces cross the neighbours' and
+    the bricks overlap (a thickness in centimetres read as metres builds a 4.5 m thick wall)."""
+    taken = [0.0] * len(spec.walls)
+    by: list[list[str]] = [[] for _ in spec.walls]
+    for c in found:
+        if not c.convex:
+            continue
+        for this, other in ((c.a, c.b), (c.b, c.a)):
+            t = spec.walls[other].thickness_m
+            taken[this] += c.end_width_on(t)
+            by[this].append(f"'{spec.walls[other].name or other}' (thickness_m = {t:.6g})")
+    for i, w in enumerate(spec.walls):
+        if taken[i] >= w.width_m:
+            raise InputError(
+                f"wall '{w.name or i}': width_m = {w.width_m:.6g} is not more than the {taken[i]:.6g} m its "
+                f"corners with {' and '.join(by[i])} take of it; a wall's thickness is its units' depth "
+                "in metres: check thickness_m and the widths"
+            )

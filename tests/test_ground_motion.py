@@ -72,6 +72,7 @@ def test_accelerogram_csv(tmp_path):
         ("0,0.1\n0.01,inf\n0.02,0.1\n", "line 2"),
         ("0,0.1\n0.01,0.2\n0.02,0.1\n0.05,0.0\n0.06,0.1\n", "line 4: time step 0.03 s"),
         ("0,0.1,0.2,0.3\n0.01,0,0,0\n0.02,0,0,0\n", "line 1: 4 columns"),
+        ("0,0\n1,0.1\n2,0\n3,0\n", "time step 1 s is coarser than any strong-motion record"),
     ],
 )
 def test_accelerogram_errors(tmp_path, text, msg):

@@ -436,6 +436,9 @@ PEAK_CHANGE_WARN = 0.05
 #: the largest peak ground acceleration a run accepts (g): above any recorded ground motion (the
 #: strongest reach about 3 g)
 MAX_PGA_G = 5.0
+#: the coarsest time step a record may have (s): strong-motion records are sampled at 0.005-0.02 s;
+#: at 0.05 s a record holds nothing above 10 Hz, and a masonry structure's periods are 0.05-0.5 s
+MAX_RECORD_DT_S = 0.05
 
 
 def _read_record(path: Path, units: str | None) -> tuple[np.ndarray, float, str]:
@@ -481,6 +484,13 @@ def read_accelerogram(
         raise InputError(f"--units {units!r}: choose g or m/s2")
     given = units
     acc, dt, units = _read_record(path, given)
+    if dt > MAX_RECORD_DT_S:
+        raise _record_error(
+            path,
+            f"its time step {dt:g} s is coarser than any strong-motion record's (at most {MAX_RECORD_DT_S:g} s: "
+            "a masonry structure's periods are 0.05-0.5 s); give the record as sampled (0.005-0.02 s) or "
+            "resample it finer",
+        )
     acc = acc * RECORD_UNITS[units]
     name = path.name
     if path_y is not None:

@@ -73,6 +73,22 @@ def test_a_thickness_the_corners_have_no_room_for_is_refused_before_any_work(tmp
         load_structure(p, require_sources=False)
 
 
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        ("mortar_m = 0.5", r"mortar_m = 0\.5 is not thinner than the units \(brick_height_m 0\.18 m\)"),
+        ("brick_height_m = 9", r"one course \(9\.01 m: a unit and its mortar\) is taller than wall 'w0'"),
+    ],
+)
+def test_a_scenario_whose_units_cannot_be_laid_is_refused(tmp_path, extra, message):
+    """Mortar thicker than the bricks, or a brick taller than the wall: synth drew 195 and 53
+    bricks of such walls without a word (a size in the wrong unit)."""
+    p = tmp_path / "s.toml"
+    p.write_text(scenario_text([(2.0, 2.0, 0)], closed=False, extra=extra))
+    with pytest.raises(InputError, match=message):
+        load_structure(p, require_sources=False)
+
+
 def test_vertices_too_few(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text(scenario_text([(2.0, 2.0, 0)], vertices=2))

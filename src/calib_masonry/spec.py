@@ -316,6 +316,13 @@ def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
             raise InputError(f"{where}: '{key}' must be > 0, got {getattr(spec, key)}")
     if not 0.0 <= spec.irregularity <= 1.0:
         raise InputError(f"{where}: 'irregularity' must lie in [0, 1], got {spec.irregularity}")
+    lowest = spec.brick_height_m if spec.layout == "stretcher" else spec.stone_height_m[0]
+    height_key = "brick_height_m" if spec.layout == "stretcher" else "stone_height_m"
+    if spec.mortar_m >= lowest:
+        raise InputError(
+            f"{where}: mortar_m = {spec.mortar_m:g} is not thinner than the units ({height_key} {lowest:g} m); "
+            "give the joint's thickness in metres (about 0.01 m for brick, 0.02-0.04 m for stone)"
+        )
     mortar_px = spec.mortar_m * spec.px_per_m
     if mortar_px < 2.0:
         raise InputError(
@@ -603,6 +610,15 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         names.add(wname)
         walls.append(_wall_from(w, where, wname, defaults, path, require_sources))
     if synthetic is not None:
+        course = synthetic.mortar_m + (
+            synthetic.brick_height_m if synthetic.layout == "stretcher" else synthetic.stone_height_m[0]
+        )
+        for w in walls:  # a wall lower than one course holds no unit whole: a unit in the wrong units
+            if w.height_m < course:
+                raise InputError(
+                    f"{_where(path, '[synthetic]')}: one course ({course:g} m: a unit and its mortar) is taller "
+                    f"than wall '{w.name}' (height_m = {w.height_m:g}); give the units' sizes in metres"
+                )
         for w in walls:  # the masks a synth run would draw, bounded before any work (1e6 px/m ran out of memory)
             pixels = w.width_m * w.height_m * synthetic.px_per_m**2
             if pixels > MAX_SYNTH_PIXELS:

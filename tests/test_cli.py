@@ -224,6 +224,39 @@ def test_sigterm_stops_build_and_leaves_nothing(tmp_path):
     assert not out.exists() and _staging(tmp_path) == []
 
 
+def test_sigterm_twice_as_timeout_sends_it_stops_once_and_cleanly(tmp_path):
+    """GNU ``timeout`` signals the command and then its whole process group, so the command gets
+    SIGTERM twice; the second one, raised in the first one's clean-up, once left "Exception ignored
+    in: <stdout> TypeError" after the error line. One line, exit 2, nothing written."""
+    import signal
+    import time
+
+    out = tmp_path / "model"
+    p = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "calib_masonry",
+            "build",
+            str(DATA / "paper_example" / "structure.toml"),
+            "--out",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(3.0)
+    assert p.poll() is None, "the build ended before it could be killed; use a larger structure"
+    p.send_signal(signal.SIGTERM)
+    time.sleep(0.01)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 2 and "terminated; nothing was written" in err
+    assert "Traceback" not in err and "Exception ignored" not in err
+    assert not out.exists() and _staging(tmp_path) == []
+
+
 def _children(pid: int) -> list[int]:
     out = []
     for stat in Path("/proc").glob("[0-9]*/stat"):

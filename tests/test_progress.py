@@ -88,3 +88,21 @@ def test_a_signal_inside_a_deferred_section_is_raised_on_the_way_out(monkeypatch
             process.on_signal(signal.SIGINT, None)
             raise ValueError
     assert not process._PENDING
+
+
+def test_a_second_sigterm_while_stopping_is_not_raised_again(monkeypatch):
+    """``timeout`` signals the command and then its process group: the second SIGTERM must not
+    raise inside the first one's clean-up."""
+    import signal
+    import threading
+
+    import pytest
+
+    from calib_masonry import errors, process
+
+    monkeypatch.setattr(process, "_STOP", threading.Event())
+    with pytest.raises(errors.Terminated):
+        process.on_signal(signal.SIGTERM, None)
+    assert process.on_signal(signal.SIGTERM, None) is None and process.stop_requested()
+    with pytest.raises(KeyboardInterrupt):  # Ctrl-C still interrupts
+        process.on_signal(signal.SIGINT, None)

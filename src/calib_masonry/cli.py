@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from .errors import CalibMasonryError, InputError, Terminated
-from .process import on_signal, print_warning
+from .process import on_signal, print_warning, stop_requested
 
 __all__ = ["main"]
 
@@ -976,7 +976,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     finally:
         for sig, handler in previous.items():
-            signal.signal(sig, handler)
+            # once stopping, a second SIGTERM (``timeout`` signals the command, then its process
+            # group) is ignored: with the default restored here, or by the interpreter's
+            # finalisation (which resets a Python handler, not SIG_IGN), it killed the command with
+            # -15 after its one line
+            signal.signal(sig, signal.SIG_IGN if sig == signal.SIGTERM and stop_requested() else handler)
         from .preload import wait_for_background
 
         wait_for_background()

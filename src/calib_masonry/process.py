@@ -43,8 +43,13 @@ def on_signal(signum, frame) -> None:
     """The CLI's handler of SIGTERM and SIGINT: raise :class:`Terminated` (SIGTERM, after
     :func:`request_stop`, kept even if some library swallows the exception) or
     ``KeyboardInterrupt`` where the program is, or, inside :func:`signals_deferred`, on the way
-    out of it."""
+    out of it. A SIGTERM while a stop is already under way does nothing: ``timeout`` sends its
+    signal to the command and again to its process group, and a second exception raised during
+    the first one's clean-up (a staging folder being removed, stdout being flushed) broke it
+    ("Exception ignored ... TypeError: an integer is required" after the run's last line)."""
     if signum == signal.SIGTERM:
+        if stop_requested():
+            return
         request_stop()
         exc: KeyboardInterrupt = Terminated()
     else:

@@ -34,6 +34,12 @@ def test_every_material_field_has_a_key_and_the_table_round_trips():
         ({"cohesion_mpa": "strong"}, "cohesion_mpa = 'strong': give a finite number"),
         ({"mortar_youngs_modulus_mpa": 0}, "mortar_youngs_modulus_mpa = 0: must be > 0"),
         ({"unit_poisson": 0.5}, "unit_poisson = 0.5: must be in [0, 0.5)"),
+        # far outside masonry: a unit error, refused with what the key's unit means
+        ({"density_kg_m3": 1.8}, "density_kg_m3 = 1.8: outside 100..30000 kg/m^3"),
+        ({"friction": 50}, "friction = 50: outside 0..2"),
+        ({"tensile_strength_mpa": 200}, "tensile_strength_mpa = 200: outside 0..50 MPa"),
+        ({"unit_youngs_modulus_mpa": 1e10}, "unit_youngs_modulus_mpa = 1e+10: outside 0..1e+06 MPa"),
+        ({"joint_thickness_m": 10}, "joint_thickness_m = 10: outside 0..0.2 metres"),
     ],
 )
 def test_bad_material_values_are_one_line_errors_naming_the_key(table, message):

@@ -140,6 +140,23 @@ MATERIAL_KEYS: dict[str, tuple[str, float]] = {
 }
 _MATERIAL_KEY_OF = {name: key for key, (name, _) in MATERIAL_KEYS.items()}
 
+#: The largest (and, for the density, smallest) value a [material] table may give, in the key's
+#: unit, and what a value beyond it usually is: far outside masonry (units 400-3000 kg/m^3, friction
+#: 0.3-1.0, strengths to about 300 MPa in compression and 20 MPa in tension, moduli to about 100 GPa,
+#: joints to a few centimetres), so a value beyond is a unit error. :class:`Material` itself (the
+#: API) takes any value its physics allows: a test may hold a joint rigid or unbreakable.
+MATERIAL_PLAUSIBLE: dict[str, tuple[float, float, str]] = {
+    "density_kg_m3": (100.0, 30000.0, "kg/m^3: brick about 1800, stone 2000-2700 (a value in t/m^3 or g/cm^3 x 1000)"),
+    "friction": (0.0, 2.0, "a coefficient: masonry 0.3-1.0"),
+    "restitution": (0.0, 1.0, "a coefficient in [0, 1]"),
+    "compressive_strength_mpa": (0.0, 500.0, "MPa: masonry 1-30, stone units up to about 300 (a value in kPa or Pa?)"),
+    "tensile_strength_mpa": (0.0, 50.0, "MPa: mortar joints 0-1 (a value in kPa or Pa?)"),
+    "cohesion_mpa": (0.0, 50.0, "MPa: mortar joints 0-1.5 (a value in kPa or Pa?)"),
+    "mortar_youngs_modulus_mpa": (0.0, 1e6, "MPa: mortar 100-20,000 (a value in kPa or Pa?)"),
+    "unit_youngs_modulus_mpa": (0.0, 1e6, "MPa: brick and stone 2,000-100,000 (a value in kPa or Pa?)"),
+    "joint_thickness_m": (0.0, 0.2, "metres: about 0.01 (a value in millimetres?)"),
+}
+
 
 def material_from_table(table, where: str, base: Material = MASONRY) -> Material:
     """The material a [material] table gives (:data:`MATERIAL_KEYS`; a key left out keeps
@@ -157,6 +174,9 @@ def material_from_table(table, where: str, base: Material = MASONRY) -> Material
             raise InputError(f"{where}: [material] has no key {key!r}; {hint}")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise InputError(f"{where}: [material] {key} = {value!r}: give a finite number")
+        lo, hi, hint = MATERIAL_PLAUSIBLE.get(key, (-math.inf, math.inf, ""))
+        if value > hi or (value > 0 and value < lo):
+            raise InputError(f"{where}: [material] {key} = {value:g}: outside {lo:g}..{hi:g} {hint}")
         name, scale = MATERIAL_KEYS[key]
         changes[name] = float(value) * scale
     try:

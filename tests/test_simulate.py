@@ -744,6 +744,7 @@ def test_modes_cli(small_model, tmp_path):
         ("badcsv", "accelerogram"),
         ("nan", "line 3: '0.02,nan' holds NaN or inf"),
         ("frames", "--frames -1"),
+        ("fps", "--fps 0: must be > 0"),
     ],
 )
 def test_simulate_bad_input(small_model, tmp_path, case, msg):
@@ -761,6 +762,8 @@ def test_simulate_bad_input(small_model, tmp_path, case, msg):
         args += ["--accelerogram", tmp_path / "x.csv"]
     elif case == "frames":
         args += ["--frames", "-1"]
+    elif case == "fps":
+        args += ["--fps", "0"]
     elif case == "damping":
         args += ["--damping", "1.5"]
     else:

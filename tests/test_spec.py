@@ -89,6 +89,22 @@ def test_a_scenario_whose_units_cannot_be_laid_is_refused(tmp_path, extra, messa
         load_structure(p, require_sources=False)
 
 
+def test_a_sweep_into_sizes_that_cannot_be_laid_is_refused_as_the_file_is(tmp_path):
+    """A study's sweep makes its scenario by ``replace``, past the file's reading: the same checks
+    hold there, on the sizes taken together (mortar 0.2 m with bricks swept to 0.3 m is fine)."""
+    from calib_masonry.study.sample import _sweep_spec
+
+    p = tmp_path / "s.toml"
+    p.write_text(scenario_text([(2.0, 2.0, 0)], closed=False))
+    base = load_structure(p, require_sources=False)
+    with pytest.raises(InputError, match=r"mortar_m = 0\.5 is not thinner than the units"):
+        _sweep_spec(base, {"synthetic.mortar_m": 0.5})
+    with pytest.raises(InputError, match=r"one course \(3\.01 m.*taller than wall 'w0'"):
+        _sweep_spec(base, {"synthetic.brick_height_m": 3.0})
+    swept = _sweep_spec(base, {"synthetic.mortar_m": 0.2, "synthetic.brick_height_m": 0.3})
+    assert (swept.synthetic.mortar_m, swept.synthetic.brick_height_m) == (0.2, 0.3)
+
+
 def test_vertices_too_few(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text(scenario_text([(2.0, 2.0, 0)], vertices=2))

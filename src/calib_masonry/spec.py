@@ -156,6 +156,21 @@ class SyntheticSpec:
     edge_blur_px: float = 0.0
     edge_noise: float = 0.0
 
+    @property
+    def lowest_unit_m(self) -> float:
+        """The lowest unit's height (m): the bricks', or the stones' smallest."""
+        return self.brick_height_m if self.layout == "stretcher" else self.stone_height_m[0]
+
+    def __post_init__(self) -> None:
+        # here rather than where the file is read: a study's sweep makes its specs by ``replace``
+        if self.mortar_m >= self.lowest_unit_m:
+            key = "brick_height_m" if self.layout == "stretcher" else "stone_height_m"
+            raise InputError(
+                f"[synthetic]: mortar_m = {self.mortar_m:g} is not thinner than the units ({key} "
+                f"{self.lowest_unit_m:g} m); give the joint's thickness in metres (about 0.01 m for brick, "
+                "0.02-0.04 m for stone)"
+            )
+
 
 @dataclass(frozen=True)
 class PhotoSpec:
@@ -222,6 +237,14 @@ class StructureSpec:
             value = getattr(self, key)
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"structure '{self.name}': {key} = {value} must be > 0")
+        if self.synthetic is not None:  # here, not where the file is read: a sweep uses ``replace``
+            course = self.synthetic.mortar_m + self.synthetic.lowest_unit_m
+            for w in self.walls:  # a wall lower than one course holds no unit whole: a size in the wrong unit
+                if w.height_m < course:
+                    raise InputError(
+                        f"[synthetic]: one course ({course:g} m: a unit and its mortar) is taller than wall "
+                        f"'{w.name}' (height_m = {w.height_m:g}); give the units' sizes in metres"
+                    )
 
     def with_walls(self, walls: tuple[WallSpec, ...]) -> "StructureSpec":
         return replace(self, walls=walls)
@@ -310,19 +333,15 @@ def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
             kwargs[key] = (float(value[0]), float(value[1]))
         else:
             kwargs[key] = float(_num(tbl, key, where))
-    spec = SyntheticSpec(**kwargs)
+    try:
+        spec = SyntheticSpec(**kwargs)
+    except InputError as e:
+        raise InputError(f"{where.split(': ')[0]}: {e}") from None
     for key in ("px_per_m", "mortar_m", "brick_length_m", "brick_height_m"):
         if getattr(spec, key) <= 0:
             raise InputError(f"{where}: '{key}' must be > 0, got {getattr(spec, key)}")
     if not 0.0 <= spec.irregularity <= 1.0:
         raise InputError(f"{where}: 'irregularity' must lie in [0, 1], got {spec.irregularity}")
-    lowest = spec.brick_height_m if spec.layout == "stretcher" else spec.stone_height_m[0]
-    height_key = "brick_height_m" if spec.layout == "stretcher" else "stone_height_m"
-    if spec.mortar_m >= lowest:
-        raise InputError(
-            f"{where}: mortar_m = {spec.mortar_m:g} is not thinner than the units ({height_key} {lowest:g} m); "
-            "give the joint's thickness in metres (about 0.01 m for brick, 0.02-0.04 m for stone)"
-        )
     mortar_px = spec.mortar_m * spec.px_per_m
     if mortar_px < 2.0:
         raise InputError(
@@ -449,6 +468,14 @@ def _numbers(value, count: int) -> bool:
         and len(value) == count
         and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
     )
+
+
+def _named(path: Path, make, **kwargs):
+    """``make(**kwargs)``, its InputError prefixed with the file's name."""
+    try:
+        return make(**kwargs)
+    except InputError as e:
+        raise InputError(f"{path.name}: {e}") from None
 
 
 def _wall_from(w, where: str, wname: str, defaults: dict, path: Path, require_sources: bool) -> WallSpec:
@@ -610,15 +637,6 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         names.add(wname)
         walls.append(_wall_from(w, where, wname, defaults, path, require_sources))
     if synthetic is not None:
-        course = synthetic.mortar_m + (
-            synthetic.brick_height_m if synthetic.layout == "stretcher" else synthetic.stone_height_m[0]
-        )
-        for w in walls:  # a wall lower than one course holds no unit whole: a unit in the wrong units
-            if w.height_m < course:
-                raise InputError(
-                    f"{_where(path, '[synthetic]')}: one course ({course:g} m: a unit and its mortar) is taller "
-                    f"than wall '{w.name}' (height_m = {w.height_m:g}); give the units' sizes in metres"
-                )
         for w in walls:  # the masks a synth run would draw, bounded before any work (1e6 px/m ran out of memory)
             pixels = w.width_m * w.height_m * synthetic.px_per_m**2
             if pixels > MAX_SYNTH_PIXELS:
@@ -638,7 +656,9 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         material_from_table(data["material"], str(path))  # checked here, before any work
         material = tuple((str(k), float(v)) for k, v in data["material"].items())
     t_default = defaults["thickness_m"]
-    spec = StructureSpec(
+    spec = _named(
+        path,
+        StructureSpec,
         name=defaults["name"],
         walls=tuple(walls),
         thickness_m=float(t_default if t_default is not None else walls[0].thickness_m),

@@ -238,11 +238,12 @@ def _sweep_spec(base, values: dict):
 
     syn = base.synthetic or SyntheticSpec()
     photos = base.photos or PhotoSpec()
+    changes = {}  # made at once: SyntheticSpec checks its sizes together (mortar thinner than the units)
     for name, v in values.items():
         table, _, field = name.partition(".")
         if table == "synthetic":
             cur = getattr(syn, field)
-            syn = replace(syn, **{field: int(v) if isinstance(cur, int) else float(v)})
+            changes[field] = int(v) if isinstance(cur, int) else float(v)
         elif table == "photos":
             cur = getattr(photos, field)
             if isinstance(cur, tuple):
@@ -252,7 +253,7 @@ def _sweep_spec(base, values: dict):
             else:
                 v = float(v)
             photos = replace(photos, **{field: v})
-    return replace(base, synthetic=syn, photos=photos)
+    return replace(base, synthetic=replace(syn, **changes), photos=photos)
 
 
 def _sweep(study: Study, sample: Sample) -> tuple[dict, object]:

@@ -78,6 +78,8 @@ def test_a_thickness_the_corners_have_no_room_for_is_refused_before_any_work(tmp
     [
         ("mortar_m = 0.5", r"mortar_m = 0\.5 is not thinner than the units \(brick_height_m 0\.18 m\)"),
         ("brick_height_m = 9", r"one course \(9\.01 m: a unit and its mortar\) is taller than wall 'w0'"),
+        # a negative size is named as such, not as mortar thicker than the units
+        ("brick_height_m = -0.18", r"\[synthetic\]: 'brick_height_m' must be > 0, got -0\.18"),
     ],
 )
 def test_a_scenario_whose_units_cannot_be_laid_is_refused(tmp_path, extra, message):

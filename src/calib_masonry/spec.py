@@ -163,10 +163,13 @@ class SyntheticSpec:
 
     def __post_init__(self) -> None:
         # here rather than where the file is read: a study's sweep makes its specs by ``replace``
+        for key in ("px_per_m", "mortar_m", "brick_length_m", "brick_height_m"):
+            if getattr(self, key) <= 0:
+                raise InputError(f"'{key}' must be > 0, got {getattr(self, key)}")
         if self.mortar_m >= self.lowest_unit_m:
             key = "brick_height_m" if self.layout == "stretcher" else "stone_height_m"
             raise InputError(
-                f"[synthetic]: mortar_m = {self.mortar_m:g} is not thinner than the units ({key} "
+                f"mortar_m = {self.mortar_m:g} is not thinner than the units ({key} "
                 f"{self.lowest_unit_m:g} m); give the joint's thickness in metres (about 0.01 m for brick, "
                 "0.02-0.04 m for stone)"
             )
@@ -336,10 +339,7 @@ def _synthetic_from(tbl: dict, where: str) -> SyntheticSpec:
     try:
         spec = SyntheticSpec(**kwargs)
     except InputError as e:
-        raise InputError(f"{where.split(': ')[0]}: {e}") from None
-    for key in ("px_per_m", "mortar_m", "brick_length_m", "brick_height_m"):
-        if getattr(spec, key) <= 0:
-            raise InputError(f"{where}: '{key}' must be > 0, got {getattr(spec, key)}")
+        raise InputError(f"{where}: {e}") from None
     if not 0.0 <= spec.irregularity <= 1.0:
         raise InputError(f"{where}: 'irregularity' must lie in [0, 1], got {spec.irregularity}")
     mortar_px = spec.mortar_m * spec.px_per_m
@@ -680,10 +680,7 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
     if not any(w.size_from_photo for w in walls):  # the corners' room, before any work (else at the build)
         from .build3d.place import corners as footprint_corners
 
-        try:
-            footprint_corners(spec)
-        except InputError as e:
-            raise InputError(f"{path.name}: {e}") from None
+        _named(path, footprint_corners, footprint=spec)
     return spec
 
 

@@ -486,10 +486,14 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     before, after = result.plumb_rms_px
     straightened = result.plumb_lines >= 2 and after <= LENS_STRAIGHTENS * before
     if inp.fit_distortion and (result.sigma("k1") > LENS_DETERMINED * inp.k1_sigma or not straightened):
+        lines = (
+            f"straightening {result.plumb_lines} long joints from {before:.2f} to {after:.2f} px RMS"
+            if result.plumb_lines
+            else "no long straight joint or line to straighten"  # its RMS is NaN: "from nan to nan" was printed
+        )
         lens_source = (
             f"held at {'the profile' if lens is not None else '0'}: this photo's joints do not determine it "
-            f"(k1 {result.value('k1'):+.3f} +- {result.sigma('k1'):.3f} when fitted, straightening "
-            f"{result.plumb_lines} long joints from {before:.2f} to {after:.2f} px RMS)"
+            f"(k1 {result.value('k1'):+.3f} +- {result.sigma('k1'):.3f} when fitted, {lines})"
         )
         inp = replace(inp, fit_distortion=False)
         try:  # on the segments and plumb lines the first fit kept (choosing them again cost 2 solves)

@@ -3,8 +3,8 @@
 A user's camera has 12-48 MP; the laboratory photos of data_external/real_photos are 594 x 891 px.
 Each real photo is resampled to k times its pixels (Lanczos, saved as a JPEG of quality 92, as a
 finer sensor would have taken the same scene; it adds no detail, so anything that changes with k
-is the code's own dependence on the pixel size) and calibrated automatically with its width
-given. Printed per photo and size: H, its sigma, the error, the error in sigmas (z), the base
+is the code's own dependence on the pixel size; k = 1 is the photo itself, not saved again) and
+calibrated automatically with its width given. Printed per photo and size: H, its sigma, the error, the error in sigmas (z), the base
 corners' sigma (px of the photo's own size: about 10 where the shaded base was carried across its
 ramp, 0.2-4 where it was not), and the seconds.
 

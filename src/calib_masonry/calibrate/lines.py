@@ -230,9 +230,10 @@ _SIDE_BLUR_PX = 0.7
 def _blurred_samples(
     rgb: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, gray: bool = False, blur_px: float = _SIDE_BLUR_PX
 ) -> np.ndarray:
-    """The photo ``(R, C, 3)`` blurred by ``blur_px`` (default :data:`_SIDE_BLUR_PX`) and sampled bilinearly (nearest
-    pixel beyond the edges) at the points ``rows``, ``cols`` ``(n,)``: ``(n, 3)``; with ``gray``, its
-    channels' mean (in float32, as ``rgb.mean(axis=-1)`` makes it) blurred and sampled: ``(n,)``.
+    """The photo ``(R, C, 3)`` blurred by ``blur_px`` (default :data:`_SIDE_BLUR_PX`) and sampled
+    bilinearly (nearest pixel beyond the edges) at the points ``rows``, ``cols`` ``(n,)``: ``(n, 3)``;
+    with ``gray``, its channels' mean (in float32, as ``rgb.mean(axis=-1)`` makes it) blurred and
+    sampled: ``(n,)``.
 
     Only the crop the points need is blurred, padded by the kernel's radius, so every sample is
     exactly (bit for bit) what blurring the whole photo would give, at a fraction of the cost (a
@@ -1382,7 +1383,7 @@ def _ramp_end(prof: np.ndarray, offs: np.ndarray) -> float:
     k = i0
     run_max = fall[i0]
     for j in range(i0 + 1, len(fall)):
-        if fall[j] < run_max - max(0.1 * run_max, SOFT_NOISE, 1e-7):
+        if fall[j] < run_max - max(0.1 * run_max, SOFT_NOISE):
             break  # the profile turns back: the ramp has ended before
         run_max = max(run_max, fall[j])
         k = j
@@ -1423,7 +1424,7 @@ def carry_soft_sides(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> tup
     moved = np.zeros(4)
     lines = []
     centre = quad.mean(axis=0)
-    h = max(1.0, max(rgb.shape[:2]) / SOFT_WORK_PX)
+    h = 1.0 / _work_scale(rgb.shape, SOFT_WORK_PX)  # the profile's step, px
     for i in range(4):
         a, b = quad[i], quad[(i + 1) % 4]
         d = b - a

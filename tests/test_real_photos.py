@@ -83,6 +83,25 @@ def test_real_photo_without_a_length_is_refused_naming_the_prior_and_the_flags(w
     assert forced.relative_sigma() > 0.25 and forced.focal_source.startswith("prior")
 
 
+def test_a_piece_inside_another_is_merged_into_it():
+    """A piece whose one neighbour is another piece goes into it (traced by its outer boundary, the
+    encloser covered it: SC1 built two overlapping stones, 9.2e-4 m^3); a piece on the photo's
+    edge, or beside unlabelled pixels (an occluder), is not enclosed and stays."""
+    from calib_masonry.wall2d.pieces import absorb_islands
+
+    lab = np.ones((30, 40), dtype=np.int32)
+    lab[:, 20:] = 2
+    lab[10:15, 5:10] = 3  # inside 1
+    lab[0:5, 25:30] = 4  # inside 2 but on the photo's edge
+    lab[20:28, 25:35] = 0  # an occluder in 2
+    lab[22:26, 28:32] = 5  # inside the occluder
+    out = absorb_islands(lab)
+    assert np.all(out[lab == 3] == out[5, 5]) and out.max() == 4
+    assert len(np.unique(out[lab == 4])) == 1 and out[2, 27] != out[2, 22]
+    assert np.all(out[lab == 0] == 0) and out[24, 30] not in (0, out[10, 30])
+    assert np.array_equal(absorb_islands(out), out)
+
+
 @pytest.mark.parametrize("wall", [t["wall"] for t in TRUTH])
 def test_real_photo_segmentation_finds_the_stones_not_the_speckle(real_calibrations, wall):
     """The painted speckle, the cracks and the plaster are not joints: 25-45 pieces for 30-40

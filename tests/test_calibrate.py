@@ -1805,6 +1805,37 @@ def test_a_noisy_shaded_rim_is_carried_alike_at_every_resolution(scale):
     assert np.allclose(carried[2:], quad[2:], atol=0.5 * scale)  # the top (sky beyond) stays
 
 
+def test_a_bowed_beam_says_no_more_of_the_lens_with_more_pixels():
+    """Two beam edges bowed by L/830 over the top of a pinhole photo, the same scene at 2 and 8
+    times the pixels: each line's points are doubted by its straightness (fit.PLUMB_STRAIGHTNESS
+    times its length) as well as by their pixel noise, so k1's sigma stops shrinking with the
+    pixels (without that term it fell to 0.73 of itself from 2 to 8 times: the lens a beam's bow
+    implied grew surer with every pixel); and a line's weight is 1 / hypot(noise, L / 500)."""
+    from calib_masonry.calibrate import fit
+
+    def beams(k: int) -> CalibrationInput:
+        t = np.linspace(-1.0, 1.0, 12)
+        pts = [np.c_[300 + 250 * t, y + 0.6 * (1 - t**2)] * k for y in (120.0, 150.0)]
+        return CalibrationInput(
+            image_size=(600 * k, 900 * k),
+            corners_px=np.array([[50, 800], [550, 800], [550, 200], [50, 200]], dtype=float) * k,
+            corner_sigma_px=(2.0 * k,) * 4,
+            camera_height_m=0.45,
+            focal_px=900.0 * k,
+            known_width_m=0.9,
+            fit_distortion=True,
+            plumb_points=np.concatenate(pts),
+            plumb_cluster=np.repeat([0, 1], 12),
+            plumb_family=np.full(24, 2.0),
+        )
+
+    _, w, _, _ = fit._pad_plumb(beams(8))
+    length = 500.0 * 8
+    assert w[:24] == pytest.approx(1.0 / math.hypot(1.0, length * fit.PLUMB_STRAIGHTNESS))
+    sigma = [calibrate(beams(k)).sigma("k1") for k in (2, 8)]
+    assert sigma[1] > 0.85 * sigma[0]
+
+
 def test_the_front_face_found_again_through_the_lens():
     """Once front_face_ends has moved a side in to the crease, the front face's base and top are
     found again between the moved corners, and the side not moved is the outline's: the corners

@@ -19,6 +19,8 @@ along the courses. So:
    ``J``) first, while that boundary is weaker than ``merge_threshold`` (texture, not a joint) or
    one of the two is smaller than ``min_piece_fraction`` of a module; never into a piece of more
    than ``max_piece_modules`` modules. The size prior thus rejects implausible pieces both ways.
+5. **Islands** (:func:`absorb_islands`): a piece whose one neighbour is another piece goes into it
+   (a unit does not wrap around another; traced by its outer boundary, the encloser covered it).
 
 The result says what it found: the pieces' count, their median and largest area, the module, and
 a warning that names the cause when the count is implausible (one piece: no joints found; far more

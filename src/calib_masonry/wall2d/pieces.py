@@ -294,30 +294,28 @@ def smooth_partition(labels: np.ndarray, sigma: float) -> np.ndarray:
 
 def absorb_islands(labels: np.ndarray) -> np.ndarray:
     """Each piece whose every neighbour is one other piece (an island: not on the photo's edge,
-    not beside an unlabelled pixel) merged into that piece, until none is left; labels renumbered
-    1..m, 0 kept. A unit does not wrap around another in a wall's face, and a piece traced by its
-    outer boundary covers what it encloses: the laboratory photo SC1 built a 46 cm^2 piece inside
+    not beside an unlabelled pixel) merged into that piece; labels renumbered 1..m, 0 kept. One
+    pass leaves none: an island touches its encloser alone, so merging it changes no other piece's
+    neighbours, and an encloser is never an island itself (it touches the island and what lies
+    beyond). A unit does not wrap around another in a wall's face, and a piece traced by its outer
+    boundary covers what it encloses: the laboratory photo SC1 built a 46 cm^2 piece inside
     another (9.2e-4 m^3 of interpenetration in the 3D model, measured)."""
     lab = np.asarray(labels).astype(np.int64)
     n = int(lab.max()) + 1
-    while True:
-        padded = np.pad(lab, 1, constant_values=n)  # the photo's edge: a neighbour of its own
-        pairs = []
-        for a, b in ((padded[:, :-1], padded[:, 1:]), (padded[:-1], padded[1:])):
-            m = a != b
-            pairs.append(np.c_[a[m], b[m]])
-            pairs.append(np.c_[b[m], a[m]])
-        pairs = np.unique(np.concatenate(pairs), axis=0)
-        pairs = pairs[(pairs[:, 0] > 0) & (pairs[:, 0] < n)]  # from each piece to its neighbours
-        piece, count = np.unique(pairs[:, 0], return_counts=True)
-        only = pairs[np.isin(pairs[:, 0], piece[count == 1])]  # (island, its one neighbour), sorted
-        only = only[(only[:, 1] > 0) & (only[:, 1] < n)]  # that neighbour a piece, not the edge or 0
-        if not len(only):
-            break
-        # an encloser is never an island itself (it has the island and what lies beyond it)
-        table = np.arange(n + 1)
-        table[only[:, 0]] = only[:, 1]
-        lab = table[lab]
+    padded = np.pad(lab, 1, constant_values=n)  # the photo's edge: a neighbour of its own
+    pairs = []
+    for a, b in ((padded[:, :-1], padded[:, 1:]), (padded[:-1], padded[1:])):
+        m = a != b
+        pairs.append(np.c_[a[m], b[m]])
+        pairs.append(np.c_[b[m], a[m]])
+    pairs = np.unique(np.concatenate(pairs), axis=0)
+    pairs = pairs[(pairs[:, 0] > 0) & (pairs[:, 0] < n)]  # from each piece to its neighbours
+    piece, count = np.unique(pairs[:, 0], return_counts=True)
+    only = pairs[np.isin(pairs[:, 0], piece[count == 1])]  # (island, its one neighbour)
+    only = only[(only[:, 1] > 0) & (only[:, 1] < n)]  # that neighbour a piece, not the edge or 0
+    table = np.arange(n + 1)
+    table[only[:, 0]] = only[:, 1]
+    lab = table[lab]
     _, renum = np.unique(lab, return_inverse=True)
     return (renum.reshape(lab.shape) + (0 if (lab == 0).any() else 1)).astype(np.int32)
 

@@ -12,7 +12,7 @@ sigma (`ok`), or the one-line refusal; then the counts.
 
     .venv/bin/python experiments/photo_conditions.py [--changes ev-2 crop_tight ...] [--truth data_external/real_photos/truth.json]
 
-Measured 2026-12-04 on 5e69001 (docs/photo_path.md, "A photo under another light"): the truth
+Measured 2026-12-04 on 5e69001 (docs/photo_path.md, "a photo under another light"): the truth
 within 2 sigma in 20 of 30, outside in 10, none refused. The 10: SC4 cropped tighter, shaded from
 the top or from a side, darker by 2 stops, flatter (contrast halved) or through gamma 1.6 (H -20
 to -35 %, 6.7-8.7 sigma off: the shaded lowest course not taken for wall, the base a course high);
@@ -22,6 +22,12 @@ to -17.8 %, 2.5-3.3 sigma). Tried and not kept: the outline's fine contrast take
 refused when the changed photos were truncated to 8 bits instead of rounded; SC1 one stop darker
 went from -1.2 % to -19.2 % (8.9 sigma). The outline's lowest course is on a knife's edge on these
 photos; the same change of light by half a grey level moves it a course.
+
+Measured again on the fifty-third session's code (the base found again below a shaded bottom
+course by its head joints, `calibrate.lines.base_below_heads`): 22 of 30 within 2 sigma. SC4
+shaded from a side and cropped tighter now within (-4.5, -4.7 %); darker by 2 stops, shaded from
+the top and flatter -6.8, -7.8, -9.1 % (2.9-4.2 sigma; were -24 to -25 %); gamma 1.6 -35.5 % as
+before; SC1 and SC2 as before.
 """
 
 from __future__ import annotations

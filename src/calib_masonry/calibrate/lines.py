@@ -1025,14 +1025,161 @@ def base_from_heads(
     return new, sigma
 
 
-def _step_across(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, off: float = 2.5) -> float:
+#: a head joint runs on below the base when a segment towards the head joints' vanishing point
+#: begins within this fraction of the photo's long side (at least HEAD_FOOT_MIN_PX) of the base
+#: and ends further below it than HEAD_FOOT_FRACTION of the long side
+HEAD_BELOW_GAP_FRACTION = 0.01
+#: the base is moved by at most this share of the wall's ends (a course of a stone wall: 0.1-0.2 of
+#: its height)
+HEAD_BELOW_REACH = 0.25
+#: the strip the base takes in must look like masonry in the shade: its relative contrast (the
+#: lightness's deviation over its mean, which shade leaves as it is) at most this many times the
+#: wall's. The laboratory photos: a bottom course shaded to a third of its light 1.4 times the wall's;
+#: the steel and concrete footing under the three walls, whose blocks' edges run on below the foot
+#: as head joints do, 2.3-3.1 times
+HEAD_BELOW_TEXTURE = 1.75
+
+
+def base_below_heads(
+    rgb: np.ndarray, quad: np.ndarray, sigma: np.ndarray, seg: np.ndarray, vp_head: np.ndarray, half: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The outline ``quad`` (LL, LR, UR, UL, corner sigmas ``sigma``) with its base moved down where
+    the wall's own head joints run on below it. A bottom course in shade (the light falling off
+    towards the floor) is not taken for wall by its appearance, and the outline's base stops a
+    course high at one end and tilts (a laboratory photo darkened towards its foot: 80 px high at
+    the left end, H -24 % with the width given). The head joints of that course are still in the
+    photo, dark lines in a dark course: of the segments of ``seg`` that run towards ``vp_head``
+    between the ends, one that begins within :data:`HEAD_BELOW_GAP_FRACTION` of the long side of
+    the base and ends more than :data:`HEAD_FOOT_FRACTION` of it below (at most
+    :data:`HEAD_BELOW_REACH` of the ends' length) says that the base is too high somewhere. The
+    lower ends of the head joints near the base or below it are then the feet, and the new base
+    the line through the two feet farthest apart (a quarter of the base at least) that leaves no
+    other foot below it (with one: through it and the other base corner), snapped to the photo's
+    outermost strong edge within ``half`` px. It is kept where the colour steps across it by
+    :data:`HEAD_FOOT_STEP_SHARE` of the step across the weaker end (as :func:`base_from_heads`
+    asks of its foot, here each step relative to the lightness either side) and the strip it takes
+    in is masonry's texture
+    (:data:`HEAD_BELOW_TEXTURE`); elsewhere the outline is kept."""
+    from .segments import dist_to_vp
+
+    quad = np.asarray(quad, dtype=np.float64)
+    seg = np.asarray(seg, dtype=np.float64).reshape(-1, 4)
+    rows, cols = rgb.shape[:2]
+    long_side = max(rows, cols)
+    if len(seg) < 2 or vp_head is None:
+        return quad, sigma
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    heads = seg[(dist_to_vp(seg, vp_head) < 1.5) & (length >= 8.0)].reshape(-1, 2, 2)
+    if len(heads) < 2:
+        return quad, sigma
+    n = side_normal(quad[0], quad[1])  # out of the wall: down, below the base
+    along = (quad[1] - quad[0]) / float(np.linalg.norm(quad[1] - quad[0]))
+    below = (heads - quad[0]) @ n  # (k, 2): how far below the base each end lies
+    upper = np.argmin(below, axis=1)
+    k = np.arange(len(heads))
+    top_b, low_b = below[k, upper], below[k, 1 - upper]
+    low_p = heads[k, 1 - upper]
+    nl, nr = side_normal(quad[3], quad[0]), side_normal(quad[1], quad[2])
+    ends = heads.reshape(-1, 2)
+    inside = ((ends - quad[0]) @ nl < -3.0) & ((ends - quad[1]) @ nr < -3.0)
+    ok = inside.reshape(-1, 2).all(axis=1)
+    gap = max(HEAD_FOOT_MIN_PX, HEAD_BELOW_GAP_FRACTION * long_side)
+    margin = max(HEAD_FOOT_MIN_PX, HEAD_FOOT_FRACTION * long_side)
+    reach = HEAD_BELOW_REACH * 0.5 * (np.linalg.norm(quad[3] - quad[0]) + np.linalg.norm(quad[2] - quad[1]))
+    # a joint runs on below the base: a piece that begins at the base (within the gap) and ends
+    # below it by more than the margin. Only then is the base looked for again (a footing's or a
+    # rig's vertical edges below a right base are no wall's joints)
+    if not np.any(ok & (top_b <= gap) & (margin < low_b) & (low_b <= reach)):
+        return quad, sigma
+    # the feet: the lower ends of the head joints near the base or below it
+    feet = low_p[ok & (low_b > -gap) & (low_b <= reach)]
+    feet = np.unique(np.round(np.array(feet), 3), axis=0)
+    left, right = (quad[3], quad[0] - quad[3]), (quad[2], quad[1] - quad[2])
+    width = float(np.linalg.norm(quad[1] - quad[0]))
+    best = None
+    for i in range(len(feet)):
+        for j in range(i + 1, len(feet)):
+            d = feet[j] - feet[i]
+            span = abs(float(d @ along))
+            if span < 0.25 * width:
+                continue
+            d = d / float(np.linalg.norm(d))
+            lower = (feet - feet[i]) @ np.array([-d[1], d[0]]) * np.sign(np.array([-d[1], d[0]]) @ n)
+            if lower.max() > 2.0:
+                continue  # another foot lies below this line
+            if best is None or span > best[0]:
+                best = (span, (feet[i], d))
+    if best is not None:
+        line = best[1]
+    else:  # one foot (or none far enough apart): through the lowest and the other base corner
+        foot = feet[np.argmax((feet - quad[0]) @ n)]
+        other = quad[1] if (foot - quad[0]) @ along < 0.5 * width else quad[0]
+        if float(np.linalg.norm(other - foot)) < 0.25 * width:
+            return quad, sigma
+        line = (foot, (other - foot) / float(np.linalg.norm(other - foot)))
+    try:
+        new = quad.copy()
+        new[0], new[1] = _intersect(line, left), _intersect(line, right)
+    except np.linalg.LinAlgError:
+        return quad, sigma
+    pts: list = []
+    snapped = _refine_side(rgb, new[0], new[1], half, points=pts)
+    if snapped is None:
+        return quad, sigma
+    try:
+        new[0], new[1] = _intersect(snapped, left), _intersect(snapped, right)
+    except np.linalg.LinAlgError:
+        return quad, sigma
+    if np.any(np.abs((new[:2] - quad[:2]) @ n) > reach):
+        return quad, sigma
+    # the steps relative to the lightness on either side: the foot found lies in the shade
+    # that hid it, the ends in the light (SC4 darkened towards its foot: 0.083 against 0.50 as RGB
+    # steps, at the rule's share of 0.15 a hair's breadth either way)
+    ends = min(_step_across(rgb, quad[3], quad[0], relative=True), _step_across(rgb, quad[1], quad[2], relative=True))
+    if _step_across(rgb, new[0], new[1], relative=True) < HEAD_FOOT_STEP_SHARE * ends:
+        return quad, sigma
+    wall, strip = _relative_contrast(rgb, [quad, new], lambda masks: (masks[0], masks[1] & ~masks[0]))
+    if not strip < HEAD_BELOW_TEXTURE * wall:
+        return quad, sigma
+    base = _side_sigma(pts[0], snapped, float(np.linalg.norm(new[1] - new[0])))
+    sigma = np.array(sigma, dtype=np.float64)
+    sigma[:2] = [_corner_sigma(float(v), base) for v in sigma[:2]]
+    return new, sigma
+
+
+def _relative_contrast(rgb: np.ndarray, polygons, regions) -> tuple[float, ...]:
+    """The median relative contrast (the CIELAB lightness's standard deviation over its mean in a
+    Gaussian window of 0.7 % of the long side, as the outline's appearance model has it) over each
+    region that ``regions`` makes of the masks of ``polygons`` (photo pixels); the photo is shrunk
+    to at most 1000 px first. NaN for an empty region."""
+    from skimage.color import rgb2lab
+
+    from .outline import polygon_mask
+    from .segments import shrink
+
+    s = min(1.0, 1000.0 / max(rgb.shape[:2]))
+    small = shrink(np.asarray(rgb, dtype=np.float32), s)
+    light = rgb2lab(np.clip(small, 0.0, 1.0))[..., 0]
+    w = max(2.0, 0.007 * max(light.shape))
+    mean = ndimage.gaussian_filter(light, w)
+    sd = np.sqrt(np.maximum(ndimage.gaussian_filter(light * light, w) - mean * mean, 0.0))
+    rel = sd / np.maximum(mean, 1.0)
+    masks = [polygon_mask(light.shape, (np.asarray(q) + 0.5) * s - 0.5) for q in polygons]
+    return tuple(float(np.median(rel[m])) if m.any() else float("nan") for m in regions(masks))
+
+
+def _step_across(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, off: float = 2.5, *, relative: bool = False) -> float:
     """The median, along the side a-b, of the colour's step across it (RGB distance between the
-    photo ``off`` px either side)."""
+    photo ``off`` px either side); ``relative``: each step over the lightness of the two sides
+    (their RGB norms' mean), which shade, falling on both sides alike, leaves as it is."""
     n = side_normal(a, b)
     p = a[None, :] + np.linspace(0.05, 0.95, max(20, int(np.linalg.norm(b - a) / 6)))[:, None] * (b - a)[None, :]
     inner = _blurred_samples(rgb, (p - off * n)[:, 1], (p - off * n)[:, 0])
     outer = _blurred_samples(rgb, (p + off * n)[:, 1], (p + off * n)[:, 0])
-    return float(np.median(np.linalg.norm(inner - outer, axis=-1)))
+    step = np.linalg.norm(inner - outer, axis=-1)
+    if relative:
+        step = step / np.maximum(0.5 * (np.linalg.norm(inner, axis=-1) + np.linalg.norm(outer, axis=-1)), 1e-3)
+    return float(np.median(step))
 
 
 def base_in_pencil(
@@ -1308,6 +1455,11 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
         quad, sigma = base_from_heads(rgb, quad, sigma, every, outline.vp_bed, outline.vp_head, halfwidths[-1])
         if straight is not None:
             straight = base_from_heads(rgb, *straight, every, outline.vp_bed, outline.vp_head, halfwidths[-1])
+    if outline.vp_head is not None:
+        # a bottom course in shade, its head joints running on below the base
+        quad, sigma = base_below_heads(rgb, quad, sigma, every, outline.vp_head, halfwidths[-1])
+        if straight is not None:
+            straight = base_below_heads(rgb, *straight, every, outline.vp_head, halfwidths[-1])
     slack = 0.02 * max(rows, cols)
     if np.any(quad < -slack) or np.any(quad[:, 0] > cols - 1 + slack) or np.any(quad[:, 1] > rows - 1 + slack):
         raise FitFailed(

@@ -777,8 +777,9 @@ def test_a_fit_its_joints_contradict_is_refused_not_moved_to_an_end_face(monkeyp
     folder = ROOT / "data_external" / "blender_walls"
     truth = next(p for p in json.loads((folder / "truth.json").read_text())["photos"] if p["name"] == "tall12325.jpg")
     # the outline as the code of that day found it: its base's lost course not yet put back on
-    # the foot its head joints give (base_from_heads, which now finds this wall within 2 %), nor
-    # the region's pockets open at the bottom taken in as openings (outline._openings: holes alone)
+    # the foot its head joints give (base_from_heads, which now finds this wall within 2 %, nor
+    # base_below_heads, which brings that base down as well), nor the region's pockets open at the
+    # bottom taken in as openings (outline._openings: holes alone)
     from scipy import ndimage
 
     import calib_masonry.calibrate.outline as outline
@@ -790,6 +791,7 @@ def test_a_fit_its_joints_contradict_is_refused_not_moved_to_an_end_face(monkeyp
         return np.r_[False, size >= outline.OPENING_MIN_FRACTION * float(region.sum() + holes.sum())][lab]
 
     monkeypatch.setattr(lines, "base_from_heads", lambda rgb, quad, sigma, *rest: (quad, sigma))
+    monkeypatch.setattr(lines, "base_below_heads", lambda rgb, quad, sigma, *rest: (quad, sigma))
     monkeypatch.setattr(outline, "_openings", holes_alone)
     asked = []
     real = rectify.front_face_ends

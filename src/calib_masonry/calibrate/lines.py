@@ -1517,6 +1517,12 @@ SOFT_MIN_FALL = 0.1
 #: 6 times larger lost its base's rim (a rise of 0.01 one pixel out ended the ramp in 2 of the 4
 #: quarters): H 0.853 m against 0.889 m at its own size, with a sigma of 1.7 % instead of 3.0 %
 SOFT_NOISE = 0.02
+#: a rim darker than this (lightness of 1, where its ramp begins) need fall only as much less as it
+#: is darker (SOFT_MIN_FALL times its lightness over this): shade and a shorter exposure scale a
+#: ramp with the light. The laboratory photos' rims begin at 0.23-0.31; two stops darker, or shaded
+#: towards the foot, at 0.12-0.18, where they fall by 0.08-0.14 and were not carried (SC1 two stops
+#: darker: H -15.6 %, 4.3 sigma, against -1.2 % at its own light)
+SOFT_LIGHT = 0.25
 #: a photo longer than this (px) has its soft sides' profiles sampled and blurred at this
 #: resolution's pixel, not its own, so that a ramp is read over the same share of the wall on a
 #: 12 or 48 MP photo as on the 0.5-6 MP photos it was measured on
@@ -1544,7 +1550,8 @@ def _ramp_end(prof: np.ndarray, offs: np.ndarray) -> float:
     end = float(offs[int(np.argmax(fall[i0 : k + 1] >= 0.9 * total)) + i0]) if total > 0 else 0.0
     if end >= offs[-1] - 3.0 * h:
         return 0.0  # still falling at the reach: the background's own gradient (a sky), not a rim
-    return end if total > SOFT_MIN_FALL and step < SOFT_STEP_SHARE * total and end > 2.0 * h else 0.0
+    min_fall = SOFT_MIN_FALL * min(1.0, inside / SOFT_LIGHT)
+    return end if total > min_fall and step < SOFT_STEP_SHARE * total and end > 2.0 * h else 0.0
 
 
 def carry_soft_sides(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> tuple[np.ndarray, np.ndarray]:
@@ -1564,7 +1571,8 @@ def carry_soft_sides(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> tup
     brightening away from it, was carried across: Blender-rendered walls lost 10-22 % of their
     height to a base moved 42 px onto the shadow's far edge). A quarter is soft when its own step
     (2 px either side) is less than
-    :data:`SOFT_STEP_SHARE` of the whole fall. A side soft in at least three quarters moves to
+    :data:`SOFT_STEP_SHARE` of the whole fall, and that fall is more than :data:`SOFT_MIN_FALL`
+    (less on a rim darker than :data:`SOFT_LIGHT`, in proportion). A side soft in at least three quarters moves to
     where their falls end (the profile within 10 % of its extreme; the median of the quarters). A
     crisp side stays, also one that a lens bends (each quarter steps at once, at its own offset,
     where the side's average profile looked like a ramp). The profile wavers by itself (grain,

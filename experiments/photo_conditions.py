@@ -27,7 +27,10 @@ Measured again on the fifty-third session's code (the base found again below a s
 course by its head joints, `calibrate.lines.base_below_heads`): 22 of 30 within 2 sigma. SC4
 shaded from a side and cropped tighter now within (-4.5, -4.7 %); darker by 2 stops, shaded from
 the top and flatter -6.8, -7.8, -9.1 % (2.9-4.2 sigma; were -24 to -25 %); gamma 1.6 -35.5 % as
-before; SC1 and SC2 as before.
+before; SC1 and SC2 as before. Then with a soft rim's least fall in proportion to its lightness
+(`lines.SOFT_LIGHT`): 26 of 30; two stops darker SC1 -3.2 %, SC2 -3.2 %, SC4 -3.7 %, SC4 shaded
+from the top -3.5 %; outside: SC2 and SC4 with the contrast halved (-5.7, -9.1 %) and through
+gamma 1.6 (-17.8, -35.5 %).
 """
 
 from __future__ import annotations

@@ -10,7 +10,12 @@ as a JPEG of quality 95 and calibrated automatically with its width given. Print
 change: H, its sigma, the error, the error in sigmas (z) and whether the truth lies within 2
 sigma (`ok`), or the one-line refusal; then the counts.
 
-    .venv/bin/python experiments/photo_conditions.py [--changes ev-2 crop_tight ...] [--truth data_external/real_photos/truth.json]
+    .venv/bin/python experiments/photo_conditions.py [--second] [--changes ev-2 crop_tight ...] [--truth data_external/real_photos/truth.json]
+
+``--second``: ten other changes of the same kinds (-1.5, -3, +0.5 stops; light falling to 50 % or
+20 % towards the foot, to 35 % towards the top, or across the diagonal; contrast 0.7; gamma 1.3 and
+0.7), made after the rules of 2026-12-04 were measured on the first ten, to check them on changes
+they were not tuned on.
 
 Measured 2026-12-04 on 5e69001 (docs/photo_path.md, "a photo under another light"): the truth
 within 2 sigma in 20 of 30, outside in 10, none refused. The 10: SC4 cropped tighter, shaded from
@@ -66,13 +71,23 @@ def changed(rgb: np.ndarray, change: str) -> np.ndarray:
         "vignette": (1 - 0.6 * ((xx - w / 2) ** 2 + (yy - h / 2) ** 2) / (0.5 * np.hypot(w, h)) ** 2)[..., None],
         "shade_down": np.linspace(1.0, 0.35, h)[:, None, None],
         "shade_side": np.linspace(0.35, 1.0, w)[None, :, None],
+        # the second set (--second): changes of the same kinds at other strengths and directions
+        "ev-1.5": 2**-1.5,
+        "ev-3": 2**-3,
+        "ev+0.5": 2**0.5,
+        "shade_down50": np.linspace(1.0, 0.5, h)[:, None, None],
+        "shade_down20": np.linspace(1.0, 0.2, h)[:, None, None],
+        "shade_up35": np.linspace(0.35, 1.0, h)[:, None, None],
+        "shade_diag": (0.3 + 0.7 * (1 - (yy / h + xx / w) / 2))[..., None],
     }
     if change in light:
         return _srgb(_linear(rgb) * light[change])
     if change == "contrast0.5":
         return 0.5 * rgb + 0.25
-    if change == "gamma1.6":
-        return rgb**1.6
+    if change == "contrast0.7":
+        return 0.7 * rgb + 0.15
+    if change.startswith("gamma"):
+        return rgb ** float(change[len("gamma") :])
     if change == "crop_tight":
         return rgb[int(0.15 * h) : int(0.9 * h), int(0.04 * w) : int(0.96 * w)]
     if change == "crop_loose":
@@ -92,6 +107,20 @@ CHANGES = (
     "crop_tight",
     "crop_loose",
 )
+#: a second set, made after the rules of 2026-12-04 were measured on the first, to check them on
+#: changes they were not tuned on
+SECOND = (
+    "ev-1.5",
+    "ev-3",
+    "ev+0.5",
+    "shade_down50",
+    "shade_down20",
+    "shade_up35",
+    "shade_diag",
+    "contrast0.7",
+    "gamma1.3",
+    "gamma0.7",
+)
 
 
 def main() -> None:
@@ -101,9 +130,11 @@ def main() -> None:
     from calib_masonry.errors import CalibMasonryError
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--changes", nargs="+", default=list(CHANGES), choices=CHANGES)
+    ap.add_argument("--changes", nargs="+", default=None, choices=CHANGES + SECOND)
+    ap.add_argument("--second", action="store_true", help="the second set of changes (SECOND) instead of the first")
     ap.add_argument("--truth", default=str(DATA / "truth.json"))
     a = ap.parse_args()
+    a.changes = a.changes or list(SECOND if a.second else CHANGES)
     truth_path = Path(a.truth)
     photos = json.loads(truth_path.read_text())["photos"]
     print(f"{'photo':>6} {'change':>12} {'H m':>6} {'+-':>6} {'err':>7} {'z':>5}")

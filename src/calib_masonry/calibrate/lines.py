@@ -1138,7 +1138,7 @@ def base_below_heads(
     ends = min(_step_across(rgb, quad[3], quad[0], relative=True), _step_across(rgb, quad[1], quad[2], relative=True))
     if _step_across(rgb, new[0], new[1], relative=True) < HEAD_FOOT_STEP_SHARE * ends:
         return quad, sigma
-    wall, strip = _relative_contrast(rgb, [quad, new], lambda masks: (masks[0], masks[1] & ~masks[0]))
+    wall, strip = _wall_and_strip_contrast(rgb, quad, new)
     if not strip < HEAD_BELOW_TEXTURE * wall:
         return quad, sigma
     base = _side_sigma(pts[0], snapped, float(np.linalg.norm(new[1] - new[0])))
@@ -1147,25 +1147,21 @@ def base_below_heads(
     return new, sigma
 
 
-def _relative_contrast(rgb: np.ndarray, polygons, regions) -> tuple[float, ...]:
-    """The median relative contrast (the CIELAB lightness's standard deviation over its mean in a
-    Gaussian window of 0.7 % of the long side, as the outline's appearance model has it) over each
-    region that ``regions`` makes of the masks of ``polygons`` (photo pixels); the photo is shrunk
-    to at most 1000 px first. NaN for an empty region."""
+def _wall_and_strip_contrast(rgb: np.ndarray, quad: np.ndarray, new: np.ndarray) -> tuple[float, float]:
+    """The median relative contrast (:func:`~calib_masonry.calibrate.outline.relative_contrast`)
+    within the outline ``quad`` and within the strip that the outline ``new`` adds to it (photo
+    pixels), on the photo shrunk to at most 1000 px; NaN for an empty strip."""
     from skimage.color import rgb2lab
 
-    from .outline import polygon_mask
+    from .outline import polygon_mask, relative_contrast
     from .segments import shrink
 
     s = min(1.0, 1000.0 / max(rgb.shape[:2]))
     small = shrink(np.asarray(rgb, dtype=np.float32), s)
-    light = rgb2lab(np.clip(small, 0.0, 1.0))[..., 0]
-    w = max(2.0, 0.007 * max(light.shape))
-    mean = ndimage.gaussian_filter(light, w)
-    sd = np.sqrt(np.maximum(ndimage.gaussian_filter(light * light, w) - mean * mean, 0.0))
-    rel = sd / np.maximum(mean, 1.0)
-    masks = [polygon_mask(light.shape, (np.asarray(q) + 0.5) * s - 0.5) for q in polygons]
-    return tuple(float(np.median(rel[m])) if m.any() else float("nan") for m in regions(masks))
+    rel = relative_contrast(rgb2lab(np.clip(small, 0.0, 1.0))[..., 0])
+    wall, grown = (polygon_mask(rel.shape, (np.asarray(q) + 0.5) * s - 0.5) for q in (quad, new))
+    strip = grown & ~wall
+    return float(np.median(rel[wall])), float(np.median(rel[strip])) if strip.any() else float("nan")
 
 
 def _step_across(rgb: np.ndarray, a: np.ndarray, b: np.ndarray, off: float = 2.5, *, relative: bool = False) -> float:

@@ -103,11 +103,11 @@ def test_real_photo_without_a_length_is_refused_naming_the_prior_and_the_flags(w
     assert forced.relative_sigma() > 0.25 and forced.focal_source.startswith("prior")
 
 
-def _darkened_towards_the_foot(rgb: np.ndarray, least: float = 0.35) -> np.ndarray:
-    """``rgb`` in [0, 1] with its light falling linearly from 1 at the top row to ``least`` at the
-    bottom one, in linear light (sRGB's curve undone and redone)."""
+def _relit(rgb: np.ndarray, light) -> np.ndarray:
+    """``rgb`` in [0, 1] under ``light`` times the light (a number, or an array that broadcasts
+    against it), in linear light (sRGB's curve undone and redone)."""
     lin = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
-    lin = np.clip(lin * np.linspace(1.0, least, rgb.shape[0])[:, None, None], 0.0, 1.0)
+    lin = np.clip(lin * light, 0.0, 1.0)
     return np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
 
 
@@ -127,7 +127,7 @@ def test_a_bottom_course_in_shade_is_found_by_its_head_joints(monkeypatch):
     with Image.open(REAL / next(t for t in TRUTH if t["wall"] == "SC4")["photo"]) as im:
         rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
     own = detect_wall(rgb).corners_px
-    shaded = np.round(255 * _darkened_towards_the_foot(rgb)) / 255
+    shaded = np.round(255 * _relit(rgb, np.linspace(1.0, 0.35, rgb.shape[0])[:, None, None])) / 255
     found = detect_wall(shaded).corners_px
     assert np.linalg.norm(found[:2] - own[:2], axis=1).max() < 8.0
     moved_without_the_texture = []
@@ -172,9 +172,7 @@ def test_a_real_photo_two_stops_darker_gives_the_same_height(real_calibrations, 
     t = next(t for t in TRUTH if t["wall"] == "SC1")
     with Image.open(REAL / t["photo"]) as im:
         rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
-    lin = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4) * 0.25
-    dark = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
-    Image.fromarray(np.round(255 * dark).astype(np.uint8)).save(tmp_path / "sc1_ev-2.jpg", quality=95)
+    Image.fromarray(np.round(255 * _relit(rgb, 0.25)).astype(np.uint8)).save(tmp_path / "sc1_ev-2.jpg", quality=95)
     cal = cm.calibrate_photo(tmp_path / "sc1_ev-2.jpg", cm.CalibrateConfig(known_width_m=t["width_m"]))
     assert cal.result.height_m == pytest.approx(real_calibrations["SC1"].result.height_m, rel=0.05)
     assert abs(cal.result.height_m - t["height_m"]) <= 2.0 * cal.result.sigma("height_m")

@@ -937,6 +937,24 @@ HEAD_FOOT_AGREE_PX = 6.0
 HEAD_FOOT_STEP_SHARE = 0.15
 
 
+def _head_joints(seg: np.ndarray, vp_head: np.ndarray) -> np.ndarray:
+    """The segments ``(n, 4)`` of ``seg`` that run towards the head joints' vanishing point
+    ``vp_head`` (within 1.5 px) and are at least 8 px long."""
+    from .segments import dist_to_vp
+
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    return seg[(dist_to_vp(seg, vp_head) < 1.5) & (length >= 8.0)]
+
+
+def _with_base_sigma(sigma: np.ndarray, edge: np.ndarray, line, new: np.ndarray) -> np.ndarray:
+    """The corner sigmas ``sigma`` with the two base corners' taken from the new base's edge
+    points ``edge`` about its ``line`` (:func:`_side_sigma`) and their ends' (:func:`_corner_sigma`)."""
+    base = _side_sigma(edge, line, float(np.linalg.norm(new[1] - new[0])))
+    sigma = np.array(sigma, dtype=np.float64)
+    sigma[:2] = [_corner_sigma(float(v), base) for v in sigma[:2]]
+    return sigma
+
+
 def base_from_heads(
     rgb: np.ndarray,
     quad: np.ndarray,
@@ -964,15 +982,13 @@ def base_from_heads(
     outline that lost the bottom course at one or both ends (its bricks in the foot's shadow) put a
     base corner 66-80 px high, W -62 to +43 %; the second lowest head joint's end lay 0.5-4.9 px
     above the foot on those walls."""
-    from .segments import dist_to_vp
 
     quad = np.asarray(quad, dtype=np.float64)
     seg = np.asarray(seg, dtype=np.float64).reshape(-1, 4)
     rows, cols = rgb.shape[:2]
     if len(seg) < 2 or vp_bed is None or vp_head is None:
         return quad, sigma
-    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
-    heads = seg[(dist_to_vp(seg, vp_head) < 1.5) & (length >= 8.0)]
+    heads = _head_joints(seg, vp_head)
     if len(heads) < 2:
         return quad, sigma
     left, right = (quad[3], quad[0] - quad[3]), (quad[2], quad[1] - quad[2])  # down each end
@@ -1019,10 +1035,7 @@ def base_from_heads(
     weaker_end = min(_step_across(rgb, quad[3], quad[0]), _step_across(rgb, quad[1], quad[2]))
     if _step_across(rgb, new[0], new[1]) < HEAD_FOOT_STEP_SHARE * weaker_end:
         return quad, sigma
-    base = _side_sigma(pts[0], line, float(np.linalg.norm(new[1] - new[0])))
-    sigma = np.array(sigma, dtype=np.float64)
-    sigma[:2] = [_corner_sigma(float(v), base) for v in sigma[:2]]
-    return new, sigma
+    return new, _with_base_sigma(sigma, pts[0], line, new)
 
 
 #: a head joint runs on below the base when a segment towards the head joints' vanishing point
@@ -1060,7 +1073,6 @@ def base_below_heads(
     asks of its foot, here each step relative to the lightness either side) and the strip it takes
     in is masonry's texture
     (:data:`HEAD_BELOW_TEXTURE`); elsewhere the outline is kept."""
-    from .segments import dist_to_vp
 
     quad = np.asarray(quad, dtype=np.float64)
     seg = np.asarray(seg, dtype=np.float64).reshape(-1, 4)
@@ -1068,8 +1080,7 @@ def base_below_heads(
     long_side = max(rows, cols)
     if len(seg) < 2 or vp_head is None:
         return quad, sigma
-    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
-    heads = seg[(dist_to_vp(seg, vp_head) < 1.5) & (length >= 8.0)].reshape(-1, 2, 2)
+    heads = _head_joints(seg, vp_head).reshape(-1, 2, 2)
     if len(heads) < 2:
         return quad, sigma
     n = side_normal(quad[0], quad[1])  # out of the wall: down, below the base
@@ -1093,7 +1104,7 @@ def base_below_heads(
         return quad, sigma
     # the feet: the lower ends of the head joints near the base or below it
     feet = low_p[ok & (low_b > -gap) & (low_b <= reach)]
-    feet = np.unique(np.round(np.array(feet), 3), axis=0)
+    feet = np.unique(np.round(feet, 3), axis=0)
     left, right = (quad[3], quad[0] - quad[3]), (quad[2], quad[1] - quad[2])
     width = float(np.linalg.norm(quad[1] - quad[0]))
     best = None
@@ -1141,10 +1152,7 @@ def base_below_heads(
     wall, strip = _wall_and_strip_contrast(rgb, quad, new)
     if not strip < HEAD_BELOW_TEXTURE * wall:
         return quad, sigma
-    base = _side_sigma(pts[0], snapped, float(np.linalg.norm(new[1] - new[0])))
-    sigma = np.array(sigma, dtype=np.float64)
-    sigma[:2] = [_corner_sigma(float(v), base) for v in sigma[:2]]
-    return new, sigma
+    return new, _with_base_sigma(sigma, pts[0], snapped, new)
 
 
 def _wall_and_strip_contrast(rgb: np.ndarray, quad: np.ndarray, new: np.ndarray) -> tuple[float, float]:

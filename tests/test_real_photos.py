@@ -161,6 +161,46 @@ def test_a_soft_rim_in_less_light_is_carried_as_far():
     assert _ramp_end(shallow, offs) == 0.0
 
 
+def test_a_soft_rim_on_a_flatter_photo_is_carried_as_far():
+    """The same shaded rim on a photo of half the contrast (haze, flare, a flat tone curve: 0.5 x
+    + 0.25) falls by half as much, 0.085, from a rim at 0.37: under SOFT_MIN_FALL, and lighter than
+    SOFT_LIGHT, so it was not taken for a ramp. The wall's own spread of lightness halves with it:
+    measured against a quarter of that (lines.SOFT_SPREAD_SHARE) the ramp ends where it ends at
+    full contrast. A fall that is small against the wall's spread is still no ramp."""
+    from calib_masonry.calibrate.lines import SOFT_SPREAD_SHARE, _ramp_end
+
+    offs = np.arange(-4.0, 28.0)
+    ramp = np.interp(offs, [-4.0, 0.0, 9.0, 27.0], [0.24, 0.23, 0.06, 0.065])
+    spread = 0.42  # the laboratory photos' 0.41-0.45 (90th less 10th percentile)
+    at_full = _ramp_end(ramp, offs, spread)
+    assert at_full > 0
+    flat = 0.5 * ramp + 0.25
+    assert _ramp_end(flat, offs) == 0.0  # the photo's contrast unknown: no ramp
+    assert _ramp_end(flat, offs, 0.5 * spread) == at_full
+    fall = 0.8 * SOFT_SPREAD_SHARE * 0.2
+    shallow = np.interp(offs, [-4.0, 0.0, 9.0, 27.0], [0.4, 0.39, 0.39 - fall, 0.39 - fall])
+    assert _ramp_end(shallow, offs, 0.2) == 0.0
+    assert _ramp_end(shallow, offs, 0.5 * 0.2) > 0  # a ramp against a wall of half that spread
+
+
+@pytest.mark.slow
+def test_a_flatter_real_photo_keeps_its_base(real_calibrations, tmp_path):
+    """SC4 with its contrast at 0.7 (0.7 x + 0.15, a hazy or flat photo): its shaded base's rim
+    fell by 0.07-0.10, under SOFT_MIN_FALL, and was not carried: the base 10 px high, H -8.5 % at
+    3.9 sigma. Measured against the wall's own spread of lightness the rim is carried as at the
+    photo's own contrast: the base corners within 4 px of those, the truth within 2 sigma."""
+    from PIL import Image
+
+    t = next(t for t in TRUTH if t["wall"] == "SC4")
+    with Image.open(REAL / t["photo"]) as im:
+        rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+    Image.fromarray(np.round(255 * (0.7 * rgb + 0.15)).astype(np.uint8)).save(tmp_path / "sc4_flat.jpg", quality=95)
+    cal = cm.calibrate_photo(tmp_path / "sc4_flat.jpg", cm.CalibrateConfig(known_width_m=t["width_m"]))
+    own = real_calibrations["SC4"].detection.corners_px
+    assert np.linalg.norm(cal.detection.corners_px[:2] - own[:2], axis=1).max() < 4.0
+    assert abs(cal.result.height_m - t["height_m"]) <= 2.0 * cal.result.sigma("height_m")
+
+
 @pytest.mark.slow
 def test_a_real_photo_two_stops_darker_gives_the_same_height(real_calibrations, tmp_path):
     """SC1 taken with a quarter of the light (two stops, in linear light): its shaded rims, at the

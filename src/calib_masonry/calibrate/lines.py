@@ -1527,15 +1527,22 @@ SOFT_NOISE = 0.02
 #: towards the foot, at 0.12-0.18, where they fall by 0.08-0.14 and were not carried (SC1 two stops
 #: darker: H -15.6 %, 4.3 sigma, against -1.2 % at its own light)
 SOFT_LIGHT = 0.25
+#: nor need a ramp fall by more than this share of the wall's own lightness spread (its 90th less
+#: its 10th percentile, :func:`_wall_spread`): a flatter photo (haze, flare, a flat tone curve)
+#: scales the rim's fall and the wall's spread alike. The laboratory photos spread 0.41-0.45 (so
+#: SOFT_MIN_FALL rules there) and their rims fall 0.1-0.16 at the base; with the contrast at 0.7
+#: or halved, 0.21-0.31 and 0.05-0.10, where the base was not carried (SC4 at 0.7: H -8.5 %, 3.9
+#: sigma). Blender's renders spread 0.13-0.27; none of their sides changed (64 outlines)
+SOFT_SPREAD_SHARE = 0.25
 #: a photo longer than this (px) has its soft sides' profiles sampled and blurred at this
 #: resolution's pixel, not its own, so that a ramp is read over the same share of the wall on a
 #: 12 or 48 MP photo as on the 0.5-6 MP photos it was measured on
 SOFT_WORK_PX = 3000
 
 
-def _ramp_end(prof: np.ndarray, offs: np.ndarray) -> float:
+def _ramp_end(prof: np.ndarray, offs: np.ndarray, spread: float = math.inf) -> float:
     """Where a soft side's ramp ends on one lightness profile across it (0.0 when the side is
-    crisp there): see :func:`carry_soft_sides`."""
+    crisp there): see :func:`carry_soft_sides` (``spread``: the wall's, :func:`_wall_spread`)."""
     h = float(offs[1] - offs[0]) if len(offs) > 1 else 1.0
     i0 = int(np.argmin(np.abs(offs)))
     inside = float(prof[max(0, i0 - 2)])
@@ -1554,8 +1561,28 @@ def _ramp_end(prof: np.ndarray, offs: np.ndarray) -> float:
     end = float(offs[int(np.argmax(fall[i0 : k + 1] >= 0.9 * total)) + i0]) if total > 0 else 0.0
     if end >= offs[-1] - 3.0 * h:
         return 0.0  # still falling at the reach: the background's own gradient (a sky), not a rim
-    min_fall = SOFT_MIN_FALL * min(1.0, inside / SOFT_LIGHT)
+    min_fall = min(SOFT_MIN_FALL * min(1.0, inside / SOFT_LIGHT), SOFT_SPREAD_SHARE * spread)
     return end if total > min_fall and step < SOFT_STEP_SHARE * total and end > 2.0 * h else 0.0
+
+
+def _wall_spread(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> float:
+    """How much the wall's lightness (its channels' mean) spreads: its 90th less its 10th percentile
+    over a 40 x 40 grid of the quadrilateral ``quad`` (LL, LR, UR, UL; ideal coordinates of
+    ``to_photo``'s lens where given), its middle 80 % each way, nearest pixels."""
+    t = np.linspace(0.1, 0.9, 40)
+    u, v = np.meshgrid(t, t)
+    q = np.asarray(quad, dtype=np.float64)
+    pts = ((1 - u) * (1 - v))[..., None] * q[0] + (u * (1 - v))[..., None] * q[1]
+    pts = pts + (u * v)[..., None] * q[2] + ((1 - u) * v)[..., None] * q[3]
+    pts = pts.reshape(-1, 2)
+    if to_photo is not None:
+        pts = to_photo(pts)
+    rows, cols = rgb.shape[:2]
+    r = np.clip(np.round(pts[:, 1]).astype(np.intp), 0, rows - 1)
+    c = np.clip(np.round(pts[:, 0]).astype(np.intp), 0, cols - 1)
+    gray = np.asarray(rgb[r, c, :3], dtype=np.float64).mean(axis=-1)
+    lo, hi = np.percentile(gray, [10, 90])
+    return float(hi - lo)
 
 
 def carry_soft_sides(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> tuple[np.ndarray, np.ndarray]:
@@ -1576,7 +1603,8 @@ def carry_soft_sides(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> tup
     height to a base moved 42 px onto the shadow's far edge). A quarter is soft when its own step
     (2 px either side) is less than
     :data:`SOFT_STEP_SHARE` of the whole fall, and that fall is more than :data:`SOFT_MIN_FALL`
-    (less on a rim darker than :data:`SOFT_LIGHT`, in proportion). A side soft in at least three quarters moves to
+    (less on a rim darker than :data:`SOFT_LIGHT`, in proportion; at most :data:`SOFT_SPREAD_SHARE` of
+    the wall's own spread of lightness, on a flat photo). A side soft in at least three quarters moves to
     where their falls end (the profile within 10 % of its extreme; the median of the quarters). A
     crisp side stays, also one that a lens bends (each quarter steps at once, at its own offset,
     where the side's average profile looked like a ramp). The profile wavers by itself (grain,
@@ -1589,6 +1617,7 @@ def carry_soft_sides(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> tup
     lines = []
     centre = quad.mean(axis=0)
     h = 1.0 / _work_scale(rgb.shape, SOFT_WORK_PX)  # the profile's step, px
+    spread = _wall_spread(rgb, quad, to_photo=to_photo)
     for i in range(4):
         a, b = quad[i], quad[(i + 1) % 4]
         d = b - a
@@ -1606,7 +1635,7 @@ def carry_soft_sides(rgb: np.ndarray, quad: np.ndarray, *, to_photo=None) -> tup
             pts = to_photo(pts.reshape(-1, 2)).reshape(pts.shape)
         prof = _blurred_samples(rgb, pts[..., 1].ravel(), pts[..., 0].ravel(), gray=True, blur_px=_SIDE_BLUR_PX * h)
         prof = prof.reshape(len(offs), len(ts))
-        ends = [_ramp_end(q.mean(axis=1), offs) for q in np.array_split(prof, 4, axis=1)]
+        ends = [_ramp_end(q.mean(axis=1), offs, spread) for q in np.array_split(prof, 4, axis=1)]
         soft = [e for e in ends if e > 0]
         shift = float(np.median(soft)) if len(soft) >= 3 else 0.0
         moved[i] = shift

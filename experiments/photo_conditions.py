@@ -10,14 +10,16 @@ as a JPEG of quality 95 and calibrated automatically with its width given. Print
 change: H, its sigma, the error, the error in sigmas (z) and whether the truth lies within 2
 sigma (`ok`), or the one-line refusal; then the counts.
 
-    .venv/bin/python experiments/photo_conditions.py [--second | --third] [--changes ev-2 crop_tight ...] [--truth data_external/real_photos/truth.json]
+    .venv/bin/python experiments/photo_conditions.py [--second | --third | --all] [--write DIR] [--changes ev-2 crop_tight ...] [--truth data_external/real_photos/truth.json]
 
 ``--second``: ten other changes of the same kinds (-1.5, -3, +0.5 stops; light falling to 50 % or
 20 % towards the foot, to 35 % towards the top, or across the diagonal; contrast 0.7; gamma 1.3 and
 0.7), made after the rules of 2026-12-04 were measured on the first ten, to check them on changes
 they were not tuned on. ``--third``: eight more (contrast 0.4, 0.6, 0.8; mist or flare as veiling light;
 the black lifted; flatter and a stop darker; an S-curve of more contrast), made after the rule of
-the fifty-fourth session was set.
+the fifty-fourth session was set. ``--all``: the three sets. ``--write DIR``: only write the changed
+photos and a truth.json listing them, for ``bench_real_photos.py --truth DIR/truth.json`` (the
+segmentation and the calibration without a length on them).
 
 Measured 2026-12-04 on 5e69001 (docs/photo_path.md, "a photo under another light"): the truth
 within 2 sigma in 20 of 30, outside in 10, none refused. The 10: SC4 cropped tighter, shaded from
@@ -150,6 +152,31 @@ SECOND = (
 THIRD = ("contrast0.4", "contrast0.6", "contrast0.8", "haze0.25", "haze0.4", "lift0.2", "flat_dark", "scurve")
 
 
+def save_changed(rgb: np.ndarray, change: str, path: Path) -> None:
+    """The photo ``rgb`` under ``change``, rounded to 8 bits, as a JPEG of quality 95 at ``path``."""
+    from PIL import Image
+
+    Image.fromarray(np.round(255 * np.clip(changed(rgb, change), 0, 1)).astype(np.uint8)).save(path, quality=95)
+
+
+def write(photos: list[dict], folder: Path, changes: list[str], out: Path) -> None:
+    """Each photo of ``photos`` (truth.json's entries, their files in ``folder``) under each of
+    ``changes``, as JPEGs in ``out`` with a truth.json that lists them (the photos' own truths)."""
+    from PIL import Image
+
+    out.mkdir(parents=True, exist_ok=True)
+    listed = []
+    for t in photos:
+        with Image.open(folder / t["photo"]) as im:
+            rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+        for change in changes:
+            name = f"{t['wall']}_{change}.jpg"
+            save_changed(rgb, change, out / name)
+            listed.append({**t, "photo": name, "change": change})
+    (out / "truth.json").write_text(json.dumps({"photos": listed}, indent=1))
+    print(f"{len(listed)} photos and truth.json written to {out}")
+
+
 def main() -> None:
     from PIL import Image
 
@@ -160,11 +187,21 @@ def main() -> None:
     ap.add_argument("--changes", nargs="+", default=None, choices=CHANGES + SECOND + THIRD)
     ap.add_argument("--second", action="store_true", help="the second set of changes (SECOND) instead of the first")
     ap.add_argument("--third", action="store_true", help="the third set of changes (THIRD) instead of the first")
+    ap.add_argument("--all", action="store_true", help="the three sets of changes")
     ap.add_argument("--truth", default=str(DATA / "truth.json"))
+    ap.add_argument(
+        "--write",
+        metavar="DIR",
+        help="only write the changed photos and their truth.json into DIR (for bench_real_photos.py --truth)",
+    )
     a = ap.parse_args()
-    a.changes = a.changes or list(THIRD if a.third else SECOND if a.second else CHANGES)
+    everything = list(CHANGES + SECOND + THIRD) if a.all else None
+    a.changes = a.changes or everything or list(THIRD if a.third else SECOND if a.second else CHANGES)
     truth_path = Path(a.truth)
     photos = json.loads(truth_path.read_text())["photos"]
+    if a.write:
+        write(photos, truth_path.parent, a.changes, Path(a.write))
+        return
     print(f"{'photo':>6} {'change':>12} {'H m':>6} {'+-':>6} {'err':>7} {'z':>5}")
     ok = out = refused = 0
     with tempfile.TemporaryDirectory() as tmp:
@@ -173,9 +210,7 @@ def main() -> None:
                 rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
             for change in a.changes:
                 path = Path(tmp) / f"{t['wall']}_{change}.jpg"
-                Image.fromarray(np.round(255 * np.clip(changed(rgb, change), 0, 1)).astype(np.uint8)).save(
-                    path, quality=95
-                )
+                save_changed(rgb, change, path)
                 try:
                     cal = cm.calibrate_photo(path, cm.CalibrateConfig(known_width_m=t["width_m"]))
                 except CalibMasonryError as exc:

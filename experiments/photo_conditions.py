@@ -152,34 +152,31 @@ SECOND = (
 THIRD = ("contrast0.4", "contrast0.6", "contrast0.8", "haze0.25", "haze0.4", "lift0.2", "flat_dark", "scurve")
 
 
-def save_changed(rgb: np.ndarray, change: str, path: Path) -> None:
-    """The photo ``rgb`` under ``change``, rounded to 8 bits, as a JPEG of quality 95 at ``path``."""
-    from PIL import Image
-
-    Image.fromarray(np.round(255 * np.clip(changed(rgb, change), 0, 1)).astype(np.uint8)).save(path, quality=95)
-
-
-def write(photos: list[dict], folder: Path, changes: list[str], out: Path) -> None:
+def changed_photos(photos: list[dict], folder: Path, changes: list[str], out: Path):
     """Each photo of ``photos`` (truth.json's entries, their files in ``folder``) under each of
-    ``changes``, as JPEGs in ``out`` with a truth.json that lists them (the photos' own truths)."""
+    ``changes``, rounded to 8 bits and saved as a JPEG of quality 95 in ``out``: yields the entry,
+    the change and the JPEG's path, photo by photo."""
     from PIL import Image
 
-    out.mkdir(parents=True, exist_ok=True)
-    listed = []
     for t in photos:
         with Image.open(folder / t["photo"]) as im:
             rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
         for change in changes:
-            name = f"{t['wall']}_{change}.jpg"
-            save_changed(rgb, change, out / name)
-            listed.append({**t, "photo": name, "change": change})
+            path = out / f"{t['wall']}_{change}.jpg"
+            Image.fromarray(np.round(255 * np.clip(changed(rgb, change), 0, 1)).astype(np.uint8)).save(path, quality=95)
+            yield t, change, path
+
+
+def write(photos: list[dict], folder: Path, changes: list[str], out: Path) -> None:
+    """The changed photos (:func:`changed_photos`) in ``out``, with a truth.json that lists them
+    (the photos' own truths)."""
+    out.mkdir(parents=True, exist_ok=True)
+    listed = [{**t, "photo": path.name, "change": c} for t, c, path in changed_photos(photos, folder, changes, out)]
     (out / "truth.json").write_text(json.dumps({"photos": listed}, indent=1))
     print(f"{len(listed)} photos and truth.json written to {out}")
 
 
 def main() -> None:
-    from PIL import Image
-
     import calib_masonry as cm
     from calib_masonry.errors import CalibMasonryError
 
@@ -195,37 +192,34 @@ def main() -> None:
         help="only write the changed photos and their truth.json into DIR (for bench_real_photos.py --truth)",
     )
     a = ap.parse_args()
-    everything = list(CHANGES + SECOND + THIRD) if a.all else None
-    a.changes = a.changes or everything or list(THIRD if a.third else SECOND if a.second else CHANGES)
+    chosen = CHANGES + SECOND + THIRD if a.all else THIRD if a.third else SECOND if a.second else CHANGES
+    a.changes = a.changes or list(chosen)
     truth_path = Path(a.truth)
     photos = json.loads(truth_path.read_text())["photos"]
     if a.write:
+        if (Path(a.write) / "truth.json").resolve() == truth_path.resolve():
+            ap.error(f"--write {a.write}: that folder holds the truth it reads ({truth_path}); write elsewhere")
         write(photos, truth_path.parent, a.changes, Path(a.write))
         return
     print(f"{'photo':>6} {'change':>12} {'H m':>6} {'+-':>6} {'err':>7} {'z':>5}")
     ok = out = refused = 0
     with tempfile.TemporaryDirectory() as tmp:
-        for t in photos:
-            with Image.open(truth_path.parent / t["photo"]) as im:
-                rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
-            for change in a.changes:
-                path = Path(tmp) / f"{t['wall']}_{change}.jpg"
-                save_changed(rgb, change, path)
-                try:
-                    cal = cm.calibrate_photo(path, cm.CalibrateConfig(known_width_m=t["width_m"]))
-                except CalibMasonryError as exc:
-                    refused += 1
-                    print(f"{t['wall']:>6} {change:>12} refused: {exc}", flush=True)
-                    continue
-                res = cal.result
-                err = res.height_m - t["height_m"]
-                within = abs(err) <= 2.0 * res.sigma("height_m")
-                ok, out = ok + within, out + (not within)
-                print(
-                    f"{t['wall']:>6} {change:>12} {res.height_m:6.3f} {res.sigma('height_m'):6.3f} "
-                    f"{100 * err / t['height_m']:+6.2f}% {err / res.sigma('height_m'):+5.1f}  {'ok' if within else 'OUT'}",
-                    flush=True,
-                )
+        for t, change, path in changed_photos(photos, truth_path.parent, a.changes, Path(tmp)):
+            try:
+                cal = cm.calibrate_photo(path, cm.CalibrateConfig(known_width_m=t["width_m"]))
+            except CalibMasonryError as exc:
+                refused += 1
+                print(f"{t['wall']:>6} {change:>12} refused: {exc}", flush=True)
+                continue
+            res = cal.result
+            err = res.height_m - t["height_m"]
+            within = abs(err) <= 2.0 * res.sigma("height_m")
+            ok, out = ok + within, out + (not within)
+            print(
+                f"{t['wall']:>6} {change:>12} {res.height_m:6.3f} {res.sigma('height_m'):6.3f} "
+                f"{100 * err / t['height_m']:+6.2f}% {err / res.sigma('height_m'):+5.1f}  {'ok' if within else 'OUT'}",
+                flush=True,
+            )
     print(f"truth within 2 sigma {ok}, outside {out}, refused {refused} (of {ok + out + refused})")
 
 

@@ -747,3 +747,58 @@ def test_a_photo_wall_without_a_scale_is_refused_in_the_structure_files_words(tm
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "eye-height prior" in err and not (tmp_path / "model").exists()
     assert "width_m" in err and "camera_height_m" in err and "known_length = [" in err and "--" not in err
+
+
+def test_a_veil_is_taken_off_and_an_unveiled_photo_left_as_it_is():
+    """calibrate.rectify.without_veil: a photo whose darkest light is a scene's shade comes back as
+    the same object; one under an even veil (linear light 0.75 x + 0.125) comes back within a
+    few grey levels of the photo without it, scaled as the veil dimmed it."""
+    from calib_masonry.calibrate.rectify import VEIL_SHADOW_SHARE, linear_light, srgb_from_linear, without_veil
+    from calib_masonry.io import read_photo
+
+    photo = read_photo(REAL / TRUTH[0]["photo"])
+    assert without_veil(photo) is photo  # its darkest pixels are black
+    lin = linear_light(photo.rgb)
+    veiled = replace(photo, rgb=np.round(255 * srgb_from_linear(0.75 * lin + 0.125)) / 255)
+    dark = np.percentile(linear_light(veiled.rgb).mean(axis=-1), 0.5)
+    light = np.percentile(linear_light(veiled.rgb).mean(axis=-1), 99.5)
+    assert dark > VEIL_SHADOW_SHARE * light  # the rule's own condition holds on this photo
+    back = linear_light(without_veil(veiled).rgb)
+    scale = 0.75 / (1 - 0.125)  # the veil's dimming, which no black point undoes
+    assert np.median(np.abs(back - scale * lin)) < 0.01
+
+
+@pytest.mark.slow
+def test_a_laboratory_photo_in_mist_gives_the_wall_it_gives_without(monkeypatch):
+    """SC4 and SC1 under an even veil of an eighth of the light (mist or flare): the outline's
+    appearance model and GrabCut took SC4's darker bottom course for surroundings (H -35 %, 9
+    sigma) and SC1's foot ran on into the footing (+19 %, 20 sigma). With the veil taken off, H
+    comes within 2 % of the photo's own and the truth within 2 sigma; with the rule off it does
+    not (the same photos)."""
+    from PIL import Image
+
+    import calib_masonry.calibrate.rectify as rectify_module
+    from calib_masonry.calibrate.rectify import linear_light, srgb_from_linear
+
+    def veiled(t, tmp):
+        with Image.open(REAL / t["photo"]) as im:
+            rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+        out = np.round(255 * srgb_from_linear(0.75 * linear_light(rgb) + 0.125)).astype(np.uint8)
+        path = tmp / f"veiled_{t['photo']}"
+        Image.fromarray(out).save(path, quality=95)
+        return path
+
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        for t in (x for x in TRUTH if x["wall"] in ("SC1", "SC4")):
+            config = cm.CalibrateConfig(known_width_m=t["width_m"])
+            own = cm.calibrate_photo(REAL / t["photo"], config).result.height_m
+            path = veiled(t, Path(tmp))
+            res = cm.calibrate_photo(path, config).result
+            assert abs(res.height_m / own - 1) < 0.02, t["wall"]
+            assert abs(res.height_m - t["height_m"]) < 2 * res.sigma("height_m"), t["wall"]
+            with monkeypatch.context() as m:
+                m.setattr(rectify_module, "VEIL_SHADOW_SHARE", math.inf)
+                off = cm.calibrate_photo(path, replace(config, force=True)).result
+            assert abs(off.height_m - t["height_m"]) > 2 * off.sigma("height_m"), t["wall"]

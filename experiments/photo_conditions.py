@@ -49,7 +49,7 @@ and SC4 through gamma 1.6, SC4 with its light to a fifth at the foot, and mist o
 haze0.4) on SC1 (+19 and +20 %, at 20-27 sigma), SC4 (-34, -35 %) and SC2 (haze0.4, -9 %).
 
 Measured again on the fifty-fifth session's code (a veil taken off a photo whose darkest light is
-above 0.15 of its lightest, `calibrate.rectify.without_veil`): `--all` on the three sets 78 of 84
+above 0.15 of its lightest, `calibrate.veil.without_veil`): `--all` on the three sets 78 of 84
 within 2 sigma (73), 3 outside (SC2 and SC4 gamma 1.6, SC4 shade_down20), 3 refused; ``--fourth``
 (``FOURTH``, veils made after the rule) 9 of 18 within 2 sigma against 1 of 18 with the rule off:
 the graded veils (flare_corner, flare_top) and the faint one (mist0.06) still fail.
@@ -112,7 +112,7 @@ def changed(rgb: np.ndarray, change: str) -> np.ndarray:
     haze = {"haze0.25": (0.75, 0.125), "haze0.4": (0.6, 0.14)}
     if change in haze:  # mist or flare: the scene's light dimmed, veiling light added (linear light)
         return _srgb(haze[change][0] * _linear(rgb) + haze[change][1])
-    veil = {  # the fourth set: veils made after the veil's rule (calibrate.rectify.without_veil)
+    veil = {  # the fourth set: veils made after the veil's rule (calibrate.veil.without_veil)
         "mist0.06": (0.9, 0.06),
         "mist0.2": (0.7, 0.2),
         "mist_dark": (0.5, 0.1),
@@ -168,7 +168,7 @@ SECOND = (
 THIRD = ("contrast0.4", "contrast0.6", "contrast0.8", "haze0.25", "haze0.4", "lift0.2", "flat_dark", "scurve")
 
 #: a fourth set, made after the veil was taken off photos whose darkest light is over 0.15 of
-#: their lightest (calibrate.rectify.without_veil, set on haze0.25 and haze0.4 above): veils of
+#: their lightest (calibrate.veil.without_veil, set on haze0.25 and haze0.4 above): veils of
 #: other strengths (one at the rule's edge), coloured, and graded across the frame as flare is
 FOURTH = ("mist0.06", "mist0.2", "mist_dark", "flare_blue", "flare_corner", "flare_top")
 

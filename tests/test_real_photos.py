@@ -750,10 +750,10 @@ def test_a_photo_wall_without_a_scale_is_refused_in_the_structure_files_words(tm
 
 
 def test_a_veil_is_taken_off_and_an_unveiled_photo_left_as_it_is():
-    """calibrate.rectify.without_veil: a photo whose darkest light is a scene's shade comes back as
+    """calibrate.veil.without_veil: a photo whose darkest light is a scene's shade comes back as
     the same object; one under an even veil (linear light 0.75 x + 0.125) comes back within a
     few grey levels of the photo without it, scaled as the veil dimmed it."""
-    from calib_masonry.calibrate.rectify import VEIL_SHADOW_SHARE, linear_light, srgb_from_linear, without_veil
+    from calib_masonry.calibrate.veil import VEIL_SHADOW_SHARE, linear_light, srgb_from_linear, without_veil
     from calib_masonry.io import read_photo
 
     photo = read_photo(REAL / TRUTH[0]["photo"])
@@ -777,8 +777,8 @@ def test_a_laboratory_photo_in_mist_gives_the_wall_it_gives_without(monkeypatch)
     not (the same photos)."""
     from PIL import Image
 
-    import calib_masonry.calibrate.rectify as rectify_module
-    from calib_masonry.calibrate.rectify import linear_light, srgb_from_linear
+    import calib_masonry.calibrate.veil as veil_module
+    from calib_masonry.calibrate.veil import linear_light, srgb_from_linear
 
     def veiled(t, tmp):
         with Image.open(REAL / t["photo"]) as im:
@@ -799,6 +799,6 @@ def test_a_laboratory_photo_in_mist_gives_the_wall_it_gives_without(monkeypatch)
             assert abs(res.height_m / own - 1) < 0.02, t["wall"]
             assert abs(res.height_m - t["height_m"]) < 2 * res.sigma("height_m"), t["wall"]
             with monkeypatch.context() as m:
-                m.setattr(rectify_module, "VEIL_SHADOW_SHARE", math.inf)
+                m.setattr(veil_module, "VEIL_SHADOW_SHARE", math.inf)
                 off = cm.calibrate_photo(path, replace(config, force=True)).result
             assert abs(off.height_m - t["height_m"]) > 2 * off.sigma("height_m"), t["wall"]

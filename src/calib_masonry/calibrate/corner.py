@@ -30,6 +30,7 @@ from .fitresult import FitResult, FitStatus, HasFit, fit_result
 from .lines import DetectConfig, _hough_segments
 from .lm import least_squares
 from .segments import vanishing_point
+from .veil import without_veil
 
 __all__ = [
     "CORNER_DETECT",
@@ -225,6 +226,7 @@ def calibrate_corner_photo(
     """The turn angle between the two walls of a corner photo (wall n on the left)."""
     if not isinstance(photo, Photo):
         photo = read_photo(photo)
+    photo = without_veil(photo)
     f = focal_px or photo.focal_px
     if f is None:
         raise InputError(f"{photo.path}: a corner photo needs the focal length (no EXIF); pass --focal-px F")

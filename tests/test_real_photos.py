@@ -802,3 +802,22 @@ def test_a_laboratory_photo_in_mist_gives_the_wall_it_gives_without(monkeypatch)
                 m.setattr(veil_module, "VEIL_SHADOW_SHARE", math.inf)
                 off = cm.calibrate_photo(path, replace(config, force=True)).result
             assert abs(off.height_m - t["height_m"]) > 2 * off.sigma("height_m"), t["wall"]
+
+
+def test_a_blank_photo_is_no_veil(tmp_path, capsys):
+    """A photo of one lightness (white, blown out) has no veil to take off: its darkest light is
+    its lightest. It ends in the outline's one-line refusal, not in a division by nothing (NaNs
+    reported as a float image out of [0, 1])."""
+    from PIL import Image
+
+    from calib_masonry.calibrate.veil import without_veil
+    from calib_masonry.cli import main
+    from calib_masonry.io import read_photo
+
+    path = tmp_path / "white.jpg"
+    Image.fromarray(np.full((400, 300, 3), 255, np.uint8)).save(path)
+    photo = read_photo(path)
+    assert without_veil(photo) is photo
+    assert main(["rectify", str(path), "--known-width", "1", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no wall found" in err and not (tmp_path / "out").exists()

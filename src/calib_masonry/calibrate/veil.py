@@ -47,7 +47,7 @@ def without_veil(photo: Photo) -> Photo:
     step = max(1, int(math.sqrt(rgb.shape[0] * rgb.shape[1] / 1.0e6)))  # about a million pixels suffice
     sample = linear_light(rgb[::step, ::step, :3]).mean(axis=-1)
     dark, light = (float(v) for v in np.percentile(sample, [VEIL_PERCENTILE, 100.0 - VEIL_PERCENTILE]))
-    if not dark > VEIL_SHADOW_SHARE * light:
+    if not VEIL_SHADOW_SHARE * light < dark < light:  # no veil; or a flat photo, nothing to restore
         return photo
     black = dark
     out = srgb_from_linear((linear_light(rgb[..., :3]) - np.float32(black)) / np.float32(1.0 - black))

@@ -109,10 +109,10 @@ def changed(rgb: np.ndarray, change: str) -> np.ndarray:
     }
     if change in flat:
         return flat[change][0] * rgb + flat[change][1]
-    haze = {"haze0.25": (0.75, 0.125), "haze0.4": (0.6, 0.14)}
-    if change in haze:  # mist or flare: the scene's light dimmed, veiling light added (linear light)
-        return _srgb(haze[change][0] * _linear(rgb) + haze[change][1])
-    veil = {  # the fourth set: veils made after the veil's rule (calibrate.veil.without_veil)
+    veil = {  # mist or flare: the scene's light dimmed, veiling light added
+        "haze0.25": (0.75, 0.125),
+        "haze0.4": (0.6, 0.14),
+        # the fourth set: veils made after the veil's rule (calibrate.veil.without_veil)
         "mist0.06": (0.9, 0.06),
         "mist0.2": (0.7, 0.2),
         "mist_dark": (0.5, 0.1),

@@ -769,7 +769,7 @@ def test_a_veil_is_taken_off_and_an_unveiled_photo_left_as_it_is():
 
 
 @pytest.mark.slow
-def test_a_laboratory_photo_in_mist_gives_the_wall_it_gives_without(monkeypatch):
+def test_a_laboratory_photo_in_mist_gives_the_wall_it_gives_without(monkeypatch, tmp_path):
     """SC4 and SC1 under an even veil of an eighth of the light (mist or flare): the outline's
     appearance model and GrabCut took SC4's darker bottom course for surroundings (H -35 %, 9
     sigma) and SC1's foot ran on into the footing (+19 %, 20 sigma). With the veil taken off, H
@@ -788,20 +788,17 @@ def test_a_laboratory_photo_in_mist_gives_the_wall_it_gives_without(monkeypatch)
         Image.fromarray(out).save(path, quality=95)
         return path
 
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as tmp:
-        for t in (x for x in TRUTH if x["wall"] in ("SC1", "SC4")):
-            config = cm.CalibrateConfig(known_width_m=t["width_m"])
-            own = cm.calibrate_photo(REAL / t["photo"], config).result.height_m
-            path = veiled(t, Path(tmp))
-            res = cm.calibrate_photo(path, config).result
-            assert abs(res.height_m / own - 1) < 0.02, t["wall"]
-            assert abs(res.height_m - t["height_m"]) < 2 * res.sigma("height_m"), t["wall"]
-            with monkeypatch.context() as m:
-                m.setattr(veil_module, "VEIL_SHADOW_SHARE", math.inf)
-                off = cm.calibrate_photo(path, replace(config, force=True)).result
-            assert abs(off.height_m - t["height_m"]) > 2 * off.sigma("height_m"), t["wall"]
+    for t in (x for x in TRUTH if x["wall"] in ("SC1", "SC4")):
+        config = cm.CalibrateConfig(known_width_m=t["width_m"])
+        own = cm.calibrate_photo(REAL / t["photo"], config).result.height_m
+        path = veiled(t, tmp_path)
+        res = cm.calibrate_photo(path, config).result
+        assert abs(res.height_m / own - 1) < 0.02, t["wall"]
+        assert abs(res.height_m - t["height_m"]) < 2 * res.sigma("height_m"), t["wall"]
+        with monkeypatch.context() as m:
+            m.setattr(veil_module, "VEIL_SHADOW_SHARE", math.inf)
+            off = cm.calibrate_photo(path, replace(config, force=True)).result
+        assert abs(off.height_m - t["height_m"]) > 2 * off.sigma("height_m"), t["wall"]
 
 
 def test_a_blank_photo_is_no_veil(tmp_path, capsys):

@@ -42,13 +42,13 @@ def without_veil(photo: Photo) -> Photo:
     outline's appearance model, GrabCut and the soft sides read the wall's darker courses as
     surroundings (laboratory photos under a veil of an eighth: H 14-35 % short, at 7-27
     sigmas, measured by experiments/photo_conditions.py); with the veil off they read as
-    without it. A photo whose darkest pixels are black comes back as it is (the same object)."""
+    without it. A photo whose darkest light is at most :data:`VEIL_SHADOW_SHARE` of its lightest
+    (its own shade, no veil), or that is of one lightness, comes back as it is (the same object)."""
     rgb = np.asarray(photo.rgb)
     step = max(1, int(math.sqrt(rgb.shape[0] * rgb.shape[1] / 1.0e6)))  # about a million pixels suffice
     sample = linear_light(rgb[::step, ::step, :3]).mean(axis=-1)
     dark, light = (float(v) for v in np.percentile(sample, [VEIL_PERCENTILE, 100.0 - VEIL_PERCENTILE]))
     if not VEIL_SHADOW_SHARE * light < dark < light:  # no veil; or a flat photo, nothing to restore
         return photo
-    black = dark
-    out = srgb_from_linear((linear_light(rgb[..., :3]) - np.float32(black)) / np.float32(1.0 - black))
+    out = srgb_from_linear((linear_light(rgb[..., :3]) - np.float32(dark)) / np.float32(1.0 - dark))
     return replace(photo, rgb=out.astype(np.float32))

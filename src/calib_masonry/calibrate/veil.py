@@ -13,6 +13,7 @@ from ..io import Photo
 __all__ = [
     "VEIL_GRID",
     "VEIL_PERCENTILE",
+    "VEIL_PLANE_SHARE",
     "VEIL_PLANE_SPREAD",
     "VEIL_SHADOW_SHARE",
     "linear_light",
@@ -34,14 +35,20 @@ VEIL_SHADOW_SHARE = 0.15
 #: is read ...
 VEIL_GRID = 4
 #: ... and where a plane through those blacks misses none by more than this share of the photo's
-#: white, and rises above :data:`VEIL_SHADOW_SHARE` of it, the plane is the veil. A scene's own
-#: blacks do not lie on one plane: sky, a bright ground or a lit wall fill whole tiles (measured:
-#: 54 Blender-rendered tall walls 0.51-0.62 of the white off the plane at the worst tile, 28
-#: facades 0.29-0.62, 60 of the project's generated tall walls 0.31-0.49; 20 close-up photos
-#: filled by their wall 0.018-0.43, the four under 0.1 with their plane at most 0.18 of the
-#: white); the laboratory photos under a flare graded across them 0.003-0.012. So a graded veil
-#: over a frame with sky in it is not found (the even rule above takes its least off)
+#: white, and rises above :data:`VEIL_PLANE_SHARE` of it, the plane is the veil, graded or even.
+#: A scene's own blacks do not lie on one plane: sky, a bright ground or a lit wall fill whole
+#: tiles (measured: 54 Blender-rendered tall walls 0.51-0.62 of the white off the plane at the
+#: worst tile, 28 facades 0.29-0.62, 60 of the project's generated tall walls 0.31-0.49; 20
+#: close-up photos filled by their wall 0.018-0.43, the four under 0.1 with their plane at most
+#: 0.18 of the white); the laboratory photos 0.001-0.010, under a flare graded across them
+#: 0.003-0.012. So a graded veil over a frame with sky in it is not found (the even rule above
+#: takes its least off)
 VEIL_PLANE_SPREAD = 0.04
+#: ... the share of the white a veil whose blacks lie on one plane must rise above: a photo whose
+#: every tile has the same lifted black is veiled at less than a scene's shade needs (the
+#: laboratory photos' plane 0.2-0.3 %, under an even veil of 0.06: 9-11 %); of the photos above,
+#: one generated close-up lies on its plane and above 0.05 (0.129, taken off: a contrast stretch)
+VEIL_PLANE_SHARE = 0.05
 
 
 def linear_light(rgb: np.ndarray) -> np.ndarray:
@@ -107,7 +114,7 @@ def _without_graded_veil(photo: Photo, light: np.ndarray) -> Photo:
         return photo
     coef, white, miss = found
     corners = coef[0] + np.array([0.0, coef[1], coef[2], coef[1] + coef[2]])
-    if not (miss < VEIL_PLANE_SPREAD * white and corners.max() > VEIL_SHADOW_SHARE * white):
+    if not (miss < VEIL_PLANE_SPREAD * white and corners.max() > VEIL_PLANE_SHARE * white):
         return photo
     rgb = np.asarray(photo.rgb)
     plane = np.maximum(_plane_on(coef, *rgb.shape[:2]), 0.0).astype(np.float32)
@@ -126,14 +133,16 @@ def without_veil(photo: Photo) -> Photo:
     sigmas, measured by experiments/photo_conditions.py); with the veil off they read as
     without it. A photo whose darkest light is at most :data:`VEIL_SHADOW_SHARE` of its lightest
     (its own shade, no veil), or that is of one lightness, comes back as it is (the same object),
-    unless its veil is graded across the frame (flare: :data:`VEIL_PLANE_SPREAD`), when the plane
-    through its tiles' blacks is subtracted and the rest scaled as far as the veil's least."""
+    unless its tiles' blacks lie on one plane above :data:`VEIL_PLANE_SHARE` of it (a veil graded
+    across the frame, as flare is, or an even one too faint for the first rule:
+    :data:`VEIL_PLANE_SPREAD`), when that plane is subtracted and the rest scaled as far as the
+    veil's least."""
     rgb = np.asarray(photo.rgb)
     sample = _sample(rgb)
     dark, light = (float(v) for v in np.percentile(sample, [VEIL_PERCENTILE, 100.0 - VEIL_PERCENTILE]))
     if dark >= light:  # a flat photo: nothing to restore
         return photo
-    if dark <= VEIL_SHADOW_SHARE * light:  # no even veil; perhaps a graded one
+    if dark <= VEIL_SHADOW_SHARE * light:  # no veil a scene's shade could not be; perhaps one on a plane
         return _without_graded_veil(photo, sample)
     out = srgb_from_linear((linear_light(rgb[..., :3]) - np.float32(dark)) / np.float32(1.0 - dark))
     return replace(photo, rgb=out.astype(np.float32))

@@ -107,8 +107,9 @@ def veil_plane(light: np.ndarray) -> tuple[np.ndarray, float, float] | None:
 
 
 def _without_graded_veil(photo: Photo, light: np.ndarray) -> Photo:
-    """The photo with a veil graded across it taken off (:data:`VEIL_PLANE_SPREAD`), or the same
-    object where its tiles' blacks do not say one."""
+    """The photo with a veil on one plane taken off, graded across it or even but faint
+    (:data:`VEIL_PLANE_SPREAD`, :data:`VEIL_PLANE_SHARE`), or the same object where its tiles'
+    blacks do not say one."""
     found = veil_plane(light)
     if found is None:
         return photo

@@ -589,8 +589,8 @@ def _parser() -> argparse.ArgumentParser:
             "--focal-px",
             type=float,
             default=None,
-            help="focal length in pixels (default: EXIF, else fitted from the vanishing points with a 24-50 mm "
-            "equivalent prior)",
+            help="focal length in pixels (default: EXIF, else fitted from the vanishing points with a weak "
+            "prior about a 35 mm equivalent, x/: 2.7)",
         )
         q.add_argument(
             "--max-rms",

@@ -298,6 +298,11 @@ def _cmd_rectify(args) -> int:
     )
     if "pieces" in doc:
         print(f"  {_pieces_line(doc['pieces'])}")
+    if doc.get("joints_left_out"):
+        print(
+            f"note: the {doc['joints_left_out']} joint segments found do not fit one wall plane with the clicked "
+            "corners (blur, grain or speckle taken for joints): left out, the wall rests on the corners"
+        )
     if doc.get("advice"):
         print(f"note: {doc['advice']}")
     return 0

@@ -250,6 +250,7 @@ class PhotoCalibration:
     corner_snap_px: tuple[float, ...] | None = None  # clicked -> snapped, per corner
     occluders: tuple = ()
     courses: dict | None = None  # the course-height scale's measurement
+    joints_left_out: int = 0  # joint segments found but left out: they did not fit the clicked corners' plane
 
     def relative_sigma(self) -> float:
         return max(
@@ -299,6 +300,8 @@ class PhotoCalibration:
         )
         if self.corner_snap_px is not None:
             doc["corner_snap_px"] = list(self.corner_snap_px)
+        if self.joints_left_out:
+            doc["joints_left_out"] = self.joints_left_out
         if self.occluders:
             doc["occluders_px"] = [np.asarray(p, dtype=float).tolist() for p in self.occluders]
         if self.courses is not None:
@@ -567,6 +570,40 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             ) from None
         inp = replace(inp, known_height_m=courses["height_m"], known_height_sigma_m=courses["height_sigma_m"])
         result = calibrate(inp, start=result.params)
+    # clicked corners with joints that fit no wall plane, with the corners or without them (their own
+    # RMS over the limit: a motion blur's streaks, grain or speckle taken for joints): the wall rests
+    # on the clicks and the joints are left out (the lens with them), rather than refused with
+    # advice to click the corners the user clicked (laboratory photo SC4 blurred 8 px along a
+    # diagonal: 368 "joints" 4.3 px RMS from their lines, pulling the corners 90 px off). A corner
+    # clicked on something else is still refused: there the joints fit their lines
+    # (:func:`_corners_contradict`)
+    max_rms = config.max_rms_px or default_max_rms_px(photo.size)
+    left_out = 0
+    used = result.used
+    if (
+        config.corners_px is not None
+        and len(used.bed_segments) + len(used.head_segments)
+        and result.rms_residual_px > max_rms
+        and result.rms_line_px > max_rms
+    ):
+        left_out = len(used.bed_segments) + len(used.head_segments)
+        try:
+            result = calibrate(
+                replace(
+                    used,
+                    bed_segments=np.zeros((0, 4)),
+                    head_segments=np.zeros((0, 4)),
+                    plumb_points=np.zeros((0, 2)),
+                    plumb_cluster=np.zeros(0, dtype=np.int64),
+                    plumb_family=np.zeros(0),
+                    fit_distortion=False,
+                ),
+                start=np.r_[result.params[:9], used.k1_prior, used.k2_prior],
+                reject_outliers=False,
+            )
+        except FitFailed as exc:
+            raise FitFailed(f"{photo.path}: {exc}") from None
+        lens_source = "held at 0: the joints were left out"
     if focal is None:
         prior = focal_prior_px((w, h))
         rel = result.sigma("focal_px") / result.value("focal_px")
@@ -601,6 +638,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         corner_snap_px=snap,
         occluders=tuple(np.asarray(p, dtype=float) for p in config.occluders),
         courses=courses,
+        joints_left_out=left_out,
     )
     if not config.force:
         _check(cal, config)

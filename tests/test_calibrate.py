@@ -1330,6 +1330,20 @@ def test_rectify_bad_input_one_line_exit_2(photo_set, tmp_path, capsys, extra, m
     assert not out.exists()
 
 
+def test_clicked_corners_refused_for_their_residual_are_not_told_to_click_the_corners(photo_set, tmp_path, capsys):
+    """A fit from clicked corners over --max-rms: the one-line error asks to check each click (the
+    user has clicked them), where an automatic outline's asks for --corners."""
+    data, truth = photo_set
+    photo = data / truth["photos"][0]["photo"]
+    clicks = ",".join(f"{v:.1f}" for v in np.ravel(truth["photos"][0]["corners_px"]))
+    for extra, told in ((["--corners", clicks], "check each click"), ([], "click the corners with --corners")):
+        out = tmp_path / "r"
+        assert _run(["rectify", photo, *extra, "--max-rms", "0.0001", "--out", out]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "RMS residual" in err and told in err and "\n" not in err
+        assert not out.exists()
+
+
 def test_rectify_missing_corrupt_and_blank_photos(tmp_path, capsys):
     assert _run(["rectify", tmp_path / "nope.jpg", "--out", tmp_path / "o"]) == 2
     assert "not found" in capsys.readouterr().err

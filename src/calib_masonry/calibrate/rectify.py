@@ -1278,10 +1278,16 @@ def _check(cal: PhotoCalibration, config: CalibrateConfig) -> None:
     if not result.fit.ok:
         raise FitFailed(f"{photo.path}: the calibration {result.status.message}; or use --force to keep it anyway")
     if result.rms_residual_px > max_rms:
+        # corners the user clicked: telling them to click the corners was no help (a blurred
+        # laboratory photo's clicks were refused so, its streaks taken for joints)
+        what = (
+            "check each click on the photo (on the wall's corner, not a shadow, a stone or the rig)"
+            if cal.mode.startswith("clicked")
+            else "click the corners with --corners"
+        )
         raise FitFailed(
             f"{photo.path}: RMS residual {result.rms_residual_px:.2f} px exceeds {max_rms:g} px "
-            "(corners or joints do not fit one wall plane); click the corners with --corners, "
-            "or use --force to keep it anyway"
+            f"(corners or joints do not fit one wall plane); {what}, or use --force to keep it anyway"
         )
     if _corners_contradict(result, max_rms):
         # the joints' lines contradict the corners: a corner found (or clicked) on something else

@@ -147,7 +147,7 @@ def changed(rgb: np.ndarray, change: str) -> np.ndarray:
         return np.clip(0.5 + 1.3 * (rgb - 0.5), 0.0, 1.0)
     if change.startswith("gamma"):
         return rgb ** float(change[len("gamma") :])
-    if change in CAMERA:
+    if change in FIFTH:
         return _through_camera(rgb, change)
     if change == "crop_tight":
         return rgb[int(0.15 * h) : int(0.9 * h), int(0.04 * w) : int(0.96 * w)]
@@ -198,8 +198,7 @@ FOURTH = ("mist0.06", "mist0.2", "mist_dark", "flare_blue", "flare_corner", "fla
 #: than the light: defocus and motion blur, sensor noise (shot and read noise in linear light,
 #: luminance and colour), a phone's sharpening halo, heavy JPEG compression, and a phone's chain
 #: of all three
-CAMERA = ("defocus1.5", "defocus3", "motion8", "noise_iso", "noise_dark", "sharpen", "jpeg30", "phone")
-FIFTH = CAMERA
+FIFTH = ("defocus1.5", "defocus3", "motion8", "noise_iso", "noise_dark", "sharpen", "jpeg30", "phone")
 
 
 def _through_camera(rgb: np.ndarray, change: str) -> np.ndarray:

@@ -576,8 +576,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     # advice to click the corners the user clicked (laboratory photo SC4 blurred 8 px along a
     # diagonal: 368 "joints" 4.3 px RMS from their lines, pulling the corners 90 px off). A corner
     # clicked on something else is still refused: there the joints fit their lines
-    # (:func:`_corners_contradict`)
-    max_rms = config.max_rms_px or default_max_rms_px(photo.size)
+    # (:func:`_corners_contradict`); max_rms as set for the end faces above
     left_out = 0
     used = result.used
     if (

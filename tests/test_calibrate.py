@@ -1587,6 +1587,44 @@ def test_distances_to_many_vanishing_points_are_those_to_each_bit_for_bit():
     assert all(np.array_equal(many[k], dist_to_vp(seg, vp)) for k, vp in enumerate(vps))
 
 
+def test_a_vanishing_point_is_not_taken_inside_the_photo_nor_from_one_line():
+    """Short segments all around a point on the wall (a speckle's) outvote three long bed joints
+    by their length, and segments along one line (a beam's edge), with or without one joint
+    more, meet anywhere along it (or where that joint's tilt says): none
+    gives the outline a vanishing point (the family takes the photo's axis), where three bed
+    joints spread over the wall do. And an outline rectified by such a point, its base 76 degrees
+    from the rows, is none."""
+    from calib_masonry.calibrate.outline import MIN_VP_SPREAD, _across, _upright, _vp
+
+    ang = np.radians(np.linspace(-30, 30, 13))
+    star = np.concatenate(
+        [
+            np.c_[
+                0.05 + r * np.cos(ang),
+                0.02 + r * np.sin(ang),
+                0.05 + (r + 0.06) * np.cos(ang),
+                0.02 + (r + 0.06) * np.sin(ang),
+            ]
+            for r in (0.04, -0.10, 0.12, -0.18)
+        ]
+    )  # 52 segments 0.06 long (3.1 in all), each on a line through (0.05, 0.02)
+    beds = np.array([[-0.3, y, 0.3, y + 0.002] for y in (-0.3, 0.0, 0.3)])  # 1.8 in all, meeting far right
+    along = np.array([[-0.3 + 0.1 * i, 0.2 + 0.001 * i, -0.22 + 0.1 * i, 0.2 + 0.001 * i] for i in range(6)])
+    band = np.r_[along, [[-0.2, -0.1, -0.1, -0.1]]]  # the beam's edge and one joint more
+    assert _across(along, np.r_[1.0, 0.01, 0.0]) < MIN_VP_SPREAD
+    assert _across(band, np.r_[1.0, 0.0, 0.0]) < MIN_VP_SPREAD <= _across(beds, np.r_[1.0, 0.0033, 0.0])
+    axis = np.array([1.0, 0.0, 0.0])
+    shape = (900, 600)
+    to_px = lambda s: s * 900 + [300, 450, 300, 450]  # noqa: E731 - normalised by the long side, centred
+    for seg in (np.r_[star, beds], along, band):
+        vp, inl = _vp(to_px(seg), shape, axis, np.random.default_rng(0), 1.5)
+        assert inl is None and vp is axis
+    vp, inl = _vp(to_px(beds[[0, 1, 2, 0, 1, 2]]), shape, axis, np.random.default_rng(0), 1.5)
+    assert inl is not None and vp[0] / vp[2] > 600  # the beds' own point, far right
+    assert _upright(np.array([[136.0, 605.0], [526.0, 585.0], [526.0, 233.0], [128.0, 237.0]]))
+    assert not _upright(np.array([[126.0, 433.4], [185.9, 680.7], [355.4, 248.0], [129.6, 242.8]]))
+
+
 @pytest.mark.parametrize("shape", [(3000, 2000), (2999, 2001), (1201, 4000)])
 @pytest.mark.parametrize("s", [0.2333, 0.35, 0.4667, 0.7])
 def test_shrink_samples_rescales_grid(shape, s):

@@ -34,19 +34,32 @@ def real_calibrations():
 @pytest.mark.parametrize("wall", [t["wall"] for t in TRUTH])
 def test_real_photo_outline_with_a_known_width_gives_the_height_within_its_sigma(real_calibrations, wall):
     """The automatic outline takes neither the loading beam, the sign, the rig nor the photo's
-    border: with the width given, H comes within 2 % of the database's 0.900 m (-0.9, +0.2, -1.8
-    % measured; -2.4 and -4.1 % on SC2 and SC4 while the focal length's prior was a phone's, x/:
-    1.35, against this laboratory camera's 75-100 mm), and the truth lies within 2 sigma of it."""
+    border: with the width given, H comes within 2 % of the database's 0.900 m on SC1 and SC4
+    (-1.2 and -1.8 % measured; -4.1 % on SC4 while the focal length's prior was a phone's, x/:
+    1.35, against this laboratory camera's 75-100 mm), within 4 % on SC2 (-3.6 %: the next test),
+    and the truth lies within 2 sigma of it."""
     t = next(t for t in TRUTH if t["wall"] == wall)
     cal = real_calibrations[wall]
     res = cal.result
     assert cal.mode == "automatic" and res.fit.ok and cal.scale_source == "known width"
-    assert res.height_m == pytest.approx(t["height_m"], rel=0.02)
+    assert res.height_m == pytest.approx(t["height_m"], rel=0.04 if wall == "SC2" else 0.02)
     assert abs(res.height_m - t["height_m"]) <= 2.0 * res.sigma("height_m")
     rows, cols = cal.photo.rgb.shape[:2]
     quad = cal.detection.corners_px
     assert quad[:, 0].min() > 0.02 * cols and quad[:, 0].max() < 0.98 * cols  # not the photo's sides
     assert quad[:, 1].min() > 0.15 * rows  # not the beam's or the sign's top (y < 0.2 of the photo)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 36, not met: SC2's H with the width is -3.6 %, not within 2 %")
+def test_real_photo_sc2_height_within_the_issues_two_percent(real_calibrations):
+    """SC2's height within the issue's 2 % with the width given: not met. Its +0.2 % of before
+    rested on a bed "vanishing point" of eight short segments, seven of them along the loading
+    beam: the photo zoomed out by 0.95-0.75 gave -2.2 to -4.9 %, and at 0.85 an outline out of
+    the photo (f 155 px). Without that point (outline.MIN_VP_SPREAD) it is -3.6 % at its own size
+    and -2.2 to -4.9 % zoomed, within 1 sigma (4 %): the outline is a trapezoid, its right end 40
+    px shorter than its left, whether the wall's top or the camera's yaw makes it."""
+    t = next(t for t in TRUTH if t["wall"] == "SC2")
+    assert real_calibrations["SC2"].result.height_m == pytest.approx(t["height_m"], rel=0.02)
 
 
 @pytest.mark.slow
@@ -440,6 +453,76 @@ def test_clicked_corners_on_a_blurred_photo_leave_out_the_streaks_taken_for_join
     assert cal.joints_left_out > 100 and cal.to_json()["joints_left_out"] == cal.joints_left_out
     assert cal.result.n_bed + cal.result.n_head == 0 and cal.result.rms_residual_px < 3.0
     assert cal.result.height_m == pytest.approx(sharp.result.height_m, rel=0.01)
+
+
+def _turned(rgb: np.ndarray, focal_px: float, yaw_deg: float, pitch_deg: float, roll_deg: float, zoom: float):
+    """``rgb`` as the same camera (focal length ``focal_px``, principal point at the centre) would
+    have taken it turned by the angles and zoomed out by ``zoom``: the homography K' R K^-1, exact
+    for any scene; the frame kept, black beyond the photo."""
+    from scipy import ndimage
+
+    from calib_masonry.calibrate.camera import wall_from_camera_rotation
+
+    rows, cols = rgb.shape[:2]
+    c = [(cols - 1) / 2, (rows - 1) / 2]
+    k = np.array([[focal_px, 0, c[0]], [0, focal_px, c[1]], [0, 0, 1.0]])
+    k2 = np.array([[focal_px * zoom, 0, c[0]], [0, focal_px * zoom, c[1]], [0, 0, 1.0]])
+    rel = wall_from_camera_rotation(*np.radians([yaw_deg, pitch_deg, roll_deg])).T @ wall_from_camera_rotation(0, 0, 0)
+    inv = np.linalg.inv(k2 @ rel @ np.linalg.inv(k))
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    p = inv @ np.stack([xx.ravel(), yy.ravel(), np.ones(xx.size)])
+    at = [p[1] / p[2], p[0] / p[2]]
+    return np.stack(
+        [ndimage.map_coordinates(rgb[..., i], at, order=1, mode="constant").reshape(rows, cols) for i in range(3)], -1
+    )
+
+
+def test_a_turned_laboratory_photo_takes_no_vanishing_point_on_its_wall():
+    """SC4 as the laboratory's camera (2000 px) turned by about a degree each way would have taken
+    it, zoomed out and brighter: its nine near-horizontal segments lay along the beam's edge, 2 %
+    of the photo apart, so they met anywhere along it, and the least squares put the bed joints'
+    "vanishing point" 100 px left of the photo. The photo rectified by it gave an outline whose
+    base ran 32 degrees from the rows (the fit refused: RMS 3.1 px). On the same view with its
+    angles to more digits (experiments/bench_real_photos.py's) the point fell on the wall, the base
+    ran 76 degrees from the rows and H came out -25 % at a sigma of 1.5 %. A family whose segments
+    lie within 5 % of the photo of one another (the outermost at each end aside) gives no
+    vanishing point, nor does a point inside the photo (the axes are taken instead), and an
+    outline whose sides are not about the rows and columns is not taken."""
+    from calib_masonry.calibrate.outline import detect_outline
+
+    t = next(t for t in TRUTH if t["wall"] == "SC4")
+    view = _turned(cm.read_photo(REAL / t["photo"]).rgb, 2000.0, -1.0688, -0.6661, 0.7214, 0.8024)
+    view = np.clip(view * 1.1712 + 0.0441, 0, 1).astype(np.float32)
+    rows, cols = view.shape[:2]
+    outline = detect_outline(view)
+    for vp in (outline.vp_bed, outline.vp_head):
+        if vp is not None:
+            assert not (abs(vp[0] / vp[2] - cols / 2) < cols / 2 and abs(vp[1] / vp[2] - rows / 2) < rows / 2)
+    quad = outline.corners_px
+    base, top = quad[1] - quad[0], quad[2] - quad[3]
+    assert abs(base[1]) < 0.1 * abs(base[0]) and abs(top[1]) < 0.1 * abs(top[0])
+    photo = cm.Photo(path=Path("SC4-turned"), rgb=view, focal_px=None, heading_deg=None)
+    cal = cm.calibrate_photo(photo, cm.CalibrateConfig(known_width_m=t["width_m"]))
+    assert cal.result.height_m == pytest.approx(t["height_m"], rel=0.03)
+    assert abs(cal.result.height_m - t["height_m"]) <= 2.0 * cal.result.sigma("height_m")
+
+
+def test_a_laboratory_photo_zoomed_out_gives_the_outline_at_its_own_size(real_calibrations):
+    """SC2 zoomed out by 0.85 about its centre (the frame kept, black around): its seven bed
+    segments along the loading beam and one in the wall gave a vanishing point that rectified
+    the photo into an outline out of the wall (a corner 110 px off, f 155 px, H with a sigma of
+    2.3 %). Zoomed, the corners come back where they are at the photo's own size."""
+    t = next(t for t in TRUTH if t["wall"] == "SC2")
+    zoom = 0.85
+    rgb = cm.read_photo(REAL / t["photo"]).rgb
+    view = _turned(rgb, 2000.0, 0.0, 0.0, 0.0, zoom).astype(np.float32)
+    photo = cm.Photo(path=Path("SC2-zoomed"), rgb=view, focal_px=None, heading_deg=None)
+    cal = cm.calibrate_photo(photo, cm.CalibrateConfig(known_width_m=t["width_m"]))
+    own = real_calibrations["SC2"].result
+    centre = np.array([rgb.shape[1] - 1, rgb.shape[0] - 1]) / 2.0
+    back = (cal.result.corners_px() - centre) / zoom + centre
+    assert np.max(np.linalg.norm(back - own.corners_px(), axis=1)) < 8.0
+    assert cal.result.height_m == pytest.approx(own.height_m, rel=0.02)
 
 
 def test_occluders_are_left_out_of_the_outline_and_the_pieces():

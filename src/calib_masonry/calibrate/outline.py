@@ -36,7 +36,7 @@ import numpy as np
 from scipy import ndimage
 
 from .._morphology import binary as _binary
-from ..errors import FitFailed
+from ..errors import FitFailed, InputError
 from .camera import CORNERS_FLAG, order_corners
 
 __all__ = [
@@ -319,6 +319,15 @@ def _with_openings(prob: np.ndarray, region: np.ndarray, occluded: np.ndarray | 
     return np.where(holes, 1.0, prob) if holes.any() else prob
 
 
+# A family's vanishing point is taken only where its segments lie at least this far apart across
+# their direction (a fraction of the photo's long side; :func:`_across`): segments along one line,
+# or a band of them (a loading beam's edges) and one more, meet anywhere along it, and the least
+# squares put the point on the wall, beside the photo, or where that one segment's tilt says
+# (measured on turned and zoomed laboratory photos: an outline out of the wall, or a base 76
+# degrees from the rows). The wall's own joints on the three laboratory photos lie 11-57 % apart
+MIN_VP_SPREAD = 0.05
+
+
 def _rectifying_map(vp_bed: np.ndarray, vp_head: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """A projective map of photo pixels that sends the bed vanishing point to infinity along +u and
     the head one along +v, fixing the photo's ``centre`` (homogeneous points in, ``(u, v, 1)`` out)."""
@@ -497,15 +506,46 @@ def _fit_rectangle(
     return corners if np.all(np.isfinite(corners)) else None
 
 
+def _upright(quad: np.ndarray, max_deg: float = 45.0) -> bool:
+    """Whether a quadrilateral (corners in any order) is a wall's outline as a photo shows it: convex,
+    its base and top within ``max_deg`` of the photo's rows and its ends of its columns. A pair of
+    vanishing points that are not the joints' (from the few bed segments of a beam's edge, say)
+    rectifies the photo into a shape whose best rectangle is none of the wall's sides (a base
+    76 degrees from the rows was taken, measured on a turned laboratory photo)."""
+    try:
+        q = order_corners(quad, where="automatic mode")
+    except InputError:
+        return False
+    d = np.roll(q, -1, axis=0) - q  # base, right end, top (reversed), left end (reversed)
+    off_rows = np.degrees(np.arctan2(np.abs(d[:, 1]), np.abs(d[:, 0])))
+    return bool(np.all(off_rows[[0, 2]] <= max_deg) and np.all(off_rows[[1, 3]] >= 90.0 - max_deg))
+
+
 def _families(seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
     from_h = np.minimum(ang, 180.0 - ang)
     return seg[from_h < 35.0], seg[np.abs(ang - 90.0) < 30.0]
 
 
+def _across(seg: np.ndarray, vp: np.ndarray) -> float:
+    """How far apart, across their direction, the segments ``(n, 4)`` that meet in ``vp`` lie: the
+    range of their midpoints' offsets from the line through their mean midpoint and ``vp``, of
+    four or more without the outermost at each end (one segment away from a band of them spreads
+    nothing: its tilt alone would place the point)."""
+    mid = (seg[:, :2] + seg[:, 2:]) / 2
+    m = mid.mean(axis=0)
+    d = vp[:2] - m * vp[2]  # towards the point (at infinity: its direction)
+    norm = np.linalg.norm(d)
+    if norm == 0:
+        return 0.0
+    off = np.sort((mid - m) @ (np.array([-d[1], d[0]]) / norm))
+    return float(off[-2] - off[1]) if len(off) >= 4 else float(off[-1] - off[0])
+
+
 def _vp(seg: np.ndarray, shape: tuple[int, int], axis: np.ndarray, rng: np.random.Generator, tol_px: float):
     """A family's vanishing point (homogeneous, pixels) by RANSAC and least squares, or the image
-    axis's point at infinity when fewer than four segments support one."""
+    axis's point at infinity when fewer than four segments support one, the point lies inside the
+    photo, or its segments do not place it (:data:`MIN_VP_SPREAD`)."""
     from .segments import vanishing_point
 
     if len(seg) < 4:
@@ -517,7 +557,12 @@ def _vp(seg: np.ndarray, shape: tuple[int, int], axis: np.ndarray, rng: np.rando
         vp, inl = vanishing_point(norm, tol_px / scale, 300, rng)
     except FitFailed:
         return axis, None
-    if inl.sum() < 3:
+    # a point inside the photo is none: every short segment of a speckled or grained surface
+    # points at a point among them (a laboratory photo's bed "vanishing point" was found on the
+    # wall, 100 px from its corner)
+    w = abs(vp[2])
+    inside = abs(vp[0]) < 0.5 * shape[1] / scale * w and abs(vp[1]) < 0.5 * shape[0] / scale * w
+    if inl.sum() < 3 or inside or _across(norm[inl], vp) < MIN_VP_SPREAD:
         return axis, None
     unscale = np.array([[scale, 0, centre[0]], [0, scale, centre[1]], [0, 0, 1.0]])
     return unscale @ vp, inl
@@ -625,7 +670,7 @@ def _cut_outline(small, start, occluded, no_wall, rect_from_px, grid):
         # changed that way started GrabCut on a wall's shadow as well (12055)
         prob = np.where(no_wall, 0.0, prob)
     quad = _fit_rectangle(prob, rect_from_px, cut, grid)
-    if quad is None:
+    if quad is None or not _upright(quad):
         return None
     try:
         quad = order_corners(quad, where="automatic mode")
@@ -728,8 +773,9 @@ def detect_outline(
         except np.linalg.LinAlgError:
             continue
         quad = _fit_rectangle(prob, rect_from_px, region, config.grid, core=core)
-        if quad is not None:
+        if quad is not None and _upright(quad):
             break
+        quad = None
     if quad is None:
         raise FitFailed(
             f"automatic mode: no wall outline found (the wall's region has no clear sides); click the wall's corners "

@@ -1017,6 +1017,48 @@ def test_automatic_mode_finds_corners_and_size(photo_set):
         assert abs((theta - t["theta_deg"] + 180) % 360 - 180) < 1.5
 
 
+def test_a_photo_with_a_dslrs_exif_resized_since_is_calibrated_at_its_own_focal_length(photo_set, tmp_path):
+    """A DSLR's EXIF (Canon's: FocalLength with FocalPlaneXResolution in pixels an inch, and the
+    camera's PixelX/YDimension), the photo halved since with its EXIF kept: the focal length is
+    the camera's halved, and the wall comes out as from the generator's own EXIF. Before, the
+    inch was multiplied (f 645 times too long) and the photo refused as implausible."""
+    from fractions import Fraction
+
+    from PIL import Image
+    from PIL.TiffImagePlugin import IFDRational
+
+    from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
+
+    def rational(v: float) -> IFDRational:
+        q = Fraction(v).limit_denominator(100000)
+        return IFDRational(q.numerator, q.denominator)
+
+    data, truth = photo_set
+    t = truth["photos"][0]
+    w, h = t["image_size"]
+    focal_mm = 35.0
+    per_inch = 2 * t["params"]["focal_px"] / focal_mm * 25.4  # the camera's pixels (twice the photo's)
+    exif = Image.Exif()
+    exif[0x010F], exif[0x0110] = "Canon", "EOS test"
+    sub = exif.get_ifd(0x8769)
+    sub[0x920A], sub[0xA20E], sub[0xA20F], sub[0xA210] = (
+        rational(focal_mm),
+        rational(per_inch),
+        rational(per_inch),
+        2,
+    )
+    sub[0xA002], sub[0xA003] = 2 * w, 2 * h
+    with Image.open(data / t["photo"]) as im:
+        im.convert("RGB").save(tmp_path / "dslr.jpg", exif=exif, quality=95)
+    cal = calibrate_photo(
+        tmp_path / "dslr.jpg", CalibrateConfig(camera_height_m=t["eye_height_m"], camera_height_sigma_m=0.01)
+    )
+    assert cal.focal_source.startswith("EXIF: FocalLength x FocalPlaneXResolution") and "resized" in cal.focal_source
+    assert cal.result.value("focal_px") == pytest.approx(t["params"]["focal_px"], rel=0.01)
+    assert cal.result.width_m == pytest.approx(t["width_m"], rel=0.02)
+    assert cal.result.height_m == pytest.approx(t["height_m"], rel=0.02)
+
+
 def _tall_wall_photo(seed: int):
     """A Stylite-like wall (irregular stones, 4-6.5 times as high as wide) of this seed, its photo
     from standing height (an in-memory Photo) and the photo's truth, as

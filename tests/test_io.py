@@ -210,3 +210,77 @@ def test_read_photo_scales_a_16_bit_grey_image_by_its_range(tmp_path):
     wide, narrow = read_photo(tmp_path / "g16.png"), read_photo(tmp_path / "g8.png")
     assert wide.rgb.dtype == np.float32 and wide.rgb.shape == narrow.rgb.shape
     assert np.abs(wide.rgb - narrow.rgb).max() < 1e-6
+
+
+def _exif_photo(path, size, **tags):
+    """A grey JPEG of ``size`` (w, h) whose EXIF sub-IFD holds ``tags`` (tag number -> value)."""
+    from fractions import Fraction
+
+    from PIL.TiffImagePlugin import IFDRational
+
+    exif = Image.Exif()
+    exif[0x010F], exif[0x0110] = "test", "camera"
+    sub = exif.get_ifd(0x8769)
+    for tag, value in tags.items():
+        tag = int(tag[1:], 16)
+        if isinstance(value, float):
+            q = Fraction(value).limit_denominator(100000)
+            value = IFDRational(q.numerator, q.denominator)
+        sub[tag] = value
+    w, h = size
+    Image.fromarray(np.full((h, w, 3), 128, np.uint8)).save(path, exif=exif, quality=90)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("unit", "per_unit_mm"),
+    [(2, 25.4), (3, 10.0), (4, 1.0)],
+    ids=["inch", "cm", "mm"],
+)
+def test_read_photo_focal_from_the_focal_planes_resolution_in_each_unit(tmp_path, unit, per_unit_mm):
+    """FocalPlaneXResolution is pixels per FocalPlaneResolutionUnit (an inch unless told: Canon's
+    cameras write inches). A 600 px-wide photo of a 36 mm sensor has 600/36 px a mm; at 50 mm the
+    focal length is 833.3 px. The inch was multiplied, not divided (645 times too long: such a
+    photo was refused as implausible); only millimetres, the project's own generator's unit, read
+    right."""
+    from calib_masonry.io import read_photo
+
+    per_mm = 600 / 36.0
+    kwargs = {"x920A": 50.0, "xA20E": per_mm * per_unit_mm, "xA20F": per_mm * per_unit_mm, "xA210": unit}
+    photo = read_photo(_exif_photo(tmp_path / "p.jpg", (600, 400), **kwargs))
+    assert photo.focal_px == pytest.approx(50 * per_mm, rel=1e-4)
+    assert photo.focal_note == "FocalLength x FocalPlaneXResolution"
+    # without the unit tag: an inch, as EXIF says
+    if unit == 2:
+        del kwargs["xA210"]
+        photo = read_photo(_exif_photo(tmp_path / "q.jpg", (600, 400), **kwargs))
+        assert photo.focal_px == pytest.approx(50 * per_mm, rel=1e-4)
+
+
+def test_read_photo_focal_of_a_photo_resized_or_cropped_since_it_was_taken(tmp_path):
+    """The focal plane's resolution is the camera's pixels: a photo halved since (its EXIF kept)
+    has half the focal length in pixels. Scaled by its pixels over PixelX/YDimension where those
+    are kept; where they are not, the 35 mm equivalent (which scales with the photo's own
+    diagonal) is taken when the two disagree; a crop (another shape) keeps the pixels' density."""
+    from calib_masonry.io import read_photo
+
+    per_mm = 600 / 36.0
+    camera = {"x920A": 50.0, "xA20E": per_mm * 25.4, "xA20F": per_mm * 25.4, "xA210": 2}
+    full = 50 * per_mm
+    # halved, the camera's pixel dimensions kept
+    halved = read_photo(_exif_photo(tmp_path / "a.jpg", (300, 200), **camera, xA002=600, xA003=400))
+    assert halved.focal_px == pytest.approx(full / 2, rel=1e-3) and "resized" in halved.focal_note
+    # halved, no pixel dimensions, the 35 mm equivalent given (a full-frame sensor: 50 mm)
+    eq = read_photo(_exif_photo(tmp_path / "b.jpg", (300, 200), **camera, xA405=50))
+    assert eq.focal_px == pytest.approx(full / 2, rel=1e-3) and eq.focal_note.startswith("FocalLengthIn35mmFilm")
+    # at the camera's own size the two agree and the focal plane's (not rounded to a mm) is taken
+    own = read_photo(_exif_photo(tmp_path / "c.jpg", (600, 400), **camera, xA405=50, xA002=600, xA003=400))
+    assert own.focal_px == pytest.approx(full, rel=1e-4) and own.focal_note == "FocalLength x FocalPlaneXResolution"
+    # a square crop of the camera's 600 x 400: the pixels' density is the camera's, and so is f
+    crop = read_photo(_exif_photo(tmp_path / "d.jpg", (400, 400), **camera, xA405=50, xA002=600, xA003=400))
+    assert crop.focal_px == pytest.approx(full, rel=1e-4)
+    # nothing usable: no focal length, a zero resolution, an unknown unit
+    for i, tags in enumerate(
+        ({"xA20E": 10.0}, {"x920A": 50.0, "xA20E": 0.0}, {"x920A": 50.0, "xA20E": 9.0, "xA210": 9})
+    ):
+        assert read_photo(_exif_photo(tmp_path / f"n{i}.jpg", (300, 200), **tags)).focal_px is None

@@ -467,6 +467,7 @@ class Photo:
     focal_px: float | None  # from FocalLength x FocalPlaneXResolution, or the 35 mm equivalent
     heading_deg: float | None  # GPSImgDirection
     lens: dict | None = None  # EXIF Make, Model, LensMake, LensModel, FocalLength (mm), FNumber
+    focal_note: str = ""  # which EXIF tags gave focal_px (see :func:`exif_focal_px`)
 
     def __post_init__(self) -> None:
         rgb = np.asarray(self.rgb)
@@ -494,32 +495,78 @@ class Photo:
 _PLANE_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}
 
 
-def _exif_camera(im) -> tuple[float | None, float | None]:
+# a focal length from the focal plane's resolution further than this from the 35 mm equivalent's
+# (both in the photo's EXIF) is taken for a photo resized since it was taken
+EXIF_FOCAL_AGREE = 0.10
+
+
+def exif_focal_px(sub, size: tuple[int, int]) -> tuple[float | None, str]:
+    """The focal length in pixels of a photo of ``size`` (w, h) from its EXIF sub-IFD ``sub`` (a
+    mapping of tag -> value), and which tags gave it ('' where none did).
+
+    FocalLength (mm) x FocalPlaneXResolution (pixels per FocalPlaneResolutionUnit: inch by
+    default, as Canon writes it; cm, mm or um) is the camera's own; it is scaled by the photo's
+    pixels over PixelX/YDimension where the camera wrote those and the photo has their shape but
+    another size (resized since). Else FocalLengthIn35mmFilm x the photo's diagonal / 43.3 mm,
+    which scales with the photo's own pixels. Where both are given and disagree by more than
+    :data:`EXIF_FOCAL_AGREE` (a photo resized with its EXIF kept, the pixel dimensions too), the
+    35 mm equivalent is taken, unless the photo's shape differs from the camera's (a crop, which
+    keeps the pixels' density and not the diagonal)."""
     import math
 
+    def num(tag) -> float:
+        try:
+            v = float(sub.get(tag) or 0.0)
+        except (TypeError, ValueError, ZeroDivisionError):
+            return 0.0
+        return v if math.isfinite(v) and v > 0 else 0.0
+
+    w, h = size
+    fl, res, eq35 = num(0x920A), num(0xA20E), num(0xA405)
+    try:
+        unit = int(sub.get(0xA210, 2))
+    except (TypeError, ValueError):
+        unit = 0
+    equivalent = eq35 * math.hypot(w, h) / math.hypot(36.0, 24.0) if eq35 else None
+    plane, note, cropped = None, "", False
+    if fl and res and unit in _PLANE_UNIT_MM:
+        plane, note = fl * res / _PLANE_UNIT_MM[unit], "FocalLength x FocalPlaneXResolution"
+        ex, ey = num(0xA002), num(0xA003)
+        if ex and ey:
+            long_ratio = max(w, h) / max(ex, ey)
+            if abs(max(w, h) / min(w, h) - max(ex, ey) / min(ex, ey)) > 0.01 * max(ex, ey) / min(ex, ey):
+                cropped = True
+            elif abs(long_ratio - 1.0) > 1e-3:
+                plane *= long_ratio
+                note += f" x {long_ratio:.3g} (the photo resized from the camera's {ex:.0f} x {ey:.0f} px)"
+    if plane is not None and equivalent is not None and not cropped:
+        if abs(math.log(plane / equivalent)) > math.log1p(EXIF_FOCAL_AGREE):
+            return equivalent, (
+                f"FocalLengthIn35mmFilm ({eq35:g} mm; FocalLength x FocalPlaneXResolution gives {plane:.0f} px: "
+                "a photo resized since it was taken?)"
+            )
+    if plane is not None:
+        return plane, note
+    if equivalent is not None:
+        return equivalent, f"FocalLengthIn35mmFilm ({eq35:g} mm)"
+    return None, ""
+
+
+def _exif_camera(im) -> tuple[float | None, float | None, str]:
     try:
         exif = im.getexif()
         sub = exif.get_ifd(0x8769)
         gps = exif.get_ifd(0x8825)
     except Exception:  # noqa: BLE001 - a broken EXIF block only means no EXIF
-        return None, None
-    w, h = im.size
-    focal = None
-    fl, res, unit = sub.get(0x920A), sub.get(0xA20E), sub.get(0xA210, 2)
-    try:
-        if fl and res and int(unit) in _PLANE_UNIT_MM and float(fl) > 0 and float(res) > 0:
-            focal = float(fl) * float(res) * _PLANE_UNIT_MM[int(unit)]
-        elif sub.get(0xA405):
-            focal = float(sub[0xA405]) * math.hypot(w, h) / math.hypot(36.0, 24.0)
-    except (TypeError, ValueError, ZeroDivisionError):
-        focal = None
+        return None, None, ""
+    focal, note = exif_focal_px(sub, im.size)
     heading = None
     try:
         if 17 in gps:
             heading = float(gps[17]) % 360.0
     except (TypeError, ValueError, ZeroDivisionError):
         heading = None
-    return focal, heading
+    return focal, heading, note
 
 
 def _exif_lens(im) -> dict | None:
@@ -582,9 +629,9 @@ def read_photo(path: str | Path, *, field: str = "PHOTO", data: bytes | None = N
     from its bytes ``data``, when given (a photo made in memory), named ``path``."""
     path = Path(path)
     with _opened_image(path, field, "give a JPEG, PNG or TIFF photo", data) as im:
-        focal, heading = _exif_camera(im)
+        focal, heading, note = _exif_camera(im)
         lens = _exif_lens(im)
         rgb = _photo_rgb(im)
     if min(rgb.shape[:2]) < 32:
         raise InputError(f"{field} {path}: image is only {rgb.shape[1]} x {rgb.shape[0]} px; give the full photo")
-    return Photo(path=path, rgb=rgb, focal_px=focal, heading_deg=heading, lens=lens)
+    return Photo(path=path, rgb=rgb, focal_px=focal, heading_deg=heading, lens=lens, focal_note=note)

@@ -384,7 +384,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         )
     focal, focal_source = config.focal_px, "--focal-px"
     if focal is None and photo.focal_px is not None:
-        focal, focal_source = photo.focal_px, "EXIF"
+        focal, focal_source = photo.focal_px, f"EXIF: {photo.focal_note}" if photo.focal_note else "EXIF"
     if focal is not None and not 0.1 * max(w, h) < focal < 20 * max(w, h):
         raise InputError(
             f"{photo.path}: focal length {focal:.0f} px is implausible for a {w} x {h} photo; "

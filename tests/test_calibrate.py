@@ -1198,6 +1198,10 @@ def test_clicked_corners_are_snapped_and_beat_raw_clicks(photo_set):
     assert abs(snapped.result.width_m / t["width_m"] - 1) < 0.01
     err = [np.max(np.abs(c.result.corners_px() - np.array(t["corners_px"]))) for c in (snapped, raw)]
     assert err[0] < err[1]
+    # a snap tolerance under the edge profiles' half-pixel step snaps nothing (it was a traceback
+    # from an empty profile: --snap-tolerance 0.01)
+    tiny = calibrate_photo(data / t["photo"], replace(cfg, snap_tolerance_px=0.01))
+    assert tiny.mode == "clicked" and tiny.corner_snap_px is None
 
 
 def test_rectify_and_segment_recover_the_bricks(photo_set):

@@ -287,7 +287,9 @@ def _refine_side(
     ``to_photo``: a map of ideal image points ``(..., 2)`` to the photo's (a lens): the side is then
     straight in ideal coordinates and the photo is sampled where the lens put each of its points."""
     length = float(np.linalg.norm(b - a))
-    if length < 10:
+    # a search narrower than the profiles' half-pixel step holds no edge (--snap-tolerance 0.01
+    # ended in a traceback from an empty profile)
+    if length < 10 or half < 0.5:
         return None
     n = side_normal(a, b)
     ts = np.linspace(0.08, 0.92, max(20, int(length / 6)))

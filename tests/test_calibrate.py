@@ -1365,6 +1365,17 @@ def test_rectify_cli_writes_calibration_json(photo_set, tmp_path, capsys):
         (["--corners", "10,10,500,10,500,400,-50,400"], "outside"),
         (["--max-rms", "0.0001"], "RMS residual"),
         (["--focal-px", "-5"], "focal"),
+        # values past which the fit was singular, a search ran out of memory, or the advice was
+        # the wrong way round (each a traceback or a misleading line before)
+        (["--known-width", "1e-9"], "--known-width 1e-09: give a length in metres"),
+        (["--known-length", "10,10,500,10,1e9"], "--known-length: the distance"),
+        (["--known-length", "-5,10,500,10,1"], "--known-length: a point lies outside"),
+        (["--course-height", "100"], "--course-height 100.0: give a length"),
+        (["--camera-height", "1e-6"], "--camera-height 1e-06"),
+        (["--camera-height", "1.6", "--camera-height-sigma", "1e9"], "--camera-height-sigma"),
+        (["--known-width", "2.4", "--px-per-m", "nan"], "--px-per-m nan"),
+        (["--known-width", "2.4", "--px-per-m", "1"], "choose a larger value"),
+        (["--known-width", "2.4", "--corners", "10,10,500,10,500,400,10,400", "--snap-tolerance", "1e9"], "tenth"),
     ],
 )
 def test_rectify_bad_input_one_line_exit_2(photo_set, tmp_path, capsys, extra, message):

@@ -152,29 +152,36 @@ class CalibrateConfig:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.focal_prior_log_sigma) and self.focal_prior_log_sigma > 0):
             raise InputError(f"focal_prior_log_sigma {self.focal_prior_log_sigma}: must be > 0")
+        # bounds past which the fit's Jacobian was singular (a height of 1e-6 m, a sigma of 1e-9 or
+        # 1e9 m, a length of 1e9 m): each named here rather than as "too few constraints"
         if self.camera_height_m is not None and not (
-            math.isfinite(self.camera_height_m) and 0 < self.camera_height_m < 100
+            math.isfinite(self.camera_height_m) and 0.01 <= self.camera_height_m < 100
         ):
             raise InputError(
-                f"--camera-height {self.camera_height_m}: give the eye height above the wall's base in metres"
+                f"--camera-height {self.camera_height_m}: give the eye height above the wall's base in metres "
+                "(0.01-100)"
             )
         if self.camera_height_sigma_m is not None and not (
-            math.isfinite(self.camera_height_sigma_m) and self.camera_height_sigma_m > 0
+            math.isfinite(self.camera_height_sigma_m) and 0.001 <= self.camera_height_sigma_m <= 100
         ):
-            raise InputError(f"--camera-height-sigma {self.camera_height_sigma_m}: must be > 0 (metres)")
+            raise InputError(
+                f"--camera-height-sigma {self.camera_height_sigma_m}: give its uncertainty in metres (0.001-100)"
+            )
         if self.focal_px is not None and not (math.isfinite(self.focal_px) and self.focal_px > 0):
             raise InputError(f"--focal-px {self.focal_px}: must be > 0 (pixels)")
-        for flag, value in (
-            ("--known-width", self.known_width_m),
-            ("--known-height", self.known_height_m),
-            ("--course-height", self.course_height_m),
+        for flag, value, top in (
+            ("--known-width", self.known_width_m, 1000.0),
+            ("--known-height", self.known_height_m, 1000.0),
+            ("--course-height", self.course_height_m, 5.0),
         ):
-            if value is not None and not (math.isfinite(value) and 0 < value < 1000):
-                raise InputError(f"{flag} {value}: must be a length > 0 (metres)")
+            if value is not None and not (math.isfinite(value) and 0.01 <= value <= top):
+                raise InputError(f"{flag} {value}: give a length in metres (0.01-{top:g})")
         if self.course_height_sigma_m is not None and not (
-            math.isfinite(self.course_height_sigma_m) and self.course_height_sigma_m > 0
+            math.isfinite(self.course_height_sigma_m) and 0 < self.course_height_sigma_m <= 5.0
         ):
-            raise InputError(f"--course-height: its sigma {self.course_height_sigma_m} must be > 0 (metres)")
+            raise InputError(
+                f"--course-height: its sigma {self.course_height_sigma_m} must be a length in metres (above 0, to 5)"
+            )
         given = [
             f
             for f, v in (
@@ -191,8 +198,8 @@ class CalibrateConfig:
             kl = tuple(self.known_length)
             if len(kl) != 5 or not all(math.isfinite(v) for v in kl):
                 raise InputError("--known-length: give x1,y1,x2,y2,METRES (two photo points and their distance)")
-            if not kl[4] > 0:
-                raise InputError(f"--known-length: the distance {kl[4]} must be > 0 (metres)")
+            if not 0.01 <= kl[4] <= 1000:
+                raise InputError(f"--known-length: the distance {kl[4]} must be a length in metres (0.01-1000)")
             if math.hypot(kl[2] - kl[0], kl[3] - kl[1]) < 5:
                 raise InputError("--known-length: the two points are less than 5 px apart; click two points far apart")
         if not (math.isfinite(self.known_sigma_m) and self.known_sigma_m > 0):
@@ -200,6 +207,7 @@ class CalibrateConfig:
         for flag, value in (("--max-rms", self.max_rms_px), ("--snap-tolerance", self.snap_tolerance_px)):
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise InputError(f"{flag} {value}: must be > 0 (pixels)")
+        # (a snap tolerance is checked against the photo's size in calibrate_photo)
         if not (math.isfinite(self.max_relative_sigma) and self.max_relative_sigma > 0):
             raise InputError(f"max_relative_sigma = {self.max_relative_sigma}: must be > 0")
         if self.corner_sigma_px is not None and not (math.isfinite(self.corner_sigma_px) and self.corner_sigma_px > 0):
@@ -389,6 +397,18 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         raise InputError(
             f"{photo.path}: focal length {focal:.0f} px is implausible for a {w} x {h} photo; "
             "pass --focal-px with the right value"
+        )
+    if config.known_length is not None:
+        pts = np.asarray(config.known_length[:4], dtype=np.float64).reshape(2, 2)
+        if np.any(pts < -0.5) or np.any(pts[:, 0] > w - 0.5) or np.any(pts[:, 1] > h - 0.5):
+            raise InputError(
+                f"--known-length: a point lies outside the {w} x {h} photo {photo.path.name}; give two points on the wall"
+            )
+    if config.snap_tolerance_px is not None and config.snap_tolerance_px > 0.1 * diag:
+        # (a tolerance of 1e9 px allocated a search of 4e9 samples a side)
+        raise InputError(
+            f"--snap-tolerance {config.snap_tolerance_px:g}: more than a tenth of the photo's diagonal "
+            f"({diag:.0f} px); give a few pixels (the default is 1 % of the diagonal, {max(3.0, 0.01 * diag):.0f} px)"
         )
     for i, poly in enumerate(config.occluders):
         pts = np.asarray(poly, dtype=np.float64)
@@ -1258,6 +1278,10 @@ def _base_through_fit(rgb, result, quad, sigma, scale, lens, first_sigma):
     return new, sigma
 
 
+#: the least side of an orthophoto (px): a photo is refused below it too (io.Photo)
+MIN_ORTHO_PX = 32
+
+
 def default_max_rms_px(image_size: tuple[int, int]) -> float:
     """The largest RMS residual a fit keeps without --force: 3 px per 1500 px of the long side, at
     least 3 px (a clicked corner off by 3.2 px on a 6000 px photo is a good click)."""
@@ -1550,6 +1574,8 @@ def rectify_to_folder(
     from .figures import plot_calibration
 
     check_output(out, command="rectify", overwrite=overwrite)
+    if px_per_m is not None and not (math.isfinite(px_per_m) and px_per_m > 0):
+        raise InputError(f"--px-per-m {px_per_m}: give the orthophoto's resolution in pixels a metre (> 0)")
     # JAX with the camera fit (0.3 s) and its compiled code (0.6 s), and Pillow's drawing, load on a
     # second thread while this one reads and searches the photo (mostly in scipy, which releases the GIL)
     preload_in_background("camera_fit", *(("figure_font",) if figure else ()), first=("detection",))
@@ -1557,11 +1583,12 @@ def rectify_to_folder(
     res = cal.result
     if px_per_m is None:  # the photo's own resolution at the wall's centre, rounded
         px_per_m = native_px_per_m(res)
-    if px_per_m <= 0 or res.width_m * px_per_m * res.height_m * px_per_m > 1.2e8:
-        raise InputError(
-            f"--px-per-m {px_per_m:g}: the orthophoto would be "
-            f"{res.width_m * px_per_m:.0f} x {res.height_m * px_per_m:.0f} px; choose a smaller value"
-        )
+    size = f"the orthophoto would be {res.width_m * px_per_m:.0f} x {res.height_m * px_per_m:.0f} px"
+    if min(res.width_m, res.height_m) * px_per_m < MIN_ORTHO_PX:
+        least = math.ceil(MIN_ORTHO_PX / min(res.width_m, res.height_m))
+        raise InputError(f"--px-per-m {px_per_m:g}: {size}; choose a larger value (at least {least})")
+    if res.width_m * px_per_m * res.height_m * px_per_m > 1.2e8:
+        raise InputError(f"--px-per-m {px_per_m:g}: {size}; choose a smaller value")
     mask = None
     if mask_path is not None:
         from ..io import read_mask

@@ -743,6 +743,7 @@ def test_modes_cli(small_model, tmp_path):
         ("huge", "must lie in 0..5 g"),
         ("badcsv", "accelerogram"),
         ("nan", "line 3: '0.02,nan' holds NaN or inf"),
+        ("still", "every acceleration in it is 0"),
         ("frames", "--frames -1"),
         ("fps", "--fps 0: must be > 0"),
     ],
@@ -760,6 +761,9 @@ def test_simulate_bad_input(small_model, tmp_path, case, msg):
     elif case == "nan":
         (tmp_path / "x.csv").write_text("0,0.1\n0.01,0.2\n0.02,nan\n0.03,0.1\n")
         args += ["--accelerogram", tmp_path / "x.csv"]
+    elif case == "still":  # a record of zeros scaled to 0.3 g ran still, "standing"
+        (tmp_path / "x.csv").write_text("0,0\n0.01,0\n0.02,0\n")
+        args += ["--accelerogram", tmp_path / "x.csv", "--pga", "0.3"]
     elif case == "frames":
         args += ["--frames", "-1"]
     elif case == "fps":

@@ -201,6 +201,12 @@ def motion_for(config: SimulationConfig) -> GroundMotion:
         record = read_accelerogram(config.accelerogram, units=config.record_units, path_y=config.accelerogram_y)
         if config.direction_deg:
             record = record.along(config.direction_deg)
+        if config.pga_g is not None and config.pga_g > 0 and record.pga <= 0:
+            # (it ran the still record and reported the structure standing under "0.3 g")
+            raise InputError(
+                f"--accelerogram {config.accelerogram}: every acceleration in it is 0, so --pga {config.pga_g:g} "
+                "cannot scale it; give the record with its motion"
+            )
         return record if config.pga_g is None else record.at_pga(config.pga_g)
     motion = synthetic_motion(
         config.pga_g,

@@ -107,6 +107,22 @@ def test_a_sweep_into_sizes_that_cannot_be_laid_is_refused_as_the_file_is(tmp_pa
     assert (swept.synthetic.mortar_m, swept.synthetic.brick_height_m) == (0.2, 0.3)
 
 
+def test_a_wall_turned_back_over_the_one_before_it_is_refused(tmp_path):
+    """A ring of four with east typed at theta 0 instead of 90: south (180) then runs back over
+    east. It built a model whose north and west walls held no brick at all (and the command ended in
+    a traceback after writing it); now the structure is refused as it is read, naming the two walls
+    and the turn."""
+    p = tmp_path / "s.toml"
+    p.write_text(scenario_text([(2.4, 2.0, 0), (2.4, 2.0, 0), (2.4, 2.0, 180), (2.4, 2.0, 270)], closed=True))
+    with pytest.raises(InputError, match=r"walls 'w1' and 'w2': theta_deg 0 and 180 turn the second back"):
+        load_structure(p, require_sources=False)
+    p.write_text(scenario_text([(2.4, 2.0, 0), (2.4, 2.0, 175)], closed=False))
+    with pytest.raises(InputError, match="a turn of 175 degrees"):
+        load_structure(p, require_sources=False)
+    p.write_text(scenario_text([(2.4, 2.0, 0), (2.4, 2.0, 160)], closed=False))
+    assert len(load_structure(p, require_sources=False).walls) == 2  # a sharp corner, not a reversal
+
+
 def test_vertices_too_few(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text(scenario_text([(2.0, 2.0, 0)], vertices=2))

@@ -90,7 +90,9 @@ def _print_build(summary: dict, out) -> None:
     )
     for w in summary["walls"]:
         ref = f" (splitting {w['mean_dice_splitting']:.4f})" if "mean_dice_splitting" in w else ""
-        if "photo" in w:  # the Dice of a photo wall is against its own segmentation: say so
+        if w["mean_dice"] is None:  # no brick (a traceback formatting None)
+            what = "no bricks"
+        elif "photo" in w:  # the Dice of a photo wall is against its own segmentation: say so
             what = f"polygon fit to the segmentation {w['mean_dice']:.4f}{ref}"
         else:
             what = f"mean Dice {w['mean_dice']:.4f}{ref}"

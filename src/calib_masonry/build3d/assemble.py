@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from ..errors import InputError
 from .bond import CornerTolerances, corner_clip_planes, find_end_faces
 from .extrude import Polyhedron, clip_plan, polygon_area, prism
 from .place import Corner, Footprint, WallFrame, _footprint, closure_gap, corners, wall_frames
@@ -126,6 +127,15 @@ def assemble(
                     dice=float(wp.dice[i]) if wp.dice else float("nan"),
                     traced_vertices=int(wp.traced_vertices[i]) if wp.traced_vertices else 0,
                 )
+            )
+    built = {b.wall for b in bricks}
+    for w in range(len(walls)):
+        if w not in built and len(polys[w]):
+            wall = footprint.walls[w]
+            raise InputError(
+                f"wall '{wall.name or w}': none of its {len(polys[w])} pieces made a brick "
+                f"({len(end_faces[w])} taken for corner end faces, the rest empty where its corners cut it); "
+                "check its width_m, thickness_m and theta_deg against its neighbours'"
             )
     return Structure3D(
         name=name,

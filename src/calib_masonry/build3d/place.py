@@ -172,6 +172,17 @@ def corners(footprint: Footprint) -> list[Corner]:
     if footprint_is_closed(spec) and n >= 3:
         pairs.append((n - 1, 0))
     found = [Corner(a, b, _wrap(spec.walls[b].theta_rad - spec.walls[a].theta_rad)) for a, b in pairs]
+    for c in found:
+        if abs(c.turn_rad) > math.pi - MIN_CORNER_TURN_RAD:
+            # (east at theta 0 instead of 90 on a ring of four: south then ran back over east, and
+            # north and west were built with no bricks at all, a traceback after the model was written)
+            wa, wb = spec.walls[c.a], spec.walls[c.b]
+            raise InputError(
+                f"walls '{wa.name or c.a}' and '{wb.name or c.b}': theta_deg {math.degrees(wa.theta_rad):.6g} and "
+                f"{math.degrees(wb.theta_rad):.6g} turn the second back over the first (a turn of "
+                f"{abs(math.degrees(c.turn_rad)):.0f} degrees); check theta_deg (each wall's direction, in the "
+                "order the walls are listed)"
+            )
     _check_end_widths(spec, found)
     return found
 

@@ -436,6 +436,9 @@ BAD = {
     "three components": ('[simulate]\npga_g = [0.1]\naccelerograms = [["a", "b", "c"]]\n', "give a file name, or"),
     "check interval 0": ("[simulate]\npga_g = [0.1]\ncheck_interval_s = 0\n", "check_interval_s = 0: must be > 0"),
     "check interval": ("[simulate]\npga_g = [0.1]\ncheck_interval_s = 0.5\n", "check_interval_s = 0.5: the joints'"),
+    # 1e9 records listed 3e9 loads before the count was checked (killed, out of memory)
+    "records": ("[simulate]\npga_g = [0.1, 0.2]\nrecords = 1e9\n", "x 1e.09 records is more than 1000000 runs"),
+    "negative pga": ("[simulate]\npga_g = [-0.1]\n", "pga_g = -0.1: must be >= 0$"),
 }
 
 

@@ -260,7 +260,8 @@ def _number(path: Path, key: str, value, *, positive=False, nonneg=False, intege
     if positive and not value > 0:
         raise InputError(f"{_where(path, key)} = {value!r}: must be > 0")
     if nonneg and not value >= 0:
-        raise InputError(f"{_where(path, key)} = {value!r}: must be >= 0 (a spread cannot be negative)")
+        why = " (a spread cannot be negative)" if key.endswith(".sigma") else ""  # not a PGA's, a seed's
+        raise InputError(f"{_where(path, key)} = {value!r}: must be >= 0{why}")
     return int(value) if integer else float(value)
 
 
@@ -503,9 +504,15 @@ def parse_study(data: dict, path: Path) -> Study:
         accelerograms = _accelerograms(path, s)
         if accelerograms and pushover:
             raise InputError(f"{path}: [simulate]: give either accelerograms = [...] or pushover = true")
+        records = _number(path, "[simulate] records", s.get("records", 1), positive=True, integer=True)
+        if max(1, len(pga)) * records > MAX_SAMPLES:  # before the loads are listed (1e9 records ran out of memory)
+            raise InputError(
+                f"{path}: [simulate] records = {records:.6g}: {max(1, len(pga))} PGA(s) x {records:.6g} records is "
+                f"more than {MAX_SAMPLES} runs; lower records"
+            )
         sim = SimulateSpec(
             pga_g=pga,
-            records=_number(path, "[simulate] records", s.get("records", 1), positive=True, integer=True),
+            records=records,
             accelerograms=accelerograms,
             duration_s=_number(path, "[simulate] duration_s", s.get("duration_s", 5.0), positive=True),
             pushover=pushover,

@@ -166,13 +166,22 @@ class SyntheticSpec:
         for key in ("px_per_m", "mortar_m", "brick_length_m", "brick_height_m"):
             if getattr(self, key) <= 0:
                 raise InputError(f"'{key}' must be > 0, got {getattr(self, key)}")
-        if self.mortar_m >= self.lowest_unit_m:
-            key = "brick_height_m" if self.layout == "stretcher" else "stone_height_m"
-            raise InputError(
-                f"mortar_m = {self.mortar_m:g} is not thinner than the units ({key} "
-                f"{self.lowest_unit_m:g} m); give the joint's thickness in metres (about 0.01 m for brick, "
-                "0.02-0.04 m for stone)"
-            )
+        stones = self.layout != "stretcher"
+        # the shortest unit along the course as well as the lowest (stones of 0.1 mm between joints
+        # of 25 mm were laid, 8,468 of them on the Stylite tower)
+        for key, unit in (
+            ("stone_height_m" if stones else "brick_height_m", self.lowest_unit_m),
+            (
+                "stone_length_m" if stones else "brick_length_m",
+                self.stone_length_m[0] if stones else self.brick_length_m,
+            ),
+        ):
+            if self.mortar_m >= unit:
+                raise InputError(
+                    f"mortar_m = {self.mortar_m:g} is not thinner than the units ({key} "
+                    f"{unit:g} m); give the joint's thickness in metres (about 0.01 m for brick, "
+                    "0.02-0.04 m for stone)"
+                )
 
 
 @dataclass(frozen=True)

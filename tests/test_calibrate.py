@@ -1059,6 +1059,50 @@ def test_a_photo_with_a_dslrs_exif_resized_since_is_calibrated_at_its_own_focal_
     assert cal.result.height_m == pytest.approx(t["height_m"], rel=0.02)
 
 
+def test_a_photo_resized_or_cropped_with_its_exif_kept_takes_its_focal_length_as_a_prior(photo_set, tmp_path):
+    """The generator's EXIF holds the focal plane's resolution (the camera's pixels) and the 35 mm
+    equivalent (which scales with the photo's diagonal). Halved with its EXIF kept, the first says
+    twice the focal length: held at it, the photo was refused (its corners 4.3 px from the joints'
+    outline). Now the two disagreeing make a prior between them and the vanishing points set f:
+    W and H within 0.5 %. The middle of the photo cropped (a close-up the wall fills): the automatic
+    outline took its middle brick for the wall; now it is refused as holding too few joints, with
+    how to go on, and four clicks of a rectangle on the wall with its width give its height within
+    two sigmas (the crop's few joints leave f loose)."""
+    from PIL import Image
+
+    from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
+
+    data, truth = photo_set
+    t = truth["photos"][0]
+    w, ht = t["width_m"], t["height_m"]
+    with Image.open(data / t["photo"]) as im:
+        im.resize((im.width // 2, im.height // 2), Image.LANCZOS).save(
+            tmp_path / "half.jpg", exif=im.getexif(), quality=95
+        )
+    half = calibrate_photo(
+        tmp_path / "half.jpg", CalibrateConfig(camera_height_m=t["eye_height_m"], camera_height_sigma_m=0.01)
+    )
+    assert half.result.value("focal_px") == pytest.approx(t["params"]["focal_px"] / 2, rel=0.03)
+    assert half.result.width_m == pytest.approx(w, rel=0.005) and half.result.height_m == pytest.approx(ht, rel=0.005)
+
+    h = np.array(t["image_from_wall"])
+    box = project(h, np.array([[0.2 * w, 0.2 * ht], [0.8 * w, 0.8 * ht]]))
+    x0, y0 = np.floor(box.min(axis=0)).astype(int)
+    x1, y1 = np.ceil(box.max(axis=0)).astype(int)
+    with Image.open(data / t["photo"]) as im:
+        im.crop((x0, y0, x1, y1)).save(tmp_path / "close.jpg", exif=im.getexif(), quality=95)
+    with pytest.raises(FitFailed, match="too few for a masonry wall.*a wall that fills the photo"):
+        calibrate_photo(tmp_path / "close.jpg", CalibrateConfig(known_width_m=0.3 * w))
+    rect = np.array([[0.35 * w, 0.3 * ht], [0.65 * w, 0.3 * ht], [0.65 * w, 0.7 * ht], [0.35 * w, 0.7 * ht]])
+    clicks = project(h, rect) - [x0, y0]
+    cal = calibrate_photo(
+        tmp_path / "close.jpg",
+        CalibrateConfig(corners_px=tuple(clicks.ravel()), known_width_m=0.3 * w, snap_tolerance_px=0.01),
+    )
+    assert abs(cal.result.height_m - 0.4 * ht) < 2 * cal.result.sigma("height_m")
+    assert cal.result.sigma("focal_px") > 0.1 * cal.result.value("focal_px")  # a prior, not held
+
+
 def _tall_wall_photo(seed: int):
     """A Stylite-like wall (irregular stones, 4-6.5 times as high as wide) of this seed, its photo
     from standing height (an in-memory Photo) and the photo's truth, as

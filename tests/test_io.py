@@ -270,9 +270,12 @@ def test_read_photo_focal_of_a_photo_resized_or_cropped_since_it_was_taken(tmp_p
     # halved, the camera's pixel dimensions kept
     halved = read_photo(_exif_photo(tmp_path / "a.jpg", (300, 200), **camera, xA002=600, xA003=400))
     assert halved.focal_px == pytest.approx(full / 2, rel=1e-3) and "resized" in halved.focal_note
-    # halved, no pixel dimensions, the 35 mm equivalent given (a full-frame sensor: 50 mm)
+    # halved, no pixel dimensions, the 35 mm equivalent given (a full-frame sensor: 50 mm): the two
+    # disagree (a resize makes the equivalent right, a crop the plane's), so the focal length is a
+    # prior between them, each one sigma from it, for the calibration's vanishing points to settle
     eq = read_photo(_exif_photo(tmp_path / "b.jpg", (300, 200), **camera, xA405=50))
-    assert eq.focal_px == pytest.approx(full / 2, rel=1e-3) and eq.focal_note.startswith("FocalLengthIn35mmFilm")
+    assert eq.focal_px == pytest.approx(full / np.sqrt(2), rel=1e-3) and "disagree" in eq.focal_note
+    assert eq.focal_log_sigma == pytest.approx(np.log(2) / 2, rel=1e-3) and halved.focal_log_sigma is None
     # at the camera's own size the two agree and the focal plane's (not rounded to a mm) is taken
     own = read_photo(_exif_photo(tmp_path / "c.jpg", (600, 400), **camera, xA405=50, xA002=600, xA003=400))
     assert own.focal_px == pytest.approx(full, rel=1e-4) and own.focal_note == "FocalLength x FocalPlaneXResolution"

@@ -468,6 +468,9 @@ class Photo:
     heading_deg: float | None  # GPSImgDirection
     lens: dict | None = None  # EXIF Make, Model, LensMake, LensModel, FocalLength (mm), FNumber
     focal_note: str = ""  # which EXIF tags gave focal_px (see :func:`exif_focal_px`)
+    # where the EXIF's two focal lengths disagree: the log of their ratio, focal_px a prior of
+    # that log sigma rather than a fact (:func:`exif_focal_px`)
+    focal_log_sigma: float | None = None
 
     def __post_init__(self) -> None:
         rgb = np.asarray(self.rgb)
@@ -500,18 +503,20 @@ _PLANE_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}
 EXIF_FOCAL_AGREE = 0.10
 
 
-def exif_focal_px(sub, size: tuple[int, int]) -> tuple[float | None, str]:
+def exif_focal_px(sub, size: tuple[int, int]) -> tuple[float | None, str, float | None]:
     """The focal length in pixels of a photo of ``size`` (w, h) from its EXIF sub-IFD ``sub`` (a
-    mapping of tag -> value), and which tags gave it ('' where none did).
+    mapping of tag -> value), which tags gave it ('' where none did), and None, or where its two
+    focal lengths disagree the log of their ratio (the calibration's prior spread).
 
     FocalLength (mm) x FocalPlaneXResolution (pixels per FocalPlaneResolutionUnit: inch by
     default, as Canon writes it; cm, mm or um) is the camera's own; it is scaled by the photo's
     pixels over PixelX/YDimension where the camera wrote those and the photo has their shape but
     another size (resized since). Else FocalLengthIn35mmFilm x the photo's diagonal / 43.3 mm,
     which scales with the photo's own pixels. Where both are given and disagree by more than
-    :data:`EXIF_FOCAL_AGREE` (a photo resized with its EXIF kept, the pixel dimensions too), the
-    35 mm equivalent is taken, unless the photo's shape differs from the camera's (a crop, which
-    keeps the pixels' density and not the diagonal)."""
+    :data:`EXIF_FOCAL_AGREE` (a photo resized with its EXIF kept, the pixel dimensions too: the 35 mm
+    equivalent is right; or cropped: the plane's is), the focal length is a prior, not a fact: their
+    geometric mean, with half the log of their ratio for its log sigma (each one sigma from it);
+    unless the photo's shape differs from the camera's, a crop, which keeps the plane's density."""
     import math
 
     def num(tag) -> float:
@@ -541,32 +546,36 @@ def exif_focal_px(sub, size: tuple[int, int]) -> tuple[float | None, str]:
                 note += f" x {long_ratio:.3g} (the photo resized from the camera's {ex:.0f} x {ey:.0f} px)"
     if plane is not None and equivalent is not None and not cropped:
         if abs(math.log(plane / equivalent)) > math.log1p(EXIF_FOCAL_AGREE):
-            return equivalent, (
-                f"FocalLengthIn35mmFilm ({eq35:g} mm; FocalLength x FocalPlaneXResolution gives {plane:.0f} px: "
-                "a photo resized since it was taken?)"
+            # a resize makes the 35 mm equivalent right, a crop the plane's: the prior between the two
+            # (their geometric mean), each of them one sigma from it
+            return (
+                math.sqrt(plane * equivalent),
+                f"FocalLengthIn35mmFilm ({eq35:g} mm, {equivalent:.0f} px) and FocalLength x "
+                f"FocalPlaneXResolution ({plane:.0f} px) disagree: a photo resized or cropped since it was taken",
+                abs(math.log(plane / equivalent)) / 2.0,
             )
     if plane is not None:
-        return plane, note
+        return plane, note, None
     if equivalent is not None:
-        return equivalent, f"FocalLengthIn35mmFilm ({eq35:g} mm)"
-    return None, ""
+        return equivalent, f"FocalLengthIn35mmFilm ({eq35:g} mm)", None
+    return None, "", None
 
 
-def _exif_camera(im) -> tuple[float | None, float | None, str]:
+def _exif_camera(im) -> tuple[float | None, float | None, str, float | None]:
     try:
         exif = im.getexif()
         sub = exif.get_ifd(0x8769)
         gps = exif.get_ifd(0x8825)
     except Exception:  # noqa: BLE001 - a broken EXIF block only means no EXIF
-        return None, None, ""
-    focal, note = exif_focal_px(sub, im.size)
+        return None, None, "", None
+    focal, note, log_sigma = exif_focal_px(sub, im.size)
     heading = None
     try:
         if 17 in gps:
             heading = float(gps[17]) % 360.0
     except (TypeError, ValueError, ZeroDivisionError):
         heading = None
-    return focal, heading, note
+    return focal, heading, note, log_sigma
 
 
 def _exif_lens(im) -> dict | None:
@@ -629,9 +638,11 @@ def read_photo(path: str | Path, *, field: str = "PHOTO", data: bytes | None = N
     from its bytes ``data``, when given (a photo made in memory), named ``path``."""
     path = Path(path)
     with _opened_image(path, field, "give a JPEG, PNG or TIFF photo", data) as im:
-        focal, heading, note = _exif_camera(im)
+        focal, heading, note, log_sigma = _exif_camera(im)
         lens = _exif_lens(im)
         rgb = _photo_rgb(im)
     if min(rgb.shape[:2]) < 32:
         raise InputError(f"{field} {path}: image is only {rgb.shape[1]} x {rgb.shape[0]} px; give the full photo")
-    return Photo(path=path, rgb=rgb, focal_px=focal, heading_deg=heading, lens=lens, focal_note=note)
+    return Photo(
+        path=path, rgb=rgb, focal_px=focal, heading_deg=heading, lens=lens, focal_note=note, focal_log_sigma=log_sigma
+    )

@@ -731,7 +731,8 @@ def detect_outline(
     if region.sum() < small_wall:
         raise FitFailed(
             "automatic mode: no wall found (no region at the photo's centre looks unlike its surroundings); "
-            f"click the wall's corners with {CORNERS_FLAG}"
+            f"click the wall's corners with {CORNERS_FLAG} (a wall that fills the photo has none in it: click four "
+            "joint crossings that make a rectangle on it and give its width with --known-width, or step back)"
         )
     # the region without its thin bands (a soft horizon joined to the wall's foot)
     r_open = max(2, round(0.015 * max(srows, scols)))

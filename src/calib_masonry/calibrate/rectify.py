@@ -16,7 +16,7 @@ import numpy as np
 
 from .._threads import background, thread_map
 from ..errors import FitFailed, InputError
-from ..io import Photo, check_output, read_photo, staged_output, write_json, write_mask, write_rgb
+from ..io import EXIF_FOCAL_AGREE, Photo, check_output, read_photo, staged_output, write_json, write_mask, write_rgb
 from ..preload import preload_in_background
 from .camera import CORNERS_FLAG, FOCAL_PRIOR_35MM, FOCAL_PRIOR_LOG_SIGMA, focal_prior_px, order_corners, px_per_m
 from .lines import (
@@ -391,8 +391,13 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             "(a resized or rotated copy?); draw the outline and occluders on this photo itself"
         )
     focal, focal_source = config.focal_px, "--focal-px"
+    # an EXIF whose two focal lengths disagree gives the prior's centre and spread, not the focal length
+    prior_px, prior_log_sigma = None, config.focal_prior_log_sigma
     if focal is None and photo.focal_px is not None:
-        focal, focal_source = photo.focal_px, f"EXIF: {photo.focal_note}" if photo.focal_note else "EXIF"
+        if photo.focal_log_sigma is None:
+            focal, focal_source = photo.focal_px, f"EXIF: {photo.focal_note}" if photo.focal_note else "EXIF"
+        else:
+            prior_px, prior_log_sigma = photo.focal_px, max(photo.focal_log_sigma, math.log1p(EXIF_FOCAL_AGREE))
     if focal is not None and not 0.1 * max(w, h) < focal < 20 * max(w, h):
         raise InputError(
             f"{photo.path}: focal length {focal:.0f} px is implausible for a {w} x {h} photo; "
@@ -464,7 +469,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     if config.lens_profile and photo.lens and config.fit_distortion:
         from .lens import lensfun_profile
 
-        lens = lensfun_profile(photo.lens, (w, h), focal or focal_prior_px((w, h)))
+        lens = lensfun_profile(photo.lens, (w, h), focal or prior_px or focal_prior_px((w, h)))
         if lens is not None:
             lens_source = lens.source
     height_m, height_sigma = config.eye_height()
@@ -494,7 +499,8 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         known_length=known_length,
         known_length_sigma_m=config.known_sigma_m,
         fit_distortion=config.fit_distortion,
-        focal_prior_log_sigma=config.focal_prior_log_sigma,
+        focal_prior_px=prior_px,
+        focal_prior_log_sigma=prior_log_sigma,
         **(
             {"k1_prior": lens.k1, "k1_sigma": lens.k1_sigma, "k2_prior": lens.k2, "k2_sigma": lens.k2_sigma}
             if lens is not None
@@ -624,12 +630,13 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             raise FitFailed(f"{photo.path}: {exc}") from None
         lens_source = "held at 0: the joints were left out"
     if focal is None:
-        prior = focal_prior_px((w, h))
+        prior = prior_px or focal_prior_px((w, h))
         rel = result.sigma("focal_px") / result.value("focal_px")
+        centre = f"EXIF: {photo.focal_note}" if prior_px else f"{FOCAL_PRIOR_35MM:g} mm equivalent"
         focal_source = (
             "vanishing points"
             if rel < 0.5 * inp.focal_prior_log_sigma
-            else f"prior ({FOCAL_PRIOR_35MM:g} mm equivalent, {prior:.0f} px, x/: {math.exp(inp.focal_prior_log_sigma):.2f})"
+            else f"prior ({centre}, {prior:.0f} px, x/: {math.exp(inp.focal_prior_log_sigma):.2f})"
         )
     scale_source = config.scale_source
     if scale_source == ScaleSource.KNOWN_WIDTH:

@@ -287,3 +287,30 @@ def test_read_photo_focal_of_a_photo_resized_or_cropped_since_it_was_taken(tmp_p
         ({"xA20E": 10.0}, {"x920A": 50.0, "xA20E": 0.0}, {"x920A": 50.0, "xA20E": 9.0, "xA210": 9})
     ):
         assert read_photo(_exif_photo(tmp_path / f"n{i}.jpg", (300, 200), **tags)).focal_px is None
+
+
+def test_read_photo_reads_a_phones_heic_with_its_exif(tmp_path):
+    """A phone's default photo is a HEIC: read (with pillow-heif) as its JPEG would be, its EXIF's
+    focal length with it; before, 'cannot be read as an image'."""
+    pytest.importorskip("pillow_heif")
+    from pillow_heif import from_pillow
+
+    from calib_masonry.io import read_photo
+
+    grey = _pattern()
+    rgb = np.repeat(grey[..., None], 3, -1)
+    exif = Image.Exif()
+    exif[0x010F], exif[0x0110] = "Apple", "iPhone test"
+    sub = exif.get_ifd(0x8769)
+    sub[0xA405] = 26  # the 35 mm equivalent, as a phone writes it
+    heif = from_pillow(Image.fromarray(rgb))
+    heif.info["exif"] = exif.tobytes()
+    heif.save(tmp_path / "p.heic", quality=-1)  # lossless
+    photo = read_photo(tmp_path / "p.heic")
+    assert photo.size == (grey.shape[1], grey.shape[0])
+    assert np.abs(photo.rgb[..., 0] * 255 - grey).mean() < 3
+    assert photo.focal_px == pytest.approx(26 * np.hypot(*grey.shape) / np.hypot(36, 24), rel=1e-6)
+    # a copy renamed .jpg is told its real type (as a PNG named .jpg is)
+    (tmp_path / "p.jpg").write_bytes((tmp_path / "p.heic").read_bytes())
+    with pytest.raises(InputError, match="a HEIF image named .jpg; rename it"):
+        read_photo(tmp_path / "p.jpg")

@@ -887,7 +887,7 @@ _COMMON_HELP = {
     "out": "the folder to write (replaced as a whole; see --overwrite)",
     "no_figures": "write no PNG figures (faster)",
     "scenario": "a scenario TOML (as data_synthetic/*/scenario.toml)",
-    "photo": "the wall's photo (JPEG or PNG)",
+    "photo": "the wall's photo (JPEG, PNG, TIFF or a phone's HEIC)",
     "mask": "a brick mask (PNG, bricks white on black) or a LabelMe JSON",
     "structure": "a structure TOML (see the README's 'Structure files')",
     "run_dir": "a folder `calib-masonry build` wrote",

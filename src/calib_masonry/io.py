@@ -7,6 +7,7 @@ image coordinates ``(x, y) = (c, r)``, origin top-left.
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import json
 import math
@@ -633,11 +634,55 @@ def _photo_rgb(im) -> np.ndarray:
     return rgb
 
 
+_HEIF_SUFFIXES = (".heic", ".heif", ".hif")
+
+
+def _is_heif(path: Path, data: bytes | None) -> bool:
+    """A HEIF file by its name, or by its first box (``ftyp`` and a HEIF brand) whatever its name."""
+    if path.suffix.lower() in _HEIF_SUFFIXES:
+        return True
+    if data is not None:
+        head = data[:12]
+    else:
+        try:
+            with path.open("rb") as f:
+                head = f.read(12)
+        except OSError:
+            return False
+    return head[4:8] == b"ftyp" and head[8:12] in (
+        b"heic",
+        b"heix",
+        b"heim",
+        b"heis",
+        b"hevc",
+        b"hevx",
+        b"mif1",
+        b"msf1",
+    )
+
+
+@functools.cache
+def _heif_opener() -> bool:
+    """Pillow opens HEIC/HEIF photos (a phone's default) once pillow-heif registers them; libheif
+    turns them upright as their transforms say and pillow-heif sets their EXIF orientation to 1, so
+    they are not turned twice. False where pillow-heif is not installed."""
+    try:
+        from pillow_heif import register_heif_opener
+    except ImportError:
+        return False
+    register_heif_opener()
+    return True
+
+
 def read_photo(path: str | Path, *, field: str = "PHOTO", data: bytes | None = None) -> Photo:
-    """Read a colour photo (JPEG, PNG, TIFF) and its EXIF focal length, compass heading and lens;
-    from its bytes ``data``, when given (a photo made in memory), named ``path``."""
+    """Read a colour photo (JPEG, PNG, TIFF, HEIC) and its EXIF focal length, compass heading and
+    lens; from its bytes ``data``, when given (a photo made in memory), named ``path``."""
     path = Path(path)
-    with _opened_image(path, field, "give a JPEG, PNG or TIFF photo", data) as im:
+    if _is_heif(path, data) and not _heif_opener():
+        raise InputError(
+            f"{field} {path}: a HEIC photo needs pillow-heif (pip install pillow-heif); or save it as a JPEG"
+        )
+    with _opened_image(path, field, "give a JPEG, PNG, TIFF or HEIC photo", data) as im:
         focal, heading, note, log_sigma = _exif_camera(im)
         lens = _exif_lens(im)
         rgb = _photo_rgb(im)

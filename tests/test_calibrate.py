@@ -1289,6 +1289,14 @@ def test_build_from_photos_matches_truth(photo_set, tmp_path):
     assert summary["walls"][0]["photo"].endswith("w0.jpg")
     m = compare_dirs(tmp_path / "b", data / "truth")
     assert m["precision"] >= 0.95 and m["recall"] >= 0.95 and m["dice"]["median"] >= 0.95
+    # a typed W ten times too large (or W and H swapped): the photo scaled by it gives an H that
+    # disagrees with the typed one, and the build is refused naming both, before anything is written
+    from calib_masonry.pipeline import photo_wall
+
+    w0 = spec.walls[0]
+    for wrong in (replace(w0, width_m=10 * w0.width_m), replace(w0, width_m=w0.height_m, height_m=w0.width_m)):
+        with pytest.raises(InputError, match=r"wall 'w0': its photo scaled by width_m = .* but height_m = .* is typed"):
+            photo_wall(wrong, spec)
 
 
 def test_photo_walls_traced_on_their_threads_are_traced_as_after(photo_set):

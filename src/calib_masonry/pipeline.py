@@ -88,6 +88,11 @@ def as_wall_keys(message: str) -> str:
     return said if said == message else f"{said} (keys of the wall's [[wall]] table)"
 
 
+#: how far a photo wall's typed H may lie from the H its photo gives when scaled by its typed W
+#: (and 5 sigmas of that H): past it, a typing error (a factor of 10, W and H swapped)
+TYPED_SIZE_TOLERANCE = 0.10
+
+
 def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) -> PhotoWall:
     """Calibrate a wall's photo (``photo``, or read from ``wall.image``), rectify it onto the wall
     (W x H) and segment its masonry units (:func:`calib_masonry.wall2d.segment.segment_wall`),
@@ -106,6 +111,16 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
     res = cal.result
     width = res.width_m if math.isnan(wall.width_m) else wall.width_m
     height = res.height_m if math.isnan(wall.height_m) else wall.height_m
+    if not math.isnan(wall.width_m) and not math.isnan(wall.height_m) and config.known_width_m == wall.width_m:
+        # W and H typed: the photo scaled by W gives its own H; one typed 10 times too large, or the
+        # two swapped, stretched the orthophoto onto the typed W x H without a word (1,674 pieces)
+        off = abs(res.height_m / wall.height_m - 1.0)
+        if off > max(TYPED_SIZE_TOLERANCE, 5.0 * res.sigma("height_m") / res.height_m):
+            raise InputError(
+                f"wall '{wall.name}': its photo scaled by width_m = {wall.width_m:g} gives H = {res.height_m:.3g} +- "
+                f"{res.sigma('height_m'):.2g} m, but height_m = {wall.height_m:g} is typed ({off:.0%} off); check "
+                "width_m and height_m (or leave height_m out to take it from the photo)"
+            )
     raise_if_stopped()
     # the fitted wall's frame stretched onto the typed W x H: the photo's outline maps onto the wall
     rect = rectify(cal, px_per_m=spec.photo_px_per_m, width_m=width, height_m=height)

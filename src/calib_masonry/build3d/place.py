@@ -173,7 +173,9 @@ def corners(footprint: Footprint) -> list[Corner]:
         pairs.append((n - 1, 0))
     found = [Corner(a, b, _wrap(spec.walls[b].theta_rad - spec.walls[a].theta_rad)) for a, b in pairs]
     for c in found:
-        if abs(c.turn_rad) > math.pi - MIN_CORNER_TURN_RAD:
+        # between walls as listed; the closing corner of a ring that does not close is warned of
+        # (its gap) where the footprint is built, as before
+        if c.b == c.a + 1 and abs(c.turn_rad) > math.pi - MIN_CORNER_TURN_RAD:
             # (east at theta 0 instead of 90 on a ring of four: south then ran back over east, and
             # north and west were built with no bricks at all, a traceback after the model was written)
             wa, wb = spec.walls[c.a], spec.walls[c.b]

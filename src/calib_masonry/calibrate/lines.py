@@ -1398,7 +1398,8 @@ def _working_gray(rgb: np.ndarray, long_side_px: int) -> tuple[np.ndarray, float
     return shrink(gray, s), s
 
 
-#: the fewest joint segments an automatic outline holds to be taken for a masonry wall: a close-up
+#: the fewest joint segments an automatic outline holds for calibrate_photo to take it for a
+#: masonry wall (detect_wall itself outlines a plain one): a close-up
 #: that a brick wall fills gave its middle brick as the wall (4 segments, its own joints' ends);
 #: the laboratory photos hold 60-72, 27-104 under the 41 lighting and camera changes of
 #: experiments/photo_conditions.py, the Blender renders 203 or more
@@ -1479,13 +1480,6 @@ def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occlu
             "automatic mode: the outline found runs outside the photo; click the wall's corners with " + CORNERS_FLAG
         )
     seg = segments_in_quad(every, quad)
-    if len(seg) < MIN_WALL_JOINTS:
-        raise FitFailed(
-            f"automatic mode: the outline found holds {len(seg)} joint segment(s), too few for a masonry wall (one "
-            "unit of a wall that fills the photo, or a wall whose joints do not show); click the wall's corners with "
-            f"{CORNERS_FLAG} (a wall that fills the photo has none in it: click four joint crossings that make a "
-            "rectangle on it and give its width with --known-width, or step back)"
-        )
     ang = np.degrees(np.arctan2(seg[:, 3] - seg[:, 1], seg[:, 2] - seg[:, 0])) % 180.0
     from_h = np.minimum(ang, 180.0 - ang)
     bed, head = seg[from_h < config.horizontal_max_deg], seg[np.abs(ang - 90.0) < config.vertical_max_deg]

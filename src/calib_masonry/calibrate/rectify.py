@@ -20,6 +20,7 @@ from ..io import EXIF_FOCAL_AGREE, Photo, check_output, read_photo, staged_outpu
 from ..preload import preload_in_background
 from .camera import CORNERS_FLAG, FOCAL_PRIOR_35MM, FOCAL_PRIOR_LOG_SIGMA, focal_prior_px, order_corners, px_per_m
 from .lines import (
+    MIN_WALL_JOINTS,
     DetectConfig,
     Detection,
     carry_soft_sides,
@@ -452,6 +453,13 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             detection = detect_wall(photo.rgb, config.detect, occluders=config.occluders)
         except FitFailed as exc:
             raise FitFailed(f"{photo.path}: {exc}") from None
+        if detection.n_segments < MIN_WALL_JOINTS:
+            raise FitFailed(
+                f"{photo.path}: automatic mode: the outline found holds {detection.n_segments} joint segment(s), too "
+                "few for a masonry wall (one unit of a wall that fills the photo, or a wall whose joints do not show); "
+                f"click the wall's corners with {CORNERS_FLAG} (a wall that fills the photo has none in it: click four "
+                "joint crossings that make a rectangle on it and give its width with --known-width, or step back)"
+            )
         corners, bed, head = detection.corners_px, detection.bed_segments, detection.head_segments
         if not config.use_lines:
             bed = head = np.zeros((0, 4))

@@ -459,6 +459,10 @@ def staged_file(path: str | Path) -> Iterator[Path]:
     os.replace(tmp_path, path)
 
 
+#: the least side of a photo (px), and of an orthophoto made from one
+MIN_IMAGE_PX = 32
+
+
 @dataclass(frozen=True)
 class Photo:
     """An RGB photo in [0, 1] with what its EXIF says about the camera."""
@@ -469,13 +473,13 @@ class Photo:
     heading_deg: float | None  # GPSImgDirection
     lens: dict | None = None  # EXIF Make, Model, LensMake, LensModel, FocalLength (mm), FNumber
     focal_note: str = ""  # which EXIF tags gave focal_px (see :func:`exif_focal_px`)
-    # where the EXIF's two focal lengths disagree: the log of their ratio, focal_px a prior of
-    # that log sigma rather than a fact (:func:`exif_focal_px`)
+    # where the EXIF's two focal lengths disagree: half the log of their ratio, focal_px a prior
+    # of that log sigma rather than a fact (:func:`exif_focal_px`)
     focal_log_sigma: float | None = None
 
     def __post_init__(self) -> None:
         rgb = np.asarray(self.rgb)
-        if rgb.ndim != 3 or rgb.shape[2] not in (3, 4) or min(rgb.shape[:2]) < 32:
+        if rgb.ndim != 3 or rgb.shape[2] not in (3, 4) or min(rgb.shape[:2]) < MIN_IMAGE_PX:
             raise InputError(
                 f"photo {self.path}: rgb must be an image array (rows, cols, 3) of at least 32 x 32 px, "
                 f"got shape {rgb.shape}"
@@ -500,14 +504,14 @@ _PLANE_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}
 
 
 # a focal length from the focal plane's resolution further than this from the 35 mm equivalent's
-# (both in the photo's EXIF) is taken for a photo resized since it was taken
+# (both in the photo's EXIF) is taken for a photo resized or cropped since it was taken: a prior
 EXIF_FOCAL_AGREE = 0.10
 
 
 def exif_focal_px(sub, size: tuple[int, int]) -> tuple[float | None, str, float | None]:
     """The focal length in pixels of a photo of ``size`` (w, h) from its EXIF sub-IFD ``sub`` (a
     mapping of tag -> value), which tags gave it ('' where none did), and None, or where its two
-    focal lengths disagree the log of their ratio (the calibration's prior spread).
+    focal lengths disagree half the log of their ratio (the calibration's prior spread).
 
     FocalLength (mm) x FocalPlaneXResolution (pixels per FocalPlaneResolutionUnit: inch by
     default, as Canon writes it; cm, mm or um) is the camera's own; it is scaled by the photo's
@@ -518,7 +522,6 @@ def exif_focal_px(sub, size: tuple[int, int]) -> tuple[float | None, str, float 
     equivalent is right; or cropped: the plane's is), the focal length is a prior, not a fact: their
     geometric mean, with half the log of their ratio for its log sigma (each one sigma from it);
     unless the photo's shape differs from the camera's, a crop, which keeps the plane's density."""
-    import math
 
     def num(tag) -> float:
         try:
@@ -686,7 +689,7 @@ def read_photo(path: str | Path, *, field: str = "PHOTO", data: bytes | None = N
         focal, heading, note, log_sigma = _exif_camera(im)
         lens = _exif_lens(im)
         rgb = _photo_rgb(im)
-    if min(rgb.shape[:2]) < 32:
+    if min(rgb.shape[:2]) < MIN_IMAGE_PX:
         raise InputError(f"{field} {path}: image is only {rgb.shape[1]} x {rgb.shape[0]} px; give the full photo")
     return Photo(
         path=path, rgb=rgb, focal_px=focal, heading_deg=heading, lens=lens, focal_note=note, focal_log_sigma=log_sigma

@@ -239,6 +239,12 @@ def focal_prior_px(image_size: tuple[int, int]) -> float:
 
 #: the flag that gives the wall's corners by hand, named by every message of a failed detection
 CORNERS_FLAG = "--corners x1,y1,...,x4,y4"
+#: what follows it where the automatic outline found no wall, or one too small: a close-up has no
+#: corners to click
+FILLS_PHOTO_ADVICE = (
+    f"(a wall that fills the photo has none in it: click four joint crossings that make a rectangle on it with "
+    f"{CORNERS_FLAG} and give its width with --known-width, or step back)"
+)
 
 
 def order_corners(points: np.ndarray, *, where: str = "--corners") -> np.ndarray:

@@ -1398,14 +1398,6 @@ def _working_gray(rgb: np.ndarray, long_side_px: int) -> tuple[np.ndarray, float
     return shrink(gray, s), s
 
 
-#: the fewest joint segments an automatic outline holds for calibrate_photo to take it for a
-#: masonry wall (detect_wall itself outlines a plain one): a close-up
-#: that a brick wall fills gave its middle brick as the wall (4 segments, its own joints' ends);
-#: the laboratory photos hold 60-72, 27-104 under the 41 lighting and camera changes of
-#: experiments/photo_conditions.py, the Blender renders 203 or more
-MIN_WALL_JOINTS = 8
-
-
 def detect_wall(rgb: np.ndarray, config: DetectConfig = DetectConfig(), *, occluders=()) -> Detection:
     """Find the wall's corners (with their uncertainty) and joint segments in an RGB photo
     ``(rows, cols, 3)`` in [0, 1]: the outline from the wall's appearance and the joints'

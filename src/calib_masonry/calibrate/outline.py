@@ -37,7 +37,7 @@ from scipy import ndimage
 
 from .._morphology import binary as _binary
 from ..errors import FitFailed, InputError
-from .camera import CORNERS_FLAG, order_corners
+from .camera import CORNERS_FLAG, FILLS_PHOTO_ADVICE, order_corners
 
 __all__ = [
     "OutlineConfig",
@@ -731,8 +731,7 @@ def detect_outline(
     if region.sum() < small_wall:
         raise FitFailed(
             "automatic mode: no wall found (no region at the photo's centre looks unlike its surroundings); "
-            f"click the wall's corners with {CORNERS_FLAG} (a wall that fills the photo has none in it: click four "
-            "joint crossings that make a rectangle on it and give its width with --known-width, or step back)"
+            f"click the wall's corners with {CORNERS_FLAG} {FILLS_PHOTO_ADVICE}"
         )
     # the region without its thin bands (a soft horizon joined to the wall's foot)
     r_open = max(2, round(0.015 * max(srows, scols)))

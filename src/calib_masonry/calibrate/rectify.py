@@ -16,11 +16,28 @@ import numpy as np
 
 from .._threads import background, thread_map
 from ..errors import FitFailed, InputError
-from ..io import EXIF_FOCAL_AGREE, Photo, check_output, read_photo, staged_output, write_json, write_mask, write_rgb
+from ..io import (
+    EXIF_FOCAL_AGREE,
+    MIN_IMAGE_PX,
+    Photo,
+    check_output,
+    read_photo,
+    staged_output,
+    write_json,
+    write_mask,
+    write_rgb,
+)
 from ..preload import preload_in_background
-from .camera import CORNERS_FLAG, FOCAL_PRIOR_35MM, FOCAL_PRIOR_LOG_SIGMA, focal_prior_px, order_corners, px_per_m
+from .camera import (
+    CORNERS_FLAG,
+    FILLS_PHOTO_ADVICE,
+    FOCAL_PRIOR_35MM,
+    FOCAL_PRIOR_LOG_SIGMA,
+    focal_prior_px,
+    order_corners,
+    px_per_m,
+)
 from .lines import (
-    MIN_WALL_JOINTS,
     DetectConfig,
     Detection,
     carry_soft_sides,
@@ -377,6 +394,11 @@ def wall_config(wall, base: CalibrateConfig | None = None) -> CalibrateConfig:
     return cfg
 
 
+def _inside_photo(points: np.ndarray, w: int, h: int) -> np.ndarray:
+    """``(n,)`` True for each point ``(n, 2)`` on a ``w`` x ``h`` photo (pixel centres, edges to +-0.5)."""
+    return (points[:, 0] >= -0.5) & (points[:, 0] <= w - 0.5) & (points[:, 1] >= -0.5) & (points[:, 1] <= h - 0.5)
+
+
 def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = CalibrateConfig()) -> PhotoCalibration:
     """Fit the camera, the lens and the wall to one photo; refuse a fit whose residual is above
     ``max_rms_px`` or whose W or H sigma is above ``max_relative_sigma`` (unless ``force``)."""
@@ -405,8 +427,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             "pass --focal-px with the right value"
         )
     if config.known_length is not None:
-        pts = np.asarray(config.known_length[:4], dtype=np.float64).reshape(2, 2)
-        if np.any(pts < -0.5) or np.any(pts[:, 0] > w - 0.5) or np.any(pts[:, 1] > h - 0.5):
+        if not _inside_photo(np.asarray(config.known_length[:4], dtype=np.float64).reshape(2, 2), w, h).all():
             raise InputError(
                 f"--known-length: a point lies outside the {w} x {h} photo {photo.path.name}; give two points on the wall"
             )
@@ -418,13 +439,13 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         )
     for i, poly in enumerate(config.occluders):
         pts = np.asarray(poly, dtype=np.float64)
-        if np.all((pts[:, 0] < -0.5) | (pts[:, 0] > w - 0.5) | (pts[:, 1] < -0.5) | (pts[:, 1] > h - 0.5)):
+        if not _inside_photo(pts, w, h).any():
             raise InputError(f"occluder {i + 1}: it lies wholly outside the {w} x {h} photo {photo.path.name}")
     detection = None
     snap = None
     if config.corners_px is not None:
         corners = order_corners(np.array(config.corners_px).reshape(4, 2))
-        if np.any(corners < -0.5) or np.any(corners[:, 0] > w - 0.5) or np.any(corners[:, 1] > h - 0.5):
+        if not _inside_photo(corners, w, h).all():
             raise InputError(
                 f"--corners: a corner lies outside the {w} x {h} photo {photo.path.name}; click inside the image"
             )
@@ -457,8 +478,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             raise FitFailed(
                 f"{photo.path}: automatic mode: the outline found holds {detection.n_segments} joint segment(s), too "
                 "few for a masonry wall (one unit of a wall that fills the photo, or a wall whose joints do not show); "
-                f"click the wall's corners with {CORNERS_FLAG} (a wall that fills the photo has none in it: click four "
-                "joint crossings that make a rectangle on it and give its width with --known-width, or step back)"
+                f"click the wall's corners with {CORNERS_FLAG} {FILLS_PHOTO_ADVICE}"
             )
         corners, bed, head = detection.corners_px, detection.bed_segments, detection.head_segments
         if not config.use_lines:
@@ -1293,8 +1313,12 @@ def _base_through_fit(rgb, result, quad, sigma, scale, lens, first_sigma):
     return new, sigma
 
 
-#: the least side of an orthophoto (px): a photo is refused below it too (io.Photo)
-MIN_ORTHO_PX = 32
+#: the fewest joint segments an automatic outline holds for calibrate_photo to take it for a
+#: masonry wall (detect_wall itself outlines a plain one): a close-up that a brick wall fills gave
+#: its middle brick as the wall (4 segments, its own joints' ends); the laboratory photos hold
+#: 60-72, 27-104 under the 41 lighting and camera changes of experiments/photo_conditions.py, the
+#: Blender renders 203 or more
+MIN_WALL_JOINTS = 8
 
 
 def default_max_rms_px(image_size: tuple[int, int]) -> float:
@@ -1599,8 +1623,8 @@ def rectify_to_folder(
     if px_per_m is None:  # the photo's own resolution at the wall's centre, rounded
         px_per_m = native_px_per_m(res)
     size = f"the orthophoto would be {res.width_m * px_per_m:.0f} x {res.height_m * px_per_m:.0f} px"
-    if min(res.width_m, res.height_m) * px_per_m < MIN_ORTHO_PX:
-        least = math.ceil(MIN_ORTHO_PX / min(res.width_m, res.height_m))
+    if min(res.width_m, res.height_m) * px_per_m < MIN_IMAGE_PX:  # the least photo, as the least orthophoto
+        least = math.ceil(MIN_IMAGE_PX / min(res.width_m, res.height_m))
         raise InputError(f"--px-per-m {px_per_m:g}: {size}; choose a larger value (at least {least})")
     if res.width_m * px_per_m * res.height_m * px_per_m > 1.2e8:
         raise InputError(f"--px-per-m {px_per_m:g}: {size}; choose a smaller value")

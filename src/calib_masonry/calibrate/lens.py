@@ -90,6 +90,39 @@ def lensfun_profile(exif: dict | None, image_size: tuple[int, int], focal_px: fl
         return _profile(lensfunpy, _database(), exif, image_size, focal_px)
 
 
+#: how far a focal length from FocalLength and the camera's crop factor may be off (log sigma): the
+#: crop factor is the sensor's diagonal, and a photo taken in another aspect than the sensor's (16:9 on
+#: a 4:3 sensor: 9 %) or cropped since covers less of it
+CROP_FACTOR_LOG_SIGMA = math.log1p(0.10)
+
+
+def crop_factor_focal(exif: dict | None, image_size: tuple[int, int]) -> tuple[float, str] | None:
+    """The focal length in pixels of a photo whose EXIF (:func:`calib_masonry.io.read_photo`'s
+    ``lens``) gives FocalLength in mm but neither the focal plane's resolution nor the 35 mm
+    equivalent, from the crop factor lensfun's database holds for its camera (FocalLength x crop
+    factor is the 35 mm equivalent, over the 43.3 mm diagonal of 36 x 24 mm, times the photo's
+    diagonal in pixels), with a note naming the camera; None where lensfun does not know the
+    camera (or is not installed). A prior's centre, with :data:`CROP_FACTOR_LOG_SIGMA`."""
+    if not exif or not exif.get("model") or not exif.get("focal_mm"):
+        return None
+    try:
+        import lensfunpy  # noqa: F401 - only whether it is there
+    except ImportError:
+        return None
+    with _DATABASE_LOCK:
+        cams = _database().find_cameras(exif.get("make") or None, exif["model"], loose_search=False)
+    crop = float(cams[0].crop_factor) if cams else 0.0
+    focal_mm = float(exif["focal_mm"])
+    if not (math.isfinite(crop) and crop > 0 and math.isfinite(focal_mm) and focal_mm > 0):
+        return None
+    w, h = image_size
+    px = focal_mm * crop * math.hypot(w, h) / math.hypot(36.0, 24.0)
+    name = (
+        cams[0].model if cams[0].model.lower().startswith(cams[0].maker.lower()) else f"{cams[0].maker} {cams[0].model}"
+    )
+    return px, f"FocalLength ({focal_mm:g} mm) x the crop factor {crop:.3g} of a {name} (lensfun)"
+
+
 _DATABASE_LOCK = threading.Lock()
 
 

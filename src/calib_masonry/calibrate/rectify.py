@@ -421,6 +421,16 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
             focal, focal_source = photo.focal_px, f"EXIF: {photo.focal_note}" if photo.focal_note else "EXIF"
         else:
             prior_px, prior_log_sigma = photo.focal_px, max(photo.focal_log_sigma, math.log1p(EXIF_FOCAL_AGREE))
+    prior_note = photo.focal_note
+    if focal is None and prior_px is None:
+        # FocalLength alone (no focal plane resolution, no 35 mm equivalent): the camera's crop
+        # factor from lensfun makes it a 35 mm equivalent, a prior (the photo may cover less of the
+        # sensor than its diagonal) that the vanishing points settle
+        from .lens import CROP_FACTOR_LOG_SIGMA, crop_factor_focal
+
+        found = crop_factor_focal(photo.lens, (w, h))
+        if found is not None:
+            (prior_px, prior_note), prior_log_sigma = found, CROP_FACTOR_LOG_SIGMA
     if focal is not None and not 0.1 * max(w, h) < focal < 20 * max(w, h):
         raise InputError(
             f"{photo.path}: focal length {focal:.0f} px is implausible for a {w} x {h} photo; "
@@ -660,7 +670,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
     if focal is None:
         prior = prior_px or focal_prior_px((w, h))
         rel = result.sigma("focal_px") / result.value("focal_px")
-        centre = f"EXIF: {photo.focal_note}" if prior_px else f"{FOCAL_PRIOR_35MM:g} mm equivalent"
+        centre = f"EXIF: {prior_note}" if prior_px else f"{FOCAL_PRIOR_35MM:g} mm equivalent"
         focal_source = (
             "vanishing points"
             if rel < 0.5 * inp.focal_prior_log_sigma

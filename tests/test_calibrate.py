@@ -2170,3 +2170,30 @@ def test_a_photo_with_focal_length_alone_takes_the_cameras_crop_factor_from_lens
     assert unknown.result.sigma("focal_px") > 0.3 * unknown.result.value("focal_px")
     for cal in runs.values():
         assert abs(cal.result.height_m - 0.9) < 2 * cal.result.sigma("height_m")
+
+
+def test_a_phones_35mm_equivalent_is_a_prior_of_its_rounding_not_a_fact(photo_set, tmp_path):
+    """A phone writes the focal length as FocalLengthIn35mmFilm, a whole number of millimetres (and
+    its lens's nominal one besides). Held as a fact, a generator photo written with its 24.7 mm
+    equivalent as 26 mm came out with f 5 % long and W 1.3 % wide, H's sigma unchanged. Now the
+    equivalent is a prior with half a millimetre for its sigma, and the vanishing points set f."""
+    from PIL import Image
+
+    from calib_masonry.calibrate.rectify import CalibrateConfig, calibrate_photo
+
+    data, truth = photo_set
+    for t in truth["photos"]:
+        w, h = t["image_size"]
+        eq = t["params"]["focal_px"] / np.hypot(w, h) * np.hypot(36.0, 24.0)
+        for written in (np.floor(eq) - 1, np.ceil(eq) + 1):  # a millimetre off, rounded the wrong way
+            exif = Image.Exif()
+            exif[0x0110] = "a phone"
+            exif.get_ifd(0x8769)[0xA405] = int(written)
+            with Image.open(data / t["photo"]) as im:
+                im.convert("RGB").save(tmp_path / "phone.jpg", exif=exif, quality=95)
+            cal = calibrate_photo(
+                tmp_path / "phone.jpg", CalibrateConfig(camera_height_m=t["eye_height_m"], camera_height_sigma_m=0.01)
+            )
+            assert cal.result.value("focal_px") == pytest.approx(t["params"]["focal_px"], rel=0.02)
+            assert cal.result.width_m == pytest.approx(t["width_m"], rel=0.005)
+            assert cal.result.height_m == pytest.approx(t["height_m"], rel=0.005)

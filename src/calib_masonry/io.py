@@ -506,12 +506,18 @@ _PLANE_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 0.001}
 # a focal length from the focal plane's resolution further than this from the 35 mm equivalent's
 # (both in the photo's EXIF) is taken for a photo resized or cropped since it was taken: a prior
 EXIF_FOCAL_AGREE = 0.10
+# FocalLengthIn35mmFilm is a whole number of millimetres: half of one is its sigma (2 % at 25 mm),
+# a prior the vanishing points may move, not a fact (held at 26 mm for a 24.7 mm equivalent, a
+# generator photo's W came out 1.3 % wide with H's sigma unchanged)
+EXIF_35MM_ROUNDING_MM = 0.5
 
 
 def exif_focal_px(sub, size: tuple[int, int]) -> tuple[float | None, str, float | None]:
     """The focal length in pixels of a photo of ``size`` (w, h) from its EXIF sub-IFD ``sub`` (a
-    mapping of tag -> value), which tags gave it ('' where none did), and None, or where its two
-    focal lengths disagree half the log of their ratio (the calibration's prior spread).
+    mapping of tag -> value), which tags gave it ('' where none did), and None where it is a fact,
+    else the log sigma of a prior at it: where its two focal lengths disagree half the log of their
+    ratio (at least :data:`EXIF_FOCAL_AGREE`'s), from the 35 mm equivalent alone its rounding to a
+    whole millimetre (:data:`EXIF_35MM_ROUNDING_MM` over it).
 
     FocalLength (mm) x FocalPlaneXResolution (pixels per FocalPlaneResolutionUnit: inch by
     default, as Canon writes it; cm, mm or um) is the camera's own; it is scaled by the photo's
@@ -556,12 +562,12 @@ def exif_focal_px(sub, size: tuple[int, int]) -> tuple[float | None, str, float 
                 math.sqrt(plane * equivalent),
                 f"FocalLengthIn35mmFilm ({eq35:g} mm, {equivalent:.0f} px) and FocalLength x "
                 f"FocalPlaneXResolution ({plane:.0f} px) disagree: a photo resized or cropped since it was taken",
-                abs(math.log(plane / equivalent)) / 2.0,
+                max(abs(math.log(plane / equivalent)) / 2.0, math.log1p(EXIF_FOCAL_AGREE)),
             )
     if plane is not None:
         return plane, note, None
     if equivalent is not None:
-        return equivalent, f"FocalLengthIn35mmFilm ({eq35:g} mm)", None
+        return equivalent, f"FocalLengthIn35mmFilm ({eq35:g} mm)", EXIF_35MM_ROUNDING_MM / eq35
     return None, "", None
 
 

@@ -17,7 +17,6 @@ import numpy as np
 from .._threads import background, thread_map
 from ..errors import FitFailed, InputError
 from ..io import (
-    EXIF_FOCAL_AGREE,
     MIN_IMAGE_PX,
     Photo,
     check_output,
@@ -420,7 +419,7 @@ def calibrate_photo(photo: Photo | str | Path, config: CalibrateConfig = Calibra
         if photo.focal_log_sigma is None:
             focal, focal_source = photo.focal_px, f"EXIF: {photo.focal_note}" if photo.focal_note else "EXIF"
         else:
-            prior_px, prior_log_sigma = photo.focal_px, max(photo.focal_log_sigma, math.log1p(EXIF_FOCAL_AGREE))
+            prior_px, prior_log_sigma = photo.focal_px, photo.focal_log_sigma
     prior_note = photo.focal_note
     if focal is None and prior_px is None:
         # FocalLength alone (no focal plane resolution, no 35 mm equivalent): the camera's crop

@@ -697,6 +697,7 @@ def detect_outline(
     srows, scols = small.shape[:2]
     scale_s = scols / cols  # the shrunk photo's pixels per photo pixel (x); rows likewise
     occluded = occluded_mask((srows, scols), occluders, scale_s)
+    given = occluded  # the user's occluders alone (a blank photo's fill is no one's occluder)
     fill = _border_fill(small)
     # where the photo holds nothing (a filled margin, or a flat sky taken for one) no wall is: see
     # the second pass below
@@ -710,10 +711,10 @@ def detect_outline(
     # an occluder over the photo's centre (a person in front of the wall) left the seed nothing to
     # learn the wall from ("no wall found"): the square grows until a quarter of it is free (its
     # occluded pixels teach nothing: wall_probability)
-    while occluded is not None and (seed & ~occluded).sum() < 0.25 * seed.sum() and half < 0.3 * min(srows, scols):
+    while given is not None and (seed & ~given).sum() < 0.25 * seed.sum() and half < 0.3 * min(srows, scols):
         half *= 1.25
         seed = (np.abs(xx - (scols - 1) / 2) < half) & (np.abs(yy - (srows - 1) / 2) < half)
-    if occluded is not None and (seed & ~occluded).sum() < 0.25 * seed.sum():
+    if given is not None and (seed & ~given).sum() < 0.25 * seed.sum():
         raise FitFailed(
             "automatic mode: the occluders cover the middle of the photo, where the wall is looked for; "
             f"click the wall's corners with {CORNERS_FLAG}"

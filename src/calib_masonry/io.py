@@ -473,15 +473,15 @@ class Photo:
     heading_deg: float | None  # GPSImgDirection
     lens: dict | None = None  # EXIF Make, Model, LensMake, LensModel, FocalLength (mm), FNumber
     focal_note: str = ""  # which EXIF tags gave focal_px (see :func:`exif_focal_px`)
-    # where the EXIF's two focal lengths disagree: half the log of their ratio, focal_px a prior
-    # of that log sigma rather than a fact (:func:`exif_focal_px`)
+    # where focal_px is a prior of this log sigma rather than a fact (the EXIF's two focal lengths
+    # disagree, or the 35 mm equivalent alone, rounded to a millimetre: :func:`exif_focal_px`)
     focal_log_sigma: float | None = None
 
     def __post_init__(self) -> None:
         rgb = np.asarray(self.rgb)
         if rgb.ndim != 3 or rgb.shape[2] not in (3, 4) or min(rgb.shape[:2]) < MIN_IMAGE_PX:
             raise InputError(
-                f"photo {self.path}: rgb must be an image array (rows, cols, 3) of at least 32 x 32 px, "
+                f"photo {self.path}: rgb must be an image array (rows, cols, 3) of at least {MIN_IMAGE_PX} x {MIN_IMAGE_PX} px, "
                 f"got shape {rgb.shape}"
             )
         if rgb.dtype == np.uint8:  # 8-bit values, as PIL and most readers give them

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .camera import focal_px_from_35mm
+
 __all__ = ["LensProfile", "PROFILE_SIGMA", "lensfun_profile", "profile_from_map"]
 
 #: the least sigma of a profile's k1 and k2 (a lens's copy and focus differ from the profiled one)
@@ -106,17 +108,15 @@ def crop_factor_focal(exif: dict | None, image_size: tuple[int, int]) -> tuple[f
     if not exif or not exif.get("model") or not exif.get("focal_mm"):
         return None
     try:
-        import lensfunpy  # noqa: F401 - only whether it is there
-    except ImportError:
+        with _DATABASE_LOCK:
+            cams = _database().find_cameras(exif.get("make") or None, exif["model"], loose_search=False)
+    except ImportError:  # no lensfunpy: no crop factor
         return None
-    with _DATABASE_LOCK:
-        cams = _database().find_cameras(exif.get("make") or None, exif["model"], loose_search=False)
     crop = float(cams[0].crop_factor) if cams else 0.0
     focal_mm = float(exif["focal_mm"])
     if not (math.isfinite(crop) and crop > 0 and math.isfinite(focal_mm) and focal_mm > 0):
         return None
-    w, h = image_size
-    px = focal_mm * crop * math.hypot(w, h) / math.hypot(36.0, 24.0)
+    px = focal_px_from_35mm(focal_mm * crop, image_size)
     name = (
         cams[0].model if cams[0].model.lower().startswith(cams[0].maker.lower()) else f"{cams[0].maker} {cams[0].model}"
     )

@@ -706,19 +706,23 @@ def detect_outline(
         no_wall = fill if occluded is None else fill & ~occluded
         occluded = fill if occluded is None else occluded | fill
     yy, xx = np.mgrid[0:srows, 0:scols]
+
+    def square(half: float) -> np.ndarray:
+        return (np.abs(xx - (scols - 1) / 2) < half) & (np.abs(yy - (srows - 1) / 2) < half)
+
     half = config.seed_fraction / 2 * min(srows, scols)
-    seed = (np.abs(xx - (scols - 1) / 2) < half) & (np.abs(yy - (srows - 1) / 2) < half)
+    seed = square(half)
     # an occluder over the photo's centre (a person in front of the wall) left the seed nothing to
     # learn the wall from ("no wall found"): the square grows until a quarter of it is free (its
     # occluded pixels teach nothing: wall_probability)
-    while given is not None and (seed & ~given).sum() < 0.25 * seed.sum() and half < 0.3 * min(srows, scols):
+    while given is not None and (seed & ~given).sum() < 0.25 * seed.sum():
+        if half >= 0.3 * min(srows, scols):
+            raise FitFailed(
+                "automatic mode: the occluders cover the middle of the photo, where the wall is looked for; "
+                f"click the wall's corners with {CORNERS_FLAG}"
+            )
         half *= 1.25
-        seed = (np.abs(xx - (scols - 1) / 2) < half) & (np.abs(yy - (srows - 1) / 2) < half)
-    if given is not None and (seed & ~given).sum() < 0.25 * seed.sum():
-        raise FitFailed(
-            "automatic mode: the occluders cover the middle of the photo, where the wall is looked for; "
-            f"click the wall's corners with {CORNERS_FLAG}"
-        )
+        seed = square(half)
     feats = _binned(_features(small), config.bins)
     prob = wall_probability(small, seed, occluded=occluded, fill=fill, config=config, binned=feats)
     region = _component_of(prob > 0.5, seed)

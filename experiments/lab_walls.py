@@ -81,20 +81,59 @@ DB_UNIT_WEIGHT_N_M3 = 20e3
 DRY = {"tensile_strength_mpa": 0.0, "cohesion_mpa": 0.0}
 
 
+# a crackmap's name: crackmap_<unit>_D<drift>_<ref>.png, the drift written 0p93, 0.93 or -0p17 (a
+# cyclic test's negative excursion), or crackmap_<unit>_<ref>.png with none; the unit may hold
+# underscores, pluses or dots (PS_1, IR4++), so the first "_D<number>_" ends it
+_CRACKMAP = re.compile(r"^crackmap_(?P<unit>.+?)(?:_D(?P<drift>-?\d+(?:[p.]\d+)?))?_(?P<ref>[^_]+)\.png$", re.I)
+
+
 def _drift(path: Path) -> float:
-    """The drift of a crackmap's name (``..._D0p93_...`` -> 0.93), inf if it has none."""
-    m = re.search(r"_D(\d+)p(\d+)_", path.name)
-    return float(f"{m.group(1)}.{m.group(2)}") if m else float("inf")
+    """The drift of a crackmap's name in per cent, its size (``..._D0p93_...``, ``_D0.93_`` and
+    ``_D-0p93_`` -> 0.93), inf if it has none."""
+    m = _CRACKMAP.match(path.name)
+    if not m or m.group("drift") is None:
+        return float("inf")
+    return abs(float(m.group("drift").replace("p", ".")))
 
 
-def drawing_of(unit: str, db: Path = DB) -> Path:
-    """The crackmap of a test unit (SW.100.1 -> SW1001, WI1.100 -> WI1100: letters and digits), the
-    one at the smallest drift (D0p00: the layout before the test)."""
-    key = re.sub(r"[^A-Za-z0-9]", "", unit)
-    found = sorted((Path(db) / "crackmaps").glob(f"crackmap_{key}_D*.png"), key=lambda p: (_drift(p), p.name))
+def _unit_key(unit: str) -> str:
+    """A test unit's name as the database writes it in file names: dots, spaces and hyphens left out
+    (SW.100.1 -> SW1001, WI1.100 -> WI1100, test 1 -> test1), every other character kept (IR4++ is
+    not IR4)."""
+    return re.sub(r"[.\s-]", "", unit).lower()
+
+
+def _surname(reference: str) -> str:
+    """The first author's surname of a reference, letters only and without accents ("Lourenço et al.
+    (2005)" -> "lourenco"), "" if it has none."""
+    import unicodedata
+
+    word = (reference or "").split(" ")[0].split(",")[0]
+    folded = unicodedata.normalize("NFKD", word).encode("ascii", "ignore").decode()
+    return re.sub(r"[^a-z]", "", folded.lower())
+
+
+def drawing_of(unit: str, db: Path = DB, reference: str = "") -> Path:
+    """The crackmap of a test unit (SW.100.1 -> SW1001, WI1.100 -> WI1100, IR4++ -> IR4++), the one
+    at the smallest drift (D0p00: the layout before the test). Where ``reference`` is given, only a
+    drawing of the same first author counts (R5 is a wall of Almeida et al. 2014 and another of
+    Mazzon 2010; the year may differ, Vasconcelos 2005 for Vasconcelos and Lourenço 2009)."""
+    folder = Path(db) / "crackmaps"
+    key, author = _unit_key(unit), _surname(reference)
+    found = []
+    for path in sorted(folder.glob("crackmap_*.png")) if folder.is_dir() else []:
+        m = _CRACKMAP.match(path.name)
+        if m and _unit_key(m.group("unit")) == key:
+            found.append((path, m.group("ref")))
     if not found:
-        raise FileNotFoundError(f"no crackmap for {unit} ({key}) in {Path(db) / 'crackmaps'}")
-    return found[0]
+        raise FileNotFoundError(f"no crackmap for {unit} ({key}) in {folder}")
+    own = [p for p, ref in found if not author or author in _surname(ref)]
+    if not own:
+        raise FileNotFoundError(
+            f"no crackmap of {reference} for {unit} in {folder} (only of another reference: "
+            f"{', '.join(p.name for p, _ in found)})"
+        )
+    return min(own, key=lambda p: (_drift(p), p.name))
 
 
 def boundary_of(h0_over_h: float) -> tuple[str | None, str]:
@@ -172,11 +211,17 @@ def stone_mask(
 def _field(row: dict, name: str) -> str:
     """A field of a tests.csv row by its name with spaces and line breaks ignored (the database's
     headers break lines inside a name: "fc\\nm  [MPa]" is "fc,m [MPa]")."""
-    want = re.sub(r"[\s,]", "", name)
+    want = _header_key(name)
     for key, value in row.items():
-        if key is not None and re.sub(r"[\s,]", "", key) == want:
+        if key is not None and _header_key(key) == want:
             return (value or "").strip()
     return ""
+
+
+def _header_key(name: str) -> str:
+    """A column's name compared without spaces, line breaks, commas or anything outside ASCII: a
+    copy of the table saved in another encoding writes "σ0,tot [MPa]" as "?0,tot [MPa]"."""
+    return re.sub(r"[\s,?]", "", name.encode("ascii", "ignore").decode())
 
 
 def _num(row: dict, name: str) -> float | None:
@@ -184,6 +229,15 @@ def _num(row: dict, name: str) -> float | None:
         return float(_field(row, name))
     except ValueError:
         return None
+
+
+def _sigma0(row: dict, L: float | None, t: float | None) -> float | None:
+    """The row's total vertical stress at the base, MPa: its sigma0,tot, else its Ntot (kN) over
+    L t (mm)."""
+    if (s := _num(row, "σ0,tot [MPa]")) is not None:
+        return s
+    n = _num(row, "Ntot [kN]")
+    return n * 1e3 / (L * t) if n is not None and L and t else None
 
 
 def tests(db: Path = DB) -> list[dict]:
@@ -210,7 +264,7 @@ def tests(db: Path = DB) -> list[dict]:
             "L": L / 1000 if L else None,
             "t": t / 1000 if t else None,
             "H0": H0 / 1000 if H0 else None,
-            "sigma0": _num(row, "σ0,tot [MPa]"),
+            "sigma0": _sigma0(row, L, t),
             "applied": None,
             "vmax": max(vmax) if vmax else None,
             "failure": _field(row, "From test report: Failure type") or "?",
@@ -258,9 +312,11 @@ def tests(db: Path = DB) -> list[dict]:
         if not test["skip"]:
             test["applied"] = round(beam, 6)
             try:
-                test["drawing"] = drawing_of(unit, db)
-            except FileNotFoundError:
-                test["skip"] = "no drawing in crackmaps/"
+                test["drawing"] = drawing_of(unit, db, ref if ref != "?" else "")
+            except FileNotFoundError as e:
+                test["skip"] = "no drawing in crackmaps/" + (
+                    " of this reference" if "another reference" in str(e) else ""
+                )
             else:
                 if _drift(test["drawing"]) > 0:
                     test["note"] = (test["note"] + "; " if test["note"] else "") + (

@@ -360,7 +360,11 @@ def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path)
         w.writerows(r.split(",") for r in rows)
     (tmp_path / "crackmaps").mkdir()
     src = DB / "crackmaps" / "crackmap_WI1100_D0p00_Vasconcelos2005.png"
-    for name in ("crackmap_A1_D0p93_Someone2020.png", "crackmap_A1_D0p00_Someone2020.png", "crackmap_A2_D1p50_X.png"):
+    for name in (
+        "crackmap_A1_D0p93_Someone2020.png",
+        "crackmap_A1_D0p00_Someone2020.png",
+        "crackmap_A2_D1p50_Someone2020.png",
+    ):
         shutil.copy(src, tmp_path / "crackmaps" / name)
     got = {t["unit"]: t for t in tests(tmp_path)}
     a1, a2, b1 = got["A-1"], got["A-2"], got["B-1"]
@@ -387,6 +391,63 @@ def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path)
     assert "drawn after the test" in a2["note"] and not a2["skip"]
     assert b1["skip"] == "no drawing in crackmaps/"
     assert drawing_of("A-1", tmp_path).name == "crackmap_A1_D0p00_Someone2020.png"
-    assert drawing_of("A-2", tmp_path).name == "crackmap_A2_D1p50_X.png"
+    assert drawing_of("A-2", tmp_path).name == "crackmap_A2_D1p50_Someone2020.png"
     with pytest.raises(FileNotFoundError, match="no crackmap for B-1"):
         drawing_of("B-1", tmp_path)
+
+
+def test_laboratory_drawings_are_found_by_the_whole_unit_name_and_its_reference(tmp_path):
+    # the database's own names (eesd-epfl/StoneMasonryDatabase, data/Images): IR4 and IR4++ are two
+    # walls; R4 and R5 are names of Almeida et al. (2014) and of Mazzon (2010); drifts are written
+    # 0p00, 0.0 and -0p26; a copy of the table in another encoding has "?0,tot" for "σ0,tot"
+    import csv
+    import shutil
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+    from lab_walls import DB, _drift, drawing_of, tests
+
+    (tmp_path / "crackmaps").mkdir()
+    src = DB / "crackmaps" / "crackmap_WI1100_D0p00_Vasconcelos2005.png"
+    names = [
+        "crackmap_IR4_D0p00_Almeida2013.png",
+        "crackmap_IR4++_D0p00_Almeida2013.png",
+        "crackmap_IR5_D0p00_Almeida2013.png",
+        "crackmap_R5_D0p00_Almeida2014.png",
+        "crackmap_R5_D0p00_Mazzon2010.png",
+        "crackmap_R4_D0p00_Almeida2014.png",
+        "crackmap_PR4_D0.0_Almeida2014.png",
+        "crackmap_RS1_D0p48_Rezaie2020.png",
+        "crackmap_RS1_D-0p26_Rezaie2020.png",
+        "crackmap_PS_1_D0p00_Costa2011.png",
+        "crackmap_RS3_Rezaie2020.png",
+    ]
+    for name in names:
+        shutil.copy(src, tmp_path / "crackmaps" / name)
+    assert drawing_of("IR4", tmp_path).name == names[0] and drawing_of("IR4++", tmp_path).name == names[1]
+    with pytest.raises(FileNotFoundError):
+        drawing_of("IR5++", tmp_path)  # not IR5's
+    assert drawing_of("R5", tmp_path, "Almeida et al. (2014)").name == names[3]
+    assert drawing_of("R5", tmp_path, "Mazzon (2010)").name == names[4]
+    with pytest.raises(FileNotFoundError, match="another reference"):
+        drawing_of("R4", tmp_path, "Mazzon (2010)")
+    assert _drift(tmp_path / names[6]) == 0.0 and drawing_of("PR4", tmp_path).name == names[6]
+    assert drawing_of("RS1", tmp_path).name == names[8]  # the smallest drift either way
+    assert drawing_of("PS_1", tmp_path).name == names[9] and drawing_of("RS3", tmp_path).name == names[10]
+    assert drawing_of("SW.100.1", DB, "Lourenço et al. (2005)").name == "crackmap_SW1001_D0p00_Lourenco2005.png"
+
+    header = ["Test unit name", "Reference", "Joints", "Leaves", "H [mm]", "L [mm]", "t [mm]", "H0 [mm]"]
+    header += ["?0,tot [MPa]", "Ntot [kN]", "Vmax,+ [kN]"]
+    rows = [
+        ["IR4++", "Almeida et al. (2014)", "Air lime mortar", "1", "1800", "1200", "280", "1950", "0.436", "", "50.4"],
+        ["PR4", "Almeida et al. (2014)", "Air lime mortar", "1", "1800", "1200", "280", "1950", "", "146.5", "54.3"],
+        ["R4", "Mazzon (2010)", "Hydraulic lime mortar", "1", "1236", "913", "320", "1336", "1.025", "", "82.3"],
+    ]
+    with open(tmp_path / "tests.csv", "w", newline="", encoding="utf-8") as fh:
+        csv.writer(fh).writerows([header, *rows])
+    got = {t["unit"]: t for t in tests(tmp_path)}
+    assert got["IR4++"]["sigma0"] == 0.436 and got["IR4++"]["drawing"].name == names[1]
+    # no sigma0,tot: Ntot over L t
+    assert got["PR4"]["sigma0"] == pytest.approx(146.5e3 / (1200 * 280)) and not got["PR4"]["skip"]
+    assert "drawn after" not in got["PR4"]["note"]
+    assert got["R4"]["skip"] == "no drawing in crackmaps/ of this reference"

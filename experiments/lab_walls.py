@@ -48,7 +48,10 @@ The beam carries the row's sigma0,tot less the database's own 20 kN/m^3 of wall 
 (``DB_UNIT_WEIGHT_N_M3``): the model's stones add their weight themselves.
 
 prints per test: sigma0 (the database's), the beam's stress, measured Vmax (the larger of the two
-directions), predicted, ratio, mechanism (model) and failure type (test); then per series the mean
+directions), predicted, ratio, the bound of the wall rocking whole as a rigid body, N L / (2 H0)
+with N = sigma0 L t (the test's own scale: a measured peak far above it says the rig held the beam,
+far below it that the units or the mortar gave way first), mechanism (model) and failure type (test);
+then per series the mean
 and the coefficient of variation of the ratios. Measured on 2026-11-26, 11-27 and 11-28 (the last
 after the contacts' friction law stopped creeping at every load step) and 2026-12-01 (the shear
 test's stalled solves asking whether the load has an equilibrium; then the beam's load without the
@@ -326,6 +329,15 @@ def tests(db: Path = DB) -> list[dict]:
     return out
 
 
+def rocking_bound_kn(test: dict) -> float:
+    """The lateral force at which the wall would rock whole about its toe as one rigid body, kN:
+    N L / (2 H0), N the base's total load sigma0,tot L t (the wall's weight in it), H0 the shear span
+    (H / 2 for a double-fixed wall)."""
+    n_kn = test["sigma0"] * test["L"] * test["t"] * 1e3
+    span = test["H"] / 2 if test.get("boundary") == "double-fixed" else test["H0"]
+    return n_kn * test["L"] / (2 * span)
+
+
 def write_wall(test: dict, folder: Path, material: bool = True) -> Path:
     """The mask (from the row's ``drawing``) and structure file of one wall in ``folder``, with the
     row's ``[material]`` table unless ``material`` is False; the structure file."""
@@ -393,7 +405,8 @@ def main() -> None:
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="lab_walls_"))
     ratios: dict[str, list[float]] = {}
     print(
-        f"{'test':>10} {'sigma0':>7} {'beam':>6} {'Vmax':>7} {'model':>7} {'ratio':>6}  mechanism (model) / failure (test)"
+        f"{'test':>10} {'sigma0':>7} {'beam':>6} {'Vmax':>7} {'model':>7} {'ratio':>6} {'rigid':>6}"
+        "  mechanism (model) / failure (test)"
     )
     for t in tests(args.db):
         if args.only and t["unit"] not in args.only:
@@ -408,7 +421,7 @@ def main() -> None:
         ratios.setdefault(t["series"], []).append(ratio)
         print(
             f"{t['unit']:>10} {t['sigma0']:7.3f} {t['applied']:6.3f} {t['vmax']:7.1f} {peak if peak is not None else float('nan'):7.1f} "
-            f"{ratio:6.2f}  {st['mechanism']} / {t['failure']}  ({st['boundary']}, coverage "
+            f"{ratio:6.2f} {rocking_bound_kn(t):6.1f}  {st['mechanism']} / {t['failure']}  ({st['boundary']}, coverage "
             f"{s['joint_coverage']['median']}{'; ' + t['note'] if t['note'] else ''})",
             flush=True,
         )

@@ -302,6 +302,48 @@ def test_the_shear_test_of_one_dry_block_rocks_or_slides_as_statics_says(tmp_pat
     assert 0 < s["drift_at_95_percent_of_peak_percent"] < 2 * s["drift_at_peak_percent"]
 
 
+def test_a_shear_tests_curve_keeps_only_the_drifts_the_joint_model_solved(tmp_path):
+    # the rubble wall WR2.250 (Vasconcelos & Lourenco 2009; its stones the SWAT mask, its inputs as
+    # experiments/lab_walls.py takes them from its row) under its shear test cracked these joints at
+    # these times (tests/data, from the whole run); the curve up to the peak solves each load again
+    # with the joints cracked by then, and above about two thirds of the peak most of those solves
+    # find no equilibrium without the contacts' slip history: their last iterates (8 m, -22 m) were
+    # written as drifts of +682 % and -1826 %, and the latter reported as the drift at 95 % of the peak
+    from types import SimpleNamespace
+
+    from calib_masonry.simulation.results import shear_curve
+    from calib_masonry.simulation.scene import ShearTest, read_material, shear_test_scene
+
+    shutil.copy(SWAT, tmp_path / "mask.png")
+    (tmp_path / "structure.toml").write_text(
+        '[structure]\nname = "WR2.250"\nthickness_m = 0.2\nvertices = 8\nclosed = false\n\n'
+        '[[wall]]\nname = "w"\nmask = "mask.png"\nwidth_m = 1.0\nheight_m = 1.2\ntheta_deg = 0\n'
+    )
+    (tmp_path / "material.toml").write_text(
+        "friction = 0.6\ndensity_kg_m3 = 2650.0\nunit_youngs_modulus_mpa = 20200.0\ncompressive_strength_mpa = 3.6\n"
+    )
+    g = _structure_geometry(tmp_path)
+    test = ShearTest(precompression_pa=1.25e6, boundary="cantilever", shear_span_ratio=1.325)
+    scene = shear_test_scene(g, test, material=read_material(tmp_path / "material.toml"))
+    broke = np.loadtxt(Path(__file__).parent / "data" / "wr2_250_shear_crack_times.txt")
+    assert len(broke) == len(scene.bonds)
+    st = scene.notes["shear_test"]
+    peak_g = 95.0665 / st["force_per_g_kn"]  # the run's peak
+    frames = 60
+    lam = np.linspace(0.0, 1.2 * peak_g, frames)
+    nb = len(scene.bodies)
+    out = SimpleNamespace(bond_break_time_s=broke, positions=np.zeros((frames, nb, 3)), plate=np.zeros((frames, 3)))
+    c = shear_curve(scene, out, SimpleNamespace(start_frame=0), (peak_g, lam, np.zeros(frames)))
+    # every drift written is one the joint model converged to: a few tenths of a per cent at most
+    assert np.all(np.isfinite(c["drift"])) and np.abs(c["drift"]).max() < 0.01
+    assert len(c["drift"]) == len(c["force_kn"]) == 1 + c["drift_levels_converged"] + int((lam > peak_g).sum())
+    assert 20 <= c["drift_levels_converged"] <= c["drift_levels"] == 40
+    at95 = c["drift_at_95_percent_of_peak"]
+    assert at95 is None or 0 < at95 < 0.01
+    if c["drift_levels_converged"] < c["drift_levels"]:
+        assert c["drift_known_to_kn"] < c["peak_lateral_force_kn"]
+
+
 def test_shear_test_inputs_are_checked(tmp_path):
     from calib_masonry.simulation.scene import ShearTest
 

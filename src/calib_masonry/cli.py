@@ -342,6 +342,20 @@ def _cmd_footprint(args) -> int:
     return 0
 
 
+def _shear_drifts(st: dict) -> str:
+    """The shear test's drifts for the printed line: at 95 % of the peak and at the peak itself,
+    or how far up the curve the joint model's drift is known where its solves did not converge."""
+    at95, at_peak = st["drift_at_95_percent_of_peak_percent"], st["drift_at_peak_percent"]
+    if at95 is None:
+        return (
+            f"the drift near it not known: the joint model's drift is known up to {st['drift_known_to_kn']:.1f} kN "
+            f"({st['drift_levels_converged']} of {st['drift_levels']} loads converged)"
+        )
+    return f"95 % of it at {at95:.2f} % drift; the joint model's drift at the peak itself " + (
+        f"{at_peak:.2f} %, a mechanism forming" if at_peak is not None else "not known (its solve did not converge)"
+    )
+
+
 def _cmd_simulate(args) -> int:
     from dataclasses import replace
 
@@ -432,9 +446,7 @@ def _cmd_simulate(args) -> int:
             f"shear test: {s['bricks'] - 1} stones, {st['boundary']}, {st['precompression_mpa']:g} MPa "
             f"({st['vertical_load_kn']:.1f} kN), H0/L = {st['shear_span_ratio']:.2f}: peak lateral force "
             + (
-                f"{peak:.1f} kN (95 % of it at {st['drift_at_95_percent_of_peak_percent']:.2f} % drift; the joint "
-                f"model's drift at the peak itself {st['drift_at_peak_percent']:.2f} %, a mechanism forming), "
-                f"{st['mechanism']}"
+                f"{peak:.1f} kN ({_shear_drifts(st)}), {st['mechanism']}"
                 if peak is not None
                 else "not reached (the ramp ended first)"
             )

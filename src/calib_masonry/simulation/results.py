@@ -537,7 +537,10 @@ def _elastic_drift(scene: Scene, out: RunOutput, lam: np.ndarray, along: np.ndar
     """The beam's displacement along the push (m) at lateral loads ``lam`` (g) before the peak, from
     the joint model (Bullet holds the intact structure rigid, so its poses show no drift before a
     mechanism): each load solved with the joints that had cracked by then, less the displacement under
-    gravity alone."""
+    gravity alone. NaN where that solve did not converge: near the peak the run's cracks, solved
+    again at one load without the contacts' slip history, may have no static equilibrium, and the
+    contact iteration's last iterate is then no displacement at all (the rubble wall WR2.250's
+    shear test read -1826 % at 95 % of its peak, its out-of-balance force 5e9 tolerances)."""
     from .joints import JointModel
 
     jm = JointModel(scene)
@@ -549,7 +552,10 @@ def _elastic_drift(scene: Scene, out: RunOutput, lam: np.ndarray, along: np.ndar
     for i, x in enumerate(np.concatenate([[0.0], lam])):
         intact = ~(broke <= x / rate)  # NaN: never cracked
         jm.solve(np.array([x * G * along[0], x * G * along[1], -G]), intact)
-        d = float(jm.motion[6 * beam : 6 * beam + 3] @ along) if jm.motion is not None else 0.0
+        if jm.motion is None:
+            d = 0.0
+        else:
+            d = float(jm.motion[6 * beam : 6 * beam + 3] @ along) if jm.converged else np.nan
         if i == 0:
             ref = d
         else:
@@ -574,26 +580,32 @@ def shear_curve(scene: Scene, out: RunOutput, m: Metrics, curve, levels: int = 4
     top = float(value) if value is not None else float(lam.max())
     pre = np.linspace(0.0, top, levels + 1)[1:]
     pre_drift = _elastic_drift(scene, out, pre, along) / st["height_m"]
+    # the loads whose solve converged: the curve leaves the others out (see _elastic_drift)
+    known = np.isfinite(pre_drift)
+    last = float(pre_drift[known][-1]) if known.any() else 0.0
     beam = st["beam"]
     rel = out.positions[start:, beam] - out.positions[start, beam] - (out.plate[start:] - out.plate[start])
     after = lam > top
-    post_drift = pre_drift[-1] + (rel[after] @ along) / st["height_m"]
+    post_drift = last + (rel[after] @ along) / st["height_m"]
     peak = None if value is None else float(value * st["force_per_g_kn"])
     # the joint model's geometry is linear: its drift at the last load before a mechanism grows
     # without bound as the mechanism forms (a rocking wall's 21 % on a laboratory wall whose force
     # was within 3 % of the peak from 0.5 %), so the drift where the force reaches 95 % of the
-    # peak is reported beside it (interpolated on the curve up to the peak)
-    at95 = None
-    if value is not None:
-        f = np.concatenate([[0.0], pre])
-        dr = np.concatenate([[0.0], pre_drift])
-        at95 = float(np.interp(0.95 * top, f, dr))
+    # peak is reported beside it (interpolated on the curve up to the peak, where a converged
+    # load at or above it brackets it)
+    f = np.concatenate([[0.0], pre[known]])
+    dr = np.concatenate([[0.0], pre_drift[known]])
+    at95 = float(np.interp(0.95 * top, f, dr)) if value is not None and f[-1] >= 0.95 * top else None
     return {
-        "force_kn": np.concatenate([[0.0], pre, lam[after]]) * st["force_per_g_kn"],
-        "drift": np.concatenate([[0.0], pre_drift, post_drift]),
+        "force_kn": np.concatenate([[0.0], pre[known], lam[after]]) * st["force_per_g_kn"],
+        "drift": np.concatenate([[0.0], pre_drift[known], post_drift]),
         "peak_lateral_force_kn": peak,
-        "drift_at_peak": None if value is None else float(pre_drift[-1]),
+        "drift_at_peak": None if value is None or not known[-1] else float(pre_drift[-1]),
         "drift_at_95_percent_of_peak": at95,
+        # how far up the curve the joint model's drift goes: the largest force whose solve converged
+        "drift_known_to_kn": float(f[-1] * st["force_per_g_kn"]),
+        "drift_levels_converged": int(known.sum()),
+        "drift_levels": int(levels),
     }
 
 
@@ -617,7 +629,13 @@ def write_shear_curve(scene: Scene, shear: dict, folder: Path, figures: bool = T
     drift, force = shear["drift"] * 100, shear["force_kn"]
     peak = shear["peak_lateral_force_kn"]
     pre = force <= (peak if peak is not None else np.inf) + 1e-9
-    ax.plot(drift[pre], force[pre], color="C0", lw=1.2, label="up to the peak (joint model)")
+    known = shear.get("drift_known_to_kn")
+    short = peak is not None and known is not None and known < peak - 1e-9
+    ax.plot(
+        drift[pre], force[pre], color="C0", lw=1.2,
+        label=f"up to {known:.1f} kN (joint model; above it no load's solve converged)" if short
+        else "up to the peak (joint model)",
+    )  # fmt: skip
     if (~pre).any():
         ax.plot(drift[~pre], force[~pre], color="C0", lw=1.0, ls="--", label="after it: the wall runs away (Bullet)")
     # the drifts a laboratory test reaches (a few per cent), not the joint model's drift at the

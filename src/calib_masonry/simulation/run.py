@@ -492,6 +492,11 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
                 "drift_at_95_percent_of_peak_percent": (
                     None if shear["drift_at_95_percent_of_peak"] is None else 100 * shear["drift_at_95_percent_of_peak"]
                 ),
+                # the joint model's drift is known up to this force: above it, the run's cracks solved
+                # again at one load had no converged equilibrium (the curve leaves those loads out)
+                "drift_known_to_kn": shear["drift_known_to_kn"],
+                "drift_levels_converged": shear["drift_levels_converged"],
+                "drift_levels": shear["drift_levels"],
                 "reached_max": shear["peak_lateral_force_kn"] is None,
                 "mechanism": (summary["mechanism"] or {}).get("mechanism"),
             }

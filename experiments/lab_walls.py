@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import re
 import subprocess
@@ -246,8 +247,13 @@ def _sigma0(row: dict, L: float | None, t: float | None) -> float | None:
 def tests(db: Path = DB) -> list[dict]:
     """Every row of the database's tests.csv with what the shear test needs, read from the row:
     ``skip`` says why a row is not run ("" if it is)."""
-    with open(Path(db) / "tests.csv", newline="", encoding="utf-8-sig") as fh:
-        rows = list(csv.DictReader(fh))
+    raw = (Path(db) / "tests.csv").read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:  # a copy saved by a spreadsheet in its own code page (Lourenço, "?0,tot")
+        text = raw.decode("cp1252", errors="replace")
+    # rows without a unit's name (a spreadsheet's empty lines of commas) are no tests
+    rows = [r for r in csv.DictReader(io.StringIO(text, newline="")) if _field(r, "Test unit name")]
     fcm: dict[str, list[float]] = {}
     for row in rows:
         if (v := _num(row, "fc,m [MPa]")) is not None and v > 0:

@@ -479,15 +479,17 @@ def test_laboratory_drawings_are_found_by_the_whole_unit_name_and_its_reference(
     assert drawing_of("SW.100.1", DB, "Lourenço et al. (2005)").name == "crackmap_SW1001_D0p00_Lourenco2005.png"
 
     header = ["Test unit name", "Reference", "Joints", "Leaves", "H [mm]", "L [mm]", "t [mm]", "H0 [mm]"]
-    header += ["?0,tot [MPa]", "Ntot [kN]", "Vmax,+ [kN]"]
+    header += ["σ0,tot [MPa]", "Ntot [kN]", "Vmax,+ [kN]"]
     rows = [
         ["IR4++", "Almeida et al. (2014)", "Air lime mortar", "1", "1800", "1200", "280", "1950", "0.436", "", "50.4"],
         ["PR4", "Almeida et al. (2014)", "Air lime mortar", "1", "1800", "1200", "280", "1950", "", "146.5", "54.3"],
         ["R4", "Mazzon (2010)", "Hydraulic lime mortar", "1", "1236", "913", "320", "1336", "1.025", "", "82.3"],
     ]
-    with open(tmp_path / "tests.csv", "w", newline="", encoding="utf-8") as fh:
-        csv.writer(fh).writerows([header, *rows])
+    rows += [["", "Lourenço et al. (2005)"], [""] * len(header)]  # a row without a name, empty lines of commas
+    with open(tmp_path / "tests.csv", "w", newline="", encoding="cp1252", errors="replace") as fh:
+        csv.writer(fh).writerows([header, *rows])  # a spreadsheet's own code page: σ as ?, ç as 0xe7
     got = {t["unit"]: t for t in tests(tmp_path)}
+    assert set(got) == {"IR4++", "PR4", "R4"}
     assert got["IR4++"]["sigma0"] == 0.436 and got["IR4++"]["drawing"].name == names[1]
     # no sigma0,tot: Ntot over L t
     assert got["PR4"]["sigma0"] == pytest.approx(146.5e3 / (1200 * 280)) and not got["PR4"]["skip"]

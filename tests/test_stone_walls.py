@@ -300,6 +300,10 @@ def test_the_shear_test_of_one_dry_block_rocks_or_slides_as_statics_says(tmp_pat
     # the drift at 95 % of the peak is reported beside the joint model's drift at the peak itself
     # (which a mechanism forming makes as large as it likes: 21 % on a rocking stone wall)
     assert 0 < s["drift_at_95_percent_of_peak_percent"] < 2 * s["drift_at_peak_percent"]
+    # the drift up to the peak is the run's own joint model at every frame's check (not 40 loads
+    # solved again afterwards), and every one of those checks converged on one block
+    assert s["drift_levels"] > 100 and s["drift_levels_converged"] == s["drift_levels"]
+    assert s["drift_known_to_kn"] == pytest.approx(s["peak_lateral_force_kn"], rel=0.01)
 
 
 def test_a_shear_tests_curve_keeps_only_the_drifts_the_joint_model_solved(tmp_path):

@@ -75,6 +75,9 @@ class RunOutput:
     # joint model stepped: (times since the ground started (K,), (K, B, 6) m and rad, float32);
     # None without a vibration (a quasi-static run)
     vibration: tuple[np.ndarray, np.ndarray] | None = None
+    # a shear test's loading beam in the joint model at each frame's check (F, 6: m and rad), NaN
+    # where the check's motion is not known (before the checks, an unconverged solve, the run-away)
+    beam_motion: np.ndarray | None = None
 
 
 class Engine(Protocol):
@@ -350,6 +353,7 @@ def steps(
     plate_pos = np.zeros((n, 3))
     mats = np.zeros((n, nb, 4, 4), dtype=np.float32)
     utilisation = np.zeros(n)
+    beam_motion = np.full((n, 6), np.nan)  # a shear test's beam in the joint model (tracker.beam_motion)
 
     def grab(i: int) -> None:
         plate_pos[i] = eng.read_poses(mats[i])
@@ -414,7 +418,8 @@ def steps(
         )
         # the vibration's velocities at the step's last release (its pieces start with them)
         velocity = tracker.free_velocity[max(tracker.free_velocity)] if len(release) and tracker.free_velocity else None
-        return release, tracker.max_utilisation, velocity, _contact_solves(tracker)
+        beam = None if tracker.beam_motion is None else tracker.beam_motion.copy()
+        return release, tracker.max_utilisation, velocity, _contact_solves(tracker), beam
 
     # A tracker that reads no pose (no body bears on the plate without a joint) decides every step
     # from the load history and its own state alone, so it runs ahead on the other core, frame
@@ -494,7 +499,11 @@ def steps(
                         waiting=waiting,
                     )
                 p = i - 1
-                release, utilisation[p], velocity, solves_used[0] = next(ahead) if ahead is not None else check(f, p)
+                release, utilisation[p], velocity, solves_used[0], beam = (
+                    next(ahead) if ahead is not None else check(f, p)
+                )
+                if beam is not None:
+                    beam_motion[i] = beam  # the check of step f is frame f's load
                 if waited[0]:
                     frames_bar.set_postfix_str("")
                     waited[0] = False
@@ -524,7 +533,7 @@ def steps(
         if wait_bar:
             wait_bar[0].close()
     seconds_stepping = time.perf_counter() - t1
-    mats, plate_pos, utilisation = mats[:n], plate_pos[:n], utilisation[:n]
+    mats, plate_pos, utilisation, beam_motion = mats[:n], plate_pos[:n], utilisation[:n], beam_motion[:n]
     if record and tracker is not None and scene.motion is not None and (pieces is None or n < frames + 1):
         times = times[: n - warm]
         pieces = move_pieces(progress=progress)
@@ -545,6 +554,7 @@ def steps(
         bond_break_mode=tracker.break_mode if tracker is not None else None,
         bond_release_time_s=tracker.release_time_s if tracker is not None else None,
         max_utilisation=utilisation if record else None,
+        beam_motion=beam_motion if record and tracker is not None and tracker.beam_body is not None else None,
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
         contact_solves=solves_used[0] if solves_used[0] is not None else _contact_solves(tracker),
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),

@@ -567,9 +567,12 @@ def shear_curve(scene: Scene, out: RunOutput, m: Metrics, curve, levels: int = 4
     """A shear test's force-drift curve and its peak (see
     :func:`~calib_masonry.simulation.scene.shear_test_scene`): the lateral force at the top (kN:
     ``lambda`` times the notes' ``force_per_g_kn``) against the drift (the beam's displacement along
-    the push over the wall's height). Up to the peak, at ``levels`` loads, the drift is the joint
-    model's elastic one with the joints cracked by then (:func:`_elastic_drift`); after it, that plus
-    the beam's motion in Bullet. The peak force is the force at the collapse multiplier (the last
+    the push over the wall's height). Up to the peak the drift is the joint model's: the run's own
+    at each frame's check (``out.beam_motion``: the unit-load solutions while nothing has cracked,
+    then each converged solve, along the run's path of cracks and contact slip), or, for a run
+    without it, each of ``levels`` loads solved again with the joints cracked by then
+    (:func:`_elastic_drift`); a load whose motion is not known is left out. After the peak, the last
+    known drift plus the beam's motion in Bullet. The peak force is the force at the collapse multiplier (the last
     load before the joint model set the beam free, or before the beam ran away in Bullet if that
     came first: :func:`collapse_multiplier`), None if the ramp ended first."""
     st = scene.notes["shear_test"]
@@ -578,9 +581,18 @@ def shear_curve(scene: Scene, out: RunOutput, m: Metrics, curve, levels: int = 4
     d = np.radians(scene.pushover.direction_deg)
     along = np.array([np.cos(d), np.sin(d), 0.0])
     top = float(value) if value is not None else float(lam.max())
-    pre = np.linspace(0.0, top, levels + 1)[1:]
-    pre_drift = _elastic_drift(scene, out, pre, along) / st["height_m"]
-    # the loads whose solve converged: the curve leaves the others out (see _elastic_drift)
+    run = getattr(out, "beam_motion", None)
+    run = None if run is None else run[start:, :3] @ along
+    if run is not None and len(run) == len(lam) and np.isfinite(run).any():
+        # the run's own joint model at each frame's check, from its first (the weight alone, the
+        # ramp at zero): its path, with the cracks and the contacts' slip as they came
+        ref = run[np.flatnonzero(np.isfinite(run))[0]]
+        up = (lam <= top) & (lam > 0.0)
+        pre, pre_drift = lam[up], (run[up] - ref) / st["height_m"]
+    else:  # each of ``levels`` loads solved again with the joints cracked by then
+        pre = np.linspace(0.0, top, levels + 1)[1:]
+        pre_drift = _elastic_drift(scene, out, pre, along) / st["height_m"]
+    # the loads whose motion is known: the curve leaves the others out (see _elastic_drift)
     known = np.isfinite(pre_drift)
     last = float(pre_drift[known][-1]) if known.any() else 0.0
     beam = st["beam"]
@@ -605,7 +617,7 @@ def shear_curve(scene: Scene, out: RunOutput, m: Metrics, curve, levels: int = 4
         # how far up the curve the joint model's drift goes: the largest force whose solve converged
         "drift_known_to_kn": float(f[-1] * st["force_per_g_kn"]),
         "drift_levels_converged": int(known.sum()),
-        "drift_levels": int(levels),
+        "drift_levels": len(pre),
     }
 
 

@@ -105,6 +105,14 @@ class CrackTracker:
         # of each step (a frame), and its time since t0: what an engine's held bricks may follow
         # (recorded where asked: only Bullet's pass after the verdict's reads it)
         self.record_vibration = record_vibration
+        # a shear test's loading beam (its body index): its displacement and rotation (6,) in the
+        # joint model at the last check of a pushover, where that check's motion is known (the
+        # unit-load solutions' sum while nothing has cracked, else a converged solve): the force-drift
+        # curve's drift up to the peak, along the run's own path (its cracks and the contacts' slip)
+        self.beam_body = scene.notes.get("shear_test", {}).get("beam") if scene.motion is None else None
+        self.beam_motion: np.ndarray | None = None
+        self._unit_motion: list[np.ndarray] = []
+        self._linear_g: np.ndarray | None = None
         self.frame_u: list[tuple[float, np.ndarray]] = []
         self._u_static: np.ndarray | None = None
         if scene.motion is not None and scene.solver.dynamics and n:
@@ -187,7 +195,10 @@ class CrackTracker:
     def _unit_states(self) -> list[JointState]:
         if self._unit is None:
             eye = np.eye(3)
-            self._unit = [self.model.solve(eye[k], self.intact)[0] for k in range(3)]
+            self._unit, self._unit_motion = [], []
+            for k in range(3):
+                self._unit.append(self.model.solve(eye[k], self.intact)[0])
+                self._unit_motion.append(self.model.motion.copy())
         return self._unit
 
     def step(
@@ -209,7 +220,11 @@ class CrackTracker:
             g = np.asarray(g, dtype=np.float64)
             if self.ground_motion is None:
                 self.checking_s = float(time_s) - self.t0
-                return self._check(float(time_s), g, positions, rotations, plate)
+                self._linear_g = None
+                release = self._check(float(time_s), g, positions, rotations, plate)
+                if self.beam_body is not None:
+                    self.beam_motion = self._beam_motion()
+                return release
             h = self.check_interval_s
             last = int(np.floor((float(time_s) - self.t0) / h + 1e-6))
             out = []
@@ -246,6 +261,16 @@ class CrackTracker:
             n = self._cracked_before + self.model.cracked_in_rounds
             text += f": crack round {rounds}, {n} joint{'' if n == 1 else 's'} cracked"
         return text
+
+    def _beam_motion(self) -> np.ndarray | None:
+        """The loading beam's (6,) displacement and rotation at the check just made: the unit-load
+        solutions' sum where nothing had cracked, the last solve's where it converged, else None."""
+        b = 6 * self.beam_body
+        if self._linear_g is not None:
+            return sum(self._linear_g[k] * self._unit_motion[k][b : b + 6] for k in range(3))
+        if self.model.converged and self.model.motion is not None:
+            return self.model.motion[b : b + 6].copy()
+        return None
 
     def _frozen(self, held_bodies: np.ndarray | None) -> np.ndarray:
         """``(nj,)`` the held joints of the pieces already set free (no held joint ties their bodies
@@ -301,6 +326,7 @@ class CrackTracker:
             state = self.model.state_from_relative(sum(g[k] * unit[k].relative for k in range(3)))
             self.max_utilisation = float(state.utilisation.max())
             if self.max_utilisation <= 1.0:
+                self._linear_g = g
                 return np.zeros(0, dtype=np.int64)
         else:
             # the cracked joints Bullet holds are contacts in the model; those it has let go

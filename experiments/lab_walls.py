@@ -50,13 +50,14 @@ The beam carries the row's sigma0,tot less the database's own 20 kN/m^3 of wall 
 prints per test: sigma0 (the database's), the beam's stress, measured Vmax (the larger of the two
 directions), predicted, ratio, the bound of the wall rocking whole as a rigid body, N L / (2 H0)
 with N = sigma0 L t (the test's own scale: a measured peak far above it says the rig held the beam,
-far below it that the units or the mortar gave way first), mechanism (model) and failure type (test);
-then per series the mean
-and the coefficient of variation of the ratios. Measured on 2026-11-26, 11-27 and 11-28 (the last
-after the contacts' friction law stopped creeping at every load step) and 2026-12-01 (the shear
-test's stalled solves asking whether the load has an equilibrium; then the beam's load without the
-wall's weight, and a crack round cracking the worst joint alone): see docs/stone_walls.md. Whether a wall's peak
-is converged in the joint model's settings: experiments/shear_test_convergence.py.
+far below it that the units or the mortar gave way first), mechanism (model) and failure type
+(test); then per series the mean and the coefficient of variation of the ratios. With ``--out``,
+DIR/lab_walls.png: predicted against measured, each wall's rocking bound beside its marker, the
++-30 % band. Measured on 2026-11-26, 11-27 and 11-28 (the last after the contacts' friction law
+stopped creeping at every load step) and 2026-12-01 (the shear test's stalled solves asking whether
+the load has an equilibrium; then the beam's load without the wall's weight, and a crack round
+cracking the worst joint alone): see docs/stone_walls.md. Whether a wall's peak is converged in the
+joint model's settings: experiments/shear_test_convergence.py.
 """
 
 from __future__ import annotations
@@ -410,6 +411,7 @@ def main() -> None:
         raise SystemExit(2)
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="lab_walls_"))
     ratios: dict[str, list[float]] = {}
+    points: list[tuple] = []
     print(
         f"{'test':>10} {'sigma0':>7} {'beam':>6} {'Vmax':>7} {'model':>7} {'ratio':>6} {'rigid':>6}"
         "  mechanism (model) / failure (test)"
@@ -425,6 +427,7 @@ def main() -> None:
         peak = st["peak_lateral_force_kn"]
         ratio = peak / t["vmax"] if peak is not None else float("nan")
         ratios.setdefault(t["series"], []).append(ratio)
+        points.append((t["series"], t["unit"], t["vmax"], peak, rocking_bound_kn(t)))
         print(
             f"{t['unit']:>10} {t['sigma0']:7.3f} {t['applied']:6.3f} {t['vmax']:7.1f} {peak if peak is not None else float('nan'):7.1f} "
             f"{ratio:6.2f} {rocking_bound_kn(t):6.1f}  {st['mechanism']} / {t['failure']}  ({st['boundary']}, coverage "
@@ -434,6 +437,41 @@ def main() -> None:
     for series, r in ratios.items():
         r = np.array(r)
         print(f"{series}: mean ratio {np.nanmean(r):.3f}, CoV {np.nanstd(r) / np.nanmean(r):.3f}, n = {len(r)}")
+    if points:
+        plot_walls(points, base / "lab_walls.png")
+        print(f"figure: {base / 'lab_walls.png'}")
+
+
+def plot_walls(points: list[tuple], path: Path) -> None:
+    """Predicted against measured peak force, one marker per wall and series, with the +-30 %
+    band and, open, each wall's rigid rocking bound N L / (2 H0) (``points``: series, unit,
+    measured kN, model kN or None, bound kN)."""
+    from calib_masonry import _figure as plt
+
+    fig, ax = plt.subplots(figsize=(6.0, 5.5))
+    top = 1.15 * max(max(p[2], p[3] or 0.0, p[4]) for p in points)
+    x = np.array([0.0, top])
+    ax.plot(x, x, color="k", lw=0.8)
+    ax.fill_between(x, 0.7 * x, 1.3 * x, color="0.9", label="within +-30 %")
+    for k, series in enumerate(dict.fromkeys(p[0] for p in points)):
+        own = [p for p in points if p[0] == series]
+        color = f"C{k}"
+        ax.scatter([p[2] for p in own], [p[4] for p in own], facecolors="none", edgecolors=color, s=40,
+                   label=f"{series}: rigid rocking bound")  # fmt: skip
+        run = [p for p in own if p[3] is not None]
+        ax.scatter([p[2] for p in run], [p[3] for p in run], color=color, s=22, label=f"{series}: model")
+        for p in run:
+            ax.annotate(p[1], (p[2], p[3]), fontsize=6, xytext=(3, 2), textcoords="offset points")
+    ax.set_xlim(0, top)
+    ax.set_ylim(0, top)
+    ax.set_xlabel("measured peak lateral force (kN)")
+    ax.set_ylabel("predicted (kN)")
+    ax.set_title("laboratory shear-compression walls (Stone Masonry Database)", fontsize=9)
+    ax.legend(fontsize=7, loc="upper left")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    plt.save(fig, path)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

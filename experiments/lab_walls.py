@@ -446,9 +446,10 @@ def plot_walls(points: list[tuple], path: Path) -> None:
     """Predicted against measured peak force, one marker per wall and series, with the +-30 %
     band and, open, each wall's rigid rocking bound N L / (2 H0) (``points``: series, unit,
     measured kN, model kN or None, bound kN)."""
-    from calib_masonry import _figure as plt
+    from matplotlib.figure import Figure  # no pyplot: no backend to select
 
-    fig, ax = plt.subplots(figsize=(6.0, 5.5))
+    fig = Figure(figsize=(6.0, 5.5))
+    ax = fig.subplots()
     top = 1.15 * max(max(p[2], p[3] or 0.0, p[4]) for p in points)
     x = np.array([0.0, top])
     ax.plot(x, x, color="k", lw=0.8)
@@ -470,8 +471,7 @@ def plot_walls(points: list[tuple], path: Path) -> None:
     ax.legend(fontsize=7, loc="upper left")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    plt.save(fig, path)
-    plt.close(fig)
+    fig.savefig(path, dpi=110)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,10 @@ database's tests.csv and crackmaps/), its inputs read from its own row, never fr
   SW.200.1's shear test sat in one frame for 25 minutes: one question HiGHS's dual simplex did not
   finish, since limited);
   any mortar -> the package's default mortar with the row's f_c,m (a row without one: the mean of
-  its reference's rows, else the package default) and E_m where given; the units' modulus E_b
+  its reference's rows, else the package default) and E_m where given; the masonry's modulus
+  from its compression tests (Ecompr) where given, which sets the joints' stiffness (each column of
+  unit and joint has it: ``masonry_youngs_modulus_mpa``; else the units' and the mortar's moduli in
+  series, whose 10 GPa made the WI walls 4-8 times stiffer than tested); the units' modulus E_b
   where given (else the package's 10 GPa); the stones' density 2650 kg/m^3 (granite; the database
   gives none) and mu 0.6 for every wall;
 - boundary from ``H0/H``: at most 0.55 -> double-fixed (H0 = H / 2); above 1 -> cantilever with the
@@ -118,6 +121,10 @@ def _surname(reference: str) -> str:
     return re.sub(r"[^a-z]", "", folded.lower())
 
 
+class OnlyAnotherReference(FileNotFoundError):
+    """The unit has drawings, but only of another reference's wall of the same name."""
+
+
 def drawing_of(unit: str, db: Path = DB, reference: str = "") -> Path:
     """The crackmap of a test unit (SW.100.1 -> SW1001, WI1.100 -> WI1100, IR4++ -> IR4++), the one
     at the smallest drift (D0p00: the layout before the test). Where ``reference`` is given, only a
@@ -134,7 +141,7 @@ def drawing_of(unit: str, db: Path = DB, reference: str = "") -> Path:
         raise FileNotFoundError(f"no crackmap for {unit} ({key}) in {folder}")
     own = [p for p, ref in found if not author or author in _surname(ref)]
     if not own:
-        raise FileNotFoundError(
+        raise OnlyAnotherReference(
             f"no crackmap of {reference} for {unit} in {folder} (only of another reference: "
             f"{', '.join(p.name for p, _ in found)})"
         )
@@ -236,6 +243,13 @@ def _num(row: dict, name: str) -> float | None:
         return None
 
 
+def _dmax(row: dict) -> float | None:
+    """The drift (%) at the row's measured peak, of the direction whose Vmax is the larger."""
+    pairs = [(_num(row, f"Vmax,{d} [kN]"), _num(row, f"dmax,{d} [%]")) for d in "+-"]
+    pairs = [(v, abs(x)) for v, x in pairs if v is not None and x is not None]
+    return max(pairs)[1] if pairs else None
+
+
 def _sigma0(row: dict, L: float | None, t: float | None) -> float | None:
     """The row's total vertical stress at the base, MPa: its sigma0,tot, else its Ntot (kN) over
     L t (mm)."""
@@ -278,6 +292,10 @@ def tests(db: Path = DB) -> list[dict]:
             "applied": None,
             "vmax": max(vmax) if vmax else None,
             "failure": _field(row, "From test report: Failure type") or "?",
+            # the test's cracking onset and its drift at the peak (of the larger direction), % and kN
+            "vcr": _num(row, "Vcr [kN]"),
+            "dcr": _num(row, "dcr [%]"),
+            "dmax": _dmax(row),
             "skip": "",
             "note": "",
         }
@@ -287,6 +305,10 @@ def tests(db: Path = DB) -> list[dict]:
             material["unit_youngs_modulus_mpa"] = eb
         if not dry and (em := _num(row, "Em [MPa]")) is not None and em > 0:
             material["mortar_youngs_modulus_mpa"] = em
+        # the masonry's own modulus from its compression tests, where given, sets the joints'
+        # stiffness (the row's measured wall, not a mortar prism; for a dry wall its contacts')
+        if (ec := _num(row, "Ecompr [MPa]")) is not None and ec > 0:
+            material["masonry_youngs_modulus_mpa"] = ec
         if dry:
             material.update(DRY)
             # a dry joint crushes at the masonry's strength (the row's f_c, from its wallets), not
@@ -325,7 +347,7 @@ def tests(db: Path = DB) -> list[dict]:
                 test["drawing"] = drawing_of(unit, db, ref if ref != "?" else "")
             except FileNotFoundError as e:
                 test["skip"] = "no drawing in crackmaps/" + (
-                    " of this reference" if "another reference" in str(e) else ""
+                    " of this reference" if isinstance(e, OnlyAnotherReference) else ""
                 )
             else:
                 if _drift(test["drawing"]) > 0:
@@ -334,6 +356,23 @@ def tests(db: Path = DB) -> list[dict]:
                     )
         out.append(test)
     return out
+
+
+def drift_at_force(shear_folder: Path, force_kn: float | None, summary: dict) -> float | None:
+    """The model's drift (%) where its lateral force first reaches ``force_kn`` on the joint model's
+    curve up to the peak (force_drift.csv), None where the curve's known part ends below it."""
+    st = summary["shear_test"]
+    if force_kn is None or st.get("drift_known_to_kn") is None or force_kn > st["drift_known_to_kn"]:
+        return None
+    curve = np.loadtxt(shear_folder / "force_drift.csv", delimiter=",", skiprows=1, ndmin=2)
+    drift, force = curve[:, 0], curve[:, 1]
+    up = np.flatnonzero(force >= force_kn)
+    if up.size == 0:
+        return None
+    k = up[0]
+    if k == 0:
+        return float(drift[0])
+    return float(np.interp(force_kn, [force[k - 1], force[k]], [drift[k - 1], drift[k]]))
 
 
 def rocking_bound_kn(test: dict) -> float:
@@ -422,24 +461,42 @@ def main() -> None:
         if t["skip"]:
             print(f"{t['unit']:>10}  not run: {t['skip']}", flush=True)
             continue
-        s = run(t, base / re.sub(r"[^A-Za-z0-9._-]", "_", t["unit"]), args.boundary)
+        folder = base / re.sub(r"[^A-Za-z0-9._-]", "_", t["unit"])
+        s = run(t, folder, args.boundary)
         st = s["shear_test"]
         peak = st["peak_lateral_force_kn"]
         ratio = peak / t["vmax"] if peak is not None else float("nan")
         ratios.setdefault(t["series"], []).append(ratio)
-        points.append((t["series"], t["unit"], t["vmax"], peak, rocking_bound_kn(t)))
+        bound = rocking_bound_kn(t)
+        points.append((t["series"], t["unit"], t["vmax"], peak, bound))
         print(
             f"{t['unit']:>10} {t['sigma0']:7.3f} {t['applied']:6.3f} {t['vmax']:7.1f} {peak if peak is not None else float('nan'):7.1f} "
-            f"{ratio:6.2f} {rocking_bound_kn(t):6.1f}  {st['mechanism']} / {t['failure']}  ({st['boundary']}, coverage "
+            f"{ratio:6.2f} {bound:6.1f}  {st['mechanism']} / {t['failure']}  ({st['boundary']}, coverage "
             f"{s['joint_coverage']['median']}{'; ' + t['note'] if t['note'] else ''})",
             flush=True,
         )
+        print(f"{'':>10}  {stiffness_line(t, s, folder / 'shear')}", flush=True)
     for series, r in ratios.items():
         r = np.array(r)
         print(f"{series}: mean ratio {np.nanmean(r):.3f}, CoV {np.nanstd(r) / np.nanmean(r):.3f}, n = {len(r)}")
     if points:
         plot_walls(points, base / "lab_walls.png")
         print(f"figure: {base / 'lab_walls.png'}")
+
+
+def stiffness_line(test: dict, summary: dict, shear_folder: Path) -> str:
+    """The model's drifts beside the test's: at the test's cracking onset Vcr (its dcr) and, against
+    the test's drift at its peak, the model's where its force reaches 95 % of its own peak (its drift
+    at the peak itself grows without bound as the mechanism forms); with the joints' modulus."""
+    pct = lambda x: "?" if x is None else f"{x:.3f} %"  # noqa: E731
+    at_vcr = drift_at_force(shear_folder, test["vcr"], summary)
+    st = summary["shear_test"]
+    em = test["material"].get("masonry_youngs_modulus_mpa")
+    return (
+        (f"drift at Vcr {test['vcr']:.1f} kN: model {pct(at_vcr)}, test {pct(test['dcr'])}; " if test["vcr"] else "")
+        + f"drift at 95 % of the peak (model) {pct(st.get('drift_at_95_percent_of_peak_percent'))}, "
+        f"at the peak (test) {pct(test['dmax'])}; masonry's E {'not given (mortar and units in series)' if em is None else f'{em:g} MPa (Ecompr)'}"
+    )
 
 
 def plot_walls(points: list[tuple], path: Path) -> None:

@@ -378,6 +378,39 @@ def test_a_laboratory_drawing_becomes_a_stone_mask_of_the_walls_size(unit, stone
     assert 0.5 < (mask > 0).mean() < 0.97  # mortar (WI) or hairline joints (SW) between the stones
 
 
+def test_a_masonry_modulus_gives_each_column_of_unit_and_joint_that_modulus():
+    # Material.masonry_youngs_modulus (a wallet's compression test): k_n = E / (l + t_j), so a column
+    # of courses of height h (l = h across a bed joint) has the modulus E whatever the units' and the
+    # mortar's moduli, 0.4 E in shear; 0 keeps the mortar and the units in series
+    from calib_masonry.simulation.joints import joint_stiffness
+
+    for e, h, tj in [(1.248e9, 0.2, 0.01), (12.75e9, 0.1, 0.01), (3e9, 0.25, 0.02)]:
+        m = Material(masonry_youngs_modulus=e, joint_thickness_m=tj, unit_youngs_modulus=20e9)
+        k = joint_stiffness(m, np.array([h, h / 2]))
+        assert (h + tj) * k.normal[0] == pytest.approx(e, rel=1e-12)
+        assert (h + tj) * k.shear[0] == pytest.approx(0.4 * e, rel=1e-12)
+        # the same column, units and mortar in series: stiffer (the units' 20 GPa) and not e
+        series = joint_stiffness(replace(m, masonry_youngs_modulus=0.0), h).normal
+        assert (h + tj) * series != pytest.approx(e, rel=0.05)
+    assert Material().masonry_youngs_modulus == 0.0
+
+
+def test_a_laboratory_walls_joints_take_the_modulus_its_compression_tests_measured():
+    # experiments/lab_walls.py: the row's Ecompr (the masonry's, from compression tests on wallets)
+    # is the masonry's modulus; its cracking onset and the drift at its peak are read for the print
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+    from lab_walls import tests
+
+    got = {t["unit"]: t for t in tests()}
+    wi, sw = got["WI1.100"], got["SW.30.1"]  # Ecompr 1248 and 12750 MPa
+    assert wi["material"]["masonry_youngs_modulus_mpa"] == 1248.0
+    assert sw["material"]["masonry_youngs_modulus_mpa"] == 12750.0
+    assert wi["vcr"] == 20.9 and wi["dmax"] == 2.45  # the larger direction's peak (40.0 kN at -2.45 %)
+    assert sw["vcr"] is None and sw["dmax"] == 2.6
+
+
 def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path):
     # experiments/lab_walls.py on walls of the database that are not in ../shared: material and
     # boundary come from each row's fields (never from the unit's name), unsupported rows say why

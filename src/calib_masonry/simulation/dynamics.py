@@ -338,6 +338,7 @@ def modes_json(m: Modes, scene: Scene) -> dict:
             "unit_youngs_modulus_pa": scene.material.unit_youngs_modulus,
             "mortar_youngs_modulus_pa": scene.material.mortar_youngs_modulus,
             "joint_thickness_m": scene.material.joint_thickness_m,
+            "masonry_youngs_modulus_pa": scene.material.masonry_youngs_modulus,
             "density_kg_m3": scene.material.density,
         },
         "method": "undamped modes of the intact joints (mortar and units in series) and the bricks' rigid-body "

@@ -228,15 +228,30 @@ class JointStiffness:
     shear: np.ndarray
 
 
+#: The masonry's shear modulus over its Young's modulus where the masonry's modulus is given
+#: (EN 1996-1-1, 3.7.3: "G may be taken as 40 % of E").
+MASONRY_SHEAR_RATIO = 0.4
+
+
 def joint_stiffness(material: Material, unit_length_m) -> JointStiffness:
     """The stiffness per unit area of a joint between rigid units: the mortar and the units' length
     across the joint in series (see the module docstring),
     ``1 / k_n = t_j / E_m + l / E_u`` and ``1 / k_s = t_j / G_m + l / G_u``, with ``l`` the units'
     length across the joint (m; per joint, an array or a number): the distances along the joint's
     normal from its plane to the centroids of the two bodies it joins (one for a joint on the
-    rigid ground)."""
+    rigid ground). Where the material gives the masonry's own modulus E
+    (:attr:`Material.masonry_youngs_modulus`: a wallet's compression test, or a code's table for the
+    typology), ``k_n = E / (l + t_j)`` and ``k_s = 0.4 E / (l + t_j)`` instead: each column of unit
+    and joint then has the masonry's modulus (a stone wall's measured 1.2 GPa where its stones'
+    20 GPa and a 1 GPa mortar in series give 10)."""
     m = material
     length = np.maximum(np.asarray(unit_length_m, dtype=np.float64), 0.0)
+    if m.masonry_youngs_modulus > 0:
+        # the masonry's own modulus over the unit's length and the joint: a column of courses of
+        # height h has the modulus E (h + t_j) / (h + t_j), and 0.4 E in shear (EN 1996-1-1, 3.7.3)
+        span = length + m.joint_thickness_m
+        e = m.masonry_youngs_modulus
+        return JointStiffness(normal=e / span, shear=MASONRY_SHEAR_RATIO * e / span)
     gu = m.unit_youngs_modulus / (2.0 * (1.0 + m.unit_poisson))
     gm = m.mortar_youngs_modulus / (2.0 * (1.0 + m.mortar_poisson))
     kn = 1.0 / (m.joint_thickness_m / m.mortar_youngs_modulus + length / m.unit_youngs_modulus)

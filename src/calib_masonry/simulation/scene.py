@@ -102,6 +102,11 @@ class Material:
     unit_youngs_modulus: float = 10.0e9  # E_u, Pa
     unit_poisson: float = 0.15
     joint_thickness_m: float = 0.01  # t_j
+    # E of the masonry as a whole (Pa; a wall's or wallet's compression test, a code's table for its
+    # typology), where known: the joints then give each column of units and joint that modulus and
+    # 0.4 of it in shear (EN 1996-1-1, 3.7.3) in place of the mortar's and the units' moduli in
+    # series (:func:`calib_masonry.simulation.joints.joint_stiffness`); 0: not given
+    masonry_youngs_modulus: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -113,7 +118,7 @@ class Material:
         ):
             if not getattr(self, name) > 0:
                 raise InputError(f"material {name} = {getattr(self, name)}: must be > 0")
-        for name in ("friction", "restitution", "tensile_strength", "shear_strength"):
+        for name in ("friction", "restitution", "tensile_strength", "shear_strength", "masonry_youngs_modulus"):
             if not getattr(self, name) >= 0:
                 raise InputError(f"material {name} = {getattr(self, name)}: must be >= 0")
         for name in ("mortar_poisson", "unit_poisson"):
@@ -137,6 +142,7 @@ MATERIAL_KEYS: dict[str, tuple[str, float]] = {
     "unit_youngs_modulus_mpa": ("unit_youngs_modulus", 1e6),
     "unit_poisson": ("unit_poisson", 1.0),
     "joint_thickness_m": ("joint_thickness_m", 1.0),
+    "masonry_youngs_modulus_mpa": ("masonry_youngs_modulus", 1e6),
 }
 _MATERIAL_KEY_OF = {name: key for key, (name, _) in MATERIAL_KEYS.items()}
 
@@ -155,6 +161,11 @@ MATERIAL_PLAUSIBLE: dict[str, tuple[float, float, str]] = {
     "mortar_youngs_modulus_mpa": (0.0, 1e6, "MPa: mortar 100-20,000 (a value in kPa or Pa?)"),
     "unit_youngs_modulus_mpa": (0.0, 1e6, "MPa: brick and stone 2,000-100,000 (a value in kPa or Pa?)"),
     "joint_thickness_m": (0.0, 0.2, "metres: about 0.01 (a value in millimetres?)"),
+    "masonry_youngs_modulus_mpa": (
+        0.0,
+        1e5,
+        "MPa: stone and brick masonry 500-20,000, 0 for none (a value in kPa or Pa?)",
+    ),
 }
 
 

@@ -45,7 +45,7 @@ yellow) becomes a mask by :func:`stone_mask`: the outline's four corners map to 
 run along the joints and count as joints, the yellow hatching of crushed zones is ignored), and the
 mortar between stones of a mortared wall, one network of low solidity, is dropped.
 
-    .venv/bin/python experiments/lab_walls.py [--out DIR] [--only SW.30.1 WI1.100] [--db DIR]
+    .venv/bin/python experiments/lab_walls.py [--out DIR] [--only SW.30.1 WI1.100] [--db DIR] [--reuse]
 
 The beam carries the row's sigma0,tot less the database's own 20 kN/m^3 of wall above the base
 (``DB_UNIT_WEIGHT_N_M3``): the model's stones add their weight themselves.
@@ -54,9 +54,13 @@ prints per test: sigma0 (the database's), the beam's stress, measured Vmax (the 
 directions), predicted, ratio, the bound of the wall rocking whole as a rigid body, N L / (2 H0)
 with N = sigma0 L t (the test's own scale: a measured peak far above it says the rig held the beam,
 far below it that the units or the mortar gave way first), mechanism (model) and failure type
-(test); then per series the mean and the coefficient of variation of the ratios. With ``--out``,
-DIR/lab_walls.png: predicted against measured, each wall's rocking bound beside its marker, the
-+-30 % band. Measured on 2026-11-26, 11-27 and 11-28 (the last after the contacts' friction law
+(test); under each wall the model's drift where its force first reaches half the measured Vmax
+beside the measured envelope's (envelopes/envelope_<unit>_<ref>.csv: the walls' stiffness), at the
+test's cracking onset Vcr beside its dcr, and at 95 % of the model's peak beside the test's drift
+at its peak; then per series the mean and the coefficient of variation of the ratios. With
+``--out``, DIR/lab_walls.png: predicted against measured, each wall's rocking bound beside its
+marker, the +-30 % band; DIR/lab_walls_curves.png: each wall's force-drift curve on its measured
+envelope. ``--reuse`` reads the shear tests already in ``--out`` instead of running them again. Measured on 2026-11-26, 11-27 and 11-28 (the last after the contacts' friction law
 stopped creeping at every load step) and 2026-12-01 (the shear test's stalled solves asking whether
 the load has an equilibrium; then the beam's load without the wall's weight, and a crack round
 cracking the worst joint alone): see docs/stone_walls.md. Whether a wall's peak is converged in the
@@ -146,6 +150,47 @@ def drawing_of(unit: str, db: Path = DB, reference: str = "") -> Path:
             f"{', '.join(p.name for p, _ in found)})"
         )
     return min(own, key=lambda p: (_drift(p), p.name))
+
+
+def envelope_of(unit: str, db: Path = DB, reference: str = "") -> tuple[np.ndarray, np.ndarray] | None:
+    """The measured force-drift envelope of a test (envelopes/envelope_<unit>_<ref>.csv, named as the
+    drawings are; only the row's first author's counts), as drift (%) and force (kN) from the origin
+    to the branch's end, on the side whose force reaches the larger magnitude (a cyclic test has two),
+    both positive; None where the database has none."""
+    folder = Path(db) / "envelopes"
+    key, author = _unit_key(unit), _surname(reference)
+    for path in sorted(folder.glob("envelope_*.csv")) if folder.is_dir() else []:
+        m = re.match(r"^envelope_(?P<unit>.+)_(?P<ref>[^_]+)\.csv$", path.name, re.I)
+        if not m or _unit_key(m.group("unit")) != key or (author and author not in _surname(m.group("ref"))):
+            continue
+        rows = []
+        for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+            parts = line.split(",")
+            try:
+                rows.append((float(parts[2]), float(parts[1])))  # drift %, force kN
+            except (IndexError, ValueError):
+                continue  # the header lines
+        if not rows:
+            return None
+        a = np.array(rows)
+        pos, neg = a[a[:, 0] >= 0], a[a[:, 0] <= 0]
+        side = pos if pos[:, 1].max(initial=0.0) >= -neg[:, 1].min(initial=0.0) else neg
+        side = np.abs(side[np.argsort(np.abs(side[:, 0]), kind="stable")])
+        if side[0, 0] > 0:  # from the origin (a cyclic test's envelope may start at its first peak)
+            side = np.vstack([[0.0, 0.0], side])
+        return side[:, 0], side[:, 1]
+    return None
+
+
+def first_drift_at(drift: np.ndarray, force: np.ndarray, level_kn: float) -> float | None:
+    """The drift (%) where a curve's force first reaches ``level_kn`` (interpolated), None if never."""
+    up = np.flatnonzero(force >= level_kn)
+    if up.size == 0:
+        return None
+    k = up[0]
+    if k == 0:
+        return float(drift[0])
+    return float(np.interp(level_kn, [force[k - 1], force[k]], [drift[k - 1], drift[k]]))
 
 
 def boundary_of(h0_over_h: float) -> tuple[str | None, str]:
@@ -343,6 +388,7 @@ def tests(db: Path = DB) -> list[dict]:
                 test["note"] = (test["note"] + "; " if test["note"] else "") + "H0 <= H: the load 5 cm above the top"
         if not test["skip"]:
             test["applied"] = round(beam, 6)
+            test["envelope"] = envelope_of(unit, db, ref if ref != "?" else "")
             try:
                 test["drawing"] = drawing_of(unit, db, ref if ref != "?" else "")
             except FileNotFoundError as e:
@@ -365,14 +411,7 @@ def drift_at_force(shear_folder: Path, force_kn: float | None, summary: dict) ->
     if force_kn is None or st.get("drift_known_to_kn") is None or force_kn > st["drift_known_to_kn"]:
         return None
     curve = np.loadtxt(shear_folder / "force_drift.csv", delimiter=",", skiprows=1, ndmin=2)
-    drift, force = curve[:, 0], curve[:, 1]
-    up = np.flatnonzero(force >= force_kn)
-    if up.size == 0:
-        return None
-    k = up[0]
-    if k == 0:
-        return float(drift[0])
-    return float(np.interp(force_kn, [force[k - 1], force[k]], [drift[k - 1], drift[k]]))
+    return first_drift_at(curve[:, 0], curve[:, 1], force_kn)
 
 
 def rocking_bound_kn(test: dict) -> float:
@@ -444,6 +483,11 @@ def main() -> None:
         help="the beam's rotation for every wall (default: each row's, from its H0/H)",
     )
     ap.add_argument("--db", type=Path, default=DB, help=f"the database folder: tests.csv and crackmaps/ (default {DB})")
+    ap.add_argument(
+        "--reuse",
+        action="store_true",
+        help="a wall whose shear test is already in --out is read, not run again (to print and draw again)",
+    )
     args = ap.parse_args()
     if not (args.db / "tests.csv").is_file():
         print(f"error: --db {args.db}: no tests.csv there; give the database folder (tests.csv and crackmaps/)")
@@ -451,6 +495,7 @@ def main() -> None:
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="lab_walls_"))
     ratios: dict[str, list[float]] = {}
     points: list[tuple] = []
+    curves: list[tuple] = []
     print(
         f"{'test':>10} {'sigma0':>7} {'beam':>6} {'Vmax':>7} {'model':>7} {'ratio':>6} {'rigid':>6}"
         "  mechanism (model) / failure (test)"
@@ -462,7 +507,9 @@ def main() -> None:
             print(f"{t['unit']:>10}  not run: {t['skip']}", flush=True)
             continue
         folder = base / re.sub(r"[^A-Za-z0-9._-]", "_", t["unit"])
-        s = run(t, folder, args.boundary)
+        done = folder / "shear" / "summary.json"
+        s = json.loads(done.read_text()) if args.reuse and done.is_file() else run(t, folder, args.boundary)
+        curves.append((t, folder / "shear" / "force_drift.csv", s["shear_test"]["peak_lateral_force_kn"]))
         st = s["shear_test"]
         peak = st["peak_lateral_force_kn"]
         ratio = peak / t["vmax"] if peak is not None else float("nan")
@@ -481,7 +528,8 @@ def main() -> None:
         print(f"{series}: mean ratio {np.nanmean(r):.3f}, CoV {np.nanstd(r) / np.nanmean(r):.3f}, n = {len(r)}")
     if points:
         plot_walls(points, base / "lab_walls.png")
-        print(f"figure: {base / 'lab_walls.png'}")
+        plot_curves(curves, base / "lab_walls_curves.png")
+        print(f"figures: {base / 'lab_walls.png'}, {base / 'lab_walls_curves.png'}")
 
 
 def stiffness_line(test: dict, summary: dict, shear_folder: Path) -> str:
@@ -492,11 +540,55 @@ def stiffness_line(test: dict, summary: dict, shear_folder: Path) -> str:
     at_vcr = drift_at_force(shear_folder, test["vcr"], summary)
     st = summary["shear_test"]
     em = test["material"].get("masonry_youngs_modulus_mpa")
-    return (
+    env = test.get("envelope")
+    half = ""
+    if env is not None:
+        # the drift where the force first reaches half the measured peak: the walls' stiffness
+        # before most cracking, on the measured envelope and on the model's curve
+        level = 0.5 * test["vmax"]
+        half = (
+            f"drift at half the measured Vmax ({level:.1f} kN): model {pct(drift_at_force(shear_folder, level, summary))}, "
+            f"envelope {pct(first_drift_at(env[0], env[1], level))}; "
+        )
+    return half + (
         (f"drift at Vcr {test['vcr']:.1f} kN: model {pct(at_vcr)}, test {pct(test['dcr'])}; " if test["vcr"] else "")
         + f"drift at 95 % of the peak (model) {pct(st.get('drift_at_95_percent_of_peak_percent'))}, "
         f"at the peak (test) {pct(test['dmax'])}; masonry's E {'not given (mortar and units in series)' if em is None else f'{em:g} MPa (Ecompr)'}"
     )
+
+
+def plot_curves(curves: list[tuple], path: Path) -> None:
+    """One panel per wall: the model's force-drift curve (its force_drift.csv: the joint model's up
+    to the peak, then Bullet's) against the measured envelope (the side of its larger peak) and the
+    measured Vmax (``curves``: the test's row, the csv, the model's peak kN or None)."""
+    from matplotlib.figure import Figure
+
+    cols = min(4, len(curves))
+    rows = -(-len(curves) // cols)
+    fig = Figure(figsize=(3.2 * cols, 2.6 * rows))
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    for ax, (t, csv_path, peak) in zip(axes, curves):
+        top = 3.0
+        if t.get("envelope") is not None:
+            ax.plot(*t["envelope"], color="k", lw=1.0, label="test (envelope)")
+            top = max(top, 1.05 * float(t["envelope"][0].max()))
+        ax.axhline(t["vmax"], color="k", lw=0.6, ls=":")
+        if csv_path.is_file():
+            c = np.loadtxt(csv_path, delimiter=",", skiprows=1, ndmin=2)
+            up = c[:, 1] <= (peak if peak is not None else np.inf) + 1e-9
+            ax.plot(c[up, 0], c[up, 1], color="C3", lw=1.2, label="model")
+        ax.set_xlim(0, top)
+        ax.set_ylim(0, 1.3 * max(t["vmax"], peak or 0.0))
+        ax.set_title(f"{t['unit']} ({t['sigma0']:.2f} MPa)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in axes[len(curves) :]:
+        ax.set_visible(False)
+    axes[0].legend(fontsize=6, loc="lower right")
+    fig.supxlabel("drift (%)", fontsize=8)
+    fig.supylabel("lateral force (kN)", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
 
 
 def plot_walls(points: list[tuple], path: Path) -> None:

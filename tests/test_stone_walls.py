@@ -411,6 +411,27 @@ def test_a_laboratory_walls_joints_take_the_modulus_its_compression_tests_measur
     assert sw["vcr"] is None and sw["dmax"] == 2.6
 
 
+def test_a_laboratory_walls_measured_envelope_is_read_on_the_side_of_its_larger_peak():
+    # experiments/lab_walls.py: envelopes/envelope_<unit>_<ref>.csv, the model's curve is drawn on it
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+    from lab_walls import envelope_of, first_drift_at, tests
+
+    for t in tests():
+        if t["skip"]:
+            continue
+        drift, force = t["envelope"]
+        assert (np.diff(drift) >= 0).all() and drift[0] == 0.0 and (force >= 0).all()
+        assert force.max() == pytest.approx(t["vmax"], rel=0.02)  # the row's larger Vmax, digitised
+    # WI1.100 peaked at -40.0 kN (-2.45 %) and +36.8: the negative side, as positive numbers
+    drift, force = envelope_of("WI1.100", reference="Vasconcelos and Lourenço (2009)")
+    assert force.max() == 40.0 and drift[np.argmax(force)] == pytest.approx(2.453)
+    assert first_drift_at(drift, force, 20.6) == pytest.approx(0.078)
+    assert first_drift_at(drift, force, 41.0) is None
+    assert envelope_of("WI1.100", reference="Lourenço et al. (2005)") is None  # another author's
+
+
 def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path):
     # experiments/lab_walls.py on walls of the database that are not in ../shared: material and
     # boundary come from each row's fields (never from the unit's name), unsupported rows say why

@@ -341,7 +341,8 @@ def modes_json(m: Modes, scene: Scene) -> dict:
             "masonry_youngs_modulus_pa": scene.material.masonry_youngs_modulus,
             "density_kg_m3": scene.material.density,
         },
-        "method": "undamped modes of the intact joints (mortar and units in series) and the bricks' rigid-body "
+        "method": "undamped modes of the intact joints (mortar and units in series, or the masonry's modulus "
+        "where given) and the bricks' rigid-body "
         "inertia, sparse shift-invert Lanczos (calib_masonry.simulation.dynamics)",
     }
 

@@ -247,8 +247,8 @@ def joint_stiffness(material: Material, unit_length_m) -> JointStiffness:
     m = material
     length = np.maximum(np.asarray(unit_length_m, dtype=np.float64), 0.0)
     if m.masonry_youngs_modulus > 0:
-        # the masonry's own modulus over the unit's length and the joint: a column of courses of
-        # height h has the modulus E (h + t_j) / (h + t_j), and 0.4 E in shear (EN 1996-1-1, 3.7.3)
+        # the masonry's own modulus over the unit's length and the joint: a column of courses
+        # (l = h across each bed joint) has (h + t_j) k_n = E, and 0.4 E in shear (EN 1996-1-1, 3.7.3)
         span = length + m.joint_thickness_m
         e = m.masonry_youngs_modulus
         return JointStiffness(normal=e / span, shear=MASONRY_SHEAR_RATIO * e / span)

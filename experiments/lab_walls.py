@@ -129,21 +129,37 @@ class OnlyAnotherReference(FileNotFoundError):
     """The unit has drawings, but only of another reference's wall of the same name."""
 
 
+def _files_of(folder: Path, glob: str, pattern: re.Pattern, unit: str) -> list[tuple[Path, str]]:
+    """The files ``glob`` of ``folder`` whose name ``pattern`` matches with a unit (its ``unit``
+    group) that is ``unit`` as the database writes names (:func:`_unit_key`), each with its
+    reference (``ref``)."""
+    key, found = _unit_key(unit), []
+    for path in sorted(folder.glob(glob)) if folder.is_dir() else []:
+        m = pattern.match(path.name)
+        if m and _unit_key(m.group("unit")) == key:
+            found.append((path, m.group("ref")))
+    return found
+
+
+def _by_author(found: list[tuple[Path, str]], reference: str) -> list[Path]:
+    """Those of ``found`` (path, its reference) of ``reference``'s first author (all where it is "")."""
+    author = _surname(reference)
+    return [p for p, ref in found if not author or author in _surname(ref)]
+
+
+_ENVELOPE = re.compile(r"^envelope_(?P<unit>.+)_(?P<ref>[^_]+)\.csv$", re.I)
+
+
 def drawing_of(unit: str, db: Path = DB, reference: str = "") -> Path:
     """The crackmap of a test unit (SW.100.1 -> SW1001, WI1.100 -> WI1100, IR4++ -> IR4++), the one
     at the smallest drift (D0p00: the layout before the test). Where ``reference`` is given, only a
     drawing of the same first author counts (R5 is a wall of Almeida et al. 2014 and another of
     Mazzon 2010; the year may differ, Vasconcelos 2005 for Vasconcelos and Lourenço 2009)."""
     folder = Path(db) / "crackmaps"
-    key, author = _unit_key(unit), _surname(reference)
-    found = []
-    for path in sorted(folder.glob("crackmap_*.png")) if folder.is_dir() else []:
-        m = _CRACKMAP.match(path.name)
-        if m and _unit_key(m.group("unit")) == key:
-            found.append((path, m.group("ref")))
+    found = _files_of(folder, "crackmap_*.png", _CRACKMAP, unit)
     if not found:
-        raise FileNotFoundError(f"no crackmap for {unit} ({key}) in {folder}")
-    own = [p for p, ref in found if not author or author in _surname(ref)]
+        raise FileNotFoundError(f"no crackmap for {unit} ({_unit_key(unit)}) in {folder}")
+    own = _by_author(found, reference)
     if not own:
         raise OnlyAnotherReference(
             f"no crackmap of {reference} for {unit} in {folder} (only of another reference: "
@@ -157,12 +173,7 @@ def envelope_of(unit: str, db: Path = DB, reference: str = "") -> tuple[np.ndarr
     drawings are; only the row's first author's counts), as drift (%) and force (kN) from the origin
     to the branch's end, on the side whose force reaches the larger magnitude (a cyclic test has two),
     both positive; None where the database has none."""
-    folder = Path(db) / "envelopes"
-    key, author = _unit_key(unit), _surname(reference)
-    for path in sorted(folder.glob("envelope_*.csv")) if folder.is_dir() else []:
-        m = re.match(r"^envelope_(?P<unit>.+)_(?P<ref>[^_]+)\.csv$", path.name, re.I)
-        if not m or _unit_key(m.group("unit")) != key or (author and author not in _surname(m.group("ref"))):
-            continue
+    for path in _by_author(_files_of(Path(db) / "envelopes", "envelope_*.csv", _ENVELOPE, unit), reference):
         rows = []
         for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
             parts = line.split(",")
@@ -404,13 +415,18 @@ def tests(db: Path = DB) -> list[dict]:
     return out
 
 
-def drift_at_force(shear_folder: Path, force_kn: float | None, summary: dict) -> float | None:
+def model_curve(shear_folder: Path) -> np.ndarray | None:
+    """A shear test's force_drift.csv as ``(n, 2)`` drift (%) and force (kN), None if there is none."""
+    path = shear_folder / "force_drift.csv"
+    return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2) if path.is_file() else None
+
+
+def drift_at_force(curve: np.ndarray | None, force_kn: float | None, summary: dict) -> float | None:
     """The model's drift (%) where its lateral force first reaches ``force_kn`` on the joint model's
-    curve up to the peak (force_drift.csv), None where the curve's known part ends below it."""
+    ``curve`` up to the peak (:func:`model_curve`), None where the curve's known part ends below it."""
     st = summary["shear_test"]
-    if force_kn is None or st.get("drift_known_to_kn") is None or force_kn > st["drift_known_to_kn"]:
+    if curve is None or force_kn is None or st.get("drift_known_to_kn") is None or force_kn > st["drift_known_to_kn"]:
         return None
-    curve = np.loadtxt(shear_folder / "force_drift.csv", delimiter=",", skiprows=1, ndmin=2)
     return first_drift_at(curve[:, 0], curve[:, 1], force_kn)
 
 
@@ -509,9 +525,10 @@ def main() -> None:
         folder = base / re.sub(r"[^A-Za-z0-9._-]", "_", t["unit"])
         done = folder / "shear" / "summary.json"
         s = json.loads(done.read_text()) if args.reuse and done.is_file() else run(t, folder, args.boundary)
-        curves.append((t, folder / "shear" / "force_drift.csv", s["shear_test"]["peak_lateral_force_kn"]))
         st = s["shear_test"]
         peak = st["peak_lateral_force_kn"]
+        curve = model_curve(folder / "shear")
+        curves.append((t, curve, peak))
         ratio = peak / t["vmax"] if peak is not None else float("nan")
         ratios.setdefault(t["series"], []).append(ratio)
         bound = rocking_bound_kn(t)
@@ -522,7 +539,7 @@ def main() -> None:
             f"{s['joint_coverage']['median']}{'; ' + t['note'] if t['note'] else ''})",
             flush=True,
         )
-        print(f"{'':>10}  {stiffness_line(t, s, folder / 'shear')}", flush=True)
+        print(f"{'':>10}  {stiffness_line(t, s, curve)}", flush=True)
     for series, r in ratios.items():
         r = np.array(r)
         print(f"{series}: mean ratio {np.nanmean(r):.3f}, CoV {np.nanstd(r) / np.nanmean(r):.3f}, n = {len(r)}")
@@ -532,12 +549,12 @@ def main() -> None:
         print(f"figures: {base / 'lab_walls.png'}, {base / 'lab_walls_curves.png'}")
 
 
-def stiffness_line(test: dict, summary: dict, shear_folder: Path) -> str:
+def stiffness_line(test: dict, summary: dict, curve: np.ndarray | None) -> str:
     """The model's drifts beside the test's: at the test's cracking onset Vcr (its dcr) and, against
     the test's drift at its peak, the model's where its force reaches 95 % of its own peak (its drift
     at the peak itself grows without bound as the mechanism forms); with the joints' modulus."""
     pct = lambda x: "?" if x is None else f"{x:.3f} %"  # noqa: E731
-    at_vcr = drift_at_force(shear_folder, test["vcr"], summary)
+    at_vcr = drift_at_force(curve, test["vcr"], summary)
     st = summary["shear_test"]
     em = test["material"].get("masonry_youngs_modulus_mpa")
     env = test.get("envelope")
@@ -547,7 +564,7 @@ def stiffness_line(test: dict, summary: dict, shear_folder: Path) -> str:
         # before most cracking, on the measured envelope and on the model's curve
         level = 0.5 * test["vmax"]
         half = (
-            f"drift at half the measured Vmax ({level:.1f} kN): model {pct(drift_at_force(shear_folder, level, summary))}, "
+            f"drift at half the measured Vmax ({level:.1f} kN): model {pct(drift_at_force(curve, level, summary))}, "
             f"envelope {pct(first_drift_at(env[0], env[1], level))}; "
         )
     return half + (
@@ -560,21 +577,20 @@ def stiffness_line(test: dict, summary: dict, shear_folder: Path) -> str:
 def plot_curves(curves: list[tuple], path: Path) -> None:
     """One panel per wall: the model's force-drift curve (its force_drift.csv: the joint model's up
     to the peak, then Bullet's) against the measured envelope (the side of its larger peak) and the
-    measured Vmax (``curves``: the test's row, the csv, the model's peak kN or None)."""
+    measured Vmax (``curves``: the test's row, its :func:`model_curve`, the model's peak kN or None)."""
     from matplotlib.figure import Figure
 
     cols = min(4, len(curves))
     rows = -(-len(curves) // cols)
     fig = Figure(figsize=(3.2 * cols, 2.6 * rows))
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
-    for ax, (t, csv_path, peak) in zip(axes, curves):
+    for ax, (t, c, peak) in zip(axes, curves):
         top = 3.0
         if t.get("envelope") is not None:
             ax.plot(*t["envelope"], color="k", lw=1.0, label="test (envelope)")
             top = max(top, 1.05 * float(t["envelope"][0].max()))
         ax.axhline(t["vmax"], color="k", lw=0.6, ls=":")
-        if csv_path.is_file():
-            c = np.loadtxt(csv_path, delimiter=",", skiprows=1, ndmin=2)
+        if c is not None:
             up = c[:, 1] <= (peak if peak is not None else np.inf) + 1e-9
             ax.plot(c[up, 0], c[up, 1], color="C3", lw=1.2, label="model")
         ax.set_xlim(0, top)

@@ -65,12 +65,13 @@ def test_first_period_of_a_bonded_column_is_the_timoshenko_beams(courses, size):
     lx, ly, h = size
     m = modes(_column(courses, size=size, material=mat), 3)
     # the column's effective moduli: units and mortar in series over a course (no mortar mass: the
-    # blocks touch in the model, the joint's thickness is in its stiffness)
+    # blocks touch in the model, each course's pitch h holds a joint's thickness t of mortar and
+    # h - t of unit, as `build`'s bodies filled out to the middle of the mortar do)
     t = mat.joint_thickness_m
-    E = h / (t / mat.mortar_youngs_modulus + h / mat.unit_youngs_modulus)
+    E = h / (t / mat.mortar_youngs_modulus + (h - t) / mat.unit_youngs_modulus)
     gm = mat.mortar_youngs_modulus / (2 * (1 + mat.mortar_poisson))
     gu = mat.unit_youngs_modulus / (2 * (1 + mat.unit_poisson))
-    Gs = h / (t / gm + h / gu)
+    Gs = h / (t / gm + (h - t) / gu)
     L, A = courses * h, lx * ly
     weak = _timoshenko_period(E, Gs, mat.density, A, lx * ly**3 / 12, L)
     strong = _timoshenko_period(E, Gs, mat.density, A, ly * lx**3 / 12, L)
@@ -79,6 +80,61 @@ def test_first_period_of_a_bonded_column_is_the_timoshenko_beams(courses, size):
     # the weak axis is y: its mode moves the mass along y, about 61 % of it (a uniform cantilever's)
     assert m.effective_mass_fraction[0, 1] == pytest.approx(0.613, abs=0.03)
     assert m.effective_mass_fraction[0, [0, 2]] == pytest.approx([0, 0], abs=1e-6)
+
+
+def test_a_built_walls_joints_count_its_mortar_once_and_its_first_period_is_the_timoshenko_beams(tmp_path):
+    """`build` fills each unit out to the middle of the mortar around it, so two bodies' centroids
+    are a course's pitch apart (unit and joint). Counted as unit, that mortar was counted twice (in
+    t_j / E_m and again in l / E_u): a bed joint's unit length was the pitch, the masonry's own
+    modulus came out (h + t_j) / (h + 2 t_j) of itself, and a built wall's out-of-plane period 4 %
+    above the beam's. The beam is computed here from the effective moduli of a course's pitch,
+    units and mortar in series."""
+    from calib_masonry.build_folder import simulation_geometry
+    from calib_masonry.pipeline import build
+    from calib_masonry.simulation.scene import scene_from_geometry
+    from calib_masonry.spec import load_structure
+    from calib_masonry.synthetic.truth import synthesize_to_folder
+
+    from .conftest import scenario_text
+
+    hu, lu, tj, t = 0.14, 0.29, 0.01, 0.2
+    (tmp_path / "scenario.toml").write_text(
+        scenario_text(
+            [(1.2, 3.0, 0.0)],
+            closed=False,
+            t=t,
+            seed=17,
+            extra=f"brick_length_m = {lu}\nbrick_height_m = {hu}\nmortar_m = {tj}\n",
+        )
+    )
+    synthesize_to_folder(
+        load_structure(tmp_path / "scenario.toml", require_sources=False), tmp_path / "data", figures=False
+    )
+    g = simulation_geometry(build(load_structure(tmp_path / "data" / "structure.toml"), progress=False).structure)
+    mat = Material(joint_thickness_m=tj)
+    scene = scene_from_geometry(g, duration_s=1.0, material=mat, foundation=True)
+    jm = JointModel(scene)
+    bed = (np.abs(jm.R[:, 2, 2]) > 0.99) & (jm.b >= 0)
+    assert bed.sum() > 20
+    assert np.median(jm.unit_length[bed]) == pytest.approx(hu, abs=0.002)  # the pitch, 0.15, before
+    # the masonry's own modulus: each bed joint over its pitch gives it (0.94 of it before)
+    e = 2.0e9
+    k = JointModel(replace(scene, material=replace(mat, masonry_youngs_modulus=e))).stiffness.normal
+    assert np.median(k[bed]) * (hu + tj) == pytest.approx(e, rel=0.01)
+    # the wall's first mode (out of its plane) against a Timoshenko cantilever of its effective moduli
+    m = modes(scene, 1)
+    pitch = hu + tj
+    E = pitch / (tj / mat.mortar_youngs_modulus + hu / mat.unit_youngs_modulus)
+    gm = mat.mortar_youngs_modulus / (2 * (1 + mat.mortar_poisson))
+    gu = mat.unit_youngs_modulus / (2 * (1 + mat.unit_poisson))
+    Gs = pitch / (tj / gm + hu / gu)
+    lo = np.min([b.location + b.vertices.min(axis=0) for b in scene.bodies], axis=0)
+    hi = np.max([b.location + b.vertices.max(axis=0) for b in scene.bodies], axis=0)
+    width, height = float(hi[0] - lo[0]), float(hi[2] - lo[2])
+    rho = m.total_mass_kg / (width * t * height)  # the units' mass spread over the wall's volume
+    beam = _timoshenko_period(E, Gs, rho, width * t, width * t**3 / 12, height)
+    assert m.effective_mass_fraction[0, 1] > 0.5  # out of the plane
+    assert m.periods_s[0] == pytest.approx(beam, rel=0.05)
 
 
 def test_effective_masses_sum_to_the_mass():

@@ -380,8 +380,10 @@ def test_a_laboratory_drawing_becomes_a_stone_mask_of_the_walls_size(unit, stone
 
 def test_a_masonry_modulus_gives_each_column_of_unit_and_joint_that_modulus():
     # Material.masonry_youngs_modulus (a wallet's compression test): k_n = E / (l + t_j), so a column
-    # of courses of height h (l = h across a bed joint) has the modulus E whatever the units' and the
-    # mortar's moduli, 0.4 E in shear; 0 keeps the mortar and the units in series
+    # of courses of units h high (l = h across a bed joint: joints.unit_lengths, the mortar out of
+    # the bodies' pitch) has the modulus E whatever the units' and the mortar's moduli, 0.4 E in
+    # shear; 0 keeps the mortar and the units in series (tests/test_dynamics.py -k built_wall: on a
+    # built wall's joints)
     from calib_masonry.simulation.joints import joint_stiffness
 
     for e, h, tj in [(1.248e9, 0.2, 0.01), (12.75e9, 0.1, 0.01), (3e9, 0.25, 0.02)]:

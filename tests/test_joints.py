@@ -71,11 +71,13 @@ def test_joint_stiffness_is_mortar_and_units_in_series():
     gm, gu = 2e9 / 2.5, 12e9 / 2.4
     assert k.normal == pytest.approx([2e9 / 0.012, 1 / (0.012 / 2e9 + 0.3 / 12e9)])
     assert k.shear == pytest.approx([gm / 0.012, 1 / (0.012 / gm + 0.3 / gu)])
-    # in a column, a joint between two blocks carries a block's height of unit (half of each), the
-    # foundation joint half of one (the ground is rigid): each joint shortens by F (t_j/E_m + l/E_u) / A
+    # in a column, a joint between two blocks carries their centroids' distance (a block's height,
+    # half of each) less the joint's mortar, which that distance holds (as `build` fills units out
+    # to the middle of the mortar: joints.unit_lengths); the foundation joint half a block (the
+    # ground is rigid, the bed under it the joint's own): each joint shortens by F (t_j/E_m + l/E_u) / A
     n, h = 4, 0.3
     jm = JointModel(_column(n, material=m))
-    assert jm.unit_length == pytest.approx([h / 2] + [h] * (n - 1))
+    assert jm.unit_length == pytest.approx([h / 2] + [h - 0.012] * (n - 1))
     st, _ = jm.solve(np.array([0.0, 0.0, -G]), np.ones(n, bool))
     above = np.array([jm.mass[i:].sum() * G for i in range(n)])
     flexibility = (0.012 / 2e9 + jm.unit_length / 12e9) / (0.4 * 0.2)

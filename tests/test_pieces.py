@@ -333,7 +333,9 @@ def _bonded_pair():
     a = _block("a", (0.3, 0.3, 0.3), (0.0, 0.0, 0.5), density=3000.0)
     b = _block("b", (0.2, 0.3, 0.3), (0.25, 0.0, 0.5))
     sc = Scene(bodies=(a, b), bonds=(Bond.rectangle(0, 1, (0.15, 0, 0.5), X, UP, 0.3, 0.3),), material=mat)
-    kn = 1.0 / (mat.joint_thickness_m / mat.mortar_youngs_modulus + (0.15 + 0.1) / mat.unit_youngs_modulus)
+    # the centroids 0.25 m apart hold the joint's mortar and 0.25 m - t_j of unit (joints.unit_lengths)
+    unit = 0.15 + 0.1 - mat.joint_thickness_m
+    kn = 1.0 / (mat.joint_thickness_m / mat.mortar_youngs_modulus + unit / mat.unit_youngs_modulus)
     w = math.sqrt(kn * 0.09 * (1 / a.mass + 1 / b.mass))
     return sc, STEP_N * b.mass / (a.mass + b.mass), w
 

@@ -278,9 +278,12 @@ def _law(path: Path, name: str, spec, *, mean: float, integer: bool = False) -> 
         raise InputError(f"{path}: {key}: give exactly one of sigma, range or choices (got {laws or 'none'})")
     if "sigma" in spec:
         sigma = _number(path, f"{key}.sigma", spec["sigma"], nonneg=True)
-        mu = _number(path, f"{key}.mean", spec.get("mean", mean))
-        if math.isnan(mu):
+        if "mean" in spec:
+            mu = _number(path, f"{key}.mean", spec["mean"])
+        elif math.isnan(mean):  # (checked before the number: "mean = nan: give a finite number" was said)
             raise InputError(f"{path}: {key}: the structure gives no value to vary about; add mean = ...")
+        else:
+            mu = mean
         return Input(name, "normal", mean=mu, sigma=sigma, integer=integer)
     if "range" in spec:
         r = spec["range"]
@@ -368,7 +371,10 @@ def parse_study(data: dict, path: Path) -> Study:
             _unknown(path, "[inputs.material]", table, tuple(MATERIAL_KEYS))
             base = material_table(material_from_table(dict(spec.material), str(src)))
             for k, v in table.items():
-                inp = _law(path, f"material.{k}", v, mean=base[k])
+                # the masonry's modulus at 0 is "not given" (the mortar and the units in series), no
+                # value to vary about: a normal about it drew negative moduli for half the samples
+                given = not (k == "masonry_youngs_modulus_mpa" and base[k] == 0)
+                inp = _law(path, f"material.{k}", v, mean=base[k] if given else math.nan)
                 for x in inp.choices or (inp.low, inp.high):  # the bounds a draw can take, checked now
                     if isinstance(x, (int, float)) and math.isfinite(x):
                         material_from_table({**dict(spec.material), k: x}, f"{path}: [inputs.material] {k}")

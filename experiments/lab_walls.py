@@ -25,7 +25,9 @@ database's tests.csv and crackmaps/), its inputs read from its own row, never fr
   its reference's rows, else the package default) and E_m where given; the masonry's modulus
   from its compression tests (Ecompr) where given, which sets the joints' stiffness (each column of
   unit and joint has it: ``masonry_youngs_modulus_mpa``; else the units' and the mortar's moduli in
-  series, whose 10 GPa made the WI walls 4-8 times stiffer than tested); the units' modulus E_b
+  series, whose 10 GPa made the WI walls 4-8 times stiffer than tested); the masonry's
+  compressive strength (the row's f_c) where given, at which the cracked joints' contacts crush
+  (``masonry_compressive_strength_mpa``: a rocking wall's toe); the units' modulus E_b
   where given (else the package's 10 GPa); the stones' density 2650 kg/m^3 (granite; the database
   gives none) and mu 0.6 for every wall;
 - boundary from ``H0/H``: at most 0.55 -> double-fixed (H0 = H / 2); above 1 -> cantilever with the
@@ -365,6 +367,11 @@ def tests(db: Path = DB) -> list[dict]:
         # stiffness (the row's measured wall, not a mortar prism; for a dry wall its contacts')
         if (ec := _num(row, "Ecompr [MPa]")) is not None and ec > 0:
             material["masonry_youngs_modulus_mpa"] = ec
+        # and its compressive strength, where given, crushes the cracked joints' contacts: a rocking
+        # wall's toe (EN 1998-3's flexural capacity; the rubble walls' 5 MPa is a quarter of their
+        # stress block at 1.27 MPa)
+        if (fcw := _num(row, "fc [MPa]")) is not None and fcw > 0:
+            material["masonry_compressive_strength_mpa"] = fcw
         if dry:
             material.update(DRY)
             # a dry joint crushes at the masonry's strength (the row's f_c, from its wallets), not

@@ -597,6 +597,47 @@ def test_the_static_programme_finds_an_equilibrium_up_to_tipping_or_sliding(size
     assert wet.has_equilibrium(np.ones(1, bool), jc[:0], kc[:0], wet._load(np.array([5 * dx, 5 * dy, -1]) * G), free)
 
 
+def test_a_dry_toe_crushes_at_the_masonrys_strength_and_the_block_tips_sooner():
+    # a block 1.0 x 0.2 x 0.5 m on a dry footing of twenty 5 cm patches, pushed along x (friction
+    # high enough not to slide): with the masonry's crushing strength f_c each corner bears at most
+    # f_c over its share of its patch, so the toe's compression spreads inward and the block tips
+    # where its weight's moment about that stress block's resultant is spent: the corners nearest
+    # the toe at f_c until they carry W, computed here. That is within 3 % of the rectangular block
+    # of EN 1998-3's flexural capacity, lambda = (L - W / (f_c t)) / h; without f_c, L / h
+    L, t, h, fc = 1.0, 0.2, 0.5, 0.025e6
+    mat = Material(tensile_strength=0.0, shear_strength=0.0, friction=3.0, masonry_compressive_strength=fc)
+    body = _block("b", (L, t, h), (0, 0, h / 2), density=2000.0)
+    xs = np.linspace(-L / 2 + 0.025, L / 2 - 0.025, 20)
+    bonds = tuple(Bond.rectangle(0, -1, (x, 0, 0), DOWN, X, 0.05, t) for x in xs)
+    w = body.mass * G
+    # the corners' lines from the toe (x = L / 2) inward, each at f_c over its share, until W
+    lines = np.sort(np.concatenate([xs - 0.025, xs + 0.025]))[::-1]
+    cap = fc * 0.05 * t / 4 * 2  # a patch's two corners on a line
+    need, moment = w, 0.0
+    for x in lines:
+        f = min(cap, need)
+        moment, need = moment + f * x, need - f
+        if need <= 0:
+            break
+    tips = moment / w / (h / 2)
+    assert tips == pytest.approx((L - w / (fc * t)) / h, rel=0.03)
+    assert tips < 0.8 * L / h  # the crushing matters here
+
+    for strength, at in ((fc, tips), (0.0, L / h)):
+        jm = JointModel(
+            Scene(bodies=(body,), bonds=bonds, material=replace(mat, masonry_compressive_strength=strength))
+        )
+        jc, kc = np.nonzero(jm.corner_mask)
+        nothing, free = np.zeros(len(bonds), bool), np.zeros(1, bool)
+        for lam, stands in ((0.97 * at, True), (1.03 * at, False)):
+            g = np.array([lam * G, 0.0, -G])
+            # the static programme, and the contact iteration on the same corners
+            assert jm.has_equilibrium(nothing, jc, kc, jm._load(g), free) == stands
+            jm.solve(g, nothing)
+            moved = float(np.abs(jm.motion[:3]).max())  # a mechanism runs away, held by the weak springs
+            assert (moved < 1e-3) == stands, (strength, lam, moved)
+
+
 def test_the_static_programme_answers_each_question_as_if_asked_first():
     # the programme is kept between questions on the same joints (HiGHS starts from its last
     # answer); a dry column of three blocks tips as a whole at lam = b / h = 0.444: loads up and

@@ -271,8 +271,9 @@ def unit_lengths(
     `build` fills each unit out to the middle of the mortar around it, so two bodies' centroids
     are a course's pitch apart, unit and joint (0.19 m for the paper example's 0.18 m bricks and
     10 mm joints): counted as unit, that mortar was counted twice, once in ``t_j / E_m`` and once in
-    ``l / E_u`` (a built wall's columns 3.5 % too compliant with the default moduli, 5 % with the
-    masonry's own modulus: a bonded wall's first period 4 % above the Timoshenko beam's). A body on
+    ``l / E_u`` (the paper example's columns 3.6 % too compliant with the default moduli, 5 % with
+    the masonry's own modulus; built walls' first periods 4-6 % above the Timoshenko beam's, now
+    2-3 %: docs/dynamics.md, "The mortar counted once"). A body on
     the ground meets it with its unit's own face (the mortar bed under the first course is the
     joint's ``t_j`` alone), so its length is the distance as it is."""
     n = normal / np.linalg.norm(normal, axis=1, keepdims=True)
@@ -386,6 +387,26 @@ def _inside_outline(
     pos = np.where(real, cross >= -1e-12, True).all(axis=1)
     neg = np.where(real, cross <= 1e-12, True).all(axis=1)
     return pos | neg
+
+
+def _smooth_cap(x: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """``f(x)`` and ``f'(x)`` of the contacts' smoothed limit: ``x`` up to ``1 - h``, ``1`` from
+    ``1 + h`` and a parabola between (a continuous slope, for Newton's method): Coulomb's friction
+    and the masonry's crushing both bound a corner's force by it."""
+    lo = 1.0 - h
+    xc = np.clip(x, lo, 1.0 + h)
+    f = np.where(x <= lo, x, xc - (xc - lo) ** 2 / (4.0 * h))
+    df = np.where(x <= lo, 1.0, 1.0 - (xc - lo) / (2.0 * h))
+    return f, df
+
+
+def _crushed(N: np.ndarray, dN: np.ndarray, cap: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """A contact corner's normal force ``N`` (C,) and its slope ``dN`` (per metre of opening)
+    bounded by its crushing force ``cap`` (C,) N: elastic below ``(1 - h) cap``, ``cap`` from
+    ``(1 + h) cap`` (perfectly plastic, no memory: a monotonic load's toe; under reversals the
+    crushed corner recovers, which a laboratory's cyclic test does not)."""
+    f, df = _smooth_cap(N / cap, h)
+    return cap * f, dN * df
 
 
 def _corner_blocks(Lc: np.ndarray, TL: np.ndarray) -> np.ndarray:
@@ -715,6 +736,11 @@ class JointModel:
         # contact corners of each joint: global positions at the reference state and their B rows
         self.corner_mask = self._unique_corners()
         self._corner_L, self._corner_k = self._corner_rows()
+        # each contact corner's crushing force (N): the masonry's f_c over its share of the patch
+        # (inf: none given, contacts carry any compression)
+        fc = self.material.masonry_compressive_strength
+        share = (self.area / np.maximum(self.corner_mask.sum(axis=1), 1))[:, None]
+        self._corner_cap = np.where(self.corner_mask & (fc > 0), fc * share, np.inf)
         self.slip = np.zeros(self.outline.shape[:2] + (2,))  # kept slip of every contact corner, m
 
     # ------------------------------------------------------------------ geometry of the corners
@@ -893,6 +919,8 @@ class JointModel:
         x = -gap[:, 2] / d
         N = k[:, 2] * d * np.logaddexp(0.0, x)
         dN = -k[:, 2] * 0.5 * (1.0 + np.tanh(0.5 * x))  # dN / d d_n
+        if self.material.masonry_compressive_strength > 0:
+            N, dN = _crushed(N, dN, self._corner_cap[jc, kc], self.settings.slip_band)
         trial = k[:, :2] * (gap[:, :2] - s)
         L = mu * N
         a = np.sqrt((trial**2).sum(axis=1))  # |T*|
@@ -903,9 +931,7 @@ class JointModel:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             xr = np.where(L > 0.0, a / np.where(L > 0.0, L, 1.0), np.inf)
         lo = 1.0 - h
-        xc = np.clip(xr, lo, 1.0 + h)
-        f = np.where(xr <= lo, xr, xc - (xc - lo) ** 2 / (4.0 * h))
-        df = np.where(xr <= lo, 1.0, 1.0 - (xc - lo) / (2.0 * h))
+        f, df = _smooth_cap(xr, h)
         # f(x) / x: 1 while sticking (and at a = 0)
         ratio = np.where(xr <= lo, 1.0, L * f / np.where(a > 0.0, a, 1.0))
         ratio = np.where(live, ratio, 0.0)
@@ -1169,6 +1195,8 @@ class JointModel:
         lo, hi = np.zeros(nvar), np.full(nvar, np.inf)
         lo[:C] = -np.inf
         hi[:C] = tension  # F_n <= f_t A_c (0 for a contact: no tension)
+        # and F_n >= -f_c A_c where the masonry's crushing strength is given (the contacts' cap)
+        lo[:C] = -self._corner_cap[cj, ck]
         lo[5 * C :] = -np.inf
         if shear_capacity is not None and n_contact:
             # and the contacts' friction within ``shear_capacity`` along u and along v

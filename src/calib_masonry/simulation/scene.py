@@ -107,6 +107,12 @@ class Material:
     # 0.4 of it in shear (EN 1996-1-1, 3.7.3) in place of the mortar's and the units' moduli in
     # series (:func:`calib_masonry.simulation.joints.joint_stiffness`); 0: not given
     masonry_youngs_modulus: float = 0.0
+    # f_c of the masonry as a whole (Pa; a wall's or wallet's compression test), where known: a
+    # cracked joint's contact then crushes at it, each corner carrying at most f_c over its share of
+    # the patch, so a rocking wall's toe spreads over N / (f_c t) (the toe crushing of EN 1998-3
+    # C.4.2.1's flexural capacity); 0: contacts carry any compression (rigid units; the joints'
+    # own criterion, ``compressive_strength``, still cracks an intact joint)
+    masonry_compressive_strength: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -118,7 +124,14 @@ class Material:
         ):
             if not getattr(self, name) > 0:
                 raise InputError(f"material {name} = {getattr(self, name)}: must be > 0")
-        for name in ("friction", "restitution", "tensile_strength", "shear_strength", "masonry_youngs_modulus"):
+        for name in (
+            "friction",
+            "restitution",
+            "tensile_strength",
+            "shear_strength",
+            "masonry_youngs_modulus",
+            "masonry_compressive_strength",
+        ):
             if not getattr(self, name) >= 0:
                 raise InputError(f"material {name} = {getattr(self, name)}: must be >= 0")
         for name in ("mortar_poisson", "unit_poisson"):
@@ -143,6 +156,7 @@ MATERIAL_KEYS: dict[str, tuple[str, float]] = {
     "unit_poisson": ("unit_poisson", 1.0),
     "joint_thickness_m": ("joint_thickness_m", 1.0),
     "masonry_youngs_modulus_mpa": ("masonry_youngs_modulus", 1e6),
+    "masonry_compressive_strength_mpa": ("masonry_compressive_strength", 1e6),
 }
 _MATERIAL_KEY_OF = {name: key for key, (name, _) in MATERIAL_KEYS.items()}
 
@@ -165,6 +179,11 @@ MATERIAL_PLAUSIBLE: dict[str, tuple[float, float, str]] = {
         0.0,
         1e5,
         "MPa: stone and brick masonry 500-20,000, 0 for none (a value in kPa or Pa?)",
+    ),
+    "masonry_compressive_strength_mpa": (
+        0.0,
+        300.0,
+        "MPa: stone and brick masonry 1-80, 0 for none (a value in kPa or Pa?)",
     ),
 }
 

@@ -373,7 +373,7 @@ def parse_study(data: dict, path: Path) -> Study:
             for k, v in table.items():
                 # the masonry's modulus at 0 is "not given" (the mortar and the units in series), no
                 # value to vary about: a normal about it drew negative moduli for half the samples
-                given = not (k == "masonry_youngs_modulus_mpa" and base[k] == 0)
+                given = not (k in ("masonry_youngs_modulus_mpa", "masonry_compressive_strength_mpa") and base[k] == 0)
                 inp = _law(path, f"material.{k}", v, mean=base[k] if given else math.nan)
                 for x in inp.choices or (inp.low, inp.high):  # the bounds a draw can take, checked now
                     if isinstance(x, (int, float)) and math.isfinite(x):

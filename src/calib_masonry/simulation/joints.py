@@ -66,7 +66,9 @@ Cracked joints. A cracked joint couples its bricks at its outline's corners, eac
 share ``A / k`` of the patch (``k`` corners) and the springs ``k_n A / k``, ``k_s A / k`` [N/m]
 of an elastic-plastic contact: no tension, and a shear force bounded by Coulomb's ``mu N`` beyond
 which the corner slides (UDEC's and 3DEC's contact law; the exact law and its smoothing are in
-:meth:`JointModel._contact_forces`). A corner keeps the slip it has made from one load to the
+:meth:`JointModel._contact_forces`); where the material gives the masonry's compressive strength
+(:attr:`Material.masonry_compressive_strength`), a compression bounded by it over the corner's share
+(:func:`_crushed`: a rocking wall's toe spreads inward, resolved to the joints' corners). A corner keeps the slip it has made from one load to the
 next (:meth:`JointModel.commit`), so the model follows the load's history as friction does. The
 equilibrium of every body under these nonlinear contacts is found by a Newton iteration on the
 symmetric part of the tangent (the contacts' stiffness with their friction taken at a fixed normal

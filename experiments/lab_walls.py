@@ -376,8 +376,8 @@ def tests(db: Path = DB) -> list[dict]:
             material.update(DRY)
             # a dry joint crushes at the masonry's strength (the row's f_c, from its wallets), not
             # at the package's mortar default of 10 MPa
-            if (fc := _num(row, "fc [MPa]")) is not None and fc > 0:
-                material["compressive_strength_mpa"] = fc
+            if fcw is not None and fcw > 0:
+                material["compressive_strength_mpa"] = fcw
         else:
             own = _num(row, "fc,m [MPa]")
             if own is not None and own > 0:

@@ -737,12 +737,13 @@ class JointModel:
         )  # (J, 12); ground columns are zero in L
         # contact corners of each joint: global positions at the reference state and their B rows
         self.corner_mask = self._unique_corners()
+        # each corner's share of its patch (J, 1), m^2: its springs', strengths' and crushing's area
+        self._corner_share = self.area[:, None] / self.corner_mask.sum(axis=1, keepdims=True)
         self._corner_L, self._corner_k = self._corner_rows()
         # each contact corner's crushing force (N): the masonry's f_c over its share of the patch
         # (inf: none given, contacts carry any compression)
         fc = self.material.masonry_compressive_strength
-        share = (self.area / np.maximum(self.corner_mask.sum(axis=1), 1))[:, None]
-        self._corner_cap = np.where(self.corner_mask & (fc > 0), fc * share, np.inf)
+        self._corner_cap = np.where(self.corner_mask & (fc > 0), fc * self._corner_share, np.inf)
         self.slip = np.zeros(self.outline.shape[:2] + (2,))  # kept slip of every contact corner, m
 
     # ------------------------------------------------------------------ geometry of the corners
@@ -768,8 +769,7 @@ class JointModel:
         B = _point_map(ra, rb, np.repeat(self.ground, K)).reshape(J, K, 3, 12)
         Rt = np.transpose(self.R, (0, 2, 1))
         Lc = np.einsum("jab,jkbc->jkac", Rt, B)
-        count = self.corner_mask.sum(axis=1, keepdims=True)
-        share = self.area[:, None] / count  # each corner carries its share of the patch
+        share = self._corner_share  # each corner carries its share of the patch
         ks, kn = self.stiffness.shear[:, None], self.stiffness.normal[:, None]
         k = np.stack([ks * share, ks * share, kn * share], -1)
         return Lc, k * self.corner_mask[..., None]
@@ -1180,7 +1180,7 @@ class JointModel:
         ij, ik = np.nonzero(intact[:, None] & self.corner_mask)
         cj, ck = np.concatenate([jc, ij]), np.concatenate([kc, ik])
         C, n_contact = cj.size, jc.size
-        share = np.concatenate([np.zeros(n_contact), (self.area / self.corner_mask.sum(axis=1))[ij]])
+        share = np.concatenate([np.zeros(n_contact), self._corner_share[ij, 0]])
         tension = np.zeros(C)
         cohesion = np.zeros(C)
         if ij.size:
@@ -1195,9 +1195,8 @@ class JointModel:
         # rotation's moments: [F_n (C), u+ (C), u- (C), v+ (C), v- (C), M (3 H)]
         nvar = 5 * C + 3 * H
         lo, hi = np.zeros(nvar), np.full(nvar, np.inf)
-        lo[:C] = -np.inf
         hi[:C] = tension  # F_n <= f_t A_c (0 for a contact: no tension)
-        # and F_n >= -f_c A_c where the masonry's crushing strength is given (the contacts' cap)
+        # and F_n >= -f_c A_c where the masonry's crushing strength is given (-inf where not)
         lo[:C] = -self._corner_cap[cj, ck]
         lo[5 * C :] = -np.inf
         if shear_capacity is not None and n_contact:

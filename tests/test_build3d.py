@@ -184,6 +184,44 @@ def test_contact_patch_of_two_facing_prisms_is_their_overlap(seed):
     assert math.isclose(patch.min_width_m, 0.3, rel_tol=1e-9)  # the overlap is 0.4 wide and 0.3 tall
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_contact_patch_between_faces_turned_apart_far_from_the_origin(seed):
+    """Two stones 2 cm apart at the middle of their joint, one face turned 2 degrees from the other,
+    5 m from the origin (a corner of a tower): one patch, its gap read at the patch. The planes'
+    offsets alone (measured from the origin) put them 17 cm apart, beyond the reach: no joint."""
+    from dataclasses import replace
+
+    import shapely
+    from scipy.spatial.transform import Rotation
+
+    from calib_masonry.build3d.assemble import Brick
+    from calib_masonry.build3d.contacts import contact_patches
+    from calib_masonry.build3d.extrude import Polyhedron
+
+    R = Rotation.random(random_state=seed).as_matrix()
+    t = 5.0 * R @ [0.0, 1.0, 0.0]
+    rect = [(0.0, 0.0), (0.5, 0.0), (0.5, 0.3), (0.0, 0.3)]
+    big = [(-0.1, -0.1), (0.6, -0.1), (0.6, 0.4), (-0.1, 0.4)]  # covers rect when turned by 2 degrees
+    a = _solid(rect, 0.0, 1.0, R, t)
+    b0 = _solid(big, 1.02, 2.0, np.eye(3), np.zeros(3))
+    # b turned by 2 degrees about the z axis through its face's point facing rect's centroid
+    centre = np.array([1.02, 0.25, 0.15])
+    turn = Rotation.from_euler("z", 2.0, degrees=True).as_matrix()
+    v = (b0.solid.vertices - centre) @ turn.T + centre
+    b = Brick(id=1, wall=0, label=0, polygon_m=b0.polygon_m, solid=Polyhedron(v @ R.T + t, b0.solid.faces))
+    far = replace(_solid(rect, 3.0, 4.0, R, t), id=2)
+    (patch,) = contact_patches([a, b, far], max_gap_m=0.03, angle_deg=10.0, progress=False)
+    assert (patch.a, patch.b) == (0, 1)
+    # the distance from a's face to b's plane along a's normal, at the patch (rect's centroid)
+    assert math.isclose(patch.gap_m, 0.02, rel_tol=1e-9)
+    assert math.isclose(patch.area_m2, shapely.Polygon(rect).area, rel_tol=1e-9)
+    assert np.allclose(patch.centroid, R @ [1.01, 0.25, 0.15] + t, atol=1e-9)
+    # turned the other way round about a point 4 cm further, the gap at the patch is beyond the reach
+    v = (b0.solid.vertices - centre) @ turn.T + centre + [0.04, 0.0, 0.0]
+    b = Brick(id=1, wall=0, label=0, polygon_m=b0.polygon_m, solid=Polyhedron(v @ R.T + t, b0.solid.faces))
+    assert contact_patches([a, b], max_gap_m=0.03, angle_deg=10.0, progress=False) == []
+
+
 def test_least_width_of_convex_polygons_is_their_narrowest_extent():
     from scipy.optimize import minimize_scalar
 

@@ -378,7 +378,7 @@ def load_model(model_dir: str | Path):
 #: scene.py's scene_geometry, mortar.py, build3d's contacts, assemble, extrude, place). Raise it
 #: with any change to them that changes a stored value: a stored copy of another version is
 #: computed again, never trusted (tests/test_simulate.py -k build_stores checks that it is).
-GEOMETRY_FORMAT = 1
+GEOMETRY_FORMAT = 2
 
 
 def _geometry_key(raw: bytes, closed, max_gap_m: float, mortar_fill: bool) -> str:

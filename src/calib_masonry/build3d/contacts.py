@@ -275,6 +275,8 @@ class _Faces:
     poly: np.ndarray
     basis: np.ndarray
     start: np.ndarray
+    centre: np.ndarray  # (F, 3) each face's centroid
+    radius: np.ndarray  # (F,) the largest distance from it to the face's corners
 
 
 def _planar_faces(solids: Sequence[Polyhedron], angle_tol: float = 1e-3) -> _Faces:
@@ -316,7 +318,12 @@ def _planar_faces(solids: Sequence[Polyhedron], angle_tol: float = 1e-3) -> _Fac
         members = by_group[bounds[g] : bounds[g + 1]]
         poly[g] = _overlay(shapely.union_all, tris[members[tri_area[members] > 0]])
     start = np.searchsorted(face_owner, np.arange(len(solids) + 1))
-    return _Faces(normal=normal, offset=offset, poly=poly, basis=basis, start=start)
+    c2 = shapely.get_coordinates(shapely.centroid(poly))
+    centre = np.einsum("ik,ikj->ij", c2, basis) + offset[:, None] * normal
+    xy, at = shapely.get_coordinates(poly, return_index=True)
+    radius = np.zeros(count)
+    np.maximum.at(radius, at, np.linalg.norm(xy - c2[at], axis=1))
+    return _Faces(normal=normal, offset=offset, poly=poly, basis=basis, start=start, centre=centre, radius=radius)
 
 
 def _plane_bases(normal: np.ndarray) -> np.ndarray:
@@ -407,17 +414,36 @@ def contact_patches(
     k = np.arange(combos.sum()) - np.repeat(np.cumsum(combos) - combos, combos)
     fa = f.start[pairs[pair, 0]] + k // nb[pair]
     fb = f.start[pairs[pair, 1]] + k % nb[pair]
-    gap = -f.offset[fb] - f.offset[fa]  # distance from a's plane to b's plane along a's normal (b's ~ -a's)
+    # the distance from a's plane to b's plane along a's normal: for anti-parallel faces the offsets'
+    # sum; where the normals differ by ``s = n_a + n_b`` the planes' distance changes across the
+    # faces by ``s`` per metre, so it is read at the faces (their centroids here, at the patch
+    # below): the offsets alone, measured from the origin, put two stones 2 cm apart at a corner
+    # 2 m from it with beds 2 degrees apart 10 cm apart, and gave them no joint
+    gap = -f.offset[fb] - f.offset[fa]
+    s = f.normal[fa] + f.normal[fb]
+    tilted = np.abs(s).max(axis=1) > 1e-9
+    gap[tilted] += 0.5 * np.einsum("ij,ij->i", s[tilted], f.centre[fa[tilted]] + f.centre[fb[tilted]])
+    # how far the distance can change between the centroids and any point of the faces
+    slack = np.linalg.norm(s, axis=1) * (f.radius[fa] + f.radius[fb])
     facing = np.einsum("ij,ij->i", f.normal[fa], f.normal[fb]) <= -np.cos(np.radians(angle_deg))
-    near = (gap >= min_gap_m) & (gap <= max_gap_m)
+    near = (gap >= min_gap_m - slack) & (gap <= max_gap_m + slack)
     cand = np.flatnonzero(facing & near)
-    pair, fa, fb, gap = pair[cand], fa[cand], fb[cand], gap[cand]
+    pair, fa, fb, gap, tilted = pair[cand], fa[cand], fb[cand], gap[cand], tilted[cand]
     # b's face in 3D, projected on a's plane basis, and its overlap with a's face
     xy, at = shapely.get_coordinates(f.poly[fb], return_index=True)
     p3 = xy[:, :1] * f.basis[fb[at], 0] + xy[:, 1:] * f.basis[fb[at], 1] + (f.offset[fb, None] * f.normal[fb])[at]
     projected = shapely.transform(f.poly[fb], lambda _: np.einsum("ik,ijk->ij", p3, f.basis[fa[at]]))
     inter = _overlay(shapely.intersection, f.poly[fa], projected)
     area = shapely.area(inter)
+    # tilted faces: the planes' distance along a's normal at the overlap's centroid, which must be
+    # within the bounds itself
+    t = np.flatnonzero(tilted & (area > 0.0))
+    if t.size:
+        c2 = shapely.get_coordinates(shapely.centroid(inter[t]))
+        p3 = np.einsum("ik,ikj->ij", c2, f.basis[fa[t]]) + f.offset[fa[t], None] * f.normal[fa[t]]
+        na, nb = f.normal[fa[t]], f.normal[fb[t]]
+        gap[t] = (f.offset[fb[t]] - np.einsum("ij,ij->i", nb, p3)) / np.einsum("ij,ij->i", nb, na)
+        area[t] = np.where((gap[t] >= min_gap_m) & (gap[t] <= max_gap_m), area[t], 0.0)
     bar.update()
     # per pair, every face pair whose overlap is at least min_area_m2 (a stone's joint with its
     # neighbour bends: its faces meet several of the neighbour's), largest first, each less what the

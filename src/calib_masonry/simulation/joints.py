@@ -658,6 +658,7 @@ class JointModel:
         # the crack rounds of the :meth:`crack` under way (or last): its round and the joints it has
         # cracked so far, read by another thread to show what a long check is doing
         self.crack_round = 0
+        self.uncracked_utilisation = np.zeros(0)  # (J,) of the last crack() call's first solve
         self.cracked_in_rounds = 0
         self._U: np.ndarray | None = None  # the last committed solve's motion
         self._last: tuple | None = None
@@ -1400,6 +1401,8 @@ class JointModel:
         modes: list[np.ndarray] = []
         self.crack_round = self.cracked_in_rounds = 0
         state, _ = self.solve(g, intact, closed, start=start, extra=extra, joints=np.flatnonzero(intact))
+        # the intact joints' utilisation before this call cracked any (CrackTracker's first check)
+        self.uncracked_utilisation = np.where(intact, state.utilisation, 0.0)
         kept = state
         for rounds in range(self.settings.max_rounds + 1):
             if (

@@ -55,6 +55,10 @@ class RunOutput:
     bond_release_time_s: np.ndarray | None = None  # when Bullet let each cracked bond go, NaN if never
     max_utilisation: np.ndarray | None = None  # (F,) the intact joints' largest utilisation at each frame
     seconds_joints: float = 0.0  # wall time spent in the joint model
+    # the intact joints' largest utilisation at the joint model's first check, before anything
+    # cracked, and how many were over 1 (the weight alone where the ground starts at rest: a model
+    # over 1 there cannot carry its own weight as built); None where not computed
+    first_check: tuple[float, int] | None = None
     # the joint model's contact solves: how many, how many ended without meeting their tolerance,
     # and the largest out-of-balance one of those ended with, in tolerances (None without it)
     contact_solves: dict | None = None
@@ -556,6 +560,11 @@ def steps(
         max_utilisation=utilisation if record else None,
         beam_motion=beam_motion if record and tracker is not None and tracker.beam_body is not None else None,
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
+        first_check=(
+            (tracker.first_utilisation, tracker.first_over)
+            if tracker is not None and tracker.first_utilisation is not None
+            else None
+        ),
         contact_solves=solves_used[0] if solves_used[0] is not None else _contact_solves(tracker),
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
         vibration=_vibration(tracker),

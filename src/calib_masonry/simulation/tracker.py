@@ -80,6 +80,10 @@ class CrackTracker:
         self.break_mode = np.full(n, -1, dtype=np.int64)
         self.release_time_s = np.full(n, np.nan)
         self.max_utilisation = 0.0
+        # the intact joints' largest utilisation at the first check and how many are over 1, before
+        # anything cracks: under the weight alone where the ground starts at rest or a push at zero
+        self.first_utilisation: float | None = None
+        self.first_over: int | None = None
         self.seconds = 0.0
         self._unit = None
         # each body's elastic velocity (B, 6) when joints were let go, by release time since t0: the
@@ -318,6 +322,7 @@ class CrackTracker:
             state = self.model.state(self.elastic.u)
             self._record(crack_time_s, g, extra, held_bodies)
             self.max_utilisation = float(state.utilisation.max())
+            self._first(state.utilisation)
             if self.max_utilisation <= 1.0:
                 return np.zeros(0, dtype=np.int64)
         elif self.intact.all() and self.model.n_all == self.model.nj:
@@ -325,6 +330,7 @@ class CrackTracker:
             unit = self._unit_states()
             state = self.model.state_from_relative(sum(g[k] * unit[k].relative for k in range(3)))
             self.max_utilisation = float(state.utilisation.max())
+            self._first(state.utilisation)
             if self.max_utilisation <= 1.0:
                 self._linear_g = g
                 return np.zeros(0, dtype=np.int64)
@@ -350,6 +356,7 @@ class CrackTracker:
             self.model.cracked_in_rounds = 0
             self._cracked_before = int((~self.intact).sum())
             new, modes, state = self.model.crack(g, intact, closed, runaway_m=self.release_m, extra=extra, start=start)
+            self._first(self.model.uncracked_utilisation)
             self.intact[new] = False
             self.break_time_s[new] = crack_time_s - self.t0
             self.break_mode[new] = modes
@@ -376,6 +383,12 @@ class CrackTracker:
                 self.free_velocity[float(time_s) - self.t0] = self.elastic.v.reshape(-1, 6).copy()
             self._record(crack_time_s, g, extra, held_bodies)
         return np.concatenate(released) if released else np.zeros(0, dtype=np.int64)
+
+    def _first(self, utilisation: np.ndarray) -> None:
+        """Keep the first check's utilisation of the intact joints (:attr:`first_utilisation`)."""
+        if self.first_utilisation is None:
+            self.first_utilisation = float(utilisation.max(initial=0.0))
+            self.first_over = int((utilisation > 1.0).sum())
 
     def _held_corners(self) -> np.ndarray:
         """``(J', K)`` the contact corners of the joints Bullet still holds (every corner of each):

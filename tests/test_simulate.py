@@ -705,6 +705,29 @@ def test_simulate_cli_pushover(small_model):
     assert (out / "pushover.png").is_file() and not (out / "ground_motion.png").exists()
 
 
+def test_output_piped_to_a_reader_that_went_away_ends_without_a_traceback(small_model, tmp_path):
+    """`calib-masonry modes MODEL | head -1`: the reader closes the pipe; the command's files stand
+    and it ends with exit code 1, no traceback and no "Exception ignored" at the interpreter's exit."""
+    out = tmp_path / "modes"
+    args = [
+        sys.executable,
+        "-m",
+        "calib_masonry",
+        "modes",
+        str(small_model / "model"),
+        "--out",
+        str(out),
+        "--no-figures",
+    ]
+    p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p.stdout.close()  # the reader is gone before the command writes a line
+    with p.stderr:
+        err = p.stderr.read()
+    assert p.wait(timeout=120) == 1, err
+    assert "Traceback" not in err and "Exception ignored" not in err and "BrokenPipe" not in err
+    assert (out / "modes.json").is_file()
+
+
 def test_modes_cli(small_model, tmp_path):
     out = tmp_path / "modes"
     r = _cli("modes", small_model / "model", "--n", "4", "--out", out)

@@ -981,7 +981,16 @@ def main(argv: list[str] | None = None) -> int:
     # `kill`, `timeout` and schedulers send SIGTERM; both signals may be held back (process.signals_deferred)
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # here, not at the interpreter's exit, where a closed pipe has no handler
+        return code
+    except BrokenPipeError:
+        # the reader of the output went away (`| head -1`): what the command wrote stands; no
+        # traceback, and nothing more written to the closed pipe when the interpreter exits
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except CalibMasonryError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -588,9 +588,9 @@ def _warn_first_check(scene: Scene, out) -> None:
     """A warning where the intact model's joints are over their strength at the joint model's first
     check, before any ground motion or push: under its own weight (and a shear test's precompression)
     the model as built cracks at once, whatever the load asked for (not said of dry or no-tension
-    joints, which open under it by design). Seen on a stone structure traced
-    to four vertices a stone: stones traced smaller than they are stand in mortar wider than the
-    joint reach and hang from their neighbours on slivers of joint."""
+    joints, which open under it by design). Seen on a stone structure traced to four vertices a
+    stone: stones traced smaller than they are stand in mortar wider than the joint reach and hang
+    from their neighbours on slivers of joint."""
     if out.first_check is None or out.first_check[0] <= 1.0:
         return
     if scene.material.tensile_strength <= 0.0 or scene.material.shear_strength <= 0.0:
@@ -600,10 +600,8 @@ def _warn_first_check(scene: Scene, out) -> None:
     warnings.warn(
         f"simulate: under {load} alone {over} joint{'s' if over != 1 else ''} of the intact model "
         f"{'are' if over != 1 else 'is'} over {'their' if over != 1 else 'its'} strength (the worst "
-        f"{worst:.3g} times) and {'crack' if over != 1 else 'cracks'} at the start, whatever the load: the model "
-        "as built cannot carry itself "
-        "with this material. "
-        "Look for bricks hanging from their neighbours on small joints (build's walls.png: outlines "
+        f"{worst:.3g} times) and {'crack' if over != 1 else 'cracks'} at the start, whatever the load: the "
+        "model as built cannot carry itself with this material. Look for bricks hanging from their neighbours on small joints (build's walls.png: outlines "
         "traced smaller than the stones leave gaps wider than the joint reach); trace the walls with more "
         "vertices (`vertices = 8` or `target_dice = 0.98` in structure.toml) and build again",
         RuntimeWarning,

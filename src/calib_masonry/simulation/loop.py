@@ -560,11 +560,7 @@ def steps(
         max_utilisation=utilisation if record else None,
         beam_motion=beam_motion if record and tracker is not None and tracker.beam_body is not None else None,
         seconds_joints=tracker.seconds if tracker is not None else 0.0,
-        first_check=(
-            (tracker.first_utilisation, tracker.first_over)
-            if tracker is not None and tracker.first_utilisation is not None
-            else None
-        ),
+        first_check=tracker.first_check if tracker is not None else None,
         contact_solves=solves_used[0] if solves_used[0] is not None else _contact_solves(tracker),
         elastic=_elastic_history(tracker, float(n - 1) / s.fps),
         vibration=_vibration(tracker),

@@ -82,8 +82,7 @@ class CrackTracker:
         self.max_utilisation = 0.0
         # the intact joints' largest utilisation at the first check and how many are over 1, before
         # anything cracks: under the weight alone where the ground starts at rest or a push at zero
-        self.first_utilisation: float | None = None
-        self.first_over: int | None = None
+        self.first_check: tuple[float, int] | None = None
         self.seconds = 0.0
         self._unit = None
         # each body's elastic velocity (B, 6) when joints were let go, by release time since t0: the
@@ -389,10 +388,9 @@ class CrackTracker:
         return np.concatenate(released) if released else np.zeros(0, dtype=np.int64)
 
     def _first(self, utilisation: np.ndarray) -> None:
-        """Keep the first check's utilisation of the intact joints (:attr:`first_utilisation`)."""
-        if self.first_utilisation is None:
-            self.first_utilisation = float(utilisation.max(initial=0.0))
-            self.first_over = int((utilisation > 1.0).sum())
+        """Keep the first check's utilisation of the intact joints (:attr:`first_check`)."""
+        if self.first_check is None:
+            self.first_check = (float(utilisation.max(initial=0.0)), int((utilisation > 1.0).sum()))
 
     def _held_corners(self) -> np.ndarray:
         """``(J', K)`` the contact corners of the joints Bullet still holds (every corner of each):

@@ -413,12 +413,14 @@ def steps(
         # the joints that step f's load cracks and the engine must let go, given the poses of
         # frame p (read only for bodies that bear on the plate without a joint)
         assert tracker is not None
+        # the last step's checks run on to its end, the record's last frame checked as well
         release = tracker.step(
             (f - 1) / s.fps,
             gravity[f],
             mats[p, :, :3, 3].astype(np.float64),
             mats[p, :, :3, :3].astype(np.float64),
             plate_pos[p].copy(),
+            through_s=f / s.fps if f == frames else None,
         )
         # the vibration's velocities at the step's last release (its pieces start with them)
         velocity = tracker.free_velocity[max(tracker.free_velocity)] if len(release) and tracker.free_velocity else None

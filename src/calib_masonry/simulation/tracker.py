@@ -205,7 +205,13 @@ class CrackTracker:
         return self._unit
 
     def step(
-        self, time_s: float, g: np.ndarray, positions: np.ndarray, rotations: np.ndarray, plate: np.ndarray
+        self,
+        time_s: float,
+        g: np.ndarray,
+        positions: np.ndarray,
+        rotations: np.ndarray,
+        plate: np.ndarray,
+        through_s: float | None = None,
     ) -> np.ndarray:
         """The joints that Bullet must let go before the coming step's load ``g`` (3,), given the
         current poses; returns their indices (joints that crack are recorded, and let go only
@@ -215,7 +221,10 @@ class CrackTracker:
         ground's start, not at the frames: every grid point up to ``time_s`` not checked yet is
         checked, at the record's acceleration then (``g`` gives the vertical), so that the cracks,
         the releases and their times are the same at any frame rate (wherever no pose is read).
-        Without one (a pushover) the frame's ``g`` is checked at ``time_s``."""
+        ``through_s`` (the run's last step: its end) checks the grid on to that time as well, so
+        that the record's last frame is checked too (0.04 s at 25 frames a second, 0.02 s at 50:
+        a crack there had been seen at one frame rate only). Without a ground motion (a pushover)
+        the frame's ``g`` is checked at ``time_s``."""
         t = time.perf_counter()
         try:
             if self.model.nj == 0:
@@ -228,31 +237,50 @@ class CrackTracker:
                 if self.beam_body is not None:
                     self.beam_motion = self._beam_motion()
                 return release
-            h = self.check_interval_s
-            last = int(np.floor((float(time_s) - self.t0) / h + 1e-6))
-            out = []
-            peak = None
-            while self._next_check <= last:
-                # the check's time from the ground's start, the same number at any frame rate: an
-                # absolute time (t0 + k h) is rounded by t0, which the frame rate sets (the warm-up's
-                # whole frames: 0.48 s at 25 fps, 0.50 s at 50), and the vibration's steps and the
-                # record's samples read at it differed in their last bits: one joint of Stylite's
-                # (seed 2, 0.95 g) cracked at 25 fps and not at 50, and the tower fell at one only
-                tk = self._next_check * h
-                self.checking_s = tk
-                out.append(self._check(tk, record_load(self.ground_motion, tk, g), positions, rotations, plate))
-                peak = self.max_utilisation if peak is None else max(peak, self.max_utilisation)
-                self._next_check += 1
+            out: list[np.ndarray] = []
+            peak = self._checks_until(time_s, g, positions, rotations, plate, out, None)
+            if through_s is not None:
+                peak = self._checks_until(through_s, g, positions, rotations, plate, out, peak)
             if peak is not None:
                 self.max_utilisation = peak  # the largest of this frame's checks
-            if self.elastic is not None and out and self.record_vibration:
-                if self._u_static is None:  # the first check: the equilibrium under the weight
-                    self._u_static = self.elastic.u.copy()
-                u = (self.elastic.u - self._u_static).reshape(-1, 6).astype(np.float32)
-                self.frame_u.append((float(time_s) - self.t0, u))
             return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
         finally:
             self.seconds += time.perf_counter() - t
+
+    def _checks_until(
+        self,
+        time_s: float,
+        g: np.ndarray,
+        positions: np.ndarray,
+        rotations: np.ndarray,
+        plate: np.ndarray,
+        out: list[np.ndarray],
+        peak: float | None,
+    ) -> float | None:
+        """:meth:`step`'s checks on the grid up to ``time_s`` (the run's clock) not made yet: their
+        releases appended to ``out``, the vibration at ``time_s`` recorded where asked; returns the
+        largest utilisation of these checks and ``peak`` (None: no check)."""
+        h = self.check_interval_s
+        last = int(np.floor((float(time_s) - self.t0) / h + 1e-6))
+        checked = False
+        while self._next_check <= last:
+            # the check's time from the ground's start, the same number at any frame rate: an
+            # absolute time (t0 + k h) is rounded by t0, which the frame rate sets (the warm-up's
+            # whole frames: 0.48 s at 25 fps, 0.50 s at 50), and the vibration's steps and the
+            # record's samples read at it differed in their last bits: one joint of Stylite's
+            # (seed 2, 0.95 g) cracked at 25 fps and not at 50, and the tower fell at one only
+            tk = self._next_check * h
+            self.checking_s = tk
+            out.append(self._check(tk, record_load(self.ground_motion, tk, g), positions, rotations, plate))
+            peak = self.max_utilisation if peak is None else max(peak, self.max_utilisation)
+            self._next_check += 1
+            checked = True
+        if self.elastic is not None and checked and self.record_vibration:
+            if self._u_static is None:  # the first check: the equilibrium under the weight
+                self._u_static = self.elastic.u.copy()
+            u = (self.elastic.u - self._u_static).reshape(-1, 6).astype(np.float32)
+            self.frame_u.append((float(time_s) - self.t0, u))
+        return peak
 
     def activity(self) -> str:
         """What the check under way is doing, for the progress line of a run that waits for it (a

@@ -66,6 +66,7 @@ def _structure(tmp_path, mask_name="m.png", width=2.0, height=1.0, vertices=5):
         ("negative_width", "width_m"),
         ("t_ge_w", "thickness_m"),
         ("vertices", "vertices"),
+        ("inverted", "looks inverted"),
     ],
 )
 def test_build_bad_input_one_line_exit_2(tmp_path, case, expect):
@@ -92,6 +93,13 @@ def test_build_bad_input_one_line_exit_2(tmp_path, case, expect):
         kw["width"] = 0.1
     elif case == "vertices":
         kw["vertices"] = 2
+    elif case == "inverted":  # mortar white around eight bricks: one piece, not a wall of eight
+        inv = np.full((100, 200), 255, np.uint8)
+        for r in range(2):
+            for c in range(4):
+                inv[10 + 45 * r : 45 + 45 * r, 10 + 47 * c : 50 + 47 * c] = 0
+        Image.fromarray(inv).save(tmp_path / "inv.png")
+        kw["mask_name"] = "inv.png"
     s = _structure(tmp_path, **kw)
     out = tmp_path / "out"
     r = _run("build", s, "--out", out)

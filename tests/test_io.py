@@ -314,3 +314,52 @@ def test_read_photo_reads_a_phones_heic_with_its_exif(tmp_path):
     (tmp_path / "p.jpg").write_bytes((tmp_path / "p.heic").read_bytes())
     with pytest.raises(InputError, match="a HEIF image named .jpg; rename it"):
         read_photo(tmp_path / "p.jpg")
+
+
+def _touching_pieces() -> np.ndarray:
+    """Labels of a 3 x 4 grid of blocks 20 x 30 px that touch their neighbours along every edge,
+    inside a black mortar border of 5 px."""
+    labels = np.zeros((70, 130), np.int32)
+    for r in range(3):
+        for c in range(4):
+            labels[5 + 20 * r : 25 + 20 * r, 5 + 30 * c : 35 + 30 * c] = 1 + 4 * r + c
+    return labels
+
+
+@pytest.mark.parametrize("kind", ["colour", "ids16", "palette"])
+def test_a_label_image_keeps_touching_units_apart(tmp_path, kind):
+    # an instance mask, as segmentation and annotation tools export them: each unit a flat colour
+    # (or a 16-bit id) of its own on black mortar, units touching; read as twelve pieces, each apart
+    from calib_masonry.io import read_mask_labels
+
+    truth = _touching_pieces()
+    if kind == "ids16":
+        image = Image.fromarray(truth.astype(np.uint16))
+    else:
+        colours = np.random.default_rng(3).integers(60, 256, (13, 3)).astype(np.uint8)
+        colours[0] = 0
+        image = Image.fromarray(colours[truth])
+        if kind == "palette":
+            image = image.convert("P", palette=Image.Palette.ADAPTIVE, colors=16)  # as LabelMe writes them
+    image.save(tmp_path / "m.png")
+    mask, labels = read_mask_labels(tmp_path / "m.png")
+    assert labels is not None and labels.max() == 12
+    for k in range(1, 13):  # every unit one label, whole
+        (found,) = np.unique(labels[truth == k])
+        assert found > 0 and np.array_equal(labels == found, truth == k)
+    # the mask keeps them apart: a one-pixel line between every two that touch
+    from scipy import ndimage
+
+    assert ndimage.label(mask)[1] == 12 and mask.sum() < (truth > 0).sum()
+
+
+def test_a_photo_is_not_taken_for_a_label_image(tmp_path):
+    # smooth colours and noise with dark lines (few flat regions): still refused, naming both formats
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[0:120, 0:160]
+    img = np.stack([128 + 100 * np.sin(x / 20), 128 + 100 * np.cos(y / 15), 128 + 60 * np.sin((x + y) / 30)], -1)
+    img = img + rng.normal(0, 8, img.shape)
+    img[::20] = 5
+    Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(tmp_path / "p.png")
+    with pytest.raises(InputError, match="colour photo.*label image"):
+        read_mask(tmp_path / "p.png")

@@ -200,3 +200,27 @@ def test_open_footprint_warns_with_gap(make_scenario, tmp_path, recwarn):
     build_to_folder(spec, tmp_path / "run", figures=False, progress=False)
     msgs = [str(w.message) for w in recwarn.list]
     assert any("does not close" in m and "mm" in m for m in msgs)
+
+
+def test_a_single_wall_from_a_label_image_builds_its_touching_units_apart(tmp_path):
+    # twelve blocks drawn edge to edge, each a colour of its own on black (an instance mask): twelve
+    # bricks, where the same drawing as a black-and-white mask is one piece; a single wall needs no
+    # `closed = false` (no warning: the tests turn warnings into errors)
+    from PIL import Image
+
+    from .test_io import _touching_pieces
+
+    truth = _touching_pieces()
+    colours = np.random.default_rng(5).integers(60, 256, (13, 3)).astype(np.uint8)
+    colours[0] = 0
+    Image.fromarray(colours[truth]).save(tmp_path / "labels.png")
+    Image.fromarray(np.where(truth > 0, 255, 0).astype(np.uint8)).save(tmp_path / "binary.png")
+    counts = {}
+    for name in ("labels", "binary"):
+        (tmp_path / f"{name}.toml").write_text(
+            f'[structure]\nname = "{name}"\nthickness_m = 0.1\nvertices = 4\n[[wall]]\nname = "w"\n'
+            f'mask = "{name}.png"\nwidth_m = 1.3\nheight_m = 0.7\n'
+        )
+        summary = build_to_folder(load_structure(tmp_path / f"{name}.toml"), tmp_path / name, figures=False)
+        counts[name] = summary["bricks"]
+    assert counts == {"labels": 12, "binary": 1}

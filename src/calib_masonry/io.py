@@ -149,7 +149,7 @@ def read_mask_labels(path: str | Path, *, field: str = "mask") -> tuple[np.ndarr
     as holes and the pieces merged (a real wall's 36 as 24)."""
     path = Path(path)
     if path.suffix.lower() != ".json":
-        return read_mask(path, field=field), None
+        return _read_mask_image(path, field, 0.05)
     from .labelme import labelme_labels, labelme_mask, read_labelme
 
     doc = read_labelme(path, field_name=field)
@@ -173,6 +173,12 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
     path = Path(path)
     if path.suffix.lower() == ".json":
         return read_mask_labels(path, field=field)[0]
+    return _read_mask_image(path, field, max_gray_fraction)[0]
+
+
+def _read_mask_image(path: Path, field: str, max_gray_fraction: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`read_mask` of an image file, and its pieces labelled where it is a label image (each
+    unit a flat colour or grey level of its own on black mortar: :func:`label_image`), else None."""
     with _opened_image(path, field, "give a PNG or TIFF mask") as im:
         arr = np.asarray(im.convert("RGB") if im.mode in ("P", "PA") else im)
     # computed in the file's own integer type where possible: a few bytes per pixel, not 8-24 bytes
@@ -181,10 +187,14 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
         chans = arr[..., :3]
         spread = chans.max(axis=-1) - chans.min(axis=-1)  # exact in the native type (max >= min)
         if np.mean(spread > 0.2 * max(1.0, float(chans.max()))) > max_gray_fraction:
-            raise InputError(
-                f"{field} {path}: looks like a colour photo, not a mask; give a binary "
-                "mask (bricks white, mortar black)"
-            )
+            del spread
+            labels = label_image(chans)
+            if labels is None:
+                raise InputError(
+                    f"{field} {path}: looks like a colour photo, not a mask; give a binary mask (bricks white, "
+                    "mortar black) or a label image (each unit a flat colour of its own, mortar black)"
+                )
+            return pieces_apart(labels), labels
         del spread
         if np.issubdtype(chans.dtype, np.integer):
             arr = chans.sum(axis=-1, dtype=np.int32)  # 3 x the mean, exactly
@@ -201,13 +211,80 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
     span = float(hi) - float(lo)
     grey = np.count_nonzero((arr > float(lo) + 0.2 * span) & (arr < float(lo) + 0.8 * span)) / arr.size
     if grey > max_gray_fraction:
-        raise InputError(
-            f"{field} {path}: not a binary-like mask ({grey:.0%} of pixels are mid-grey); "
-            "threshold it to black mortar and white bricks first"
-        )
+        labels = label_image(arr) if arr.ndim == 2 and np.issubdtype(arr.dtype, np.integer) else None
+        if labels is None:
+            raise InputError(
+                f"{field} {path}: not a binary-like mask ({grey:.0%} of pixels are mid-grey); "
+                "threshold it to black mortar and white bricks first (or give a label image: each unit a "
+                "grey level of its own, mortar 0)"
+            )
+        return pieces_apart(labels), labels
     if np.issubdtype(arr.dtype, np.integer):  # (v - lo) / (hi - lo) >= 1/2, in exact integers
-        return arr >= int(lo) + (int(hi) - int(lo) + 1) // 2
-    return arr >= float(lo) + 0.5 * span
+        return arr >= int(lo) + (int(hi) - int(lo) + 1) // 2, None
+    return arr >= float(lo) + 0.5 * span, None
+
+
+#: A label image's pieces: a flat region smaller than this (pixels) is an edge's blend, not a unit.
+LABEL_MIN_PX = 20
+
+
+def label_image(image: np.ndarray) -> np.ndarray | None:
+    """The units of a label image as labels ``(rows, cols)`` int32 (0 mortar, 1..K), or None where
+    ``image`` is not one. A label image (an instance mask: what segmentation and annotation tools
+    export) gives each unit a flat colour (``(rows, cols, 3)`` integers) or grey level (``(rows,
+    cols)`` integers, 16-bit ids too) and the mortar black (0; a colour within 4 % of black); two
+    units may touch. A unit is a connected region of one value (8-neighbours); regions under
+    :data:`LABEL_MIN_PX` pixels are taken for mortar. Not a label image: no mortar (under 1 % of the
+    pixels), or more than 2 % of the units' pixels in such small regions (a photo's texture), or a
+    sample of 200,000 pixels with more than 5,000 values."""
+    from skimage.measure import label as connected
+
+    if image.ndim == 3:
+        c = image[..., :3]
+        top = max(1, int(c.max()))
+        dark = (c <= int(0.04 * top)).all(axis=-1)
+        # one integer per colour, in 4 bytes a pixel for 8-bit colours (a large mask fits in memory)
+        kind = np.int32 if (top + 1) ** 3 < 2**31 - 1 else np.int64
+        key = c[..., 0].astype(kind)
+        for k in (1, 2):
+            key *= top + 1
+            key += c[..., k]
+    else:
+        dark = image == 0
+        key = image.astype(np.int64 if image.dtype.itemsize >= 4 else np.int32)
+    if dark.mean() < 0.01:
+        return None
+    flat = key.ravel()
+    sample = flat[np.random.default_rng(0).integers(0, flat.size, min(flat.size, 200_000))]
+    if np.unique(sample).size > 5000:
+        return None
+    key += 1
+    key[dark] = 0  # 0 the mortar, each other value a unit's
+    del dark
+    found = connected(key, background=0, connectivity=2)
+    del key
+    sizes = np.bincount(found.ravel())
+    small = sizes < LABEL_MIN_PX
+    small[0] = False
+    units = sizes[1:].sum()
+    if units == 0 or sizes[small].sum() > 0.02 * units:
+        return None
+    keep = np.flatnonzero(~small[1:]) + 1  # the units, in order
+    renumber = np.zeros(sizes.size, dtype=np.int32)
+    renumber[keep] = np.arange(1, keep.size + 1, dtype=np.int32)
+    return renumber[found]
+
+
+def pieces_apart(labels: np.ndarray) -> np.ndarray:
+    """The brick mask ``(rows, cols)`` (bricks True) of labelled pieces ``labels`` (0 none): every
+    piece's pixels, less those that touch another piece (4-neighbours), so that two pieces drawn
+    edge to edge stay two."""
+    edge = np.zeros(labels.shape, dtype=bool)
+    below, above = labels[1:], labels[:-1]
+    edge[1:] |= (below != above) & (below > 0) & (above > 0)  # the lower of two pieces one above the other
+    right, left = labels[:, 1:], labels[:, :-1]
+    edge[:, 1:] |= (right != left) & (right > 0) & (left > 0)  # the right one of two side by side
+    return (labels > 0) & ~edge
 
 
 def to_uint8(img: np.ndarray) -> np.ndarray:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .io import pieces_apart
 
 __all__ = [
     "LabelMe",
@@ -179,13 +180,7 @@ def labelme_mask(doc: LabelMe, labels: np.ndarray | None = None) -> np.ndarray:
     """The pieces as a brick mask ``(rows, cols)`` (bricks True): every piece's pixels, less those
     that touch another piece (4-neighbours), so that two pieces drawn edge to edge stay two.
     ``labels``: the document's :func:`labelme_labels`, where they are at hand."""
-    labels = labelme_labels(doc) if labels is None else labels
-    edge = np.zeros(labels.shape, dtype=bool)
-    below, above = labels[1:], labels[:-1]
-    edge[1:] |= (below != above) & (below > 0) & (above > 0)  # the lower of two pieces one above the other
-    right, left = labels[:, 1:], labels[:, :-1]
-    edge[:, 1:] |= (right != left) & (right > 0) & (left > 0)  # the right one of two side by side
-    return (labels > 0) & ~edge
+    return pieces_apart(labelme_labels(doc) if labels is None else labels)
 
 
 def read_photo_annotation(path: str | Path) -> LabelMe:

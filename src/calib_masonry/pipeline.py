@@ -19,7 +19,7 @@ from .io import Photo, read_mask_labels, to_uint8, warn
 from .preload import preload
 from .progress import progress as _progress
 from .spec import StructureSpec, WallSpec
-from .wall2d.trace import TraceConfig, TraceResult, trace_mask
+from .wall2d.trace import TraceConfig, TraceResult, check_not_inverted, trace_mask
 
 __all__ = [
     "BuildResult",
@@ -226,12 +226,17 @@ def trace_wall(
             f"wall '{wall.name}' {source}: no bricks found; "
             "bricks must be white on black mortar (or give a mask instead of the photo)"
         )
+    if labels is None and wall.mask is not None:
+        check_not_inverted(mask, len(result.bricks), f"wall '{wall.name}' mask {wall.mask}")
     return result
 
 
 def closure_warning(spec: StructureSpec, gap_xy: np.ndarray) -> str | None:
+    """The warning for a footprint that does not close where it is declared closed or looks meant
+    to (None: nothing to say). One or two walls never close a footprint: a laboratory wall or an
+    L needs no ``closed = false``."""
     gap = float(np.linalg.norm(gap_xy))
-    if spec.closed is False or gap <= CLOSURE_WARN_M:
+    if spec.closed is False or gap <= CLOSURE_WARN_M or (spec.closed is None and len(spec.walls) < 3):
         return None
     if spec.closed is None and not footprint_is_closed(spec):
         return (

@@ -543,6 +543,40 @@ def refine_trace(
     return TraceResult(image_shape=traced.image_shape, bricks=tuple(out))
 
 
+#: A mask traced to at most this many pieces is checked for black pieces enclosed in white ones.
+FEW_PIECES = 10
+
+
+def enclosed_holes(mask: np.ndarray) -> int:
+    """How many black regions of ``mask`` (bricks True) white ones enclose (not touching the
+    border; at least 20 pixels and 1e-4 of the image). A mask with mortar white and units black
+    shows its units so, as one white piece around them; a brick mask has none, or a few pores."""
+    found, n = ndimage.label(~mask)
+    if n == 0:
+        return 0
+    border = np.unique(np.concatenate([found[0], found[-1], found[:, 0], found[:, -1]]))
+    sizes = np.bincount(found.ravel(), minlength=n + 1)
+    keep = sizes >= max(20, 1e-4 * mask.size)
+    keep[border] = False
+    keep[0] = False
+    return int(keep.sum())
+
+
+def check_not_inverted(mask: np.ndarray, pieces: int, where: str) -> None:
+    """Refuse a mask traced to ``pieces`` pieces that are few and enclose more black regions than
+    they are (at least 3): mortar drawn white (the units black), or units drawn touching, traced as
+    one piece. ``where`` names the file in the one-line error."""
+    if pieces > FEW_PIECES:
+        return
+    holes = enclosed_holes(mask)
+    if holes >= 3 and holes > pieces:
+        raise InputError(
+            f"{where}: its white part is {pieces} piece{'' if pieces == 1 else 's'} around {holes} black ones: "
+            "the mask looks inverted (mortar white) or its units touch; give the units white on black mortar, "
+            "each apart (or a LabelMe file or a label image, whose pieces may touch)"
+        )
+
+
 def trace_to_file(
     mask_path: str | Path,
     out: str | Path,
@@ -567,6 +601,8 @@ def trace_to_file(
     result = trace_mask(mask, config) if labels is None else trace_labels(labels, config)
     if not result.bricks:
         raise InputError(f"MASK {mask_path}: no bricks found (no white regions); bricks must be white on black")
+    if labels is None:
+        check_not_inverted(mask, len(result.bricks), f"MASK {mask_path}")
     seconds = time.perf_counter() - t0
     with staged_file(out) as tmp_json, staged_file(figure) as tmp_png:
         doc = result.to_json()

@@ -224,3 +224,69 @@ def test_a_single_wall_from_a_label_image_builds_its_touching_units_apart(tmp_pa
         summary = build_to_folder(load_structure(tmp_path / f"{name}.toml"), tmp_path / name, figures=False)
         counts[name] = summary["bricks"]
     assert counts == {"labels": 12, "binary": 1}
+
+
+def _wide_bed_wall(tmp_path: Path, max_joint: float | None) -> Path:
+    """Two courses of three bricks 0.39 x 0.18 m, 1 cm head joints, the upper course on a mortar
+    bed 8 cm wide (200 px/m; the wall 1.21 x 0.46 m); its structure file, with ``max_joint_m``."""
+    from PIL import Image
+
+    px = 200
+    mask = np.zeros((int(0.46 * px), int(1.21 * px)), np.uint8)
+    rows = mask.shape[0]
+    for z0 in (0.0, 0.26):  # the courses' bottoms above the ground
+        for x0 in (0.01, 0.41, 0.81):
+            r1, r0 = rows - int(round(z0 * px)), rows - int(round((z0 + 0.18) * px))
+            mask[r0:r1, int(round(x0 * px)) : int(round((x0 + 0.39) * px))] = 255
+    Image.fromarray(mask).save(tmp_path / "wide.png")
+    head = '[structure]\nname = "wide"\nthickness_m = 0.2\nvertices = 4\n'
+    if max_joint is not None:
+        head += f"max_joint_m = {max_joint}\n"
+    p = tmp_path / f"wide_{max_joint}.toml"
+    p.write_text(head + '[[wall]]\nname = "w"\nmask = "wide.png"\nwidth_m = 1.21\nheight_m = 0.46\n')
+    return p
+
+
+def test_a_mortar_bed_wider_than_the_default_joint_is_joined_where_the_structure_says_so(tmp_path, capsys):
+    # an 8 cm bed is wider than the default joint reach (6 cm): the upper course has no joint
+    # beneath it, the build says so (summary.json and the command line's note), and nothing ties it
+    # to the ground; with max_joint_m = 0.1 in [structure] it is joined, and simulate's geometry
+    # (read back from the folder, stored) is the one built with it
+    from calib_masonry.build_folder import geometry_for_model
+    from calib_masonry.cli import main
+    from calib_masonry.simulation.run import SimulationConfig, scene_for_model
+    from calib_masonry.simulation.scene import grounded_bodies
+
+    held = {}
+    for max_joint in (None, 0.1):
+        spec = load_structure(_wide_bed_wall(tmp_path, max_joint))
+        assert spec.max_joint_m == max_joint
+        out = tmp_path / f"m_{max_joint}"
+        summary = build_to_folder(spec, out, figures=False)
+        assert summary["max_joint_m"] == (0.06 if max_joint is None else max_joint)
+        hanging = summary["joint_coverage"]["units_without_bed_joint"]
+        assert len(hanging) == (3 if max_joint is None else 0)
+        geometry, stored = geometry_for_model(out)
+        assert stored and geometry.max_gap_m == summary["max_joint_m"]
+        scene = scene_for_model(out, SimulationConfig(pga_g=0.0, duration_s=1.0, figures=False))
+        held[max_joint] = int(grounded_bodies(scene.bonds, len(scene.bodies)).sum())
+    assert held == {None: 3, 0.1: 6}
+    # the command line names them in one note
+    capsys.readouterr()
+    r = main(["build", str(_wide_bed_wall(tmp_path, None)), "--out", str(tmp_path / "cli"), "--no-figures"])
+    notes = [line for line in capsys.readouterr().out.splitlines() if "note:" in line]
+    assert r == 0 and len(notes) == 1 and "3 units" in notes[0] and "max_joint_m = 0.06" in notes[0]
+    # the value goes through a written structure file (synth writes one from a scenario)
+    from calib_masonry.spec import structure_to_toml
+
+    again = tmp_path / "again.toml"
+    again.write_text(structure_to_toml(load_structure(_wide_bed_wall(tmp_path, 0.1)), relative_to=tmp_path))
+    assert load_structure(again).max_joint_m == 0.1
+
+
+@pytest.mark.parametrize("value", [0.0, 0.5, -0.01])
+def test_an_impossible_max_joint_is_refused_naming_the_field(tmp_path, value):
+    from calib_masonry.errors import InputError
+
+    with pytest.raises(InputError, match=r"max_joint_m = .* must lie in 0.005..0.3"):
+        load_structure(_wide_bed_wall(tmp_path, value))

@@ -109,6 +109,7 @@ def _summary(result: BuildResult, interpenetration) -> dict:
         "mean_dice": float(np.mean([b.dice for b in s.bricks])),
         "total_volume_m3": float(sum(b.volume for b in s.bricks)),
         "closed_footprint": footprint_is_closed(spec),
+        "max_joint_m": joint_width(s),
         "closure_error_m": s.closure_error_m,
         "closure_gap_xy_m": s.closure_gap_xy.tolist(),
         "max_interpenetration_m3": interpenetration.max_volume_m3,
@@ -192,6 +193,7 @@ def read_build(model_dir: str | Path) -> Structure3D:
         bricks=tuple(bricks),
         removed=removed,
         closure_gap_xy=closure_gap(footprint),
+        max_joint_m=_model_max_joint(Path(model_dir)),
     )
 
 
@@ -340,6 +342,23 @@ def _closed_footprint(model_dir: Path):
     return None
 
 
+def _model_max_joint(model_dir: Path) -> float | None:
+    """The widest joint a model folder was built with where it is not the default (its summary's
+    ``max_joint_m``), else None."""
+    if (model_dir / "summary.json").is_file():
+        value = read_json(model_dir / "summary.json").get("max_joint_m")
+        if value is not None and float(value) != MAX_GAP_M:
+            return float(value)
+    return None
+
+
+def joint_width(model: Structure3D | None) -> float:
+    """The widest mortar joint (m) two units of ``model`` are joined across: its own
+    ``max_joint_m`` (the structure file's), else the default :data:`MAX_GAP_M`."""
+    value = getattr(model, "max_joint_m", None)
+    return MAX_GAP_M if value is None else float(value)
+
+
 def model_from_json(data: dict, closed, source: str | Path):
     """Bricks, wall frames, corners and footprint of a ``build`` output's bricks.json contents
     ``data`` (``closed``: the build summary's closed_footprint)."""
@@ -457,9 +476,10 @@ def _load_geometry(path: Path, key: str) -> SceneGeometry | None:
 
 
 def simulation_geometry(
-    model: Structure3D | SceneGeometry, *, max_gap_m: float = MAX_GAP_M, mortar_fill: bool = True
+    model: Structure3D | SceneGeometry, *, max_gap_m: float | None = None, mortar_fill: bool = True
 ) -> SceneGeometry:
-    """The bodies and contact patches of a built structure, in memory."""
+    """The bodies and contact patches of a built structure, in memory (``max_gap_m``: the widest
+    joint; None: the structure's own, :func:`joint_width`)."""
     if isinstance(model, SceneGeometry):
         return model
     if not isinstance(model, Structure3D):
@@ -467,16 +487,15 @@ def simulation_geometry(
             f"simulate: the model must be a Structure3D (from build), a SceneGeometry or a build "
             f"folder, got {type(model).__name__}"
         )
-    return scene_geometry(
-        model.bricks, list(model.frames), list(model.corners), mortar_fill=mortar_fill, max_gap_m=max_gap_m
-    )
+    gap = joint_width(model) if max_gap_m is None else max_gap_m
+    return scene_geometry(model.bricks, list(model.frames), list(model.corners), mortar_fill=mortar_fill, max_gap_m=gap)
 
 
 def store_geometry(
     structure: Structure3D,
     model_dir: str | Path,
     *,
-    max_gap_m: float = MAX_GAP_M,
+    max_gap_m: float | None = None,
     mortar_fill: bool = True,
     bricks_json: bytes | None = None,
     geometry: SceneGeometry | None = None,
@@ -496,15 +515,19 @@ def store_geometry(
 
 
 def geometry_for_model(
-    model_dir: str | Path, *, max_gap_m: float = MAX_GAP_M, mortar_fill: bool = True
+    model_dir: str | Path, *, max_gap_m: float | None = None, mortar_fill: bool = True
 ) -> tuple[SceneGeometry, bool]:
     """The simulation geometry of a model folder and whether it came from the folder's
     sim_geometry.npz. The stored copy is used only if it was computed from this bricks.json (its
     hash), footprint and settings by this version of the code; otherwise (a model built before it
-    was stored, an edited bricks.json) the geometry is computed here from bricks.json."""
+    was stored, an edited bricks.json) the geometry is computed here from bricks.json.
+    ``max_gap_m``: the widest joint; None: the one the model was built with (its summary's
+    ``max_joint_m``, else the default)."""
     model_dir = checked_model_dir(model_dir)
     raw = (model_dir / "bricks.json").read_bytes()
     closed = _closed_footprint(model_dir)
+    if max_gap_m is None:
+        max_gap_m = _model_max_joint(model_dir) or MAX_GAP_M
     stored = _load_geometry(model_dir / GEOMETRY_FILE, _geometry_key(raw, closed, max_gap_m, mortar_fill))
     if stored is not None:
         return stored, True

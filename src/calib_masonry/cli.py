@@ -99,6 +99,16 @@ def _print_build(summary: dict, out) -> None:
         print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, {what}, {w['corner_pieces_removed']} corner pieces removed")
         if "pieces" in w:
             print(f"  {'':>10}  scale from the {w['scale_source']}; {_pieces_line(w['pieces'])}")
+    hanging = (summary.get("joint_coverage") or {}).get("units_without_bed_joint") or []
+    if hanging:
+        n = len(hanging)
+        print(
+            f"  note: {n} unit{'s' if n > 1 else ''} above the lowest course {'have' if n > 1 else 'has'} no joint "
+            f"beneath (a bed wider than max_joint_m = {summary.get('max_joint_m', 0.06):g} m, or a void) and "
+            f"{'hang' if n > 1 else 'hangs'} from side joints: {', '.join(hanging[:5])}{', ...' if n > 5 else ''} "
+            "(summary.json joint_coverage); for wide mortar beds raise max_joint_m in [structure], for units "
+            "traced too small trace with more vertices"
+        )
 
 
 def _cmd_compare(args) -> int:

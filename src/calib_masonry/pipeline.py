@@ -336,6 +336,8 @@ def build(
 
     t0 = time.perf_counter()
     structure = assemble(spec.footprint, walls, name=spec.name)
+    if spec.max_joint_m is not None:
+        structure = replace(structure, max_joint_m=spec.max_joint_m)
     seconds["assemble"] = time.perf_counter() - t0
     message = closure_warning(spec, structure.closure_gap_xy) if warn_closure else None
     if message:

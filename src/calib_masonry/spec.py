@@ -7,6 +7,7 @@ order the walls follow the footprint (each wall starts where the previous one en
     name = "paper_example"
     thickness_m = 0.18        # default brick thickness t of every wall
     vertices = 5              # default target number of polygon vertices (or target_dice = 0.98)
+    max_joint_m = 0.06        # optional: the widest mortar joint two units are joined across
 
     [[wall]]
     name = "wall1"
@@ -234,6 +235,8 @@ class StructureSpec:
     synthetic: SyntheticSpec | None = None
     photos: PhotoSpec | None = None
     corners: tuple[CornerSpec, ...] = ()
+    # the widest mortar joint (m) two units are joined across, where it is not the default 0.06
+    max_joint_m: float | None = None
     # the [material] table as given (key, value) (calib_masonry.simulation.scene.MATERIAL_KEYS):
     # build stores it in the model folder (material.toml), where simulate reads it
     material: tuple[tuple[str, float], ...] = ()
@@ -249,6 +252,12 @@ class StructureSpec:
             value = getattr(self, key)
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"structure '{self.name}': {key} = {value} must be > 0")
+        j = self.max_joint_m
+        if j is not None and not (math.isfinite(j) and MIN_JOINT_M <= j <= MAX_JOINT_M):
+            raise InputError(
+                f"structure '{self.name}': max_joint_m = {j:g} must lie in {MIN_JOINT_M:g}..{MAX_JOINT_M:g} "
+                "(metres: the widest mortar joint two units are joined across; default 0.06)"
+            )
         if self.synthetic is not None:  # here, not where the file is read: a sweep uses ``replace``
             course = self.synthetic.mortar_m + self.synthetic.lowest_unit_m
             for w in self.walls:  # a wall lower than one course holds no unit whole: a size in the wrong unit
@@ -395,6 +404,10 @@ def _photos_from(tbl: dict, where: str) -> PhotoSpec:
     return spec
 
 
+#: The range of ``max_joint_m``: a joint narrower than half a centimetre leaves hairline gaps
+#: unjoined, and a gap wider than 30 cm is a void, not a joint.
+MIN_JOINT_M, MAX_JOINT_M = 0.005, 0.3
+
 STRUCTURE_KEYS = (
     "name",
     "thickness_m",
@@ -404,6 +417,7 @@ STRUCTURE_KEYS = (
     "refine",
     "photo_px_per_m",
     "aspect_tolerance",
+    "max_joint_m",
 )
 WALL_KEYS = (
     "name",
@@ -458,8 +472,10 @@ def _structure_defaults(st, path: Path) -> dict:
     aspect_tol = float(_num(st, "aspect_tolerance", where, default=0.03))
     if aspect_tol <= 0:
         raise InputError(f"{where}: 'aspect_tolerance' must be > 0, got {aspect_tol}")
+    max_joint = _num(st, "max_joint_m", where, default=None)
     return {
         "name": str(st.get("name", path.parent.name)),
+        "max_joint_m": None if max_joint is None else float(max_joint),
         "thickness_m": t_default,
         "vertices": n_default,
         "target_dice": d_default,
@@ -680,6 +696,7 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
         aspect_tolerance=defaults["aspect_tolerance"],
         refine=defaults["refine"],
         photo_px_per_m=defaults["photo_px_per_m"],
+        max_joint_m=defaults["max_joint_m"],
         synthetic=synthetic,
         photos=photos,
         corners=tuple(corners),
@@ -715,6 +732,8 @@ def structure_to_toml(spec: StructureSpec, *, relative_to: Path | None = None, i
         st["photo_px_per_m"] = spec.photo_px_per_m
     if spec.refine:
         st["refine"] = True
+    if spec.max_joint_m is not None:
+        st["max_joint_m"] = _clean(spec.max_joint_m)
     doc: dict[str, Any] = {"structure": st}
     if include_synthetic and spec.synthetic is not None:
         syn = {k: (list(v) if isinstance(v, tuple) else v) for k, v in spec.synthetic.__dict__.items()}

@@ -52,6 +52,9 @@ class Structure3D:
     bricks: tuple[Brick, ...]
     removed: tuple[tuple[int, ...], ...]  # per wall: labels of corner end-face pieces removed
     closure_gap_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    # the widest mortar joint (m) two units are joined across (the structure file's max_joint_m);
+    # None: the simulation's default (simulation/scene.py MAX_GAP_M)
+    max_joint_m: float | None = None
 
     @property
     def closure_error_m(self) -> float:

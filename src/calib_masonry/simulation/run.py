@@ -602,9 +602,10 @@ def _warn_first_check(scene: Scene, out) -> None:
         f"{'are' if over != 1 else 'is'} over {'their' if over != 1 else 'its'} strength (the worst "
         f"{worst:.3g} times) and {'crack' if over != 1 else 'cracks'} at the start, whatever the load: the "
         "model as built cannot carry itself with this material. Look for bricks hanging from their "
-        "neighbours on small joints (build's walls.png: outlines traced smaller than the stones leave gaps "
-        "wider than the joint reach); trace the walls with more vertices (`vertices = 8` or "
-        "`target_dice = 0.98` in structure.toml) and build again",
+        "neighbours on small joints (build's walls.png and summary.json's units_without_bed_joint: outlines "
+        "traced smaller than the stones, or mortar beds wider than the joints reach); trace the walls with "
+        "more vertices (`vertices = 8` or `target_dice = 0.98` in structure.toml), or for wide mortar raise "
+        "`max_joint_m` (default 0.06 m) in its [structure], and build again",
         RuntimeWarning,
         stacklevel=2,
     )

@@ -729,7 +729,8 @@ class SceneGeometry:
     coverage: np.ndarray = field(default_factory=lambda: np.full(5, np.nan))
 
     def coverage_summary(self) -> dict:
-        """The coverage as summary.json reports it (see :func:`joint_coverage`)."""
+        """The coverage as summary.json reports it (see :func:`joint_coverage`), with the units
+        that have no joint beneath them (:meth:`without_bed_joint`, by name)."""
         median, p10, total, pairs, missing = (float(x) for x in self.coverage)
         clean = lambda x: None if not np.isfinite(x) else round(x, 4)  # noqa: E731
         return {
@@ -739,7 +740,25 @@ class SceneGeometry:
             "pairs": int(pairs) if np.isfinite(pairs) else 0,
             "pairs_without_joint": int(missing) if np.isfinite(missing) else 0,
             "reach_m": round(0.5 * self.max_gap_m, 6),
+            "units_without_bed_joint": [self.names[i] for i in self.without_bed_joint()],
         }
+
+    def without_bed_joint(self) -> np.ndarray:
+        """The bodies above the lowest course with no joint beneath them (none whose normal is
+        within 60 degrees of vertical, with the body on its upper side): the bed under them is
+        wider than the joint reach (``max_gap_m``: a wide mortar bed, or a unit traced smaller
+        than it is) or a void, and they hang from their side joints. Indices, ascending."""
+        n = len(self.names)
+        if n == 0:
+            return np.zeros(0, dtype=np.int64)
+        nz = self.patch_normals[:, 2] if len(self.patch_normals) else np.zeros(0)
+        bedded = np.zeros(n, dtype=bool)
+        pairs = self.patch_pairs.reshape(-1, 2)
+        bedded[pairs[nz > 0.5, 1]] = True  # a's normal points up at b: b rests on a
+        bedded[pairs[nz < -0.5, 0]] = True
+        bottom = np.array([float(v[:, 2].min()) + float(x[2]) for v, x in zip(self.vertices, self.locations)])
+        on_ground = bottom <= bottom.min() + self.max_gap_m
+        return np.flatnonzero(~bedded & ~on_ground)
 
 
 #: Pairs sharing less boundary than this (m) touch at a corner: left out of the coverage's median.

@@ -290,3 +290,18 @@ def test_an_impossible_max_joint_is_refused_naming_the_field(tmp_path, value):
 
     with pytest.raises(InputError, match=r"max_joint_m = .* must lie in 0.005..0.3"):
         load_structure(_wide_bed_wall(tmp_path, value))
+
+
+def test_a_wall_traced_to_triangles_is_said_to_be_too_coarse(tmp_path):
+    # bricks traced to three vertices are triangles (half of each brick left out): build warns in one
+    # line naming the wall, the Dice and the remedy; four vertices build without a word
+    from calib_masonry.pipeline import COARSE_TRACE_DICE
+
+    p = _wide_bed_wall(tmp_path, None)
+    p.write_text(p.read_text().replace("vertices = 4", "vertices = 3"))
+    with pytest.warns(
+        UserWarning, match=r"wall 'w': .* mean Dice of 0\.\d\d \(vertices = 3\): too few vertices"
+    ) as got:
+        summary = build_to_folder(load_structure(p), tmp_path / "tri", figures=False)
+    assert summary["mean_dice"] < COARSE_TRACE_DICE and len(got) == 1
+    build_to_folder(load_structure(_wide_bed_wall(tmp_path, None)), tmp_path / "quad", figures=False)

@@ -194,6 +194,8 @@ def _read_mask_image(path: Path, field: str, max_gray_fraction: float) -> tuple[
                     f"{field} {path}: looks like a colour photo, not a mask; give a binary mask (bricks white, "
                     "mortar black) or a label image (each unit a flat colour of its own, mortar black)"
                 )
+            from .labelme import pieces_apart
+
             return pieces_apart(labels), labels
         del spread
         if np.issubdtype(chans.dtype, np.integer):
@@ -218,6 +220,8 @@ def _read_mask_image(path: Path, field: str, max_gray_fraction: float) -> tuple[
                 "threshold it to black mortar and white bricks first (or give a label image: each unit a "
                 "grey level of its own, mortar 0)"
             )
+        from .labelme import pieces_apart
+
         return pieces_apart(labels), labels
     if np.issubdtype(arr.dtype, np.integer):  # (v - lo) / (hi - lo) >= 1/2, in exact integers
         return arr >= int(lo) + (int(hi) - int(lo) + 1) // 2, None
@@ -273,18 +277,6 @@ def label_image(image: np.ndarray) -> np.ndarray | None:
     renumber = np.zeros(sizes.size, dtype=np.int32)
     renumber[keep] = np.arange(1, keep.size + 1, dtype=np.int32)
     return renumber[found]
-
-
-def pieces_apart(labels: np.ndarray) -> np.ndarray:
-    """The brick mask ``(rows, cols)`` (bricks True) of labelled pieces ``labels`` (0 none): every
-    piece's pixels, less those that touch another piece (4-neighbours), so that two pieces drawn
-    edge to edge stay two."""
-    edge = np.zeros(labels.shape, dtype=bool)
-    below, above = labels[1:], labels[:-1]
-    edge[1:] |= (below != above) & (below > 0) & (above > 0)  # the lower of two pieces one above the other
-    right, left = labels[:, 1:], labels[:, :-1]
-    edge[:, 1:] |= (right != left) & (right > 0) & (left > 0)  # the right one of two side by side
-    return (labels > 0) & ~edge
 
 
 def to_uint8(img: np.ndarray) -> np.ndarray:

@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .io import pieces_apart
 
 __all__ = [
     "LabelMe",
@@ -174,6 +173,18 @@ def labelme_labels(doc: LabelMe) -> np.ndarray:
     for k, poly in enumerate(doc.pieces, start=1):
         labels[polygon_mask(doc.shape, poly)] = k
     return labels
+
+
+def pieces_apart(labels: np.ndarray) -> np.ndarray:
+    """The brick mask ``(rows, cols)`` (bricks True) of labelled pieces ``labels`` (0 none): every
+    piece's pixels, less those that touch another piece (4-neighbours), so that two pieces drawn
+    edge to edge stay two."""
+    edge = np.zeros(labels.shape, dtype=bool)
+    below, above = labels[1:], labels[:-1]
+    edge[1:] |= (below != above) & (below > 0) & (above > 0)  # the lower of two pieces one above the other
+    right, left = labels[:, 1:], labels[:, :-1]
+    edge[:, 1:] |= (right != left) & (right > 0) & (left > 0)  # the right one of two side by side
+    return (labels > 0) & ~edge
 
 
 def labelme_mask(doc: LabelMe, labels: np.ndarray | None = None) -> np.ndarray:

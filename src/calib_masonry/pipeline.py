@@ -231,6 +231,24 @@ def trace_wall(
     return result
 
 
+#: A wall whose polygons fit its pieces at a mean Dice under this gets a warning: too few vertices.
+COARSE_TRACE_DICE = 0.85
+
+
+def coarse_trace_warning(wall: WallSpec, trace: TraceResult) -> str | None:
+    """The warning for a wall traced too coarsely to be a model of its units (None: fine): bricks
+    traced to three vertices are triangles (mean Dice 0.67 on a stretcher-bond wall), and a unit
+    much smaller than its piece leaves a gap wider than the joints reach beside it."""
+    if not trace.bricks or not np.isfinite(trace.mean_dice) or trace.mean_dice >= COARSE_TRACE_DICE:
+        return None
+    how = f"vertices = {wall.vertices}" if wall.vertices is not None else f"target_dice = {wall.target_dice}"
+    return (
+        f"wall '{wall.name}': its polygons fit its {len(trace.bricks)} pieces at a mean Dice of "
+        f"{trace.mean_dice:.2f} ({how}): too few vertices to model these units; trace with more "
+        "(vertices = 8, or target_dice = 0.98, in its [[wall]] or [structure]) and build again"
+    )
+
+
 def closure_warning(spec: StructureSpec, gap_xy: np.ndarray) -> str | None:
     """The warning for a footprint that does not close where it is declared closed or looks meant
     to (None: nothing to say). One or two walls never close a footprint: a laboratory wall or an
@@ -318,6 +336,10 @@ def build(
         bar.close()
     traces = [by_name[w.name] for w in spec.walls]
     seconds["trace"] = time.perf_counter() - t0
+    for wall, tr in zip(spec.walls, traces):
+        message = coarse_trace_warning(wall, tr)
+        if message:
+            warn(message)
 
     t0 = time.perf_counter()
     walls = []

@@ -444,6 +444,11 @@ BAD = {
     # 1e9 records listed 3e9 loads before the count was checked (killed, out of memory)
     "records": ("[simulate]\npga_g = [0.1, 0.2]\nrecords = 1e9\n", "x 1e.09 records is more than 1000000 runs"),
     "negative pga": ("[simulate]\npga_g = [-0.1]\n", "pga_g = -0.1: must be >= 0$"),
+    "joint reach": (
+        "[inputs.structure]\nmax_joint_m = { range = [0.05, 0.5] }\n",
+        "max_joint_m: .0.5. out of range (0.005..0.3 m",
+    ),
+    "structure key": ("[inputs.structure]\nmax_joint = { range = [0.05, 0.08] }\n", "did you mean max_joint_m"),
 }
 
 
@@ -671,3 +676,28 @@ def test_a_study_runs_recorded_accelerograms_scaled_to_each_pga(tmp_path, small_
     before = study.fingerprint()
     _esm_file(tmp_path / "N.ASC", 60.0 * env * np.sin(2 * np.pi * 3 * t), stream="HNN")
     assert load_study(path).fingerprint() != before
+
+
+def test_a_study_varies_the_joint_reach_that_each_samples_model_is_built_with(tmp_path, small_structure, monkeypatch):
+    # [inputs.structure] max_joint_m: the widest mortar joint two units are joined across, a modelling
+    # input like the tape's; each sample's simulation geometry is computed with its draw
+    import calib_masonry.simulation.run as simulation_run
+    from calib_masonry.study.sample import run_sample
+
+    text = (
+        f'[study]\nname = "reach"\nstructure = "{small_structure}"\n[sampling]\nmethod = "lhs"\nn = 3\n'
+        "[inputs.structure]\nmax_joint_m = { choices = [0.04, 0.06, 0.1] }\n[simulate]\npga_g = [0.1]\nbullet = false\n"
+    )
+    study = load_study(_study(tmp_path, text))
+    seen = []
+
+    def simulate(geometry, load, settings, **kw):  # a stand-in: only the geometry handed on is tested
+        seen.append(geometry.max_gap_m)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(simulation_run, "simulate", simulate)
+    drawn = []
+    for sample in samples(study):
+        drawn.append(sample.values["structure.max_joint_m"])
+        assert run_sample(study, sample)["status"] != "ok"
+    assert sorted(drawn) == [0.04, 0.06, 0.1] and seen == drawn

@@ -25,6 +25,9 @@ simulation every sample runs::
     [inputs.trace]
     vertices = { choices = [4, 5, 6, 8] }  # or target_dice = { range = [0.95, 0.99] }
 
+    [inputs.structure]
+    max_joint_m = { range = [0.05, 0.08] } # the widest mortar joint two units are joined across
+
     [inputs.material]       # any key of a [material] table, about the structure's value (or the defaults)
     friction = { range = [0.5, 0.8] }
     tensile_strength_mpa = { sigma = 0.05 }
@@ -83,6 +86,7 @@ __all__ = [
 WALL_FIELDS = ("width_m", "height_m", "theta_deg", "thickness_m")
 MASK_FIELDS = ("dilate_px",)
 TRACE_FIELDS = ("vertices", "target_dice")
+STRUCTURE_FIELDS = ("max_joint_m",)  # [inputs.structure]: the model's own settings that may vary
 # generator parameters of `synth` a truth sweep may vary: table -> fields
 SWEEP_FIELDS = {
     "synthetic": (
@@ -379,6 +383,21 @@ def parse_study(data: dict, path: Path) -> Study:
                     if isinstance(x, (int, float)) and math.isfinite(x):
                         material_from_table({**dict(spec.material), k: x}, f"{path}: [inputs.material] {k}")
                 inputs.append(inp)
+        elif group == "structure":
+            from ..simulation.scene import MAX_GAP_M
+            from ..spec import MAX_JOINT_M, MIN_JOINT_M
+
+            _unknown(path, "[inputs.structure]", table, STRUCTURE_FIELDS)
+            for k, v in table.items():
+                inp = _law(path, f"structure.{k}", v, mean=spec.max_joint_m or MAX_GAP_M)
+                bounds = [x for x in (inp.choices or (inp.low, inp.high)) if math.isfinite(x)]
+                bad = [x for x in bounds if not MIN_JOINT_M <= x <= MAX_JOINT_M]
+                if bad:
+                    raise InputError(
+                        f"{path}: [inputs.structure] {k}: {bad} out of range ({MIN_JOINT_M:g}..{MAX_JOINT_M:g} m: "
+                        "the widest mortar joint two units are joined across)"
+                    )
+                inputs.append(inp)
         elif group == "trace":
             _unknown(path, "[inputs.trace]", table, TRACE_FIELDS)
             for k, v in table.items():
@@ -396,7 +415,9 @@ def parse_study(data: dict, path: Path) -> Study:
         else:
             targets = list(walls) if group == "every_wall" else [group]
             if group not in walls and group != "every_wall":
-                close = difflib.get_close_matches(group, [*walls, "every_wall", "mask", "trace", "material"], n=1)
+                close = difflib.get_close_matches(
+                    group, [*walls, "every_wall", "mask", "trace", "material", "structure"], n=1
+                )
                 raise InputError(
                     f"{path}: [inputs.{group}]: '{spec.name}' has no wall '{group}'"
                     + (f"; did you mean {close[0]}?" if close else f"; its walls are {', '.join(walls)}")

@@ -210,7 +210,10 @@ def _varied(spec, study: Study, values: dict, source: Path | None, masks: dict |
         w = replace(w, **changes)
         walls.append(w)
         keys[w.name] = (key, w.vertices, w.target_dice, bool(w.refine))
-    return spec.with_walls(tuple(walls)), keys, drawn
+    spec = spec.with_walls(tuple(walls))
+    if "structure.max_joint_m" in values:
+        spec = replace(spec, max_joint_m=float(values["structure.max_joint_m"]))
+    return spec, keys, drawn
 
 
 def build_outputs(result) -> dict:

@@ -342,14 +342,13 @@ def _closed_footprint(model_dir: Path):
     return None
 
 
-def _model_max_joint(model_dir: Path) -> float | None:
+def _model_max_joint(model_dir: Path, summary: dict | None = None) -> float | None:
     """The widest joint a model folder was built with where it is not the default (its summary's
-    ``max_joint_m``), else None."""
-    if (model_dir / "summary.json").is_file():
-        value = read_json(model_dir / "summary.json").get("max_joint_m")
-        if value is not None and float(value) != MAX_GAP_M:
-            return float(value)
-    return None
+    ``max_joint_m``; ``summary``: that file's contents, where already read), else None."""
+    if summary is None and (model_dir / "summary.json").is_file():
+        summary = read_json(model_dir / "summary.json")
+    value = (summary or {}).get("max_joint_m")
+    return float(value) if value is not None and float(value) != MAX_GAP_M else None
 
 
 def joint_width(model: Structure3D | None) -> float:
@@ -525,9 +524,10 @@ def geometry_for_model(
     ``max_joint_m``, else the default)."""
     model_dir = checked_model_dir(model_dir)
     raw = (model_dir / "bricks.json").read_bytes()
-    closed = _closed_footprint(model_dir)
+    summary = read_json(model_dir / "summary.json") if (model_dir / "summary.json").is_file() else {}
+    closed = summary.get("closed_footprint")  # as _closed_footprint, from the one reading
     if max_gap_m is None:
-        max_gap_m = _model_max_joint(model_dir) or MAX_GAP_M
+        max_gap_m = _model_max_joint(model_dir, summary) or MAX_GAP_M
     stored = _load_geometry(model_dir / GEOMETRY_FILE, _geometry_key(raw, closed, max_gap_m, mortar_fill))
     if stored is not None:
         return stored, True

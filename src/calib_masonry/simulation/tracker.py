@@ -237,50 +237,35 @@ class CrackTracker:
                 if self.beam_body is not None:
                     self.beam_motion = self._beam_motion()
                 return release
+            h = self.check_interval_s
             out: list[np.ndarray] = []
-            peak = self._checks_until(time_s, g, positions, rotations, plate, out, None)
-            if through_s is not None:
-                peak = self._checks_until(through_s, g, positions, rotations, plate, out, peak)
+            peak = None
+            for until in (time_s,) if through_s is None else (time_s, through_s):
+                last = int(np.floor((float(until) - self.t0) / h + 1e-6))
+                checked = False
+                while self._next_check <= last:
+                    # the check's time from the ground's start, the same number at any frame rate:
+                    # an absolute time (t0 + k h) is rounded by t0, which the frame rate sets (the
+                    # warm-up's whole frames: 0.48 s at 25 fps, 0.50 s at 50), and the vibration's
+                    # steps and the record's samples read at it differed in their last bits: one
+                    # joint of Stylite's (seed 2, 0.95 g) cracked at 25 fps and not at 50, and the
+                    # tower fell at one only
+                    tk = self._next_check * h
+                    self.checking_s = tk
+                    out.append(self._check(tk, record_load(self.ground_motion, tk, g), positions, rotations, plate))
+                    peak = self.max_utilisation if peak is None else max(peak, self.max_utilisation)
+                    self._next_check += 1
+                    checked = True
+                if self.elastic is not None and checked and self.record_vibration:
+                    if self._u_static is None:  # the first check: the equilibrium under the weight
+                        self._u_static = self.elastic.u.copy()
+                    u = (self.elastic.u - self._u_static).reshape(-1, 6).astype(np.float32)
+                    self.frame_u.append((float(until) - self.t0, u))
             if peak is not None:
                 self.max_utilisation = peak  # the largest of this frame's checks
             return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
         finally:
             self.seconds += time.perf_counter() - t
-
-    def _checks_until(
-        self,
-        time_s: float,
-        g: np.ndarray,
-        positions: np.ndarray,
-        rotations: np.ndarray,
-        plate: np.ndarray,
-        out: list[np.ndarray],
-        peak: float | None,
-    ) -> float | None:
-        """:meth:`step`'s checks on the grid up to ``time_s`` (the run's clock) not made yet: their
-        releases appended to ``out``, the vibration at ``time_s`` recorded where asked; returns the
-        largest utilisation of these checks and ``peak`` (None: no check)."""
-        h = self.check_interval_s
-        last = int(np.floor((float(time_s) - self.t0) / h + 1e-6))
-        checked = False
-        while self._next_check <= last:
-            # the check's time from the ground's start, the same number at any frame rate: an
-            # absolute time (t0 + k h) is rounded by t0, which the frame rate sets (the warm-up's
-            # whole frames: 0.48 s at 25 fps, 0.50 s at 50), and the vibration's steps and the
-            # record's samples read at it differed in their last bits: one joint of Stylite's
-            # (seed 2, 0.95 g) cracked at 25 fps and not at 50, and the tower fell at one only
-            tk = self._next_check * h
-            self.checking_s = tk
-            out.append(self._check(tk, record_load(self.ground_motion, tk, g), positions, rotations, plate))
-            peak = self.max_utilisation if peak is None else max(peak, self.max_utilisation)
-            self._next_check += 1
-            checked = True
-        if self.elastic is not None and checked and self.record_vibration:
-            if self._u_static is None:  # the first check: the equilibrium under the weight
-                self._u_static = self.elastic.u.copy()
-            u = (self.elastic.u - self._u_static).reshape(-1, 6).astype(np.float32)
-            self.frame_u.append((float(time_s) - self.t0, u))
-        return peak
 
     def activity(self) -> str:
         """What the check under way is doing, for the progress line of a run that waits for it (a

@@ -284,6 +284,77 @@ def test_a_mortar_bed_wider_than_the_default_joint_is_joined_where_the_structure
     assert load_structure(again).max_joint_m == 0.1
 
 
+def _courses_mask(path: Path, margin_m: float = 0.0, shift_up_m: float = 0.0, px: int = 200) -> None:
+    """Two courses of three bricks 0.39 x 0.18 m with 1 cm joints (a wall 1.21 x 0.39 m at 200
+    px/m), drawn inside a canvas ``margin_m`` larger on every side, or lifted ``shift_up_m`` off the
+    canvas's bottom (its top course cut by as much)."""
+    from PIL import Image
+
+    rows, cols = int(round((0.39 + 2 * margin_m) * px)), int(round((1.21 + 2 * margin_m) * px))
+    mask = np.zeros((rows, cols), np.uint8)
+    for z0 in (0.0, 0.20):
+        for x0 in (0.01, 0.41, 0.81):
+            r1 = rows - int(round((z0 + margin_m + shift_up_m) * px))
+            c0 = int(round((x0 + margin_m) * px))
+            mask[max(r1 - int(round(0.18 * px)), 0) : r1, c0 : c0 + int(round(0.39 * px))] = 255
+    Image.fromarray(mask).save(path)
+
+
+def test_a_mask_drawn_inside_a_larger_canvas_is_warned_of(tmp_path):
+    # the canvas 0.1 m larger than the wall on every side, width_m and height_m the canvas's: the
+    # wall is built 1.2 m wide where 1.41 m was given, its base 0.1 m off the mask's bottom, and
+    # the build says so, naming the margins and the size built; drawn to its edges, no word
+    import warnings
+
+    from calib_masonry.pipeline import build
+
+    for margin in (0.1, 0.0):
+        _courses_mask(tmp_path / f"m{margin}.png", margin_m=margin)
+        (tmp_path / f"s{margin}.toml").write_text(
+            f'[structure]\nname = "c"\nthickness_m = 0.2\nvertices = 4\n[[wall]]\nname = "w"\nmask = "m{margin}.png"\n'
+            f"width_m = {1.21 + 2 * margin:.2f}\nheight_m = {0.39 + 2 * margin:.2f}\n"
+        )
+        spec = load_structure(tmp_path / f"s{margin}.toml")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = build(spec, progress=False)
+        said = [str(w.message) for w in caught if "units stop" in str(w.message)]
+        if margin:
+            assert len(said) == 1 and "0.100 m above its base" in said[0] and "built 1.190 x 0.380 m" in said[0]
+            assert "crop the mask" in said[0] and "\n" not in said[0]
+        else:
+            assert said == []
+        z = np.concatenate([b.solid.vertices[:, 2] for b in result.structure.bricks])
+        assert z.min() == pytest.approx(margin, abs=0.006)
+
+
+def test_a_wall_whose_units_start_above_the_footing_is_refused(tmp_path, capsys):
+    # an L of two walls, the second's units lifted 0.1 m off its mask's bottom: nothing joins it
+    # to the footing (the first wall's base), and it would drop under gravity alone: exit 2, one
+    # line naming the wall, its mask and the reach, nothing written; lifted 3 cm (within the
+    # reach of 6 cm), it builds
+    from calib_masonry.cli import main
+
+    _courses_mask(tmp_path / "a.png")
+    for lift in (0.1, 0.03):
+        _courses_mask(tmp_path / "b.png", shift_up_m=lift)
+        (tmp_path / "l.toml").write_text(
+            '[structure]\nname = "l"\nthickness_m = 0.2\nvertices = 4\nclosed = false\n'
+            '[[wall]]\nname = "a"\nmask = "a.png"\nwidth_m = 1.21\nheight_m = 0.39\ntheta_deg = 0\n'
+            '[[wall]]\nname = "b"\nmask = "b.png"\nwidth_m = 1.21\nheight_m = 0.39\ntheta_deg = 90\n'
+        )
+        out = tmp_path / f"out{lift}"
+        capsys.readouterr()
+        r = main(["build", str(tmp_path / "l.toml"), "--out", str(out), "--no-figures"])
+        err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        if lift == 0.1:
+            assert r == 2 and not out.exists() and len(err) == 1, err
+            assert "wall 'b' mask " in err[0] and "b.png" in err[0] and "0.100 m above the footing" in err[0]
+            assert "reach of 0.06 m" in err[0] and "max_joint_m" in err[0]
+        else:
+            assert r == 0 and out.exists(), err
+
+
 @pytest.mark.parametrize("value", [0.0, 0.5, -0.01])
 def test_an_impossible_max_joint_is_refused_naming_the_field(tmp_path, value):
     from calib_masonry.errors import InputError

@@ -584,9 +584,9 @@ def test_labelme_round_trip_edits_one_stone_and_builds_it(tmp_path):
     from calib_masonry.wall2d.trace import TraceConfig, trace_mask
 
     mask = np.zeros((200, 300), dtype=bool)
-    for r0 in (10, 110):
-        for c0 in (10, 160):
-            mask[r0 : r0 + 80, c0 : c0 + 130] = True
+    for r0 in (20, 120):
+        for c0 in (0, 155):
+            mask[r0 : r0 + 80, c0 : c0 + 145] = True
     traced = trace_mask(mask, TraceConfig(vertices=4))
     pieces = [b.vertices_xy for b in traced.bricks]
     path = tmp_path / "wall1.json"
@@ -607,9 +607,9 @@ def test_labelme_round_trip_edits_one_stone_and_builds_it(tmp_path):
     built = cm.build(cm.load_structure(tmp_path / "structure.toml"))
     areas = sorted(b.volume / 0.2 for b in built.structure.bricks)
     assert len(areas) == 4
-    # three stones of 1.3 x 0.8 m and the edited one of 0.65 x 0.8 m (to a pixel at 100 px/m)
+    # three stones of 1.45 x 0.8 m and the edited one of 0.65 x 0.8 m (to a pixel at 100 px/m)
     assert areas[0] == pytest.approx(0.65 * 0.8, rel=0.05)
-    assert all(a == pytest.approx(1.3 * 0.8, rel=0.05) for a in areas[1:])
+    assert all(a == pytest.approx(1.45 * 0.8, rel=0.05) for a in areas[1:])
 
 
 def test_labelme_files_with_wrong_labels_or_shapes_are_one_line_errors(tmp_path):

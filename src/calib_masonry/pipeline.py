@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ._threads import background_process, cpu_count, thread_imap
-from .build3d.assemble import Structure3D, WallPolygons, assemble
+from .build3d.assemble import MAX_GAP_M, Structure3D, WallPolygons, assemble
 from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
@@ -221,9 +221,8 @@ def trace_wall(
     else:
         result = trace_mask(mask, config, progress=progress)
     if not result.bricks:
-        source = f"mask {wall.mask}" if wall.mask is not None else f"photo {wall.image}"
         raise InputError(
-            f"wall '{wall.name}' {source}: no bricks found; "
+            f"wall '{wall.name}' {_source(wall)}: no bricks found; "
             "bricks must be white on black mortar (or give a mask instead of the photo)"
         )
     if labels is None and wall.mask is not None:
@@ -246,6 +245,57 @@ def coarse_trace_warning(wall: WallSpec, trace: TraceResult) -> str | None:
         f"wall '{wall.name}': its polygons fit its {len(trace.bricks)} pieces at a mean Dice of "
         f"{trace.mean_dice:.2f} ({how}): too few vertices to model these units; trace with more "
         "(vertices = 8, or target_dice = 0.98, in its [[wall]] or [structure]) and build again"
+    )
+
+
+def unit_margins(polygons_m, width_m: float, height_m: float) -> tuple[float, float, float, float]:
+    """How far a wall's units stay from its edges (m): left, right, below (above its base) and
+    above (under its top), from its polygons in the wall's frame (x along it, z up)."""
+    pts = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in polygons_m])
+    (x0, z0), (x1, z1) = pts.min(axis=0), pts.max(axis=0)
+    return float(x0), float(width_m - x1), float(z0), float(height_m - z1)
+
+
+def _source(wall: WallSpec) -> str:
+    return f"mask {wall.mask}" if wall.mask is not None else f"photo {wall.image}"
+
+
+def _crop_advice(wall: WallSpec) -> str:
+    if wall.mask is not None:
+        return "crop the mask to the wall (its bottom row the wall's base, its first and last columns the wall's ends)"
+    return "check its outline and its pieces (the LabelMe file rectify writes beside its orthophoto) and pass them back"
+
+
+def margin_warning(wall: WallSpec, margins: tuple[float, float, float, float], reach_m: float) -> str | None:
+    """The warning for a wall whose units stop short of its ends or of its base by more than the
+    joints reach (None: fine): a mask drawn inside a larger canvas builds a smaller wall than
+    ``width_m`` x ``height_m``, its ends apart from its neighbours' and its base off the footing.
+    The top is not asked: a last course that does not fill the height is common and harmless."""
+    left, right, below, above = margins
+    if max(left, right, below) <= reach_m:
+        return None
+    return (
+        f"wall '{wall.name}' {_source(wall)}: its units stop {left:.3f} m from its left end, {right:.3f} m from its "
+        f"right and {below:.3f} m above its base, beyond the joints' reach ({reach_m:g} m): it is built "
+        f"{wall.width_m - left - right:.3f} x {wall.height_m - below - above:.3f} m, not {wall.width_m:g} x "
+        f"{wall.height_m:g} m, with its ends or base unjoined; {_crop_advice(wall)}"
+    )
+
+
+def check_units_on_the_footing(walls: tuple[WallSpec, ...], margins: list[tuple], reach_m: float) -> None:
+    """Refuse a structure in which a wall's lowest unit lies higher above the footing (the lowest
+    unit of all its walls: every wall stands on it) than the joints reach: nothing would carry
+    that wall, which would drop onto the footing under gravity alone."""
+    below = np.array([m[2] for m in margins])
+    k = int(np.argmax(below - below.min()))
+    if below[k] - below.min() <= reach_m:
+        return
+    lowest = walls[int(np.argmin(below))]
+    wall = walls[k]
+    raise InputError(
+        f"wall '{wall.name}' {_source(wall)}: its lowest unit starts {below[k] - below.min():.3f} m above the "
+        f"footing (the bottom of wall '{lowest.name}'), beyond the joints' reach of {reach_m:g} m: nothing would "
+        f"carry it; {_crop_advice(wall)} (or raise max_joint_m in [structure])"
     )
 
 
@@ -355,6 +405,13 @@ def build(
             )
         )
     seconds["scale"] = time.perf_counter() - t0
+    reach = MAX_GAP_M if spec.max_joint_m is None else spec.max_joint_m
+    margins = [unit_margins(wp.polygons_m, w.width_m, w.height_m) for wp, w in zip(walls, spec.walls)]
+    check_units_on_the_footing(spec.walls, margins, reach)
+    for wall, m in zip(spec.walls, margins):
+        message = margin_warning(wall, m, reach)
+        if message:
+            warn(message)
 
     t0 = time.perf_counter()
     structure = assemble(spec.footprint, walls, name=spec.name)

@@ -12,7 +12,14 @@ from .bond import CornerTolerances, corner_clip_planes, find_end_faces
 from .extrude import Polyhedron, clip_plan, polygon_area, prism
 from .place import Corner, Footprint, WallFrame, _footprint, closure_gap, corners, wall_frames
 
-__all__ = ["WallPolygons", "Brick", "Structure3D", "assemble", "simple_polygon", "brick_solid"]
+__all__ = ["MAX_GAP_M", "WallPolygons", "Brick", "Structure3D", "assemble", "simple_polygon", "brick_solid"]
+
+
+#: The widest mortar joint (m) two units are joined across by default (a structure file's
+#: ``max_joint_m`` sets its own): a gap wider than this between two neighbours is no joint. The
+#: default of every function that computes or looks up a model's simulation geometry, and of the
+#: build's checks that units reach their wall's ends and base.
+MAX_GAP_M = 0.06
 
 
 @dataclass(frozen=True)
@@ -53,7 +60,7 @@ class Structure3D:
     removed: tuple[tuple[int, ...], ...]  # per wall: labels of corner end-face pieces removed
     closure_gap_xy: np.ndarray = field(default_factory=lambda: np.zeros(2))
     # the widest mortar joint (m) two units are joined across (the structure file's max_joint_m);
-    # None: the simulation's default (simulation/scene.py MAX_GAP_M)
+    # None: the default, MAX_GAP_M
     max_joint_m: float | None = None
 
     @property

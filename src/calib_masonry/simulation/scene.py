@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import shapely
 
-from ..build3d.assemble import Brick, brick_solid
+from ..build3d.assemble import MAX_GAP_M, Brick, brick_solid
 from ..build3d.contacts import (
     OUTLINE_POINTS,
     ContactPatch,
@@ -906,12 +906,6 @@ def joint_coverage(
         return np.array([np.nan, np.nan, np.nan, 0.0, 0.0])
     r = np.array(ratios)
     return np.array([np.median(r), np.percentile(r, 10), joint_total / shared_total, len(r), float(np.sum(r == 0))])
-
-
-#: The widest mortar joint (m) two bricks are joined across: a gap wider than this between two
-#: neighbours is no joint. The default of every function that computes or looks up a model's
-#: simulation geometry.
-MAX_GAP_M = 0.06
 
 
 def scene_geometry(

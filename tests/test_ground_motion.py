@@ -99,6 +99,29 @@ def test_two_column_record_shakes_along_x_and_three_columns_along_both(tmp_path)
     assert in_ms2.pga == pytest.approx(m2.pga / G, rel=1e-9)
 
 
+def test_a_record_with_decimal_commas_or_in_gal_reads_as_the_same_motion(tmp_path):
+    """A spreadsheet in a European locale writes ``0,005;0,012`` (semicolons between the columns,
+    commas for the decimals): read as the record it is, where it was refused as four columns. A
+    record in cm/s2 (gal, as ESM, ITACA and K-NET give them) with ``--units cm/s2``, which the
+    reader knew but the command line and the simulation settings refused."""
+    from calib_masonry.simulation.run import SimulationConfig
+
+    t = np.arange(0, 4, 0.005)
+    a = 0.2 * np.sin(np.pi * t / t[-1]) ** 2 * np.sin(2 * np.pi * 1.5 * t)
+    dots = tmp_path / "dots.csv"
+    dots.write_text("\n".join(f"{x:.3f},{y:.6f},{-y:.6f}" for x, y in zip(t, a)))
+    commas = tmp_path / "commas.csv"
+    commas.write_text("Zeit;ax;ay\n" + "\n".join(f"{x:.3f};{y:.6f};{-y:.6f}".replace(".", ",") for x, y in zip(t, a)))
+    m, c = read_accelerogram(dots), read_accelerogram(commas)
+    assert c.dt == m.dt and np.array_equal(c.displacement, m.displacement)
+    gal = tmp_path / "gal.csv"
+    gal.write_text("\n".join(f"{x:.3f},{100 * G * y:.6f}" for x, y in zip(t, a)))
+    assert read_accelerogram(gal, units="cm/s2").pga == pytest.approx(read_accelerogram(dots).pga, rel=1e-5)
+    assert SimulationConfig(accelerogram=gal, record_units="cm/s2").record_units == "cm/s2"
+    with pytest.raises(InputError, match=r"gal.csv.*peak is .* g read in g.*--units m/s2 or --units cm/s2"):
+        read_accelerogram(gal)
+
+
 def test_peer_at2_record(tmp_path):
     rng = np.random.default_rng(0)
     values = 0.1 * rng.standard_normal(203)

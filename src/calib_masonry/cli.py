@@ -746,8 +746,8 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument(
         "--units",
         default=None,
-        choices=("g", "m/s2"),
-        help="of a CSV --accelerogram (default g; .AT2 and ESM name theirs)",
+        choices=("g", "m/s2", "cm/s2"),
+        help="of a CSV --accelerogram (default g; cm/s2 is gal; .AT2 and ESM name theirs)",
     )
     m.add_argument("--fps", type=int, default=None, help="frames per second (default: the tested settings, 25)")
     m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")

@@ -375,11 +375,14 @@ def _is_number(text: str) -> bool:
 
 
 def _parse_csv(path: Path, lines: list[str]) -> tuple[np.ndarray, float]:
-    """``time, acceleration[, acceleration_y]`` per line (comma, semicolon, tab or spaces), header
-    lines allowed before the numbers; every problem names its line."""
+    """``time, acceleration[, acceleration_y]`` per line (comma, semicolon, tab or spaces; where
+    semicolons part the columns, a comma is the decimal mark, as a spreadsheet in a European locale
+    writes ``0,01;-0,0123``), header lines allowed before the numbers; every problem names its line."""
     rows: list[list[float]] = []
     numbers: list[int] = []
     for number, line in enumerate(lines, start=1):
+        if ";" in line:  # semicolons between the columns: a comma is the decimal mark (a European spreadsheet's CSV)
+            line = line.replace(",", ".")
         parts = [p for p in line.replace(";", ",").replace("\t", ",").replace(" ", ",").split(",") if p.strip()]
         if not parts:
             continue
@@ -473,15 +476,15 @@ def read_accelerogram(
     path: str | Path, *, units: str | None = None, highpass_hz: float = 0.1, path_y: str | Path | None = None
 ) -> GroundMotion:
     """A recorded ground motion: a CSV of ``time, acceleration[, acceleration_y]`` (a header allowed;
-    ``units`` "g" by default, or "m/s2"), a PEER NGA ``.AT2`` file or an ESM / ITACA ASCII file
+    ``units`` "g" by default, "m/s2" or "cm/s2"), a PEER NGA ``.AT2`` file or an ESM / ITACA ASCII file
     (units from their headers). ``path_y``: a second file of one component, the motion along Y
     (the other horizontal component of the same record: PEER and ESM give one file each); its time
     step must be the first's, and the record ends with the shorter. NaN, inf, a time that does not
     increase or an irregular time step is refused with its line number. The record is applied as
     recorded (see :func:`calib_masonry.simulation.run.motion_for` for scaling it to a PGA)."""
     path = Path(path)
-    if units is not None and units not in ("g", "m/s2"):
-        raise InputError(f"--units {units!r}: choose g or m/s2")
+    if units is not None and units not in RECORD_UNITS:
+        raise InputError(f"--units {units!r}: choose {', '.join(RECORD_UNITS)}")
     given = units
     acc, dt, units = _read_record(path, given)
     if dt > MAX_RECORD_DT_S:
@@ -512,12 +515,12 @@ def read_accelerogram(
         name = f"{path.name} + {path_y.name}"
     peak_g = float(np.max(np.abs(acc))) / G
     if peak_g > MAX_PGA_G:
-        other = "m/s2" if units == "g" else "g"
+        other = " or ".join(f"--units {u}" for u in RECORD_UNITS if RECORD_UNITS[u] < RECORD_UNITS[units])
         raise _record_error(
             path_y if path_y is not None and np.abs(acc[:, 1]).max() > np.abs(acc[:, 0]).max() else path,
             f"its peak is {peak_g:.3g} g read in {units}, above any recorded ground motion (the bound is "
-            f"{MAX_PGA_G:g} g); if the record is in {other} (or cm/s2: divide by 100 for m/s2), pass --units "
-            f"{other}, or remove the row that is out of range",
+            f"{MAX_PGA_G:g} g); if the record is in smaller units, pass {other}, or remove the row that is out "
+            "of range",
         )
     if acc.shape[1] == 1:  # one horizontal component, along X
         acc = np.column_stack([acc[:, 0], np.zeros(len(acc))])

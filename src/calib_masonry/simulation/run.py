@@ -29,7 +29,7 @@ from ..build3d.assemble import Structure3D
 from ..build_folder import checked_model_dir, geometry_for_model, simulation_geometry
 from ..errors import InputError
 from ..io import check_output, staged_output, write_json
-from .ground_motion import MAX_PGA_G, G, GroundMotion, read_accelerogram, synthetic_motion
+from .ground_motion import MAX_PGA_G, RECORD_UNITS, G, GroundMotion, read_accelerogram, synthetic_motion
 from .joints import scene_joint_stiffness
 from .scene import (
     MASONRY,
@@ -79,7 +79,7 @@ class SimulationConfig:
     # a second file of the same record, its other horizontal component (along Y): PEER and ESM
     # give one file a component
     accelerogram_y: Path | None = None
-    record_units: str | None = None  # of a CSV record: "g" (default) or "m/s2"; .AT2 and ESM files name their own
+    record_units: str | None = None  # of a CSV record: "g" (default), "m/s2" or "cm/s2"; .AT2 and ESM files name theirs
     # two independent horizontal components, as a real earthquake has: with one, along X, the walls
     # parallel to X are loaded only in their plane and stand, so at most the other walls fall (the
     # paper example at 0.6 g, seed 0: 43 % of bricks moved with one component, 71-77 % with two)
@@ -115,8 +115,8 @@ class SimulationConfig:
             raise InputError(
                 f"--accelerogram-y {self.accelerogram_y}: the record's Y component alone; add --accelerogram with its X component"
             )
-        if self.record_units is not None and self.record_units not in ("g", "m/s2"):
-            raise InputError(f"--units {self.record_units!r}: choose g or m/s2")
+        if self.record_units is not None and self.record_units not in RECORD_UNITS:
+            raise InputError(f"--units {self.record_units!r}: choose {', '.join(RECORD_UNITS)}")
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise InputError(f"--duration {self.duration_s}: must be > 0 seconds")
         if self.components not in (1, 2):

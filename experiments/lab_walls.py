@@ -56,7 +56,8 @@ prints per test: sigma0 (the database's), the beam's stress, measured Vmax (the 
 directions), predicted, ratio, the bound of the wall rocking whole as a rigid body, N L / (2 H0)
 with N = sigma0 L t (the test's own scale: a measured peak far above it says the rig held the beam,
 far below it that the units or the mortar gave way first), mechanism (model) and failure type
-(test); under each wall the model's drift where its force first reaches half the measured Vmax
+(test; a wall whose drawing cannot be read or whose build or run is refused is printed as failed, with
+the last line of its error, and the others run on); under each wall the model's drift where its force first reaches half the measured Vmax
 beside the measured envelope's (envelopes/envelope_<unit>_<ref>.csv: the walls' stiffness), at the
 test's cracking onset Vcr beside its dcr, and at 95 % of the model's peak beside the test's drift
 at its peak; then per series the mean and the coefficient of variation of the ratios. With
@@ -517,6 +518,7 @@ def main() -> None:
         raise SystemExit(2)
     base = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="lab_walls_"))
     ratios: dict[str, list[float]] = {}
+    failed: dict[str, list[str]] = {}
     points: list[tuple] = []
     curves: list[tuple] = []
     print(
@@ -531,7 +533,12 @@ def main() -> None:
             continue
         folder = base / re.sub(r"[^A-Za-z0-9._-]", "_", t["unit"])
         done = folder / "shear" / "summary.json"
-        s = json.loads(done.read_text()) if args.reuse and done.is_file() else run(t, folder, args.boundary)
+        try:
+            s = json.loads(done.read_text()) if args.reuse and done.is_file() else run(t, folder, args.boundary)
+        except (RuntimeError, OSError, ValueError) as exc:  # one wall's failure does not stop the others
+            failed.setdefault(t["series"], []).append(t["unit"])
+            print(f"{t['unit']:>10}  failed: {str(exc).splitlines()[-1][:300]}", flush=True)
+            continue
         st = s["shear_test"]
         peak = st["peak_lateral_force_kn"]
         curve = model_curve(folder / "shear")
@@ -547,9 +554,11 @@ def main() -> None:
             flush=True,
         )
         print(f"{'':>10}  {stiffness_line(t, s, curve)}", flush=True)
-    for series, r in ratios.items():
-        r = np.array(r)
-        print(f"{series}: mean ratio {np.nanmean(r):.3f}, CoV {np.nanstd(r) / np.nanmean(r):.3f}, n = {len(r)}")
+    for series in {**ratios, **failed}:
+        r = np.array(ratios.get(series, []))
+        stats = f"mean ratio {np.nanmean(r):.3f}, CoV {np.nanstd(r) / np.nanmean(r):.3f}, " if r.size else ""
+        lost = failed.get(series, [])
+        print(f"{series}: {stats}n = {len(r)}" + (f"; failed {len(lost)}: {' '.join(lost)}" if lost else ""))
     if points:
         plot_walls(points, base / "lab_walls.png")
         plot_curves(curves, base / "lab_walls_curves.png")

@@ -439,6 +439,11 @@ BAD = {
     "no record file": ('[simulate]\npga_g = [0.1]\naccelerograms = ["gone.AT2"]\n', "gone.AT2: file not found"),
     "records and files": ('[simulate]\npga_g = [0.1]\nrecords = 2\naccelerograms = ["a.csv"]\n', "keep one"),
     "three components": ('[simulate]\npga_g = [0.1]\naccelerograms = [["a", "b", "c"]]\n', "give a file name, or"),
+    "record units": (
+        '[simulate]\npga_g = [0.1]\naccelerograms = ["a.csv"]\nunits = "gal"\n',
+        "units = 'gal': the units",
+    ),
+    "units without records": ('[simulate]\npga_g = [0.1]\nunits = "m/s2"\n', "without accelerograms"),
     "check interval 0": ("[simulate]\npga_g = [0.1]\ncheck_interval_s = 0\n", "check_interval_s = 0: must be > 0"),
     "check interval": ("[simulate]\npga_g = [0.1]\ncheck_interval_s = 0.5\n", "check_interval_s = 0.5: the joints'"),
     # 1e9 records listed 3e9 loads before the count was checked (killed, out of memory)
@@ -676,6 +681,24 @@ def test_a_study_runs_recorded_accelerograms_scaled_to_each_pga(tmp_path, small_
     before = study.fingerprint()
     _esm_file(tmp_path / "N.ASC", 60.0 * env * np.sin(2 * np.pi * 3 * t), stream="HNN")
     assert load_study(path).fingerprint() != before
+
+
+def test_a_study_reads_a_record_in_gal_with_its_units(tmp_path, small_structure):
+    # [simulate] units: a CSV record in cm/s2 (gal) was read in g: 150 gal as 150 g, refused with
+    # advice to pass --units, which a study file could not; now as simulate --units does
+    from calib_masonry.simulation.ground_motion import G
+    from calib_masonry.study.sample import _recorded
+
+    t = np.arange(0, 1.5, 0.005)
+    env = np.sin(np.pi * t / t[-1]) ** 2
+    (tmp_path / "gal.csv").write_text("\n".join(f"{x:.3f},{150 * e * np.sin(9 * x):.6f}" for x, e in zip(t, env)))
+    head = f'[study]\nname = "gal"\nstructure = "{small_structure}"\n[simulate]\npga_g = [0.2]\naccelerograms = ["gal.csv"]\n'
+    with pytest.raises(InputError, match=r"gal.csv.*peak is .* g read in g.*--units cm/s2"):
+        load_study(_study(tmp_path, head))
+    study = load_study(_study(tmp_path, head + 'units = "cm/s2"\n'))
+    assert study.simulate.record_units == "cm/s2"
+    as_recorded = _recorded(study.simulate.accelerograms[0], 0.2, units=study.simulate.record_units)
+    assert as_recorded.pga == pytest.approx(0.2 * G, rel=1e-9)
 
 
 def test_a_study_varies_the_joint_reach_that_each_samples_model_is_built_with(tmp_path, small_structure, monkeypatch):

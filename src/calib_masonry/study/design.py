@@ -43,6 +43,7 @@ simulation every sample runs::
     # accelerograms = ["RSN766_G02_000.AT2", ["E.ASC", "N.ASC"]]  # instead of records: recorded
     #                        # motions (a file, or its X and Y components), each scaled to every PGA
     #                        # and run for its whole length
+    # units = "cm/s2"        # of CSV accelerograms (g by default, "m/s2", "cm/s2")
     # pushover = true        # instead: the collapse multiplier
     # check_interval_s = 0.0025  # the joint model's check interval (default 0.005 s, simulate
     #                        # --check-interval): a fragility's median run again at half of it
@@ -170,6 +171,7 @@ class SimulateSpec:
     pga_g: tuple[float, ...] = ()
     records: int = 1
     accelerograms: tuple[tuple[Path, ...], ...] = ()
+    record_units: str | None = None  # of CSV accelerograms: "g" (None: the default), "m/s2" or "cm/s2"
     duration_s: float = 5.0
     pushover: bool = False
     direction_deg: float = 0.0
@@ -496,6 +498,7 @@ def parse_study(data: dict, path: Path) -> Study:
                 "pga_g",
                 "records",
                 "accelerograms",
+                "units",
                 "duration_s",
                 "pushover",
                 "direction_deg",
@@ -528,7 +531,8 @@ def parse_study(data: dict, path: Path) -> Study:
             )
         if pushover == bool(pga):
             raise InputError(f"{path}: [simulate]: give either pga_g = [...] or pushover = true")
-        accelerograms = _accelerograms(path, s)
+        units = _record_units(path, s)
+        accelerograms = _accelerograms(path, s, units)
         if accelerograms and pushover:
             raise InputError(f"{path}: [simulate]: give either accelerograms = [...] or pushover = true")
         records = _number(path, "[simulate] records", s.get("records", 1), positive=True, integer=True)
@@ -541,6 +545,7 @@ def parse_study(data: dict, path: Path) -> Study:
             pga_g=pga,
             records=records,
             accelerograms=accelerograms,
+            record_units=units,
             duration_s=_number(path, "[simulate] duration_s", s.get("duration_s", 5.0), positive=True),
             pushover=pushover,
             direction_deg=_number(path, "[simulate] direction_deg", s.get("direction_deg", 0.0)),
@@ -630,10 +635,25 @@ def samples(study: Study) -> list[Sample]:
     return out
 
 
-def _accelerograms(path: Path, s: dict) -> tuple[tuple[Path, ...], ...]:
+def _record_units(path: Path, s: dict) -> str | None:
+    """``[simulate] units``: of CSV accelerograms (simulate's ``--units``; .AT2 and ESM files name
+    theirs), None where not given (g)."""
+    from ..simulation.ground_motion import RECORD_UNITS
+
+    units = s.get("units")
+    if units is not None and units not in RECORD_UNITS:
+        raise InputError(
+            f"{path}: [simulate] units = {units!r}: the units of CSV accelerograms; choose {', '.join(RECORD_UNITS)}"
+        )
+    if units is not None and not s.get("accelerograms"):
+        raise InputError(f"{path}: [simulate] units = {units!r} without accelerograms: give both, or drop units")
+    return units
+
+
+def _accelerograms(path: Path, s: dict, units: str | None = None) -> tuple[tuple[Path, ...], ...]:
     """``[simulate] accelerograms``: each entry a file, or a list of two (the X and Y components),
-    relative to the study file; every record read once here, so that a bad one is refused before
-    any sample runs."""
+    relative to the study file, in ``units`` where they are CSV files; every record read once here,
+    so that a bad one is refused before any sample runs."""
     from ..simulation.ground_motion import read_accelerogram
 
     given = s.get("accelerograms", [])
@@ -657,7 +677,7 @@ def _accelerograms(path: Path, s: dict) -> tuple[tuple[Path, ...], ...]:
             )
         paths = tuple((path.parent / f).resolve() for f in files)
         try:
-            read_accelerogram(paths[0], path_y=paths[1] if len(paths) == 2 else None)
+            read_accelerogram(paths[0], units=units, path_y=paths[1] if len(paths) == 2 else None)
         except InputError as exc:
             raise InputError(f"{path}: [simulate] accelerograms: {exc}") from None
         out.append(paths)

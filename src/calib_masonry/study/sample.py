@@ -359,7 +359,9 @@ def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -
             rate_g_per_s=sim.pushover_rate_g_per_s, direction_deg=sim.direction_deg, max_g=sim.pushover_max_g
         )
     elif sim.accelerograms:
-        load = _recorded(sim.accelerograms[sample.load["record"]], sample.load["pga_g"], sim.direction_deg)
+        load = _recorded(
+            sim.accelerograms[sample.load["record"]], sample.load["pga_g"], sim.direction_deg, sim.record_units
+        )
     else:
         load = synthetic_motion(
             sample.load["pga_g"],
@@ -370,20 +372,21 @@ def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -
     return geometry, load, _material(sample, material)
 
 
-_RECORDS: dict[tuple[Path, ...], object] = {}  # a worker's records, read once
+_RECORDS: dict[tuple[tuple[Path, ...], str | None], object] = {}  # a worker's records (and units), read once
 
 
-def _recorded(files: tuple[Path, ...], pga_g: float, direction_deg: float = 0.0):
+def _recorded(files: tuple[Path, ...], pga_g: float, direction_deg: float = 0.0, units: str | None = None):
     """The recorded motion of ``files`` (one file, or its X and Y components) scaled so that its peak
     is ``pga_g``, as ``simulate --accelerogram ... --pga`` scales it; a one-component record (one
     file of one component) along ``direction_deg`` from global X, as a study's synthetic motions."""
     from ..simulation.ground_motion import read_accelerogram
 
-    if files not in _RECORDS:
+    key = (files, units)
+    if key not in _RECORDS:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # said once, when the study file was read
-            _RECORDS[files] = read_accelerogram(files[0], path_y=files[1] if len(files) == 2 else None)
-    record = _RECORDS[files]
+            _RECORDS[key] = read_accelerogram(files[0], units=units, path_y=files[1] if len(files) == 2 else None)
+    record = _RECORDS[key]
     if direction_deg and not record.displacement[:, 1].any():
         record = record.along(direction_deg)
     return record.at_pga(pga_g)

@@ -612,6 +612,63 @@ def test_labelme_round_trip_edits_one_stone_and_builds_it(tmp_path):
     assert all(a == pytest.approx(1.45 * 0.8, rel=0.05) for a in areas[1:])
 
 
+def _mask_shape(label: str, region: np.ndarray) -> dict:
+    """A LabelMe mask shape as its AI tools write it: the box's first and last pixel and a base64 PNG
+    of the box."""
+    import base64
+    import io
+
+    from PIL import Image
+
+    rows, cols = np.nonzero(region)
+    y1, y2, x1, x2 = rows.min(), rows.max(), cols.min(), cols.max()
+    buf = io.BytesIO()
+    Image.fromarray(region[y1 : y2 + 1, x1 : x2 + 1].astype(np.uint8)).save(buf, format="PNG")
+    return {
+        "label": label,
+        "points": [[float(x1), float(y1)], [float(x2), float(y2)]],
+        "shape_type": "mask",
+        "mask": base64.b64encode(buf.getvalue()).decode(),
+        "group_id": None,
+        "flags": {},
+    }
+
+
+def test_labelme_mask_shapes_are_read_as_the_pieces_they_fill(tmp_path):
+    """Stones marked with LabelMe's AI tools are mask shapes (a box and a PNG of it), which were
+    refused ("draw ... as polygons or rectangles"): each is read as the outline of its pixels, so
+    that the wall built from them has every stone pixel for pixel, irregular ones included."""
+    from calib_masonry.labelme import labelme_labels, labelme_mask, read_labelme
+
+    yy, xx = np.mgrid[0:200, 0:300]
+    stones = [
+        (yy >= 20) & (yy < 100) & (xx < 145),  # a block to the wall's left end
+        ((yy - 60) / 38.0) ** 2 + ((xx - 225) / 70.0) ** 2 <= 1.0,  # a rounded stone
+        (yy >= 110) & (xx < 150) & (xx + yy > 130),  # a block with a corner cut off
+        (yy >= 115) & (xx >= 158) & (xx < 300) & ((xx - 230) ** 2 + (yy - 160) ** 2 > 15**2),  # one with a hole
+    ]
+    doc = {"version": "5.5.0", "flags": {}, "imagePath": "rectified.png", "imageData": None}
+    doc.update(imageHeight=200, imageWidth=300, shapes=[_mask_shape("stone", m) for m in stones])
+    path = tmp_path / "wall1.json"
+    path.write_text(json.dumps(doc))
+    back = read_labelme(path)
+    labels = labelme_labels(back)
+    hole = (xx - 230) ** 2 + (yy - 160) ** 2 <= 15**2
+    for k, m in enumerate([*stones[:3], stones[3] | hole], start=1):  # a piece is its outline: holes filled
+        assert np.array_equal(labels == k, m)
+    assert np.array_equal(labelme_mask(back), labels > 0)  # drawn apart, they stay as drawn
+    (tmp_path / "structure.toml").write_text(
+        '[structure]\nname = "ai"\nthickness_m = 0.2\nvertices = 8\nclosed = false\n'
+        '[[wall]]\nname = "wall1"\nmask = "wall1.json"\nwidth_m = 3.0\nheight_m = 2.0\ntheta_deg = 0\n'
+    )
+    built = cm.build(cm.load_structure(tmp_path / "structure.toml"))
+    assert len(built.structure.bricks) == 4
+    doc["shapes"][0]["mask"] = "not base64!"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match=r"shape 1 \('stone'\): its 'mask' is not a base64 PNG"):
+        read_labelme(path)
+
+
 def test_labelme_files_with_wrong_labels_or_shapes_are_one_line_errors(tmp_path):
     from calib_masonry.labelme import read_labelme, read_occluders
 

@@ -12,7 +12,8 @@ The format (LabelMe 5): ``{"version", "flags", "shapes": [{"label", "points": [[
 "group_id", "description", "shape_type", "flags", "mask"}], "imagePath", "imageData",
 "imageHeight", "imageWidth"}``; points are pixels, x along a row, y down, LabelMe's pixel-corner
 convention (the image spans 0..width): this module converts to and from this project's
-pixel-centre convention (x - 0.5). Polygons and rectangles are read; labels ``piece``, ``stone``,
+pixel-centre convention (x - 0.5). Polygons, rectangles and masks (LabelMe's AI masks: a box and a
+base64 PNG of it) are read; labels ``piece``, ``stone``,
 ``brick`` and ``unit`` are pieces, ``occluder`` occluders, ``wall`` or ``outline`` the outline;
 other labels are named in the error. Reading needs no GUI (plain JSON).
 """
@@ -134,10 +135,12 @@ def read_labelme(path: str | Path, *, field_name: str = "LabelMe file") -> Label
         if kind == "rectangle" and len(pts) == 2:
             (x0, y0), (x1, y1) = pts
             pts = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+        elif kind == "mask":
+            pts = _mask_outline(sh, pts + 0.5, (rows, cols), f"{where}: shape {i + 1} ('{label}')")
         elif kind not in ("polygon", None):
             raise InputError(
-                f"{where}: shape {i + 1} ('{label}') is a {kind}; draw stones, occluders and the wall as polygons "
-                "or rectangles"
+                f"{where}: shape {i + 1} ('{label}') is a {kind}; draw stones, occluders and the wall as polygons, "
+                "rectangles or masks"
             )
         if len(pts) < 3:
             raise InputError(f"{where}: shape {i + 1} ('{label}') has {len(pts)} points; a polygon needs at least 3")
@@ -162,6 +165,48 @@ def read_labelme(path: str | Path, *, field_name: str = "LabelMe file") -> Label
         outline=outline,
         source=path,
     )
+
+
+def _mask_outline(shape: dict, corners: np.ndarray, size: tuple[int, int], where: str) -> np.ndarray:
+    """The outline (x, y pixel centres) of a LabelMe mask shape (what its AI tools make from a
+    click, a SAM mask): ``points`` the box's first and last pixel ``[[x1, y1], [x2, y2]]`` and
+    ``mask`` a base64 PNG of the box, ``image[y1 : y2 + 1, x1 : x2 + 1]`` as LabelMe fills it. The
+    outline runs along the pixel edges of its largest connected part, so that it is drawn back
+    pixel for pixel."""
+    import base64
+    import binascii
+    import io
+
+    from PIL import Image, UnidentifiedImageError
+    from scipy import ndimage
+    from skimage.measure import find_contours
+
+    if len(corners) != 2:
+        raise InputError(f"{where} is a mask with {len(corners)} points; LabelMe gives its box's two corners")
+    (x1, y1), (x2, y2) = np.asarray(corners).astype(int)
+    rows, cols = size
+    if not (0 <= x1 <= x2 < cols and 0 <= y1 <= y2 < rows):
+        raise InputError(f"{where}: its mask's box ({x1}, {y1})-({x2}, {y2}) lies outside the {cols} x {rows} px image")
+    try:
+        with Image.open(io.BytesIO(base64.b64decode(shape.get("mask") or "", validate=True))) as im:
+            if im.width * im.height > (x2 - x1 + 1) * (y2 - y1 + 1):
+                raise ValueError("larger than its box")
+            box = np.asarray(im.convert("L")) > 0
+    except (binascii.Error, UnidentifiedImageError, OSError, ValueError) as exc:
+        raise InputError(
+            f"{where}: its 'mask' is not a base64 PNG of its box ({exc}); save it again from LabelMe"
+        ) from None
+    if box.shape != (y2 - y1 + 1, x2 - x1 + 1):
+        raise InputError(
+            f"{where}: its mask is {box.shape[1]} x {box.shape[0]} px for a box of {x2 - x1 + 1} x {y2 - y1 + 1}; "
+            "save it again from LabelMe"
+        )
+    parts, n = ndimage.label(box)
+    if n == 0:
+        raise InputError(f"{where}: its mask is empty; delete the shape or draw it again")
+    largest = parts == 1 + int(np.argmax(ndimage.sum_labels(box, parts, index=np.arange(1, n + 1))))
+    contour = max(find_contours(np.pad(largest.astype(np.float64), 1), 0.5, fully_connected="low"), key=len)[:-1]
+    return np.column_stack([contour[:, 1] - 1.0 + x1, contour[:, 0] - 1.0 + y1])
 
 
 def labelme_labels(doc: LabelMe) -> np.ndarray:

@@ -276,6 +276,14 @@ def test_a_mortar_bed_wider_than_the_default_joint_is_joined_where_the_structure
     r = main(["build", str(_wide_bed_wall(tmp_path, None)), "--out", str(tmp_path / "cli"), "--no-figures"])
     notes = [line for line in capsys.readouterr().out.splitlines() if "note:" in line]
     assert r == 0 and len(notes) == 1 and "3 units" in notes[0] and "max_joint_m = 0.06" in notes[0]
+    # the note says what reach the masks' own joints need (their 95th percentile width, 8 cm here,
+    # measured along the mortar's medial axis), and that reach joins them
+    coverage = json.loads((tmp_path / "cli" / "summary.json").read_text())["joint_coverage"]
+    assert coverage["mortar_width_p95_m"] == pytest.approx(0.08, abs=0.006)
+    assert "narrower than 8.0 cm" in notes[0] and "max_joint_m = 0.09 would reach across them" in notes[0]
+    suggested = build_to_folder(load_structure(_wide_bed_wall(tmp_path, 0.09)), tmp_path / "m_09", figures=False)
+    assert suggested["joint_coverage"]["units_without_bed_joint"] == []
+    assert "mortar_width_p95_m" not in suggested["joint_coverage"]  # measured only where units hang
     # the value goes through a written structure file (synth writes one from a scenario)
     from calib_masonry.spec import structure_to_toml
 

@@ -311,8 +311,34 @@ def write_build(
             store_geometry(s, stage, bricks_json=raw, geometry=computed)
             # joint area over the boundary neighbouring bricks share (simulation/scene.py: joint_coverage)
             summary["joint_coverage"] = computed.coverage_summary()
+            if summary["joint_coverage"]["units_without_bed_joint"]:
+                width = mortar_width_m(spec, result)
+                if width is not None:
+                    summary["joint_coverage"]["mortar_width_p95_m"] = round(width, 4)
         write_json(stage / "summary.json", summary)
     return summary
+
+
+def mortar_width_m(spec, result) -> float | None:
+    """The width (m) that 95 % of the mortar joints' length in the walls' masks is narrower than
+    (:func:`~calib_masonry.wall2d.trace.mortar_widths`; a photo wall's segmented pieces): what the
+    joint reach must span to join the units across their own joints. None where no wall has a
+    mask or pieces to measure (a LabelMe file's polygons, traces given)."""
+    from .io import read_mask_labels
+    from .wall2d.trace import mortar_widths
+
+    found = []
+    for wall in spec.walls:
+        pw = result.photos.get(wall.name)
+        if pw is not None:
+            mask = pw.mask
+        elif wall.mask is not None and Path(wall.mask).suffix.lower() != ".json":
+            mask, _ = read_mask_labels(wall.mask, field=f"wall '{wall.name}' mask")
+        else:
+            continue
+        found.append(mortar_widths(mask) * (wall.width_m / mask.shape[1]))
+    widths = np.concatenate(found) if found else np.zeros(0)
+    return float(np.percentile(widths, 95)) if widths.size else None
 
 
 def _timed_geometry(structure: Structure3D):

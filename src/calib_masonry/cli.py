@@ -7,6 +7,7 @@ A user's mistake ends in one line ``error: ...`` and exit code 2, never a traceb
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import signal
 import sys
@@ -99,15 +100,24 @@ def _print_build(summary: dict, out) -> None:
         print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, {what}, {w['corner_pieces_removed']} corner pieces removed")
         if "pieces" in w:
             print(f"  {'':>10}  scale from the {w['scale_source']}; {_pieces_line(w['pieces'])}")
-    hanging = (summary.get("joint_coverage") or {}).get("units_without_bed_joint") or []
+    coverage = summary.get("joint_coverage") or {}
+    hanging = coverage.get("units_without_bed_joint") or []
     if hanging:
         n = len(hanging)
+        reach = summary.get("max_joint_m", 0.06)
+        width = coverage.get("mortar_width_p95_m")
+        measured = (
+            f" (95 % of the length of this structure's mortar joints is narrower than {width * 100:.1f} cm, measured "
+            f"in its masks: max_joint_m = {(math.floor(width * 100 + 1e-9) + 1) / 100:g} would reach across them)"
+            if width is not None and width > reach
+            else ""
+        )
         print(
             f"  note: {n} unit{'s' if n > 1 else ''} above the lowest course {'have' if n > 1 else 'has'} no joint "
-            f"beneath (a bed wider than max_joint_m = {summary.get('max_joint_m', 0.06):g} m, or a void) and "
+            f"beneath (a bed wider than max_joint_m = {reach:g} m, or a void) and "
             f"{'hang' if n > 1 else 'hangs'} from side joints: {', '.join(hanging[:5])}{', ...' if n > 5 else ''} "
-            "(summary.json joint_coverage); for wide mortar beds raise max_joint_m in [structure], for units "
-            "traced too small trace with more vertices"
+            f"(summary.json joint_coverage); for wide mortar beds raise max_joint_m in [structure]{measured}, for "
+            "units traced too small trace with more vertices"
         )
 
 

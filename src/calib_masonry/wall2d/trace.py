@@ -562,6 +562,17 @@ def enclosed_holes(mask: np.ndarray) -> int:
     return int(keep.sum())
 
 
+def mortar_widths(mask: np.ndarray) -> np.ndarray:
+    """The mortar's width (pixels) at every pixel of its medial axis (twice the distance to the
+    nearest unit), away from the image's border: the local widths of the joints between the
+    units of ``mask`` (bricks True), along their length."""
+    from skimage.morphology import medial_axis
+
+    axis, dist = medial_axis(~np.asarray(mask, dtype=bool), return_distance=True)
+    axis[:2], axis[-2:], axis[:, :2], axis[:, -2:] = False, False, False, False
+    return 2.0 * dist[axis]
+
+
 def check_not_inverted(mask: np.ndarray, pieces: int, where: str) -> None:
     """Refuse a mask traced to ``pieces`` pieces that are few and enclose more black regions than
     they are (at least 3): mortar drawn white (the units black), or units drawn touching, traced as

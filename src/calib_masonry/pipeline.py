@@ -251,6 +251,8 @@ def coarse_trace_warning(wall: WallSpec, trace: TraceResult) -> str | None:
 def unit_margins(polygons_m, width_m: float, height_m: float) -> tuple[float, float, float, float]:
     """How far a wall's units stay from its edges (m): left, right, below (above its base) and
     above (under its top), from its polygons in the wall's frame (x along it, z up)."""
+    if not len(polygons_m):  # no unit (traces given in memory): nothing to say
+        return 0.0, 0.0, 0.0, 0.0
     pts = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in polygons_m])
     (x0, z0), (x1, z1) = pts.min(axis=0), pts.max(axis=0)
     return float(x0), float(width_m - x1), float(z0), float(height_m - z1)

@@ -122,6 +122,16 @@ def test_a_record_with_decimal_commas_or_in_gal_reads_as_the_same_motion(tmp_pat
         read_accelerogram(gal)
 
 
+def test_a_record_timed_in_milliseconds_is_refused_naming_them(tmp_path):
+    # a time column in ms (0, 5, 10, ...) read as seconds is a 5 s step: the refusal said to
+    # resample the record finer; it now names the milliseconds
+    t = np.arange(0, 2000, 5.0)
+    p = tmp_path / "ms.csv"
+    p.write_text("time_ms,a\n" + "".join(f"{x:.1f},{0.1 * np.sin(x / 100):.5f}\n" for x in t))
+    with pytest.raises(InputError, match=r"ms.csv.*time step 5 s.*in milliseconds \(5 ms\), give it in seconds"):
+        read_accelerogram(p)
+
+
 def test_peer_at2_record(tmp_path):
     rng = np.random.default_rng(0)
     values = 0.1 * rng.standard_normal(203)

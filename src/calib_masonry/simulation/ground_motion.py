@@ -491,8 +491,12 @@ def read_accelerogram(
         raise _record_error(
             path,
             f"its time step {dt:g} s is coarser than any strong-motion record's (at most {MAX_RECORD_DT_S:g} s: "
-            "a masonry structure's periods are 0.05-0.5 s); give the record as sampled (0.005-0.02 s) or "
-            "resample it finer",
+            "a masonry structure's periods are 0.05-0.5 s); "
+            + (
+                f"if its time column is in milliseconds ({dt:g} ms), give it in seconds"
+                if 1.0 <= dt <= 1000 * MAX_RECORD_DT_S
+                else "give the record as sampled (0.005-0.02 s) or resample it finer"
+            ),
         )
     acc = acc * RECORD_UNITS[units]
     name = path.name

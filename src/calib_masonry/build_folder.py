@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._threads import background, background_process
-from .build3d.assemble import Structure3D
+from .build3d.assemble import Structure3D, joint_width
 from .build3d.contacts import max_interpenetration
 from .build3d.export import bricks_from_json, bricks_json_bytes, export_mesh, plot_model, plot_walls, write_bricks_json
 from .build3d.place import Footprint, WallGeometry, closure_gap, corners, footprint_is_closed, wall_frames
@@ -375,13 +375,6 @@ def _model_max_joint(model_dir: Path, summary: dict | None = None) -> float | No
         summary = read_json(model_dir / "summary.json")
     value = (summary or {}).get("max_joint_m")
     return float(value) if value is not None and float(value) != MAX_GAP_M else None
-
-
-def joint_width(model: Structure3D | None) -> float:
-    """The widest mortar joint (m) two units of ``model`` are joined across: its own
-    ``max_joint_m`` (the structure file's), else the default :data:`MAX_GAP_M`."""
-    value = getattr(model, "max_joint_m", None)
-    return MAX_GAP_M if value is None else float(value)
 
 
 def model_from_json(data: dict, closed, source: str | Path):

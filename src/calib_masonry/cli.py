@@ -104,7 +104,7 @@ def _print_build(summary: dict, out) -> None:
     hanging = coverage.get("units_without_bed_joint") or []
     if hanging:
         n = len(hanging)
-        reach = summary.get("max_joint_m", 0.06)
+        reach = summary["max_joint_m"]  # build writes it since it became a setting
         width = coverage.get("mortar_width_p95_m")
         measured = (
             f" (95 % of the length of this structure's mortar joints is narrower than {width * 100:.1f} cm, measured "

@@ -176,6 +176,13 @@ def read_mask(path: str | Path, *, field: str = "mask", max_gray_fraction: float
     return _read_mask_image(path, field, max_gray_fraction)[0]
 
 
+def _labelled(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A label image's brick mask, its units drawn touching kept apart, and the labels."""
+    from .labelme import pieces_apart  # here: labelme imports io
+
+    return pieces_apart(labels), labels
+
+
 def _read_mask_image(path: Path, field: str, max_gray_fraction: float) -> tuple[np.ndarray, np.ndarray | None]:
     """:func:`read_mask` of an image file, and its pieces labelled where it is a label image (each
     unit a flat colour or grey level of its own on black mortar: :func:`label_image`), else None."""
@@ -194,9 +201,7 @@ def _read_mask_image(path: Path, field: str, max_gray_fraction: float) -> tuple[
                     f"{field} {path}: looks like a colour photo, not a mask; give a binary mask (bricks white, "
                     "mortar black) or a label image (each unit a flat colour of its own, mortar black)"
                 )
-            from .labelme import pieces_apart
-
-            return pieces_apart(labels), labels
+            return _labelled(labels)
         del spread
         if np.issubdtype(chans.dtype, np.integer):
             arr = chans.sum(axis=-1, dtype=np.int32)  # 3 x the mean, exactly
@@ -220,9 +225,7 @@ def _read_mask_image(path: Path, field: str, max_gray_fraction: float) -> tuple[
                 "threshold it to black mortar and white bricks first (or give a label image: each unit a "
                 "grey level of its own, mortar 0)"
             )
-        from .labelme import pieces_apart
-
-        return pieces_apart(labels), labels
+        return _labelled(labels)
     if np.issubdtype(arr.dtype, np.integer):  # (v - lo) / (hi - lo) >= 1/2, in exact integers
         return arr >= int(lo) + (int(hi) - int(lo) + 1) // 2, None
     return arr >= float(lo) + 0.5 * span, None

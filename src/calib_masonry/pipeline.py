@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ._threads import background_process, cpu_count, thread_imap
-from .build3d.assemble import MAX_GAP_M, Structure3D, WallPolygons, assemble
+from .build3d.assemble import Structure3D, WallPolygons, assemble, joint_width
 from .build3d.place import footprint_is_closed
 from .build3d.scale import aspect_mismatch, wall_from_image
 from .errors import InputError
@@ -407,7 +407,7 @@ def build(
             )
         )
     seconds["scale"] = time.perf_counter() - t0
-    reach = MAX_GAP_M if spec.max_joint_m is None else spec.max_joint_m
+    reach = joint_width(spec)
     margins = [unit_margins(wp.polygons_m, w.width_m, w.height_m) for wp, w in zip(walls, spec.walls)]
     check_units_on_the_footing(spec.walls, margins, reach)
     for wall, m in zip(spec.walls, margins):

@@ -12,7 +12,16 @@ from .bond import CornerTolerances, corner_clip_planes, find_end_faces
 from .extrude import Polyhedron, clip_plan, polygon_area, prism
 from .place import Corner, Footprint, WallFrame, _footprint, closure_gap, corners, wall_frames
 
-__all__ = ["MAX_GAP_M", "WallPolygons", "Brick", "Structure3D", "assemble", "simple_polygon", "brick_solid"]
+__all__ = [
+    "MAX_GAP_M",
+    "joint_width",
+    "WallPolygons",
+    "Brick",
+    "Structure3D",
+    "assemble",
+    "simple_polygon",
+    "brick_solid",
+]
 
 
 #: The widest mortar joint (m) two units are joined across by default (a structure file's
@@ -20,6 +29,14 @@ __all__ = ["MAX_GAP_M", "WallPolygons", "Brick", "Structure3D", "assemble", "sim
 #: default of every function that computes or looks up a model's simulation geometry, and of the
 #: build's checks that units reach their wall's ends and base.
 MAX_GAP_M = 0.06
+
+
+def joint_width(model) -> float:
+    """The widest mortar joint (m) two units of ``model`` (a Structure3D, a StructureSpec, or
+    None) are joined across: its own ``max_joint_m`` (the structure file's), else the default
+    :data:`MAX_GAP_M`."""
+    value = getattr(model, "max_joint_m", None)
+    return MAX_GAP_M if value is None else float(value)
 
 
 @dataclass(frozen=True)

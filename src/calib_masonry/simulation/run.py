@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .._json import jsonable
-from ..build3d.assemble import Structure3D
+from ..build3d.assemble import MAX_GAP_M, Structure3D
 from ..build_folder import checked_model_dir, geometry_for_model, simulation_geometry
 from ..errors import InputError
 from ..io import check_output, staged_output, write_json
@@ -605,7 +605,7 @@ def _warn_first_check(scene: Scene, out) -> None:
         "neighbours on small joints (build's walls.png and summary.json's units_without_bed_joint: outlines "
         "traced smaller than the stones, or mortar beds wider than the joints reach); trace the walls with "
         "more vertices (`vertices = 8` or `target_dice = 0.98` in structure.toml), or for wide mortar raise "
-        "`max_joint_m` (default 0.06 m) in its [structure], and build again",
+        f"`max_joint_m` (default {MAX_GAP_M:g} m) in its [structure], and build again",
         RuntimeWarning,
         stacklevel=2,
     )

@@ -386,12 +386,12 @@ def parse_study(data: dict, path: Path) -> Study:
                         material_from_table({**dict(spec.material), k: x}, f"{path}: [inputs.material] {k}")
                 inputs.append(inp)
         elif group == "structure":
-            from ..simulation.scene import MAX_GAP_M
+            from ..build3d.assemble import joint_width
             from ..spec import MAX_JOINT_M, MIN_JOINT_M
 
             _unknown(path, "[inputs.structure]", table, STRUCTURE_FIELDS)
             for k, v in table.items():
-                inp = _law(path, f"structure.{k}", v, mean=spec.max_joint_m or MAX_GAP_M)
+                inp = _law(path, f"structure.{k}", v, mean=joint_width(spec))
                 bounds = [x for x in (inp.choices or (inp.low, inp.high)) if math.isfinite(x)]
                 bad = [x for x in bounds if not MIN_JOINT_M <= x <= MAX_JOINT_M]
                 if bad:

@@ -1,4 +1,5 @@
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,8 @@ def test_shipped_data_is_reproducible(tmp_path, name):
     assert json.loads((DATA / name / "truth" / "truth.json").read_text()) == json.loads(
         (tmp_path / name / "truth" / "truth.json").read_text()
     )
+    # and the structure file (its vertices, its joint reach) as shipped: the tables were measured on it
+    assert (DATA / name / "structure.toml").read_text() == (tmp_path / name / "structure.toml").read_text()
 
 
 def test_a_synthesis_in_memory_writes_the_folder_synth_writes(tmp_path):
@@ -290,6 +293,45 @@ def test_a_mortar_bed_wider_than_the_default_joint_is_joined_where_the_structure
     again = tmp_path / "again.toml"
     again.write_text(structure_to_toml(load_structure(_wide_bed_wall(tmp_path, 0.1)), relative_to=tmp_path))
     assert load_structure(again).max_joint_m == 0.1
+
+
+def test_synth_joins_thick_mortar_stones_to_the_ones_beneath_as_its_truth_does(tmp_path):
+    # a tower of stones in 5 cm of mortar, irregular at 1.0: their beds are up to about 9 cm wide where their
+    # edges tilt and corners are chamfered, wider than the default joint reach (6 cm). A scenario
+    # that names neither vertices nor max_joint_m: synth writes the stones' own corner count (8)
+    # and the reach its truth's widest bed needs, and the built wall stands under its own weight.
+    # With five vertices and the default reach (synth's structure file before) most of its units
+    # hang from side joints and gravity alone cracks joints.
+    from calib_masonry.build3d.assemble import reach_over
+    from calib_masonry.simulation import joints as J
+    from calib_masonry.simulation.run import SimulationConfig, scene_for_model
+    from calib_masonry.spec import STONE_VERTICES
+
+    text = scenario_text(
+        [(2.2, 4.0, a) for a in (0, 90, 180, 270)], layout="stones", seed=11, t=0.5, closed=True, px_per_m=100
+    )
+    text = text.replace("vertices = 5\n", "").replace("mortar_m = 0.025", "mortar_m = 0.05\nirregularity = 1.0")
+    (tmp_path / "s.toml").write_text(text)
+    truth = synthesize_to_folder(
+        load_structure(tmp_path / "s.toml", require_sources=False), tmp_path / "d", figures=False
+    )
+    spec = load_structure(tmp_path / "d" / "structure.toml")
+    assert truth["widest_bed_m"] > 0.07
+    assert spec.max_joint_m == truth["max_joint_m"] == reach_over(truth["widest_bed_m"])
+    assert spec.vertices == STONE_VERTICES and all(w.vertices == STONE_VERTICES for w in spec.walls)
+    down = np.array([0.0, 0.0, -9.81])
+    hanging, cracked = {}, {}
+    for name, s in {"synth": spec, "before": replace(spec, max_joint_m=None)}.items():
+        if name == "before":
+            s = s.with_walls(tuple(replace(w, vertices=5) for w in s.walls))
+        summary = build_to_folder(s, tmp_path / name, figures=False)
+        hanging[name] = len(summary["joint_coverage"]["units_without_bed_joint"]) / summary["bricks"]
+        model = J.JointModel(
+            scene_for_model(tmp_path / name, SimulationConfig(pga_g=0.0, duration_s=1.0, figures=False))
+        )
+        cracked[name] = len(model.crack(down, np.ones(model.nj, bool))[0])
+    assert hanging["synth"] <= 0.03 and cracked["synth"] == 0
+    assert hanging["before"] > 0.3 and cracked["before"] > 0
 
 
 def _courses_mask(path: Path, margin_m: float = 0.0, shift_up_m: float = 0.0, px: int = 200) -> None:

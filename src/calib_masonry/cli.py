@@ -7,7 +7,6 @@ A user's mistake ends in one line ``error: ...`` and exit code 2, never a traceb
 from __future__ import annotations
 
 import argparse
-import math
 import re
 import signal
 import sys
@@ -103,12 +102,14 @@ def _print_build(summary: dict, out) -> None:
     coverage = summary.get("joint_coverage") or {}
     hanging = coverage.get("units_without_bed_joint") or []
     if hanging:
+        from .build3d.assemble import reach_over
+
         n = len(hanging)
         reach = summary["max_joint_m"]  # build writes it since it became a setting
         width = coverage.get("mortar_width_p95_m")
         measured = (
             f" (95 % of the length of this structure's mortar joints is narrower than {width * 100:.1f} cm, measured "
-            f"in its masks: max_joint_m = {(math.floor(width * 100 + 1e-9) + 1) / 100:g} would reach across them)"
+            f"in its masks: max_joint_m = {reach_over(width):g} would reach across them)"
             if width is not None and width > reach
             else ""
         )

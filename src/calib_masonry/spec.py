@@ -36,6 +36,11 @@ from .io import read_toml
 #: polygon vertices per unit of a mask wall (and of ``trace``) when neither the wall nor
 #: [structure] gives ``vertices`` or ``target_dice``
 DEFAULT_VERTICES = 5
+#: the most corners a stone of synth's ``stones`` layout has (four, each chamfered or not): a
+#: stones scenario that gives neither ``vertices`` nor ``target_dice`` traces its masks to this
+#: many (at five, a tower's stones came out at mean Dice 0.965 against 0.993, and their beds up
+#: to 2 cm wider than drawn)
+STONE_VERTICES = 8
 #: a photo wall's pieces, and a LabelMe file's (its pieces as rectify wrote them or an engineer
 #: drew them), likewise traced to the fewest vertices reaching this Dice: a photo's pieces are
 #: whatever its masonry is, and irregular stones in five vertices were a tangle of overlapping
@@ -648,6 +653,9 @@ def load_structure(path: str | Path, *, require_sources: bool = True) -> Structu
     _check_keys(data, TABLES, str(path), "table")
     defaults = _structure_defaults(data.get("structure"), path)
     synthetic = _synthetic_from(data["synthetic"], _where(path, "[synthetic]")) if "synthetic" in data else None
+    if synthetic is not None and synthetic.layout == "stones" and defaults["vertices"] is None:
+        if defaults["target_dice"] is None:  # the masks synth draws of its stones: traced to their own corners
+            defaults["vertices"] = STONE_VERTICES
     photos = _photos_from(data["photos"], _where(path, "[photos]")) if "photos" in data else None
     walls_tbl = data.get("wall")
     if not isinstance(walls_tbl, list) or not walls_tbl:

@@ -15,6 +15,7 @@ from .place import Corner, Footprint, WallFrame, _footprint, closure_gap, corner
 __all__ = [
     "MAX_GAP_M",
     "joint_width",
+    "reach_over",
     "WallPolygons",
     "Brick",
     "Structure3D",
@@ -37,6 +38,12 @@ def joint_width(model) -> float:
     :data:`MAX_GAP_M`."""
     value = getattr(model, "max_joint_m", None)
     return MAX_GAP_M if value is None else float(value)
+
+
+def reach_over(width_m: float) -> float:
+    """The joint reach (m) that joins units across a joint ``width_m`` wide: the next whole
+    centimetre above it (what ``max_joint_m`` is best given in)."""
+    return (np.floor(width_m * 100 + 1e-9) + 1) / 100
 
 
 @dataclass(frozen=True)

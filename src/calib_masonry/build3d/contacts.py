@@ -54,6 +54,7 @@ __all__ = [
     "patch_section",
     "OUTLINE_POINTS",
     "box_pairs",
+    "narrowest_beds",
 ]
 
 OUTLINE_POINTS = 16  # a patch's outline (its convex hull) is stored with this many corners, padded by repeats
@@ -474,3 +475,22 @@ def contact_patches(
     ]
     out.sort(key=lambda c: (c.a, c.b))
     return out
+
+
+def narrowest_beds(bricks: Sequence[Brick], *, search_m: float, ground_m: float) -> np.ndarray:
+    """Each brick's narrowest bed (m): the least gap of the :func:`contact_patches` (searched to
+    ``search_m``) beneath it, whose normal lies within 60 degrees of vertical, as the simulation
+    geometry's ``without_bed_joint`` reads a bed. NaN for a brick within ``ground_m`` of the lowest
+    brick's bottom (it stands on the footing), inf for one with no bed within ``search_m``. The
+    joint reach a structure needs for none of its units to hang is the largest finite value."""
+    beds = np.full(len(bricks), np.inf)
+    if not bricks:
+        return beds
+    row = {b.id: k for k, b in enumerate(bricks)}
+    for p in contact_patches(bricks, max_gap_m=search_m, progress=False):
+        if abs(p.normal[2]) > 0.5:  # a's normal points up at b: b rests on a (or the other way round)
+            k = row[p.b] if p.normal[2] > 0 else row[p.a]
+            beds[k] = min(beds[k], p.gap_m)
+    bottom = np.array([float(b.solid.vertices[:, 2].min()) for b in bricks])
+    beds[bottom <= bottom.min() + ground_m] = np.nan
+    return beds

@@ -2,7 +2,9 @@
 
 Output folder layout::
 
-    structure.toml        the structure file ``build`` reads (mask paths relative to it)
+    structure.toml        the structure file ``build`` reads (mask paths relative to it; with
+                          ``max_joint_m`` where the stones' beds are wider than the default reach,
+                          so that every unit is joined to the one beneath it as in the truth)
     masks/<wall>.png      binary masks, bricks white
     truth/truth.json      per wall: W, H, theta, t, image shape, and every piece's polygon in wall
                           metres and in pixels, with ``end_face`` marking corner end faces
@@ -28,11 +30,12 @@ from pathlib import Path
 import numpy as np
 
 from .._threads import background
-from ..build3d.assemble import Structure3D, WallPolygons, assemble
+from ..build3d.assemble import MAX_GAP_M, Structure3D, WallPolygons, assemble, joint_width, reach_over
+from ..build3d.contacts import narrowest_beds
 from ..build3d.export import plot_walls, write_bricks_json
 from ..build3d.place import closure_gap, footprint_is_closed
 from ..io import Photo, read_photo, staged_output, write_json, write_mask
-from ..spec import PhotoSpec, StructureSpec, SyntheticSpec, structure_to_toml
+from ..spec import MAX_JOINT_M, PhotoSpec, StructureSpec, SyntheticSpec, structure_to_toml
 from .layouts import layout_structure
 from .render import rasterise_wall
 
@@ -48,6 +51,21 @@ def truth_structure(spec: StructureSpec):
     ]
     end_faces = [{i for i, q in enumerate(p) if q.end_face} for p in pieces]
     return pieces, assemble(spec.footprint, walls, name=spec.name, end_faces=end_faces)
+
+
+def widest_bed_m(structure: Structure3D, syn: SyntheticSpec) -> float:
+    """The widest bed (m) under a unit of the true ``structure`` above its lowest course: about the
+    joint reach at which every unit gets a joint beneath it (the gap between facing faces at their
+    overlap, as the corners' joints are found; a wall's own joints follow the mortar's middle, and
+    a traced outline lies up to a pixel inside its stone). A bond's beds are its mortar; irregular stones' beds widen where their edges tilt
+    and their corners are chamfered (mortar 4 cm with irregularity 0.8 gives beds of up to 7.2
+    cm). A unit with no bed within :data:`~calib_masonry.spec.MAX_JOINT_M` (one resting on a corner
+    stone whose face is turned) is left out."""
+    if syn.layout != "stones":
+        return float(syn.mortar_m)
+    beds = narrowest_beds(structure.bricks, search_m=MAX_JOINT_M, ground_m=MAX_GAP_M)
+    beds = beds[np.isfinite(beds)]
+    return float(beds.max()) if beds.size else float(syn.mortar_m)
 
 
 def _shots(jobs: list, progress, desc: str):
@@ -164,6 +182,10 @@ def synthesize(
     photos = photos or spec.photos
     syn = spec.synthetic or SyntheticSpec()
     pieces, structure = truth_structure(spec)
+    widest = widest_bed_m(structure, syn)
+    if spec.max_joint_m is None and reach_over(widest) > MAX_GAP_M:
+        # the structure files written join every unit to the one beneath it, as the truth does
+        spec = replace(spec, max_joint_m=min(MAX_JOINT_M, float(reach_over(widest))))
     rng = np.random.default_rng([syn.seed, 1])
     masks, walls_truth, new_walls = {}, [], []
     for w, wall in enumerate(spec.walls):
@@ -198,6 +220,8 @@ def synthesize(
         "seed": syn.seed,
         "px_per_m": syn.px_per_m,
         "mortar_m": syn.mortar_m,
+        "widest_bed_m": round(widest, 5),
+        "max_joint_m": joint_width(spec),
         "closure_gap_xy_m": closure_gap(spec),
         "walls": walls_truth,
         "bricks": len(structure.bricks),

@@ -132,6 +132,43 @@ def test_a_record_timed_in_milliseconds_is_refused_naming_them(tmp_path):
         read_accelerogram(p)
 
 
+def test_a_record_of_accelerations_alone_reads_with_its_time_step(tmp_path):
+    """Many records come as accelerations alone, one a line or several a line in reading order
+    (an agency's fixed-width file, a column exported from a processing tool), the time step
+    given apart. It was refused as "1 columns"; now ``dt`` (``--dt``, a study's ``dt_s``) reads it
+    as the same motion as the file with a time column, and without it the refusal names ``--dt``."""
+    from calib_masonry.simulation.run import SimulationConfig, motion_for
+
+    t = np.arange(0, 4, 0.01)
+    a = 0.2 * np.sin(np.pi * t / t[-1]) ** 2 * np.sin(2 * np.pi * 1.5 * t)
+    timed = tmp_path / "timed.csv"
+    timed.write_text("\n".join(f"{x:.3f},{y:.6f}" for x, y in zip(t, a)))
+    column = tmp_path / "column.txt"
+    column.write_text("acceleration (g), station X\n" + "\n".join(f"{y:.6f}" for y in a))
+    rows = tmp_path / "rows.txt"
+    rows.write_text("\n".join("  ".join(f"{y:.6f}" for y in a[k : k + 8]) for k in range(0, len(a), 8)))
+    want = read_accelerogram(timed)
+    for f in (column, rows):
+        m = read_accelerogram(f, dt=0.01)
+        assert m.dt == pytest.approx(want.dt, rel=1e-12)  # the times' median step, in their last bits
+        np.testing.assert_allclose(m.displacement, want.displacement, rtol=1e-9, atol=1e-15)
+    y = read_accelerogram(column, dt=0.01, path_y=rows)  # two components, each alone with the same step
+    np.testing.assert_allclose(y.displacement[:, 1], want.displacement[:, 0], rtol=1e-9, atol=1e-15)
+    assert motion_for(SimulationConfig(accelerogram=column, record_dt_s=0.01)).pga == pytest.approx(want.pga)
+    with pytest.raises(InputError, match=r"column.txt: line 2: one column, .*--dt SECONDS"):
+        read_accelerogram(column)
+    with pytest.raises(InputError, match=r"timed.csv: its first column steps evenly from 0 by 0.01: a time column"):
+        read_accelerogram(timed, dt=0.01)
+    for bad in (0.0, -0.01, 5.0, float("nan")):
+        with pytest.raises(InputError, match=r"--dt .*must lie in 0..0.05 s"):
+            SimulationConfig(accelerogram=column, record_dt_s=bad)
+    at2 = tmp_path / "RSN1.AT2"
+    at2.write_text("PEER\nx\nACCELERATION TIME SERIES IN UNITS OF G\nNPTS=   400, DT=   .0100 SEC\n" + rows.read_text())
+    assert read_accelerogram(at2, dt=0.01).dt == 0.01  # the header's own step, given again
+    with pytest.raises(InputError, match=r"RSN1.AT2: its header gives its time step, 0.01 s, not 0.02"):
+        read_accelerogram(at2, dt=0.02)
+
+
 def test_peer_at2_record(tmp_path):
     rng = np.random.default_rng(0)
     values = 0.1 * rng.standard_normal(203)

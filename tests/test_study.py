@@ -444,6 +444,7 @@ BAD = {
         "units = 'gal': the units",
     ),
     "units without records": ('[simulate]\npga_g = [0.1]\nunits = "m/s2"\n', "without accelerograms"),
+    "step without records": ("[simulate]\npga_g = [0.1]\ndt_s = 0.01\n", "dt_s = 0.01 without accelerograms"),
     "check interval 0": ("[simulate]\npga_g = [0.1]\ncheck_interval_s = 0\n", "check_interval_s = 0: must be > 0"),
     "check interval": ("[simulate]\npga_g = [0.1]\ncheck_interval_s = 0.5\n", "check_interval_s = 0.5: the joints'"),
     # 1e9 records listed 3e9 loads before the count was checked (killed, out of memory)
@@ -699,6 +700,25 @@ def test_a_study_reads_a_record_in_gal_with_its_units(tmp_path, small_structure)
     assert study.simulate.record_units == "cm/s2"
     as_recorded = _recorded(study.simulate.accelerograms[0], 0.2, units=study.simulate.record_units)
     assert as_recorded.pga == pytest.approx(0.2 * G, rel=1e-9)
+
+
+def test_a_study_reads_a_record_of_accelerations_alone_with_its_time_step(tmp_path, small_structure):
+    # [simulate] dt_s: a record without a time column (simulate --dt); a study file had no place
+    # for the step, and its record was refused as one column
+    from calib_masonry.simulation.ground_motion import G
+    from calib_masonry.study.sample import _recorded
+
+    t = np.arange(0, 1.5, 0.005)
+    (tmp_path / "acc.txt").write_text("\n".join(f"{np.sin(np.pi * x / t[-1]) ** 2 * np.sin(9 * x):.6f}" for x in t))
+    head = f'[study]\nname = "alone"\nstructure = "{small_structure}"\n[simulate]\npga_g = [0.2]\naccelerograms = ["acc.txt"]\n'
+    with pytest.raises(InputError, match=r"acc.txt: line 1: one column.*dt_s in a study's \[simulate\]"):
+        load_study(_study(tmp_path, head))
+    study = load_study(_study(tmp_path, head + "dt_s = 0.005\n"))
+    assert study.simulate.record_dt_s == 0.005
+    motion = _recorded(study.simulate.accelerograms[0], 0.2, dt=study.simulate.record_dt_s)
+    assert motion.dt == 0.005 and motion.pga == pytest.approx(0.2 * G, rel=1e-9)
+    with pytest.raises(InputError, match=r"\[simulate\] dt_s 5: the record's time step must lie in 0..0.05 s"):
+        load_study(_study(tmp_path, head + "dt_s = 5\n"))
 
 
 def test_a_study_varies_the_joint_reach_that_each_samples_model_is_built_with(tmp_path, small_structure, monkeypatch):

@@ -440,6 +440,7 @@ def _cmd_simulate(args) -> int:
         accelerogram=Path(args.accelerogram) if args.accelerogram else None,
         accelerogram_y=Path(args.accelerogram_y) if args.accelerogram_y else None,
         record_units=args.units,
+        record_dt_s=args.dt,
         components=args.components or SimulationConfig.components,
         direction_deg=0.0 if args.pushover else args.direction,
         solver=solver,
@@ -759,6 +760,14 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         choices=("g", "m/s2", "cm/s2"),
         help="of a CSV --accelerogram (default g; cm/s2 is gal; .AT2 and ESM name theirs)",
+    )
+    m.add_argument(
+        "--dt",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="the time step of an --accelerogram of accelerations alone (one column, or several values a line "
+        "in reading order); a file with a time column, .AT2 and ESM give theirs",
     )
     m.add_argument("--fps", type=int, default=None, help="frames per second (default: the tested settings, 25)")
     m.add_argument("--substeps", type=int, default=None, help="Bullet substeps per frame (default 10)")

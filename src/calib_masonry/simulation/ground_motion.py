@@ -374,29 +374,53 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _parse_csv(path: Path, lines: list[str]) -> tuple[np.ndarray, float]:
-    """``time, acceleration[, acceleration_y]`` per line (comma, semicolon, tab or spaces; where
-    semicolons part the columns, a comma is the decimal mark, as a spreadsheet in a European locale
-    writes ``0,01;-0,0123``), header lines allowed before the numbers; every problem names its line."""
-    rows: list[list[float]] = []
-    numbers: list[int] = []
+def _fields(line: str) -> tuple[str, list[str]]:
+    """A CSV line's fields (comma, semicolon, tab or spaces between them), and the line as read:
+    where semicolons part the columns, a comma is the decimal mark (a European spreadsheet's CSV)."""
+    if ";" in line:
+        line = line.replace(",", ".")
+    return line, [p for p in line.replace(";", ",").replace("\t", ",").replace(" ", ",").split(",") if p.strip()]
+
+
+def _numeric_rows(path: Path, lines: list[str], what: str):
+    """Each line's numbers with its line number, after any header lines (text before the first
+    line of numbers); text after it, NaN or inf are refused naming the line (``what``: what the
+    numbers should be)."""
+    seen = False
     for number, line in enumerate(lines, start=1):
-        if ";" in line:  # semicolons between the columns: a comma is the decimal mark (a European spreadsheet's CSV)
-            line = line.replace(",", ".")
-        parts = [p for p in line.replace(";", ",").replace("\t", ",").replace(" ", ",").split(",") if p.strip()]
+        line, parts = _fields(line)
         if not parts:
             continue
         try:
             values = [float(p) for p in parts]
         except ValueError:
-            if rows:
-                raise _record_error(
-                    path, f"line {number}: {line.strip()!r} is not numbers; give time, acceleration"
-                ) from None
+            if seen:
+                raise _record_error(path, f"line {number}: {line.strip()!r} is not numbers; give {what}") from None
             continue  # a header line
         if not all(math.isfinite(v) for v in values):
             raise _record_error(path, f"line {number}: {line.strip()!r} holds NaN or inf; give finite numbers")
-        if len(values) not in (2, 3):
+        seen = True
+        yield number, values
+
+
+def _parse_csv(path: Path, lines: list[str], dt: float | None = None) -> tuple[np.ndarray, float]:
+    """``time, acceleration[, acceleration_y]`` per line (comma, semicolon, tab or spaces; where
+    semicolons part the columns, a comma is the decimal mark, as a spreadsheet in a European locale
+    writes ``0,01;-0,0123``), header lines allowed before the numbers; every problem names its line.
+    With ``dt`` (s) the file holds one component's accelerations alone, sampled every ``dt``: one a
+    line, or several a line read in order (as fixed-width agency files hold them)."""
+    if dt is not None:
+        return _parse_samples(path, lines, dt)
+    rows: list[list[float]] = []
+    numbers: list[int] = []
+    for number, values in _numeric_rows(path, lines, "time, acceleration"):
+        if len(values) == 1:
+            raise _record_error(
+                path,
+                f"line {number}: one column, accelerations without their times; give the time step "
+                "(--dt SECONDS, or dt_s in a study's [simulate]) or a column of times before them",
+            )
+        if len(values) > 3:
             raise _record_error(
                 path, f"line {number}: {len(values)} columns; give time, acceleration[, acceleration_y]"
             )
@@ -431,6 +455,28 @@ def _parse_csv(path: Path, lines: list[str]) -> tuple[np.ndarray, float]:
     return data[:, 1:], dt
 
 
+def _parse_samples(path: Path, lines: list[str], dt: float) -> tuple[np.ndarray, float]:
+    """One component's accelerations sampled every ``dt`` s, in reading order, after any header
+    lines (see :func:`_parse_csv`). A file whose first column steps evenly upwards is a time
+    column: refused, since its times would be read as accelerations."""
+    values: list[float] = []
+    first: list[float] = []
+    for _, row in _numeric_rows(path, lines, "accelerations"):
+        values.extend(row)
+        if len(row) > 1:
+            first.append(row[0])
+    if len(values) < 3:
+        raise _record_error(path, "expected at least 3 accelerations")
+    steps = np.diff(first)
+    if len(first) >= 3 and steps.min() > 0 and np.ptp(steps) <= 1e-6 + 1e-3 * steps.mean():
+        raise _record_error(
+            path,
+            f"its first column steps evenly from {first[0]:g} by {float(np.median(steps)):g}: a time column; "
+            "leave out --dt (dt_s), the file gives the times",
+        )
+    return np.asarray(values)[:, None], float(dt)
+
+
 RECORD_UNITS = {"g": G, "m/s2": 1.0, "cm/s2": 0.01}
 
 
@@ -444,7 +490,16 @@ MAX_PGA_G = 5.0
 MAX_RECORD_DT_S = 0.05
 
 
-def _read_record(path: Path, units: str | None) -> tuple[np.ndarray, float, str]:
+def check_record_dt(dt: float | None) -> None:
+    """A record's given time step (s), refused with a one-line error where it is not one."""
+    if dt is not None and not (math.isfinite(dt) and 0 < dt <= MAX_RECORD_DT_S):
+        raise InputError(
+            f"--dt {dt:g}: the record's time step must lie in 0..{MAX_RECORD_DT_S:g} s (strong-motion records "
+            "are sampled every 0.005-0.02 s)" + ("; give it in seconds" if 1.0 <= dt <= 1000 * MAX_RECORD_DT_S else "")
+        )
+
+
+def _read_record(path: Path, units: str | None, dt: float | None = None) -> tuple[np.ndarray, float, str]:
     """One file's accelerations ``(n, 1 or 2)``, time step and units (see :func:`read_accelerogram`)."""
     if not path.is_file():
         raise _record_error(
@@ -462,22 +517,28 @@ def _read_record(path: Path, units: str | None) -> tuple[np.ndarray, float, str]
         # a header in a Windows code page (a station's name, a degree sign): the numbers are ASCII
         text = raw.decode("latin-1")
     lines = text.splitlines()
-    if path.suffix.upper() == ".AT2":
-        acc, dt, file_units = _parse_at2(path, lines)
-        return acc, dt, units or file_units
-    if _is_esm(lines):
-        acc, dt, file_units = _parse_esm(path, lines)
-        return acc, dt, units or file_units
-    acc, dt = _parse_csv(path, lines)
+    if path.suffix.upper() == ".AT2" or _is_esm(lines):
+        acc, own, file_units = (_parse_at2 if path.suffix.upper() == ".AT2" else _parse_esm)(path, lines)
+        if dt is not None and abs(dt - own) > 1e-9 + 1e-6 * own:
+            raise _record_error(path, f"its header gives its time step, {own:g} s, not {dt:g}; leave out --dt (dt_s)")
+        return acc, own, units or file_units
+    acc, dt = _parse_csv(path, lines, dt)
     return acc, dt, units or "g"
 
 
 def read_accelerogram(
-    path: str | Path, *, units: str | None = None, highpass_hz: float = 0.1, path_y: str | Path | None = None
+    path: str | Path,
+    *,
+    units: str | None = None,
+    highpass_hz: float = 0.1,
+    path_y: str | Path | None = None,
+    dt: float | None = None,
 ) -> GroundMotion:
     """A recorded ground motion: a CSV of ``time, acceleration[, acceleration_y]`` (a header allowed;
     ``units`` "g" by default, "m/s2" or "cm/s2"), a PEER NGA ``.AT2`` file or an ESM / ITACA ASCII file
-    (units from their headers). ``path_y``: a second file of one component, the motion along Y
+    (units from their headers). ``dt`` (s): the file (and ``path_y``) holds accelerations alone,
+    sampled every ``dt``, one component, one or several values a line in reading order (a .AT2 or
+    ESM file gives its own, which ``dt`` must equal). ``path_y``: a second file of one component, the motion along Y
     (the other horizontal component of the same record: PEER and ESM give one file each); its time
     step must be the first's, and the record ends with the shorter. NaN, inf, a time that does not
     increase or an irregular time step is refused with its line number. The record is applied as
@@ -485,8 +546,9 @@ def read_accelerogram(
     path = Path(path)
     if units is not None and units not in RECORD_UNITS:
         raise InputError(f"--units {units!r}: choose {', '.join(RECORD_UNITS)}")
-    given = units
-    acc, dt, units = _read_record(path, given)
+    check_record_dt(dt)
+    given, given_dt = units, dt
+    acc, dt, units = _read_record(path, given, given_dt)
     if dt > MAX_RECORD_DT_S:
         raise _record_error(
             path,
@@ -506,7 +568,7 @@ def read_accelerogram(
             raise _record_error(
                 path, "holds two components already; give a second file only beside a one-component one"
             )
-        acc_y, dt_y, units_y = _read_record(path_y, given)
+        acc_y, dt_y, units_y = _read_record(path_y, given, given_dt)
         if acc_y.shape[1] != 1:
             raise _record_error(path_y, "holds two components; the second file must hold the Y component alone")
         if abs(dt_y - dt) > 1e-9 + 1e-6 * dt:

@@ -29,7 +29,15 @@ from ..build3d.assemble import MAX_GAP_M, Structure3D
 from ..build_folder import checked_model_dir, geometry_for_model, simulation_geometry
 from ..errors import InputError
 from ..io import check_output, staged_output, write_json
-from .ground_motion import MAX_PGA_G, RECORD_UNITS, G, GroundMotion, read_accelerogram, synthetic_motion
+from .ground_motion import (
+    MAX_PGA_G,
+    RECORD_UNITS,
+    G,
+    GroundMotion,
+    check_record_dt,
+    read_accelerogram,
+    synthetic_motion,
+)
 from .joints import scene_joint_stiffness
 from .scene import (
     MASONRY,
@@ -80,6 +88,8 @@ class SimulationConfig:
     # give one file a component
     accelerogram_y: Path | None = None
     record_units: str | None = None  # of a CSV record: "g" (default), "m/s2" or "cm/s2"; .AT2 and ESM files name theirs
+    # a record of accelerations alone (no time column): its time step (s); .AT2 and ESM files give theirs
+    record_dt_s: float | None = None
     # two independent horizontal components, as a real earthquake has: with one, along X, the walls
     # parallel to X are loaded only in their plane and stand, so at most the other walls fall (the
     # paper example at 0.6 g, seed 0: 43 % of bricks moved with one component, 71-77 % with two)
@@ -117,6 +127,7 @@ class SimulationConfig:
             )
         if self.record_units is not None and self.record_units not in RECORD_UNITS:
             raise InputError(f"--units {self.record_units!r}: choose {', '.join(RECORD_UNITS)}")
+        check_record_dt(self.record_dt_s)
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise InputError(f"--duration {self.duration_s}: must be > 0 seconds")
         if self.components not in (1, 2):
@@ -198,7 +209,9 @@ def motion_for(config: SimulationConfig) -> GroundMotion:
     collapse PGA with the frame rate. A recorded accelerogram is applied as recorded, or, with
     ``pga_g``, scaled the same way so that its peak is the PGA."""
     if config.accelerogram is not None:
-        record = read_accelerogram(config.accelerogram, units=config.record_units, path_y=config.accelerogram_y)
+        record = read_accelerogram(
+            config.accelerogram, units=config.record_units, path_y=config.accelerogram_y, dt=config.record_dt_s
+        )
         if config.direction_deg:
             record = record.along(config.direction_deg)
         if config.pga_g is not None and config.pga_g > 0 and record.pga <= 0:

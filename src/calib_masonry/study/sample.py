@@ -360,7 +360,11 @@ def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -
         )
     elif sim.accelerograms:
         load = _recorded(
-            sim.accelerograms[sample.load["record"]], sample.load["pga_g"], sim.direction_deg, sim.record_units
+            sim.accelerograms[sample.load["record"]],
+            sample.load["pga_g"],
+            sim.direction_deg,
+            sim.record_units,
+            sim.record_dt_s,
         )
     else:
         load = synthetic_motion(
@@ -372,20 +376,28 @@ def _simulation(study: Study, sample: Sample, structure, material: tuple = ()) -
     return geometry, load, _material(sample, material)
 
 
-_RECORDS: dict[tuple[tuple[Path, ...], str | None], object] = {}  # a worker's records (and units), read once
+_RECORDS: dict[tuple, object] = {}  # a worker's records (and units, time step), read once
 
 
-def _recorded(files: tuple[Path, ...], pga_g: float, direction_deg: float = 0.0, units: str | None = None):
+def _recorded(
+    files: tuple[Path, ...],
+    pga_g: float,
+    direction_deg: float = 0.0,
+    units: str | None = None,
+    dt: float | None = None,
+):
     """The recorded motion of ``files`` (one file, or its X and Y components) scaled so that its peak
     is ``pga_g``, as ``simulate --accelerogram ... --pga`` scales it; a one-component record (one
     file of one component) along ``direction_deg`` from global X, as a study's synthetic motions."""
     from ..simulation.ground_motion import read_accelerogram
 
-    key = (files, units)
+    key = (files, units, dt)
     if key not in _RECORDS:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # said once, when the study file was read
-            _RECORDS[key] = read_accelerogram(files[0], units=units, path_y=files[1] if len(files) == 2 else None)
+            _RECORDS[key] = read_accelerogram(
+                files[0], units=units, path_y=files[1] if len(files) == 2 else None, dt=dt
+            )
     record = _RECORDS[key]
     if direction_deg and not record.displacement[:, 1].any():
         record = record.along(direction_deg)

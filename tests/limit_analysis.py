@@ -52,7 +52,7 @@ MAX_STEPS = 1000
 def _corners(scene: Scene):
     """Every joint corner: (bond index, point (3,), n, u, v) with the frame of each bond."""
     bonds = scene.bonds
-    u, v, n = joint_axes(np.array([b.normal for b in bonds]))
+    u, v, n = joint_axes(np.array([b.normal for b in bonds]).reshape(-1, 3))  # (0, 3) for a body alone
     rows = []
     for k, b in enumerate(bonds):
         pts = np.unique(np.round(np.asarray(b.outline), 12), axis=0)

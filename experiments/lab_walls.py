@@ -34,6 +34,9 @@ database's tests.csv and crackmaps/), its inputs read from its own row, never fr
   load H0 above the foot (``--shear-span-ratio H0/L``); from 0.95 to 1 -> cantilever with the load
   5 cm above the wall's top (the beam's centroid; noted); between -> not run (a partly restrained
   top, which the shear test does not model), said so;
+- the joint reach: the package's default (6 cm) or, where a stone would hang at it (a drawing's
+  joint wider than that, as rubble walls have), the least whole centimetre above at which none
+  does (:func:`build_wall`; WI2.175 and WI3.175 at 0.07 m, a wedge between two stones each);
 - the statistics are per reference (a series), from the test's own ``Reference`` field;
 - not run, each with its reason printed: more than one leaf (the model is single-wythe), no
   drawing, no precompression, no Vmax or no H0. A drawing is ``crackmaps/crackmap_<unit, letters and
@@ -447,28 +450,44 @@ def rocking_bound_kn(test: dict) -> float:
     return n_kn * test["L"] / (2 * span)
 
 
-def write_wall(test: dict, folder: Path, material: bool = True) -> Path:
+def write_wall(test: dict, folder: Path, material: bool = True, max_joint_m: float | None = None) -> Path:
     """The mask (from the row's ``drawing``) and structure file of one wall in ``folder``, with the
-    row's ``[material]`` table unless ``material`` is False; the structure file."""
+    row's ``[material]`` table unless ``material`` is False and the joint reach ``max_joint_m``
+    where given (else the package's default); the structure file."""
     from PIL import Image
 
     folder.mkdir(parents=True, exist_ok=True)
     mask = stone_mask(test["drawing"], test["L"], test["H"], mortar=test["mortar"])
     Image.fromarray(mask).save(folder / "mask.png")
     table = "\n".join(f"{k} = {v}" for k, v in test["material"].items())
+    reach = "" if max_joint_m is None else f"max_joint_m = {max_joint_m:g}\n"
     (folder / "structure.toml").write_text(
-        f'[structure]\nname = "{test["unit"]}"\nthickness_m = {test["t"]}\nvertices = 8\nclosed = false\n\n'
+        f'[structure]\nname = "{test["unit"]}"\nthickness_m = {test["t"]}\nvertices = 8\nclosed = false\n{reach}\n'
         f'[[wall]]\nname = "w"\nmask = "mask.png"\nwidth_m = {test["L"]}\nheight_m = {test["H"]}\ntheta_deg = 0\n'
         + (f"\n[material]\n{table}\n" if material else "")
     )
     return folder / "structure.toml"
 
 
+#: the widest joint reach a wall is built with (m): the structure files' own bound
+MAX_REACH_M = 0.3
+
+
 def build_wall(test: dict, folder: Path) -> Path:
-    """Mask (from the row's ``drawing``), structure and build of one wall in ``folder``; the model folder."""
-    structure = write_wall(test, folder)
-    call([*CLI, "build", str(structure), "--out", str(folder / "model"), "--overwrite"])
-    return folder / "model"
+    """Mask (from the row's ``drawing``), structure and build of one wall in ``folder``; the model
+    folder. The joint reach is the package's default or, where a stone would hang at it (no joint
+    beneath it: a joint of the drawing wider than the reach, as rubble walls have), the least whole
+    centimetre above it at which none does (up to :data:`MAX_REACH_M`): the wall stood before its
+    test, each stone on others. Its summary.json's ``max_joint_m`` says which; nothing is fitted
+    to Vmax."""
+    reach = None
+    while True:
+        structure = write_wall(test, folder, max_joint_m=reach)
+        call([*CLI, "build", str(structure), "--out", str(folder / "model"), "--overwrite"])
+        built = json.loads((folder / "model" / "summary.json").read_text())
+        if not built["joint_coverage"]["units_without_bed_joint"] or built["max_joint_m"] >= MAX_REACH_M:
+            return folder / "model"
+        reach = round(built["max_joint_m"] + 0.01, 2)
 
 
 CLI = [sys.executable, "-m", "calib_masonry"]
@@ -550,7 +569,7 @@ def main() -> None:
         print(
             f"{t['unit']:>10} {t['sigma0']:7.3f} {t['applied']:6.3f} {t['vmax']:7.1f} {peak if peak is not None else float('nan'):7.1f} "
             f"{ratio:6.2f} {bound:6.1f}  {st['mechanism']} / {t['failure']}  ({st['boundary']}, coverage "
-            f"{s['joint_coverage']['median']}{'; ' + t['note'] if t['note'] else ''})",
+            f"{s['joint_coverage']['median']}{_reach_note(folder)}{'; ' + t['note'] if t['note'] else ''})",
             flush=True,
         )
         print(f"{'':>10}  {stiffness_line(t, s, curve)}", flush=True)
@@ -563,6 +582,16 @@ def main() -> None:
         plot_walls(points, base / "lab_walls.png")
         plot_curves(curves, base / "lab_walls_curves.png")
         print(f"figures: {base / 'lab_walls.png'}, {base / 'lab_walls_curves.png'}")
+
+
+def _reach_note(folder: Path) -> str:
+    """ ", joint reach X m" where the wall in ``folder`` was built with more than the default reach
+    (:func:`build_wall`), else nothing."""
+    built = folder / "model" / "summary.json"
+    reach = json.loads(built.read_text()).get("max_joint_m") if built.is_file() else None
+    from calib_masonry.build3d.assemble import MAX_GAP_M
+
+    return f", joint reach {reach:g} m" if reach is not None and reach > MAX_GAP_M + 1e-9 else ""
 
 
 def stiffness_line(test: dict, summary: dict, curve: np.ndarray | None) -> str:

@@ -434,6 +434,38 @@ def test_a_laboratory_walls_measured_envelope_is_read_on_the_side_of_its_larger_
     assert envelope_of("WI1.100", reference="Lourenço et al. (2005)") is None  # another author's
 
 
+def test_a_laboratory_wall_with_joints_wider_than_the_default_reach_is_built_with_every_stone_bedded(tmp_path):
+    # experiments/lab_walls.py: a rubble wall's drawing may have joints wider than the package's
+    # default reach (6 cm); a stone with no joint beneath it would hang in the model where it stood
+    # in the laboratory. The wall is built with the least whole centimetre at which none hangs
+    import json
+    import sys
+
+    from PIL import Image, ImageDraw
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+    from lab_walls import build_wall
+
+    # a drawing at 500 px/m of a 1.0 x 0.62 m wall: three courses of stones 0.16 m high, 8 cm beds
+    # and heads between them (grey outlines, the wall's outline black), as the database draws them
+    img = Image.new("RGB", (501, 311), "white")
+    d = ImageDraw.Draw(img)
+    for c in range(3):
+        y1 = 310 - c * 120  # 0.24 m a course: 0.16 m of stone, 0.08 m of bed
+        y0 = y1 - 80
+        x = 0 if c % 2 == 0 else -60
+        while x < 500:
+            x0, x1 = max(x, 0), min(x + 160, 500)
+            d.rectangle([x0, y0, x1, y1], outline=(128, 128, 128), width=2)
+            x += 200
+    d.rectangle([0, 0, 500, 310], outline="black", width=2)
+    drawing = tmp_path / "crackmap.png"
+    img.save(drawing)
+    test = {"unit": "R1", "drawing": drawing, "L": 1.0, "H": 0.62, "t": 0.3, "mortar": True, "material": {}}
+    built = json.loads((build_wall(test, tmp_path / "R1") / "summary.json").read_text())
+    assert built["max_joint_m"] == 0.09 and built["joint_coverage"]["units_without_bed_joint"] == []
+
+
 def test_laboratory_rows_of_other_walls_are_read_from_their_own_fields(tmp_path):
     # experiments/lab_walls.py on walls of the database that are not in ../shared: material and
     # boundary come from each row's fields (never from the unit's name), unsupported rows say why

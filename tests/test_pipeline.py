@@ -283,10 +283,13 @@ def test_a_mortar_bed_wider_than_the_default_joint_is_joined_where_the_structure
     # measured along the mortar's medial axis), and that reach joins them
     coverage = json.loads((tmp_path / "cli" / "summary.json").read_text())["joint_coverage"]
     assert coverage["mortar_width_p95_m"] == pytest.approx(0.08, abs=0.006)
-    assert "narrower than 8.0 cm" in notes[0] and "max_joint_m = 0.09 would reach across them" in notes[0]
+    assert "narrower than 8.0 cm" in notes[0]
+    # and the reach that joins each hanging unit to a unit beneath: its bed, 8 cm, as built
+    assert coverage["widest_bed_m"] == pytest.approx(0.08, abs=1e-6)
+    assert "max_joint_m = 0.09 joins each of them to a unit beneath, their beds being at most 8.0 cm" in notes[0]
     suggested = build_to_folder(load_structure(_wide_bed_wall(tmp_path, 0.09)), tmp_path / "m_09", figures=False)
     assert suggested["joint_coverage"]["units_without_bed_joint"] == []
-    assert "mortar_width_p95_m" not in suggested["joint_coverage"]  # measured only where units hang
+    assert not {"mortar_width_p95_m", "widest_bed_m"} & set(suggested["joint_coverage"])  # only where units hang
     # the value goes through a written structure file (synth writes one from a scenario)
     from calib_masonry.spec import structure_to_toml
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from ._threads import background, background_process
 from .build3d.assemble import Structure3D, joint_width
-from .build3d.contacts import max_interpenetration
+from .build3d.contacts import max_interpenetration, narrowest_beds
 from .build3d.export import bricks_from_json, bricks_json_bytes, export_mesh, plot_model, plot_walls, write_bricks_json
 from .build3d.place import Footprint, WallGeometry, closure_gap, corners, footprint_is_closed, wall_frames
 from .build3d.scale import wall_from_image
@@ -315,8 +315,26 @@ def write_build(
                 width = mortar_width_m(spec, result)
                 if width is not None:
                     summary["joint_coverage"]["mortar_width_p95_m"] = round(width, 4)
+                bed = widest_bed_m(s, computed.without_bed_joint())
+                if bed is not None:
+                    summary["joint_coverage"]["widest_bed_m"] = round(bed, 4)
         write_json(stage / "summary.json", summary)
     return summary
+
+
+def widest_bed_m(structure: Structure3D, hanging) -> float | None:
+    """The widest of the narrowest beds under the units ``hanging`` (indices of
+    ``structure.bricks``: the simulation geometry's ``without_bed_joint``), the gap between each
+    and the units beneath it (:func:`~calib_masonry.build3d.contacts.narrowest_beds`, searched to
+    the structure files' widest reach): a reach above it joins each to a unit beneath. None where
+    none has a unit beneath within that search."""
+    from .spec import MAX_JOINT_M
+
+    hanging = np.asarray(hanging, dtype=np.int64)
+    beds = narrowest_beds(structure.bricks, search_m=MAX_JOINT_M, ground_m=joint_width(structure), only=hanging)
+    beds = beds[hanging]
+    beds = beds[np.isfinite(beds)]
+    return float(beds.max()) if beds.size else None
 
 
 def mortar_width_m(spec, result) -> float | None:

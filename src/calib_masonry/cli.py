@@ -106,13 +106,19 @@ def _print_build(summary: dict, out) -> None:
 
         n = len(hanging)
         reach = summary["max_joint_m"]  # build writes it since it became a setting
-        width = coverage.get("mortar_width_p95_m")
-        measured = (
-            f" (95 % of the length of this structure's mortar joints is narrower than {width * 100:.1f} cm, measured "
-            f"in its masks: max_joint_m = {reach_over(width):g} would reach across them)"
-            if width is not None and width > reach
-            else ""
-        )
+        width, bed = coverage.get("mortar_width_p95_m"), coverage.get("widest_bed_m")
+        said = []
+        if bed is not None:
+            said.append(
+                f"max_joint_m = {reach_over(bed):g} joins each of them to a unit beneath, their beds being at most "
+                f"{bed * 100:.1f} cm wide"
+            )
+        if width is not None and width > reach:
+            said.append(
+                f"95 % of the length of the masks' mortar joints is narrower than {width * 100:.1f} cm"
+                + ("" if bed is not None else f": max_joint_m = {reach_over(width):g} would reach across them")
+            )
+        measured = f" ({'; '.join(said)})" if said else ""
         print(
             f"  note: {n} unit{'s' if n > 1 else ''} above the lowest course {'have' if n > 1 else 'has'} no joint "
             f"beneath (a bed wider than max_joint_m = {reach:g} m, or a void) and "

@@ -477,20 +477,37 @@ def contact_patches(
     return out
 
 
-def narrowest_beds(bricks: Sequence[Brick], *, search_m: float, ground_m: float) -> np.ndarray:
+def narrowest_beds(
+    bricks: Sequence[Brick], *, search_m: float, ground_m: float, only: Sequence[int] | None = None
+) -> np.ndarray:
     """Each brick's narrowest bed (m): the least gap of the :func:`contact_patches` (searched to
     ``search_m``) beneath it, whose normal lies within 60 degrees of vertical, as the simulation
     geometry's ``without_bed_joint`` reads a bed. NaN for a brick within ``ground_m`` of the lowest
     brick's bottom (it stands on the footing), inf for one with no bed within ``search_m``. The
-    joint reach a structure needs for none of its units to hang is the largest finite value."""
+    joint reach a structure needs for none of its units to hang is the largest finite value.
+    ``only``: the indices of the bricks to measure (the patches are then found among them and the
+    bricks within ``search_m`` of them alone); the others are inf."""
     beds = np.full(len(bricks), np.inf)
     if not bricks:
         return beds
-    row = {b.id: k for k, b in enumerate(bricks)}
-    for p in contact_patches(bricks, max_gap_m=search_m, progress=False):
+    bottom = np.array([float(b.solid.vertices[:, 2].min()) for b in bricks])
+    near = np.arange(len(bricks))
+    if only is not None:
+        only = np.asarray(only, dtype=np.int64)
+        lo = np.array([b.solid.vertices.min(axis=0) for b in bricks])
+        hi = np.array([b.solid.vertices.max(axis=0) for b in bricks])
+        touch = np.zeros(len(bricks), dtype=bool)
+        for k in only.tolist():  # the bricks whose boxes come within search_m of a measured one's
+            touch |= ((lo <= hi[k] + search_m) & (hi >= lo[k] - search_m)).all(axis=1)
+        near = np.flatnonzero(touch)
+    row = {bricks[k].id: k for k in near.tolist()}
+    for p in contact_patches([bricks[k] for k in near.tolist()], max_gap_m=search_m, progress=False):
         if abs(p.normal[2]) > 0.5:  # a's normal points up at b: b rests on a (or the other way round)
             k = row[p.b] if p.normal[2] > 0 else row[p.a]
             beds[k] = min(beds[k], p.gap_m)
-    bottom = np.array([float(b.solid.vertices[:, 2].min()) for b in bricks])
+    if only is not None:
+        measured = np.zeros(len(bricks), dtype=bool)
+        measured[only] = True
+        beds[~measured] = np.inf
     beds[bottom <= bottom.min() + ground_m] = np.nan
     return beds

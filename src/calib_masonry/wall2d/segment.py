@@ -254,7 +254,7 @@ class Segmentation:
     made it, and what it found (:meth:`summary`)."""
 
     mask: np.ndarray
-    method: str  # "mortar" (the top-hat) or "joints" (wall2d.pieces)
+    method: str  # "mortar" (the top-hat), "colour" (broad mortar by its colour) or "joints" (wall2d.pieces)
     px_per_m: float
     pieces: object | None = None  # wall2d.pieces.Pieces, for the "joints" method
     note: str = ""  # why the method was chosen
@@ -320,6 +320,66 @@ def mortar_plausible(mask: np.ndarray, labels: np.ndarray | None = None) -> str:
     return ""
 
 
+#: the colour split (:func:`segment_by_colour`): the orthophoto is smoothed over this (m) first, and
+#: the units opened by it after, so that grain and speckle finer than half a centimetre are neither
+MORTAR_SMOOTH_M = 0.005
+#: of the mortar side of the colour split, at least this share must be one connected network (the
+#: joints between units are; texture on the units' faces is spots)
+MORTAR_NETWORK = 0.9
+#: the mortar side of the colour split covers at most this share of the wall (the units are most of it)
+MORTAR_MOST = 0.5
+
+
+def segment_by_colour(
+    rgb: np.ndarray, px_per_m: float, valid: np.ndarray | None = None
+) -> tuple[np.ndarray | None, str]:
+    """Units against broad mortar by colour: the brick mask ``(rows, cols)``, or None and why not.
+
+    Rubble and stone walls have joints of 2-6 cm, wider than the top-hat of :func:`segment_photo`
+    keeps whole (a joint wider than its disk is a plateau, not a line), whose pale band the top-hat
+    finds only at its edges. Here CIELAB lightness and chroma, smoothed over
+    :data:`MORTAR_SMOOTH_M`, are each split at Otsu's threshold, the lighter or the greyer side
+    taken for mortar (and the other way round); a split counts only where its mortar side is one
+    network (:data:`MORTAR_NETWORK`), at most :data:`MORTAR_MOST` of the wall, and its units look like
+    masonry (:func:`mortar_plausible`). Of those, the one whose two sides Otsu separates best. On
+    the laboratory photos (painted speckle, tight joints) no split counts."""
+    from skimage.color import rgb2lab
+    from skimage.filters import threshold_otsu
+    from skimage.morphology import disk
+
+    r = max(1, int(round(MORTAR_SMOOTH_M * px_per_m)))
+    img = np.empty(rgb.shape[:2] + (3,), dtype=np.float32)
+    for c in range(3):
+        img[..., c] = ndimage.gaussian_filter(np.asarray(rgb[..., c], dtype=np.float32), MORTAR_SMOOTH_M * px_per_m)
+    np.clip(img, 0, 1, out=img)
+    lab = rgb2lab(img)
+    inside = np.ones(rgb.shape[:2], dtype=bool) if valid is None else valid
+    best, best_sep, why = None, -1.0, "no colour split looks like mortar"
+    for chan in (lab[..., 0], np.hypot(lab[..., 1], lab[..., 2])):
+        values = chan[inside]
+        t = threshold_otsu(values)
+        lo, hi = values[values <= t], values[values > t]
+        if len(lo) == 0 or len(hi) == 0 or values.var() <= 1e-12:
+            continue
+        sep = float((hi.mean() - lo.mean()) ** 2 * len(lo) * len(hi) / values.size**2 / values.var())
+        for mortar in (chan > t, chan <= t):
+            mortar &= inside
+            share = mortar.sum() / max(1, inside.sum())
+            if not 0.0 < share <= MORTAR_MOST:
+                continue
+            parts, n = ndimage.label(mortar)
+            if n == 0 or np.bincount(parts.ravel())[1:].max() < MORTAR_NETWORK * mortar.sum():
+                continue
+            units = opening(~mortar & inside, disk(r))
+            labels = label_bricks(units)
+            problem = mortar_plausible(units, labels)
+            if problem:
+                why = problem.replace("the mortar top-hat", "the colour split")
+            elif sep > best_sep:
+                best, best_sep = units, sep
+    return (best, "") if best is not None else (None, why)
+
+
 #: the joints' partition is made at this resolution (px per metre of wall), or the orthophoto's
 #: own where that is coarser, on at most MAX_PIECES_PIXELS pixels
 PIECES_PX_PER_M = 300.0
@@ -358,7 +418,8 @@ def segment_wall(
 ) -> Segmentation:
     """Segment a wall's orthophoto ``(rows, cols, 3)`` at ``px_per_m`` into masonry units: the
     mortar top-hat (:func:`segment_photo`: exact on brick walls with visible mortar) when its pieces
-    look like masonry (:func:`mortar_plausible`), else the joints' partition
+    look like masonry (:func:`mortar_plausible`), else the mortar by its colour where its joints
+    are broad (:func:`segment_by_colour`: rubble and stone walls), else the joints' partition
     (:func:`calib_masonry.wall2d.pieces.segment_pieces`: stones, plaster, speckle, cracks).
     ``valid``: the pixels that are wall (False under an occluder): no piece covers the others."""
     from .pieces import PieceConfig, pieces_mask, segment_pieces
@@ -373,6 +434,10 @@ def segment_wall(
         return Segmentation(
             mask=mortar_mask, method="mortar", px_per_m=float(px_per_m), note="the mortar top-hat", known_labels=labels
         )
+    colour, not_colour = segment_by_colour(rgb, px_per_m, valid)
+    if colour is not None:  # broad mortar, paler or greyer than the units
+        return Segmentation(mask=colour, method="colour", px_per_m=float(px_per_m), note=f"{why}: the mortar's colour")
+    why = f"{why}; {not_colour}"
     # the joints' partition at one resolution, whatever the orthophoto's (its pieces changed by a
     # third between 300 and 550 px/m, measured), then back to the orthophoto's pixels
     # never finer than the orthophoto (a 20 px/m orthophoto of a 14 x 75 m fit was taken to 300 px/m:

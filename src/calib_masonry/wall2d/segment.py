@@ -173,10 +173,25 @@ def grey_morphology(image: np.ndarray, footprint: np.ndarray, op) -> np.ndarray:
     return f(np.ascontiguousarray(image), fp.astype(np.uint8), borderType=cv2.BORDER_REFLECT)
 
 
+def _cielab(img: np.ndarray) -> np.ndarray:
+    """CIELAB of an RGB image in [0, 1] (float32 in, float32 out). rgb2lab's temporaries are 5x its
+    input: a band at a time, the bands on every core (numpy's arithmetic releases the GIL; 0.1 s of
+    a 2.6 MP orthophoto on one core)."""
+    from skimage.color import rgb2lab
+
+    lab = np.empty_like(img)
+
+    def to_lab(job) -> None:
+        src_rgb, dst, rows = job
+        dst[rows] = rgb2lab(src_rgb[rows])
+
+    thread_map(to_lab, [(img, lab, rows) for rows in _row_chunks(img.shape, 1 << 18)])
+    return lab
+
+
 def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConfig()) -> np.ndarray:
     """Boolean brick mask ``(rows, cols)`` of a rectified RGB photo in [0, 1] (bricks True)."""
     import cv2  # noqa: F401 - grey_morphology's, loaded here and not first on the threads below
-    from skimage.color import rgb2lab
     from skimage.filters import threshold_otsu
     from skimage.morphology import disk
 
@@ -193,15 +208,7 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
 
     thread_map(smooth, [(c, img) for c in range(3)])
     np.clip(img, 0, 1, out=img)
-    lab = np.empty_like(img)
-
-    def to_lab(job) -> None:
-        src_rgb, dst, rows = job
-        dst[rows] = rgb2lab(src_rgb[rows])
-
-    # rgb2lab's temporaries are 5x its input: a band at a time, the bands on every core (numpy's
-    # arithmetic releases the GIL; 0.1 s of a 2.6 MP orthophoto on one core)
-    thread_map(to_lab, [(img, lab, rows) for rows in _row_chunks(img.shape, 1 << 18)])
+    lab = _cielab(img)
     del img
     chroma = np.hypot(lab[..., 1], lab[..., 2])
     fp = disk(config.joint_px)
@@ -343,7 +350,6 @@ def segment_by_colour(
     network (:data:`MORTAR_NETWORK`), at most :data:`MORTAR_MOST` of the wall, and its units look like
     masonry (:func:`mortar_plausible`). Of those, the one whose two sides Otsu separates best. On
     the laboratory photos (painted speckle, tight joints) no split counts."""
-    from skimage.color import rgb2lab
     from skimage.filters import threshold_otsu
     from skimage.morphology import disk
 
@@ -352,7 +358,8 @@ def segment_by_colour(
     for c in range(3):
         img[..., c] = ndimage.gaussian_filter(np.asarray(rgb[..., c], dtype=np.float32), MORTAR_SMOOTH_M * px_per_m)
     np.clip(img, 0, 1, out=img)
-    lab = rgb2lab(img)
+    lab = _cielab(img)
+    del img
     inside = np.ones(rgb.shape[:2], dtype=bool) if valid is None else valid
     best, best_sep, why = None, -1.0, "no colour split looks like mortar"
     for chan in (lab[..., 0], np.hypot(lab[..., 1], lab[..., 2])):

@@ -173,6 +173,18 @@ def grey_morphology(image: np.ndarray, footprint: np.ndarray, op) -> np.ndarray:
     return f(np.ascontiguousarray(image), fp.astype(np.uint8), borderType=cv2.BORDER_REFLECT)
 
 
+def _otsu_split(values: np.ndarray) -> tuple[float, float] | None:
+    """Otsu's threshold of ``values`` and how well it splits them (the between-class variance over
+    the whole variance, in [0, 1]); None where one side is empty."""
+    from skimage.filters import threshold_otsu
+
+    t = threshold_otsu(values)
+    lo, hi = values[values <= t], values[values > t]
+    if len(lo) == 0 or len(hi) == 0:
+        return None
+    return t, float((hi.mean() - lo.mean()) ** 2 * len(lo) * len(hi) / values.size**2 / max(values.var(), 1e-12))
+
+
 def _cielab(img: np.ndarray) -> np.ndarray:
     """CIELAB of an RGB image in [0, 1] (float32 in, float32 out). rgb2lab's temporaries are 5x its
     input: a band at a time, the bands on every core (numpy's arithmetic releases the GIL; 0.1 s of
@@ -229,11 +241,8 @@ def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConf
         if scale <= 1e-9:
             return None, -1.0
         r = np.clip(resp / scale, 0, 1.5)
-        t = threshold_otsu(r)
-        lo, hi = r[r <= t], r[r > t]
-        if len(lo) == 0 or len(hi) == 0:
-            return None, -1.0
-        return r, (hi.mean() - lo.mean()) ** 2 * len(lo) * len(hi) / r.size**2 / max(r.var(), 1e-12)
+        split = _otsu_split(r)
+        return (None, -1.0) if split is None else (r, split[1])
 
     best, best_sep = None, -1.0
     for r, sep in thread_map(separation, responses):  # in order: the first of equal ones wins, as before
@@ -350,7 +359,6 @@ def segment_by_colour(
     network (:data:`MORTAR_NETWORK`), at most :data:`MORTAR_MOST` of the wall, and its units look like
     masonry (:func:`mortar_plausible`). Of those, the one whose two sides Otsu separates best. On
     the laboratory photos (painted speckle, tight joints) no split counts."""
-    from skimage.filters import threshold_otsu
     from skimage.morphology import disk
 
     r = max(1, int(round(MORTAR_SMOOTH_M * px_per_m)))
@@ -364,11 +372,10 @@ def segment_by_colour(
     best, best_sep, why = None, -1.0, "no colour split looks like mortar"
     for chan in (lab[..., 0], np.hypot(lab[..., 1], lab[..., 2])):
         values = chan[inside]
-        t = threshold_otsu(values)
-        lo, hi = values[values <= t], values[values > t]
-        if len(lo) == 0 or len(hi) == 0 or values.var() <= 1e-12:
+        split = _otsu_split(values)
+        if split is None or values.var() <= 1e-12:
             continue
-        sep = float((hi.mean() - lo.mean()) ** 2 * len(lo) * len(hi) / values.size**2 / values.var())
+        t, sep = split
         for mortar in (chan > t, chan <= t):
             mortar &= inside
             share = mortar.sum() / max(1, inside.sum())

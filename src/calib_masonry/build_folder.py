@@ -18,7 +18,7 @@ import numpy as np
 
 from ._threads import background, background_process
 from .build3d.assemble import Structure3D, joint_width
-from .build3d.contacts import max_interpenetration, narrowest_beds
+from .build3d.contacts import max_interpenetration, widest_bed
 from .build3d.export import bricks_from_json, bricks_json_bytes, export_mesh, plot_model, plot_walls, write_bricks_json
 from .build3d.place import Footprint, WallGeometry, closure_gap, corners, footprint_is_closed, wall_frames
 from .build3d.scale import wall_from_image
@@ -182,8 +182,10 @@ def build_to_folder(
 
 def read_build(model_dir: str | Path) -> Structure3D:
     """The Structure3D a ``build`` output folder holds (its bricks.json and summary.json)."""
-    data, closed = read_model_json(model_dir)  # bricks.json parsed once
-    bricks, frames, cs, footprint = model_from_json(data, closed, model_dir)
+    model_dir = checked_model_dir(model_dir)
+    data = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
+    summary = _model_summary(model_dir)  # each file parsed once
+    bricks, frames, cs, footprint = model_from_json(data, summary.get("closed_footprint"), model_dir)
     removed = tuple(tuple(w.get("removed_corner_pieces", ())) for w in data["walls"])
     return Structure3D(
         name=str(data.get("structure", Path(model_dir).name)),
@@ -193,7 +195,7 @@ def read_build(model_dir: str | Path) -> Structure3D:
         bricks=tuple(bricks),
         removed=removed,
         closure_gap_xy=closure_gap(footprint),
-        max_joint_m=_model_max_joint(Path(model_dir)),
+        max_joint_m=_model_max_joint(model_dir, summary),
     )
 
 
@@ -330,11 +332,7 @@ def widest_bed_m(structure: Structure3D, hanging) -> float | None:
     none has a unit beneath within that search."""
     from .spec import MAX_JOINT_M
 
-    hanging = np.asarray(hanging, dtype=np.int64)
-    beds = narrowest_beds(structure.bricks, search_m=MAX_JOINT_M, ground_m=joint_width(structure), only=hanging)
-    beds = beds[hanging]
-    beds = beds[np.isfinite(beds)]
-    return float(beds.max()) if beds.size else None
+    return widest_bed(structure.bricks, search_m=MAX_JOINT_M, ground_m=joint_width(structure), only=hanging)
 
 
 def mortar_width_m(spec, result) -> float | None:
@@ -380,18 +378,17 @@ def checked_model_dir(model_dir: str | Path) -> Path:
     return model_dir
 
 
-def _closed_footprint(model_dir: Path):
-    if (model_dir / "summary.json").is_file():
-        return read_json(model_dir / "summary.json").get("closed_footprint")
-    return None
+def _model_summary(model_dir: Path) -> dict:
+    """A model folder's summary.json contents, {} where it has none."""
+    return read_json(model_dir / "summary.json") if (model_dir / "summary.json").is_file() else {}
 
 
 def _model_max_joint(model_dir: Path, summary: dict | None = None) -> float | None:
     """The widest joint a model folder was built with where it is not the default (its summary's
     ``max_joint_m``; ``summary``: that file's contents, where already read), else None."""
-    if summary is None and (model_dir / "summary.json").is_file():
-        summary = read_json(model_dir / "summary.json")
-    value = (summary or {}).get("max_joint_m")
+    if summary is None:
+        summary = _model_summary(model_dir)
+    value = summary.get("max_joint_m")
     return float(value) if value is not None and float(value) != MAX_GAP_M else None
 
 
@@ -421,7 +418,8 @@ def model_from_json(data: dict, closed, source: str | Path):
 def read_model_json(model_dir: str | Path) -> tuple[dict, bool | None]:
     """A ``build`` output folder's bricks.json contents and its summary's closed_footprint."""
     model_dir = checked_model_dir(model_dir)
-    return read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json"), _closed_footprint(model_dir)
+    bricks = read_json(model_dir / "bricks.json", field="MODEL_DIR bricks.json")
+    return bricks, _model_summary(model_dir).get("closed_footprint")
 
 
 def load_model(model_dir: str | Path):
@@ -562,7 +560,7 @@ def geometry_for_model(
     model_dir = checked_model_dir(model_dir)
     raw = (model_dir / "bricks.json").read_bytes()
     summary = read_json(model_dir / "summary.json") if (model_dir / "summary.json").is_file() else {}
-    closed = summary.get("closed_footprint")  # as _closed_footprint, from the one reading
+    closed = summary.get("closed_footprint")  # as read_model_json's, from the one reading
     if max_gap_m is None:
         max_gap_m = _model_max_joint(model_dir, summary) or MAX_GAP_M
     stored = _load_geometry(model_dir / GEOMETRY_FILE, _geometry_key(raw, closed, max_gap_m, mortar_fill))

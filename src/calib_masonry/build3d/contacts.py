@@ -55,6 +55,7 @@ __all__ = [
     "OUTLINE_POINTS",
     "box_pairs",
     "narrowest_beds",
+    "widest_bed",
 ]
 
 OUTLINE_POINTS = 16  # a patch's outline (its convex hull) is stored with this many corners, padded by repeats
@@ -511,3 +512,16 @@ def narrowest_beds(
         beds[~measured] = np.inf
     beds[bottom <= bottom.min() + ground_m] = np.nan
     return beds
+
+
+def widest_bed(
+    bricks: Sequence[Brick], *, search_m: float, ground_m: float, only: Sequence[int] | None = None
+) -> float | None:
+    """The largest finite :func:`narrowest_beds` (of the bricks ``only``, where given): the joint
+    reach above which every such brick rests on a brick beneath it. None where none has a bed
+    within ``search_m``."""
+    beds = narrowest_beds(bricks, search_m=search_m, ground_m=ground_m, only=only)
+    if only is not None:
+        beds = beds[np.asarray(only, dtype=np.int64)]
+    beds = beds[np.isfinite(beds)]
+    return float(beds.max()) if beds.size else None

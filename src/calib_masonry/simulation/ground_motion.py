@@ -452,7 +452,9 @@ def _parse_csv(path: Path, lines: list[str], dt: float | None = None) -> tuple[n
             f"line {numbers[k]}: time step {dts[k - 1]:g} s where the record's step is "
             f"{dt:g} s; resample the record to a regular time step",
         )
-    return data[:, 1:], dt
+    # the mean step over the record, to the time column's own digits: "0.01, 0.02, ..." steps by
+    # 0.01 s, where the median of the differences kept their rounding (0.010000000000000009)
+    return data[:, 1:], float(f"{(t[-1] - t[0]) / (len(t) - 1):.10g}")
 
 
 def _parse_samples(path: Path, lines: list[str], dt: float) -> tuple[np.ndarray, float]:

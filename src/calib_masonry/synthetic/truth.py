@@ -31,7 +31,7 @@ import numpy as np
 
 from .._threads import background
 from ..build3d.assemble import MAX_GAP_M, Structure3D, WallPolygons, assemble, joint_width, reach_over
-from ..build3d.contacts import narrowest_beds
+from ..build3d.contacts import widest_bed
 from ..build3d.export import plot_walls, write_bricks_json
 from ..build3d.place import closure_gap, footprint_is_closed
 from ..io import Photo, read_photo, staged_output, write_json, write_mask
@@ -63,9 +63,8 @@ def widest_bed_m(structure: Structure3D, syn: SyntheticSpec) -> float:
     stone whose face is turned) is left out."""
     if syn.layout != "stones":
         return float(syn.mortar_m)
-    beds = narrowest_beds(structure.bricks, search_m=MAX_JOINT_M, ground_m=MAX_GAP_M)
-    beds = beds[np.isfinite(beds)]
-    return float(beds.max()) if beds.size else float(syn.mortar_m)
+    widest = widest_bed(structure.bricks, search_m=MAX_JOINT_M, ground_m=MAX_GAP_M)
+    return float(syn.mortar_m) if widest is None else widest
 
 
 def _shots(jobs: list, progress, desc: str):

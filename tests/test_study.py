@@ -123,6 +123,11 @@ def test_sobol_gives_the_only_input_with_spread_all_of_the_variance(tmp_path, sm
     assert si["w0.width_m"]["ST"] > 0.9
     for other in ("w0.height_m", "w1.width_m", "w1.theta_deg"):
         assert abs(si[other]["ST"]) < 0.05 and abs(si[other]["S1"]) < 0.05
+    # an open L has no closure: its ends' distance (which varied with w0's width) is no output, and
+    # an output the same in every sample has no spread (numpy's std left 1e-16 on the mean Dice)
+    assert all(r["closure_error_m"] is None for r in rows) and summary["outputs"]["closure_error_m"] == {"n": 0}
+    assert "closure_error_m" not in summary["sobol"]
+    assert len({r["mean_dice"] for r in rows}) == 1 and summary["outputs"]["mean_dice"]["std"] == 0.0
 
 
 @pytest.mark.slow

@@ -88,7 +88,11 @@ class Structure3D:
     max_joint_m: float | None = None
 
     @property
-    def closure_error_m(self) -> float:
+    def closure_error_m(self) -> float | None:
+        """How far the last wall's end lies from the first wall's start (m); None for an open
+        footprint (an L or a single wall), whose ends are apart by design."""
+        if not self.footprint.is_closed:
+            return None
         return float(np.linalg.norm(self.closure_gap_xy))
 
     def bricks_of(self, wall: int) -> list[Brick]:

@@ -69,7 +69,9 @@ def _stats(v: np.ndarray) -> dict:
     return {
         "n": len(v),
         "mean": float(v.mean()),
-        "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
+        # 0 where every sample is the same (numpy's std of equal values keeps its mean's rounding:
+        # 1e-16 for a constant 0.9968, which the command line listed among the outputs that vary)
+        "std": float(v.std(ddof=1)) if v.max() > v.min() else 0.0,
         "p5": float(p5),
         "p50": float(p50),
         "p95": float(p95),
@@ -180,8 +182,8 @@ def _sobol(study: Study, rows: list[dict], outputs: list[str]) -> dict | None:
     result: dict = {}
     for key in outputs:
         y = _numeric(rows, key)
-        if y is None:
-            continue
+        if y is None or not np.isfinite(y).any():
+            continue  # no sample has a value (an open footprint's closure, a collapse time where none fell)
         if not np.all(np.isfinite(y)):
             result[key] = {"note": "some samples failed or gave NaN; Saltelli's estimator needs every sample"}
             continue

@@ -228,7 +228,7 @@ def build_outputs(result) -> dict:
         "total_volume_m3": float(vol.sum()),
         "mass_kg": float(MASONRY.density * vol.sum()),
         "bricks": len(s.bricks),
-        "closure_error_m": float(s.closure_error_m),
+        "closure_error_m": s.closure_error_m,  # None for an open footprint: no closure to vary
         "com_x_m": float(com[0]),
         "com_y_m": float(com[1]),
         "com_z_m": float(com[2]),

@@ -1529,6 +1529,17 @@ def test_footprint_of_a_structure_of_photos_with_typed_widths(photo_set, tmp_pat
     widths = [w["width_m"] for w in doc["walls"]]
     assert widths == pytest.approx([2.4, 2.0, third], abs=0.01) and doc["closure_gap_m"] < 1e-6
     assert "gap" in capsys.readouterr().out
+    # the first two walls alone, an L (refused before: "a closed footprint needs at least 3")
+    (tmp_path / "l.toml").write_text(
+        (tmp_path / "s.toml").read_text().split('[[wall]]\nname = "c"')[0].replace("closed = true", "closed = false")
+    )
+    assert _run(["footprint", tmp_path / "l.toml", "--out", tmp_path / "fl"]) == 0
+    doc = json.loads((tmp_path / "fl" / "footprint.json").read_text())
+    assert [w["width_m"] for w in doc["walls"]] == pytest.approx([2.4, 2.0], abs=0.01) and doc["closure_gap_m"] is None
+    assert "open footprint (no closure)" in capsys.readouterr().out and (tmp_path / "fl" / "footprint.png").is_file()
+    from calib_masonry.spec import load_structure
+
+    assert load_structure(tmp_path / "fl" / "structure.toml").closed is False
 
 
 def test_footprint_leaves_a_photo_walls_occluders_out_as_build_does(photo_set, tmp_path, monkeypatch):
@@ -1652,6 +1663,32 @@ def test_footprint_with_turns_ties_the_walls_together():
     te2[3] = np.nan
     part = fit_footprint(we, 0.01 * we, te2, st, turns=turns)
     assert abs(math.degrees(math.remainder(part.theta_rad[3] - t[3], 2 * math.pi))) < 2.0
+
+
+def test_an_open_footprint_is_adjusted_to_its_corner_turns_without_a_closure():
+    """An L of two walls (or a row of them) was refused: "a closed footprint needs at least 3". Its
+    walls keep their photos' W (no ring to close), the thetas agree with the corner photo's turn,
+    and a wall with no orientation of its own and no corner to one that has is named."""
+    from calib_masonry.calibrate.footprint import fit_footprint
+
+    w, t = np.array([3.4, 2.1]), np.radians([0.0, 90.0])
+    rng = np.random.default_rng(4)
+    we, te = w * (1 + rng.normal(0, 0.01, 2)), t + np.radians([1.5, -1.5])
+    turn = [(0, 1, math.radians(90.0), math.radians(0.1))]
+    res = fit_footprint(we, 0.01 * we, te, math.radians(2.0), turns=turn, closed=False, names=["a", "b"])
+    assert res.fit.ok and res.closure_gap_m is None and res.closure_gap_before_m is None
+    np.testing.assert_allclose(res.width_m, we, rtol=1e-9)  # nothing to pull them to
+    assert math.degrees(res.theta_rad[1] - res.theta_rad[0]) == pytest.approx(90.0, abs=0.05)
+    assert res.theta_sigma_rad[0] < math.radians(2.0)  # the turn ties the two thetas together
+    with pytest.raises(InputError, match="closed = false"):
+        fit_footprint(we, 0.01 * we, te, math.radians(2.0), turns=turn)  # as a ring: refused, saying why
+    st = np.array([math.radians(2.0), np.inf])
+    placed = fit_footprint(we, 0.01 * we, [te[0], np.nan], st, turns=turn, closed=False, names=["a", "b"])
+    assert math.degrees(placed.theta_rad[1] - placed.theta_rad[0]) == pytest.approx(90.0, abs=0.05)
+    with pytest.raises(InputError, match="wall 'b' of an open footprint has no orientation"):
+        fit_footprint(we, 0.01 * we, [te[0], np.nan], st, closed=False, names=["a", "b"])
+    one = fit_footprint(we[:1], 0.01 * we[:1], te[:1], math.radians(2.0), closed=False)
+    assert one.fit.ok and one.width_m[0] == pytest.approx(we[0])
 
 
 def test_corner_tables_are_checked_and_written_back(photo_set, tmp_path):

@@ -357,10 +357,12 @@ def _cmd_footprint(args) -> int:
         figure=not args.no_figures,
         overwrite=args.overwrite,
     )
-    print(
-        f"footprint: {len(doc['walls'])} walls, gap {doc['closure_gap_before_m'] * 1000:.1f} mm before, "
-        f"{doc['closure_gap_m'] * 1000:.3g} mm after -> {args.out}"
+    gap = (
+        f"gap {doc['closure_gap_before_m'] * 1000:.1f} mm before, {doc['closure_gap_m'] * 1000:.3g} mm after"
+        if doc["closure_gap_m"] is not None
+        else "open footprint (no closure)"
     )
+    print(f"footprint: {len(doc['walls'])} walls, {gap} -> {args.out}")
     for w in doc["walls"]:
         print(
             f"  {w['name']:>10}: W = {w['width_m']:.3f} +- {w['width_sigma_m']:.3f} m, "

@@ -103,9 +103,11 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
     canvas.save(path)
 
 
-def plot_footprint(widths, thetas, adjusted_w, adjusted_t, names, path: Path, *, title: str = "") -> None:
+def plot_footprint(
+    widths, thetas, adjusted_w, adjusted_t, names, path: Path, *, title: str = "", closed: bool = True
+) -> None:
     """Plan view of the footprint from the per-wall estimates (dashed, not closing) and after the
-    closure-constrained fit (solid)."""
+    closure-constrained fit (solid; an open footprint's: the fit to its corner photos' turns)."""
     from .. import _figure as plt
 
     def walk(w, t):
@@ -115,7 +117,7 @@ def plot_footprint(widths, thetas, adjusted_w, adjusted_t, names, path: Path, *,
     fig, ax = plt.subplots(figsize=(6.5, 6.5))
     p0, p1 = walk(np.asarray(widths), np.asarray(thetas)), walk(np.asarray(adjusted_w), np.asarray(adjusted_t))
     ax.plot(p0[:, 0], p0[:, 1], "--o", color="tab:red", ms=3, label="per-wall estimates")
-    ax.plot(p1[:, 0], p1[:, 1], "-o", color="tab:blue", ms=3, label="closure fit")
+    ax.plot(p1[:, 0], p1[:, 1], "-o", color="tab:blue", ms=3, label="closure fit" if closed else "fit to the turns")
     for i, n in enumerate(names):
         m = (p1[i] + p1[i + 1]) / 2
         ax.annotate(n, m, fontsize=8, ha="center")
@@ -124,7 +126,8 @@ def plot_footprint(widths, thetas, adjusted_w, adjusted_t, names, path: Path, *,
     ax.legend(fontsize=8)
     ax.set_xlabel("X [m]")
     ax.set_ylabel("Y [m]")
-    ax.set_title(f"{title}\nestimates leave a {gap * 1000:.0f} mm gap; the fit closes it".strip(), fontsize=9)
+    say = f"estimates leave a {gap * 1000:.0f} mm gap; the fit closes it" if closed else "open footprint: no closure"
+    ax.set_title(f"{title}\n{say}".strip(), fontsize=9)
     fig.tight_layout()
     plt.save(fig, path, dpi=110)
     plt.close(fig)

@@ -1,4 +1,5 @@
-"""The footprint: adjust every wall's W and theta so the walls close into a ring.
+"""The footprint: adjust every wall's W and theta so the walls close into a ring (or, for an open
+footprint, an L or a row of walls, so that they agree with the corner photos' turns alone).
 
 Each wall brings an estimate of its width (from its photo's calibration, with its sigma) and of
 its orientation theta (from the photo's EXIF compass heading plus the fitted yaw, or typed in);
@@ -12,7 +13,9 @@ We solve, with optimistix's Levenberg-Marquardt,
 the constraint as two residuals scaled by ``closure_sigma_m`` (1 micrometre: the ring closes to
 far below a millimetre). The covariance of the adjusted values is ``(J^T J)^-1`` of that system,
 which is the constrained covariance to first order. The first wall's theta is the reference of a
-rotation that the closure cannot see, so its prior is what fixes the ring's orientation.
+rotation that the closure cannot see, so its prior is what fixes the ring's orientation. An open
+footprint has no closure: its walls' W are their photos' and their thetas are adjusted to the turns,
+so each wall needs a theta of its own or a chain of corner photos to one that has.
 """
 
 from __future__ import annotations
@@ -36,8 +39,8 @@ class FootprintResult(HasFit):
     W_1..W_n, theta_1..theta_n) and the closure gap before and after."""
 
     fit: FitResult
-    closure_gap_m: float  # after the fit
-    closure_gap_before_m: float
+    closure_gap_m: float | None  # after the fit; None for an open footprint
+    closure_gap_before_m: float | None
 
     @property
     def n(self) -> int:
@@ -101,9 +104,18 @@ def _solve(x0, args):
 
 
 def fit_footprint(
-    width_m, width_sigma_m, theta_rad, theta_sigma_rad, *, closure_sigma_m: float = 1e-6, names=None, turns=()
+    width_m,
+    width_sigma_m,
+    theta_rad,
+    theta_sigma_rad,
+    *,
+    closure_sigma_m: float = 1e-6,
+    names=None,
+    turns=(),
+    closed: bool = True,
 ) -> FootprintResult:
-    """Adjust per-wall (W, theta) estimates with their sigmas so the footprint closes.
+    """Adjust per-wall (W, theta) estimates with their sigmas so the footprint closes (``closed``;
+    else so that they agree with the turns alone: an open footprint, one wall or more).
 
     ``theta_sigma_rad`` may be ``inf`` for a wall with no own orientation estimate. ``turns`` are
     corner-photo measurements ``(i, j, turn_rad, sigma_rad)``: theta_j - theta_i = turn."""
@@ -112,8 +124,11 @@ def fit_footprint(
     sw = np.asarray(width_sigma_m, dtype=np.float64) * np.ones_like(w_hat)
     st = np.asarray(theta_sigma_rad, dtype=np.float64) * np.ones_like(w_hat)
     names = names or [f"wall{i + 1}" for i in range(len(w_hat))]
-    if len(w_hat) < 3 or len(t_hat) != len(w_hat):
-        raise InputError(f"footprint: {len(w_hat)} walls; a closed footprint needs at least 3 with W and theta each")
+    if len(t_hat) != len(w_hat) or len(w_hat) < (3 if closed else 1):
+        raise InputError(
+            f"footprint: {len(w_hat)} walls; a closed footprint needs at least 3 with W and theta each "
+            "(an L or a row of walls: closed = false in the structure file)"
+        )
     for i, n in enumerate(names):
         if not (w_hat[i] > 0 and sw[i] > 0 and st[i] > 0 and (np.isfinite(t_hat[i]) or np.isinf(st[i]))):
             raise InputError(
@@ -138,15 +153,26 @@ def fit_footprint(
         if np.isinf(st[j]) and not np.isinf(st[i]):
             t_start[j] = t_start[i] + v
     t_hat = np.where(np.isinf(st), t_start, t_hat)
-    before = float(np.linalg.norm(_gap(w_hat, t_hat)))
-    args = tuple(jnp.asarray(a) for a in (w_hat, t_hat, sw, st_inv, closure_sigma_m, ti, tj, tv, 1.0 / ts))
+    if not closed:  # no closure to give a wall its theta: each needs its own or a turn to one that has
+        known = ~np.isinf(st)
+        for _ in range(len(w_hat)):
+            for i, j in zip(ti.tolist(), tj.tolist()):
+                known[i] = known[j] = known[i] or known[j]
+        if not known.all():
+            raise InputError(
+                f"footprint: wall '{names[int(np.argmin(known))]}' of an open footprint has no orientation: give "
+                "its theta_deg, a photo with an EXIF heading, or a corner photo with a wall that has one"
+            )
+    before = float(np.linalg.norm(_gap(w_hat, t_hat))) if closed else None
+    sc = closure_sigma_m if closed else np.inf  # an open footprint's gap is no residual
+    args = tuple(jnp.asarray(a) for a in (w_hat, t_hat, sw, st_inv, sc, ti, tj, tv, 1.0 / ts))
     x, ok, steps, jac, r = _solve(jnp.asarray(np.r_[w_hat, t_start]), args)
     n = len(w_hat)
     fit = fit_result(x, ok, steps, jac, r, [f"width_m:{m}" for m in names] + [f"theta_rad:{m}" for m in names])
     x = fit.value
     # a ring that closes only by shrinking a wall to (almost) nothing is no footprint: the walls'
     # thetas do not go round (three copies of one wall, a wall listed twice, a heading off by 180)
-    if fit.status.ok and np.any(x[:n] <= 0.5 * w_hat):
+    if closed and fit.status.ok and np.any(x[:n] <= 0.5 * w_hat):
         fit = replace(fit, status=FitStatus.DEGENERATE)
     if not fit.status.ok:
         worst = names[int(np.argmin(x[:n] / w_hat))] if np.all(np.isfinite(x)) else None
@@ -159,7 +185,7 @@ def fit_footprint(
                 else ""
             )
         )
-    gap = float(np.linalg.norm(_gap(x[:n], x[n:])))
+    gap = float(np.linalg.norm(_gap(x[:n], x[n:]))) if closed else None
     return FootprintResult(fit=fit, closure_gap_m=gap, closure_gap_before_m=before)
 
 
@@ -228,6 +254,21 @@ def _estimates_from_json(paths, heading_sigma_deg):
     return None, rows
 
 
+def _is_closed(spec, width_m: np.ndarray, theta_rad: np.ndarray) -> bool:
+    """Whether the walls are to close into a ring: as the structure file declares (``closed``), else
+    as :func:`~calib_masonry.build3d.place.footprint_is_closed` decides from the estimates (three
+    walls or more whose gap is under 5 % of the perimeter; a wall with no theta yet is placed by the
+    closure, so such a ring is closed). Calibrations alone (no structure file): a ring."""
+    if spec is None:
+        return True
+    if spec.closed is not None:
+        return bool(spec.closed)
+    if len(width_m) < 3:
+        return False
+    gap = float(np.linalg.norm(_gap(width_m, theta_rad)))
+    return not np.isfinite(gap) or gap <= 0.05 * float(np.sum(width_m))
+
+
 def footprint_to_folder(
     inputs,
     out,
@@ -260,7 +301,8 @@ def footprint_to_folder(
     names = [r[0] for r in rows]
     turns, corner_docs = _turns_from_structure(spec, names) if spec is not None else ([], [])
     w, sw, t, st = (np.array([r[i] for r in rows]) for i in (1, 2, 3, 4))
-    res = fit_footprint(w, sw, t, st, names=names, turns=turns)
+    closed = _is_closed(spec, w, t)
+    res = fit_footprint(w, sw, t, st, names=names, turns=turns, closed=closed)
     doc = res.to_json(names)
     doc["corners"] = [{k: v for k, v in d.items() if k != "_result"} for d in corner_docs]
     for row, est in zip(doc["walls"], rows):
@@ -288,8 +330,12 @@ def footprint_to_folder(
             # command ran, they were looked for beside the new file and the build of it failed)
             corners = tuple(replace(c, photo=c.photo.resolve()) for c in spec.corners)
             (stage / "structure.toml").write_text(
-                "# Written by `calib-masonry footprint`: W and theta adjusted so the footprint closes.\n"
-                + structure_to_toml(replace(spec, walls=walls, corners=corners, closed=True), relative_to=None),
+                (
+                    "# Written by `calib-masonry footprint`: W and theta adjusted so the footprint closes.\n"
+                    if closed
+                    else "# Written by `calib-masonry footprint`: W from the photos, theta adjusted to the corner photos.\n"
+                )
+                + structure_to_toml(replace(spec, walls=walls, corners=corners, closed=closed), relative_to=None),
                 encoding="utf-8",
             )
         if figure and corner_docs:
@@ -315,5 +361,6 @@ def footprint_to_folder(
                 names,
                 stage / "footprint.png",
                 title=f"footprint of {len(names)} walls",
+                closed=closed,
             )
     return doc

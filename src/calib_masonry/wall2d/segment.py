@@ -344,6 +344,27 @@ MORTAR_SMOOTH_M = 0.005
 MORTAR_NETWORK = 0.9
 #: the mortar side of the colour split covers at most this share of the wall (the units are most of it)
 MORTAR_MOST = 0.5
+#: the band along the orthophoto's sides (m) where the top-hat's and the colour split's joints are
+#: carried straight on from just inside it: an outline a centimetre or two beyond the wall takes in ground, sky or the
+#: next wall, which is not mortar and joined every stone of the course along it into one piece
+EDGE_BAND_M = 0.02
+
+
+def _joints_to_the_border(units: np.ndarray, band: int) -> np.ndarray:
+    """``units`` ``(rows, cols)`` with the joints that reach each side's band of ``band`` pixels
+    run on straight through it to the border (a band pixel is a unit only where the row or column
+    just inside it is; the top and bottom first, then the sides over the whole height): nothing in
+    the band joins two units that the wall inside it keeps apart, and nothing in it is made a unit.
+    Unchanged where the band would take more than a quarter of either side."""
+    rows, cols = units.shape
+    if band < 1 or 4 * band >= min(rows, cols):
+        return units
+    out = units.copy()
+    out[:band] &= out[band]
+    out[rows - band :] &= out[rows - band - 1]
+    out[:, :band] &= out[:, band : band + 1]
+    out[:, cols - band :] &= out[:, cols - band - 1 : cols - band]
+    return out
 
 
 def segment_by_colour(
@@ -358,10 +379,13 @@ def segment_by_colour(
     taken for mortar (and the other way round); a split counts only where its mortar side is one
     network (:data:`MORTAR_NETWORK`), at most :data:`MORTAR_MOST` of the wall, and its units look like
     masonry (:func:`mortar_plausible`). Of those, the one whose two sides Otsu separates best. On
-    the laboratory photos (painted speckle, tight joints) no split counts."""
+    the laboratory photos (painted speckle, tight joints) no split counts. Within
+    :data:`EDGE_BAND_M` of the orthophoto's sides the joints run on straight from inside it
+    (:func:`_joints_to_the_border`)."""
     from skimage.morphology import disk
 
     r = max(1, int(round(MORTAR_SMOOTH_M * px_per_m)))
+    band = int(round(EDGE_BAND_M * px_per_m))
     img = np.empty(rgb.shape[:2] + (3,), dtype=np.float32)
     for c in range(3):
         img[..., c] = ndimage.gaussian_filter(np.asarray(rgb[..., c], dtype=np.float32), MORTAR_SMOOTH_M * px_per_m)
@@ -384,7 +408,7 @@ def segment_by_colour(
             parts, n = ndimage.label(mortar)
             if n == 0 or np.bincount(parts.ravel())[1:].max() < MORTAR_NETWORK * mortar.sum():
                 continue
-            units = opening(~mortar & inside, disk(r))
+            units = _joints_to_the_border(opening(~mortar & inside, disk(r)), band) & inside
             labels = label_bricks(units)
             problem = mortar_plausible(units, labels)
             if problem:
@@ -442,11 +466,16 @@ def segment_wall(
     mortar_mask = segment_photo(rgb, config)
     if valid is not None:
         mortar_mask &= valid
-    labels = label_bricks(mortar_mask)
-    why = mortar_plausible(mortar_mask, labels)
+    # the joints carried on straight to the orthophoto's sides, as the colour split's are: a strip of
+    # ground or sky inside the outline joined the units along it (a course of bricks as one piece)
+    units = _joints_to_the_border(mortar_mask, int(round(EDGE_BAND_M * px_per_m)))
+    if valid is not None:
+        units &= valid
+    labels = label_bricks(units)
+    why = mortar_plausible(units, labels)
     if not why:
         return Segmentation(
-            mask=mortar_mask, method="mortar", px_per_m=float(px_per_m), note="the mortar top-hat", known_labels=labels
+            mask=units, method="mortar", px_per_m=float(px_per_m), note="the mortar top-hat", known_labels=labels
         )
     colour, not_colour = segment_by_colour(rgb, px_per_m, valid)
     if colour is not None:  # broad mortar, paler or greyer than the units

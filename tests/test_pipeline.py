@@ -79,6 +79,28 @@ def test_end_faces_detected_on_true_polygons(tmp_path, layout, walls, seed):
     assert found == truth
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_end_faces_of_walls_of_two_thicknesses_where_a_brick_is_as_long_as_one_is_thick(tmp_path, seed):
+    """A tower of 0.45 m and 0.30 m thick walls of 0.30 m long bricks: on a 0.45 m wall's photo the
+    other wall's end face is 0.30 wide, and so is a whole brick of its own that reaches the corner.
+    The brick was taken for the end face and the real one (0.45 wide on the thinner wall) kept: 14
+    pieces of each wall on the wrong side of the corner, the build's precision 0.975."""
+    walls = [(4.0, 3.0, 0, 0.45), (3.0, 3.0, 90, 0.3), (4.0, 3.0, 180, 0.45), (3.0, 3.0, 270, 0.3)]
+    p = tmp_path / "s.toml"
+    p.write_text(
+        '[structure]\nname = "mixed"\nthickness_m = 0.3\nclosed = true\n[synthetic]\nlayout = "stretcher"\n'
+        f"brick_length_m = 0.30\nbrick_height_m = 0.10\nmortar_m = 0.012\npx_per_m = 200\nseed = {seed}\n"
+        + "".join(
+            f'[[wall]]\nname = "w{i}"\nwidth_m = {w}\nheight_m = {h}\ntheta_deg = {th}\nthickness_m = {t}\n'
+            for i, (w, h, th, t) in enumerate(walls)
+        )
+    )
+    spec = load_structure(p, require_sources=False)
+    pieces = layout_structure(spec)
+    found = find_end_faces([[q.polygon_m for q in ps] for ps in pieces], wall_frames(spec), corners(spec))
+    assert found == [{i for i, q in enumerate(ps) if q.end_face} for ps in pieces]
+
+
 @pytest.mark.parametrize("seed", [3, 4])
 def test_stone_walls_end_where_their_stones_do(tmp_path, monkeypatch, seed):
     """A free end (no corner) is a jamb: its stones' faces lie on the end's plumb line; the first

@@ -41,6 +41,22 @@ def _z_shared(e1, e2, frac: float) -> bool:
     return hi - lo >= frac * min(e1[3] - e1[2], e2[3] - e2[2])
 
 
+#: two rival end-face candidates whose widths match their end widths within this (a fraction) of
+#: each other are told apart by their walls' unit lengths (:func:`_module_length`)
+TIE = 0.1
+
+
+def _module_length(ext: list, width_m: float) -> float | None:
+    """The length (m) of a bond's units: the median width of a wall's pieces that touch neither of
+    its ends, where the middle half of them lie within 5 % of it (bricks); None for units of many
+    lengths (stones) or fewer than three."""
+    inner = [e[1] - e[0] for e in ext if e[0] > 0.02 * width_m and e[1] < 0.98 * width_m]
+    if len(inner) < 3:
+        return None
+    q1, med, q3 = np.percentile(inner, [25, 50, 75])
+    return float(med) if q3 - q1 <= 0.1 * med else None
+
+
 def find_end_faces(
     polygons: list[list[np.ndarray]],
     frames: list[WallFrame],
@@ -53,6 +69,7 @@ def find_end_faces(
     """
     remove: list[set[int]] = [set() for _ in polygons]
     ext = [[_extent(p) for p in polys] for polys in polygons]
+    module = [_module_length(e, f.width_m) for e, f in zip(ext, frames)]
     for c in corners:
         if not c.convex:
             continue
@@ -95,6 +112,11 @@ def find_end_faces(
             eb = ext[c.b][j]
             da = abs((ea[1] - ea[0]) / w_a - 1.0)
             db = abs((eb[1] - eb[0]) / w_b - 1.0)
+            if abs(da - db) <= TIE and module[c.a] and module[c.b]:
+                # both as wide as an end face (a unit as long as the other wall is thick): the one
+                # that is no unit of its own wall's length is the end face
+                da -= abs((ea[1] - ea[0]) / module[c.a] - 1.0)
+                db -= abs((eb[1] - eb[0]) / module[c.b] - 1.0)
             if da <= db:
                 remove[c.a].add(i)
             else:

@@ -267,6 +267,26 @@ def test_real_photo_segmentation_finds_the_stones_not_the_speckle(real_calibrati
     assert 25 <= s["count"] <= 45 and s["max_area_m2"] < 0.1 and s["warning"] == ""
 
 
+@pytest.mark.parametrize("smooth_px", [0.0, 3.0, 8.0])
+def test_a_face_of_texture_alone_is_a_warning_not_a_silent_thousand_pieces(smooth_px):
+    """A plastered or rendered wall, or a photo too noisy for its joints: the joints' partition
+    measured its module from the texture's own lines and found 160-2,444 pieces that agreed with
+    it, with no warning (a 4 x 2.4 m face of grain: "2034 pieces, module 8.6 x 8.7 cm"). Masonry's
+    faces are mostly free of lines (the laboratory photos: the test above, no warning); here the
+    lines cover the face, and the summary says so and what to do."""
+    from scipy import ndimage
+
+    from calib_masonry.wall2d.segment import segment_wall
+
+    rng = np.random.default_rng(11)
+    grain = 0.6 + 0.08 * rng.standard_normal((720, 1200))
+    face = ndimage.gaussian_filter(grain, smooth_px) if smooth_px else grain
+    seg = segment_wall(np.repeat(face[..., None], 3, -1).clip(0, 1).astype(np.float32), 300.0)
+    s = seg.summary()
+    assert seg.method == "joints" and s["count"] > 1
+    assert "line-like evidence covers the whole face" in s["warning"] and "LabelMe" in s["warning"]
+
+
 @pytest.mark.parametrize("mortar, irregularity, seed", [(0.03, 0.3, 45), (0.05, 0.7, 44)])
 def test_a_stone_wall_with_broad_mortar_is_segmented_by_the_mortars_colour(tmp_path, mortar, irregularity, seed):
     """Rubble and stone walls have joints of 2-6 cm, wider than the top-hat's disk: it found their

@@ -68,6 +68,14 @@ class PieceConfig:
     module_m: tuple[float, float] | None = None
 
 
+#: the median joint evidence (:func:`joint_evidence`) over a wall's face above which its lines are
+#: texture, not joints: masonry's faces are mostly free of lines (0.07-0.13 on the three laboratory
+#: photos and all 120 of their changed versions that calibrate, the highest through gamma 1.6), a
+#: plastered or noisy face is lines everywhere (0.22-0.29 on noise smoothed over 0-8 px at 300 px/m)
+TEXTURE_MEDIAN_EVIDENCE = 0.18
+MASONRY_MEDIAN_EVIDENCE = 0.13
+
+
 @dataclass(frozen=True)
 class Pieces:
     """The partition ``labels`` (rows, cols) int32 (1..n, 0 outside the wall or occluded), the
@@ -98,6 +106,15 @@ class Pieces:
             return (
                 "the segmentation found one piece: no joints stand out from the face's texture (plastered or "
                 "blurred); draw the units in the LabelMe file and build from it"
+            )
+        texture = float(np.median(self.joints)) if self.joints.size else 0.0
+        if texture > TEXTURE_MEDIAN_EVIDENCE:
+            # the module is measured from the same lines, so the count agrees with it: only the
+            # evidence's spread over the face tells a partition of texture from one of units
+            return (
+                f"{n} pieces, but line-like evidence covers the whole face (its median {texture:.2f}; on masonry "
+                f"at most {MASONRY_MEDIAN_EVIDENCE}): no joints stand out from the texture (plaster, render, "
+                "noise), so the pieces follow it, not units; draw the units in the LabelMe file and build from it"
             )
         if n > 4.0 * expected:
             return (

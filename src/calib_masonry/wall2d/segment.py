@@ -317,18 +317,29 @@ class Segmentation:
         return doc
 
 
-def mortar_plausible(mask: np.ndarray, labels: np.ndarray | None = None) -> str:
+#: the least median area (m^2) of a wall's units: a small brick is 40 cm^2 and more on its face; a
+#: top-hat's pieces of grain or noise are specks of a square centimetre or two, of one size
+MIN_UNIT_AREA_M2 = 10e-4
+
+
+def mortar_plausible(mask: np.ndarray, labels: np.ndarray | None = None, px_per_m: float | None = None) -> str:
     """Why a top-hat mortar mask does not look like masonry ("" when it does): bricks of one
     format give pieces of similar size (the median piece within a third of the area-weighted mean,
     measured 0.91-1.08 on the synthetic brick walls); texture taken for mortar gives a few large
-    pieces among a crowd of specks (0.01-0.02 on the laboratory photos), a face without joints one.
-    ``labels``: the mask's :func:`label_bricks`, where the caller has them."""
+    pieces among a crowd of specks (0.01-0.02 on the laboratory photos), a face without joints one,
+    and a face of even grain or noise specks all of one size, under :data:`MIN_UNIT_AREA_M2` (with
+    ``px_per_m``). ``labels``: the mask's :func:`label_bricks`, where the caller has them."""
     if labels is None:
         labels = label_bricks(mask)
     a = np.bincount(labels.ravel())[1:]
     a = a[a > 0].astype(np.float64)
     if len(a) < 4:
         return f"the mortar top-hat found {len(a)} piece(s)"
+    if px_per_m is not None and float(np.median(a)) / px_per_m**2 < MIN_UNIT_AREA_M2:
+        return (
+            f"the mortar top-hat's pieces are specks (median {float(np.median(a)) / px_per_m**2 * 1e4:.1f} cm^2, "
+            f"a unit's face is {MIN_UNIT_AREA_M2 * 1e4:.0f} cm^2 or more): grain, not joints"
+        )
     weighted = float((a * a).sum() / a.sum())
     ratio = float(np.median(a)) / weighted
     if ratio < 0.3:
@@ -410,7 +421,7 @@ def segment_by_colour(
                 continue
             units = _joints_to_the_border(opening(~mortar & inside, disk(r)), band) & inside
             labels = label_bricks(units)
-            problem = mortar_plausible(units, labels)
+            problem = mortar_plausible(units, labels, px_per_m)
             if problem:
                 why = problem.replace("the mortar top-hat", "the colour split")
             elif sep > best_sep:
@@ -472,7 +483,7 @@ def segment_wall(
     if valid is not None:
         units &= valid
     labels = label_bricks(units)
-    why = mortar_plausible(units, labels)
+    why = mortar_plausible(units, labels, px_per_m)
     if not why:
         return Segmentation(
             mask=units, method="mortar", px_per_m=float(px_per_m), note="the mortar top-hat", known_labels=labels

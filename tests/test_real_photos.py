@@ -848,7 +848,7 @@ def test_a_coarse_orthophoto_is_segmented_at_its_own_resolution(monkeypatch):
         return real(rgb, px_per_m, *args, **kwargs)
 
     monkeypatch.setattr(pieces, "segment_pieces", spy)
-    monkeypatch.setattr(segment, "mortar_plausible", lambda mask, labels=None: "no mortar (forced)")
+    monkeypatch.setattr(segment, "mortar_plausible", lambda mask, labels=None, px_per_m=None: "no mortar (forced)")
     rng = np.random.default_rng(0)
     rgb = np.clip(0.5 + 0.1 * rng.standard_normal((300, 60, 3)), 0, 1).astype(np.float32)
     seg = segment.segment_wall(rgb, 20.0)

@@ -559,7 +559,7 @@ def geometry_for_model(
     ``max_joint_m``, else the default)."""
     model_dir = checked_model_dir(model_dir)
     raw = (model_dir / "bricks.json").read_bytes()
-    summary = read_json(model_dir / "summary.json") if (model_dir / "summary.json").is_file() else {}
+    summary = _model_summary(model_dir)
     closed = summary.get("closed_footprint")  # as read_model_json's, from the one reading
     if max_gap_m is None:
         max_gap_m = _model_max_joint(model_dir, summary) or MAX_GAP_M

@@ -201,25 +201,30 @@ def _cielab(img: np.ndarray) -> np.ndarray:
     return lab
 
 
+def _smoothed(rgb: np.ndarray, sigma: float) -> np.ndarray:
+    """``rgb`` ``(rows, cols, 3)`` as float32, each channel Gaussian-smoothed over ``sigma`` px on a
+    core of its own (scipy's filters release the GIL; the same values as one filter of the three
+    with sigma 0 across them), clipped to [0, 1]. float32, as the orthophoto is: CIELAB of a 5 MP
+    orthophoto took 1.5 s in float64 and 0.2 s in float32 (scikit-image keeps the dtype); the paper
+    example's six masks came out identical."""
+    src = np.asarray(rgb, dtype=np.float32)
+    img = np.empty(src.shape[:2] + (3,), dtype=np.float32)
+
+    def smooth(c: int) -> None:
+        img[..., c] = ndimage.gaussian_filter(np.ascontiguousarray(src[..., c]), sigma)
+
+    thread_map(smooth, range(3))
+    np.clip(img, 0, 1, out=img)
+    return img
+
+
 def segment_photo(rgb: np.ndarray, config: PhotoSegmentConfig = PhotoSegmentConfig()) -> np.ndarray:
     """Boolean brick mask ``(rows, cols)`` of a rectified RGB photo in [0, 1] (bricks True)."""
     import cv2  # noqa: F401 - grey_morphology's, loaded here and not first on the threads below
     from skimage.filters import threshold_otsu
     from skimage.morphology import disk
 
-    # float32, as the orthophoto is: CIELAB of a 5 MP orthophoto took 1.5 s in float64 and 0.2 s in
-    # float32 (scikit-image keeps the dtype); the paper example's six masks came out identical
-    # each channel on a core of its own (scipy's filters release the GIL): the same values as one
-    # filter of the three with sigma 0 across them
-    src = np.asarray(rgb, dtype=np.float32)
-    img = np.empty(src.shape[:2] + (3,), dtype=np.float32)
-
-    def smooth(job) -> None:
-        c, out = job
-        out[..., c] = ndimage.gaussian_filter(np.ascontiguousarray(src[..., c]), config.smooth_px)
-
-    thread_map(smooth, [(c, img) for c in range(3)])
-    np.clip(img, 0, 1, out=img)
+    img = _smoothed(rgb, config.smooth_px)
     lab = _cielab(img)
     del img
     chroma = np.hypot(lab[..., 1], lab[..., 2])
@@ -397,10 +402,7 @@ def segment_by_colour(
 
     r = max(1, int(round(MORTAR_SMOOTH_M * px_per_m)))
     band = int(round(EDGE_BAND_M * px_per_m))
-    img = np.empty(rgb.shape[:2] + (3,), dtype=np.float32)
-    for c in range(3):
-        img[..., c] = ndimage.gaussian_filter(np.asarray(rgb[..., c], dtype=np.float32), MORTAR_SMOOTH_M * px_per_m)
-    np.clip(img, 0, 1, out=img)
+    img = _smoothed(rgb, MORTAR_SMOOTH_M * px_per_m)
     lab = _cielab(img)
     del img
     inside = np.ones(rgb.shape[:2], dtype=bool) if valid is None else valid

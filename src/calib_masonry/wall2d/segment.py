@@ -361,8 +361,8 @@ MORTAR_NETWORK = 0.9
 #: the mortar side of the colour split covers at most this share of the wall (the units are most of it)
 MORTAR_MOST = 0.5
 #: the band along the orthophoto's sides (m) where the top-hat's and the colour split's joints are
-#: carried straight on from just inside it: an outline a centimetre or two beyond the wall takes in ground, sky or the
-#: next wall, which is not mortar and joined every stone of the course along it into one piece
+#: carried straight on from just inside it: an outline a centimetre or two beyond the wall takes in
+#: ground, sky or the next wall, which is not mortar and joined every unit of the course along it
 EDGE_BAND_M = 0.02
 
 
@@ -421,7 +421,7 @@ def segment_by_colour(
             parts, n = ndimage.label(mortar)
             if n == 0 or np.bincount(parts.ravel())[1:].max() < MORTAR_NETWORK * mortar.sum():
                 continue
-            units = _joints_to_the_border(opening(~mortar & inside, disk(r)), band) & inside
+            units = _joints_to_the_border(opening(~mortar & inside, disk(r)), band)
             labels = label_bricks(units)
             problem = mortar_plausible(units, labels, px_per_m)
             if problem:
@@ -481,9 +481,7 @@ def segment_wall(
         mortar_mask &= valid
     # the joints carried on straight to the orthophoto's sides, as the colour split's are: a strip of
     # ground or sky inside the outline joined the units along it (a course of bricks as one piece)
-    units = _joints_to_the_border(mortar_mask, int(round(EDGE_BAND_M * px_per_m)))
-    if valid is not None:
-        units &= valid
+    units = _joints_to_the_border(mortar_mask, int(round(EDGE_BAND_M * px_per_m)))  # only takes units away
     labels = label_bricks(units)
     why = mortar_plausible(units, labels, px_per_m)
     if not why:

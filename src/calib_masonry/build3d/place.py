@@ -25,6 +25,7 @@ __all__ = [
     "wall_frames",
     "closure_gap",
     "footprint_is_closed",
+    "ring_closes",
     "corners",
     "MIN_CORNER_TURN_RAD",
 ]
@@ -140,23 +141,31 @@ def wall_frames(footprint: Footprint) -> list[WallFrame]:
     return frames
 
 
+def _gap(widths, thetas) -> np.ndarray:
+    """``sum_n W_n (cos theta_n, sin theta_n)`` of walls in footprint order."""
+    return sum((float(w) * np.array([math.cos(t), math.sin(t)]) for w, t in zip(widths, thetas)), start=np.zeros(2))
+
+
 def closure_gap(footprint: Footprint) -> np.ndarray:
     """``sum_n W_n (cos theta_n, sin theta_n)``: zero for a footprint that closes."""
     spec = _footprint(footprint)
-    return sum(
-        (w.width_m * np.array([math.cos(w.theta_rad), math.sin(w.theta_rad)]) for w in spec.walls), start=np.zeros(2)
-    )
+    return _gap([w.width_m for w in spec.walls], [w.theta_rad for w in spec.walls])
+
+
+def ring_closes(widths, thetas) -> bool:
+    """Whether walls of these widths and directions (footprint order) close into a ring: three or
+    more, their gap under 5 % of the perimeter (a footprint's ``closed`` when the file says none)."""
+    if len(widths) < 3:
+        return False
+    return float(np.linalg.norm(_gap(widths, thetas))) <= 0.05 * sum(float(w) for w in widths)
 
 
 def footprint_is_closed(footprint: Footprint) -> bool:
-    """Declared by ``closed`` in the file, else closed when the gap is under 5 % of the perimeter."""
+    """Declared by ``closed`` in the file, else :func:`ring_closes` of its walls."""
     spec = _footprint(footprint)
     if spec.closed is not None:
         return spec.closed
-    if len(spec.walls) < 3:
-        return False
-    perimeter = sum(w.width_m for w in spec.walls)
-    return float(np.linalg.norm(closure_gap(spec))) <= 0.05 * perimeter
+    return ring_closes([w.width_m for w in spec.walls], [w.theta_rad for w in spec.walls])
 
 
 def _wrap(angle: float) -> float:

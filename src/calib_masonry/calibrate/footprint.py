@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._jax import jax, jnp
+from ..build3d.place import ring_closes
 from ..errors import FitFailed, InputError
 from .fitresult import FitResult, FitStatus, HasFit, fit_result
 from .lm import least_squares
@@ -256,17 +257,16 @@ def _estimates_from_json(paths, heading_sigma_deg):
 
 def _is_closed(spec, width_m: np.ndarray, theta_rad: np.ndarray) -> bool:
     """Whether the walls are to close into a ring: as the structure file declares (``closed``), else
-    as :func:`~calib_masonry.build3d.place.footprint_is_closed` decides from the estimates (three
-    walls or more whose gap is under 5 % of the perimeter; a wall with no theta yet is placed by the
-    closure, so such a ring is closed). Calibrations alone (no structure file): a ring."""
+    as :func:`~calib_masonry.build3d.place.ring_closes` decides from the estimates (a ring of three or
+    more with a wall that has no theta yet is closed: the closure places that wall). Calibrations
+    alone (no structure file): a ring."""
     if spec is None:
         return True
     if spec.closed is not None:
         return bool(spec.closed)
-    if len(width_m) < 3:
-        return False
-    gap = float(np.linalg.norm(_gap(width_m, theta_rad)))
-    return not np.isfinite(gap) or gap <= 0.05 * float(np.sum(width_m))
+    if len(width_m) >= 3 and not (np.all(np.isfinite(width_m)) and np.all(np.isfinite(theta_rad))):
+        return True
+    return ring_closes(width_m, theta_rad)
 
 
 def footprint_to_folder(

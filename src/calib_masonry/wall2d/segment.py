@@ -340,13 +340,14 @@ def mortar_plausible(mask: np.ndarray, labels: np.ndarray | None = None, px_per_
     a = a[a > 0].astype(np.float64)
     if len(a) < 4:
         return f"the mortar top-hat found {len(a)} piece(s)"
-    if px_per_m is not None and float(np.median(a)) / px_per_m**2 < MIN_UNIT_AREA_M2:
+    median = float(np.median(a))
+    if px_per_m is not None and median / px_per_m**2 < MIN_UNIT_AREA_M2:
         return (
-            f"the mortar top-hat's pieces are specks (median {float(np.median(a)) / px_per_m**2 * 1e4:.1f} cm^2, "
+            f"the mortar top-hat's pieces are specks (median {median / px_per_m**2 * 1e4:.1f} cm^2, "
             f"a unit's face is {MIN_UNIT_AREA_M2 * 1e4:.0f} cm^2 or more): grain, not joints"
         )
     weighted = float((a * a).sum() / a.sum())
-    ratio = float(np.median(a)) / weighted
+    ratio = median / weighted
     if ratio < 0.3:
         return f"the mortar top-hat's pieces differ wildly in size (median {ratio:.2f} of the weighted mean)"
     return ""

@@ -684,6 +684,33 @@ def _cli(*args):
     return subprocess.run([sys.executable, "-m", "calib_masonry", *map(str, args)], capture_output=True, text=True)
 
 
+def test_bonds_in_a_freed_piece_are_counted_as_unchecked():
+    """A column whose base bond let go is one piece set free: its bonds that had not cracked are
+    reported as not checked since (a larger PGA, which frees the piece sooner, otherwise reports
+    fewer bonds broken); none while the column stands, and None where --piece-joints checks them."""
+    from types import SimpleNamespace
+
+    from calib_masonry.simulation.run import _unchecked_bonds
+
+    from .test_joints import _column
+
+    scene = _column(4)  # bond 0 the base, 1-3 between the blocks
+    nan = np.nan
+    standing = SimpleNamespace(bond_break_time_s=np.array([1.0, nan, nan, nan]), bond_release_time_s=np.full(4, nan))
+    assert _unchecked_bonds(scene, standing) == 0  # cracked but held: the column still stands on it
+    freed = SimpleNamespace(
+        bond_break_time_s=np.array([1.0, nan, 2.0, nan]), bond_release_time_s=np.array([1.5, nan, nan, nan])
+    )
+    assert _unchecked_bonds(scene, freed) == 2  # bonds 1 and 3; 2 cracked before
+    # the base held, the top two blocks let go above bond 2: one bond (3) inside that piece
+    top = SimpleNamespace(
+        bond_break_time_s=np.array([nan, nan, 2.0, nan]), bond_release_time_s=np.array([nan, nan, 2.5, nan])
+    )
+    assert _unchecked_bonds(scene, top) == 1
+    checked = replace(scene, solver=replace(scene.solver, piece_joints=True))
+    assert _unchecked_bonds(checked, freed) is None
+
+
 def test_simulate_cli_outputs(small_model):
     out = small_model / "sim"
     r = _cli(
@@ -708,6 +735,7 @@ def test_simulate_cli_outputs(small_model):
     assert d["elastic"] and d["damping_ratio"] == 0.05 and 0 < d["first_period_s"] < 1
     assert d["max_roof_drift_m"] > 0 and d["max_base_shear_kn"] > 0
     assert 0.0 <= s["set_free_fraction"] <= 1.0
+    assert 0 <= s["bonds_unchecked"] <= s["bonds"] - s["bonds_broken"]
     for f in ("poses.npz", "scene.blend", "ground_motion.png", "histories.png", "frames/frame_000.png", "collapse.gif"):
         assert (out / f).is_file(), f
     poses = np.load(out / "poses.npz")

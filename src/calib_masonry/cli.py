@@ -504,7 +504,13 @@ def _quake_line(s: dict, out) -> str:
         f"simulate: {s['bricks']} bricks, {s['bonds']} bonds, {s['ground_motion']['source']}: {s['outcome']}; "
         + (f"{s['toppled_fraction']:.1%} of bricks toppled, " if s.get("toppled_fraction") is not None else "")
         + f"moved {s['moved_fraction_final']:.1%} of bricks at the end, {s['bonds_broken_fraction']:.1%} of bonds "
-        f"broken, max roof drift {s['max_roof_drift_m'] * 1000:.0f} mm"
+        "broken"
+        + (
+            f" and {s['bonds_unchecked'] / s['bonds']:.1%} not checked since their piece was set free (--piece-joints)"
+            if s.get("bonds_unchecked") and s["bonds"]
+            else ""
+        )
+        + f", max roof drift {s['max_roof_drift_m'] * 1000:.0f} mm"
         + (f" (the held structure's vibration {vibration * 1000:.1f} mm)" if vibration is not None else "")
         + f"; stepping {s['seconds']['stepping']:.1f} s -> {out}"
     )

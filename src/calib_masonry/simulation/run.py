@@ -353,13 +353,32 @@ def _dynamics_summary(scene: Scene, out) -> dict:
     }
 
 
-def _set_free_fraction(scene: Scene, out) -> float:
+def _grounded_at_end(scene: Scene, out) -> np.ndarray | None:
+    """``(B,)`` the bodies that the bonds Bullet still held at the end tie to the ground (None: no
+    bond was ever let go, or there are none)."""
     from .scene import grounded_bodies
 
     if not scene.bonds or out.bond_release_time_s is None:
-        return 0.0
-    held = ~np.isfinite(out.bond_release_time_s)
-    return float(1.0 - grounded_bodies(scene.bonds, len(scene.bodies), held).mean())
+        return None
+    return grounded_bodies(scene.bonds, len(scene.bodies), ~np.isfinite(out.bond_release_time_s))
+
+
+def _set_free_fraction(scene: Scene, out) -> float:
+    grounded = _grounded_at_end(scene, out)
+    return 0.0 if grounded is None else float(1.0 - grounded.mean())
+
+
+def _unchecked_bonds(scene: Scene, out) -> int | None:
+    """How many bonds never cracked lie inside the pieces set free (no held bond ties their bodies to
+    the ground): their piece moved as one rigid body, its own bonds not checked again (None where
+    ``piece_joints`` checked them)."""
+    if scene.solver.piece_joints:
+        return None
+    grounded = _grounded_at_end(scene, out)
+    if grounded is None or out.bond_break_time_s is None:
+        return 0
+    a = np.array([b.a for b in scene.bonds])
+    return int((~np.isfinite(out.bond_break_time_s) & ~grounded[a]).sum())
 
 
 def _first_period(scene: Scene) -> float | None:
@@ -478,6 +497,10 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
         # (moved_fraction_final, outcome) is the rigid pieces' motion ("pieces" below), Bullet's
         # only without a ground motion
         "set_free_fraction": _set_free_fraction(scene, out),
+        # the bonds inside the pieces set free that had not cracked when their piece was: not checked
+        # again, unless --piece-joints (None then), so that a larger PGA, which frees a piece sooner,
+        # can report fewer bonds broken
+        "bonds_unchecked": _unchecked_bonds(scene, out),
         "pieces": _pieces_summary(scene, out),
         # rocking, sliding or stepped (diagonal) cracking, from the joints' motion where the
         # collapse began (None: nothing ran away); see calib_masonry.simulation.results.mechanism

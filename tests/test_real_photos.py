@@ -265,6 +265,21 @@ def test_real_photo_segmentation_finds_the_stones_not_the_speckle(real_calibrati
     s = seg.summary()
     assert seg.method == "joints" and "top-hat" in seg.note and "colour split" in seg.note
     assert 25 <= s["count"] <= 45 and s["max_area_m2"] < 0.1 and s["warning"] == ""
+    assert s["piece_aspect"] < 1.0  # stones laid wider than tall
+
+
+def test_a_laboratory_photo_turned_by_ninety_degrees_is_a_warning(real_calibrations):
+    """A photo whose EXIF orientation was lost (a portrait photo stored sideways) rectifies as a
+    wall on its side: the known width then measures its height, and nothing had said so. Its stones
+    stand taller than wide (1.4-2.1 against 0.7-1.3 upright, at 150-600 px/m), and the summary asks."""
+    from calib_masonry.calibrate.rectify import rectify
+    from calib_masonry.wall2d.segment import segment_wall
+
+    rect = rectify(real_calibrations["SC1"], px_per_m=300.0)
+    upright = segment_wall(rect, 300.0).summary()
+    turned = segment_wall(np.ascontiguousarray(np.rot90(rect)), 300.0).summary()
+    assert upright["warning"] == "" and upright["piece_aspect"] < 1.0
+    assert turned["piece_aspect"] > 1.4 and "turned by 90 degrees" in turned["warning"]
 
 
 @pytest.mark.parametrize("smooth_px", [0.0, 3.0, 8.0])
@@ -861,7 +876,8 @@ def test_a_real_brick_close_up_with_clicked_corners_writes_its_bricks(tmp_path):
     in the installed package): its corners clicked at the photo's corners, rectify writes the
     pieces. It had ended in a traceback: the orthophoto shrunk for the segmentation (303 x 300
     px at its column scale) was a row longer than its mask of valid pixels. About 13 columns of
-    5-7 bricks, partial ones at the border included."""
+    5-7 bricks, partial ones at the border included. Its bricks stand on end, as a wall's do in a
+    photo turned by 90 degrees: the summary asks whether it is."""
     from PIL import Image
     from skimage import data
 
@@ -876,7 +892,10 @@ def test_a_real_brick_close_up_with_clicked_corners_writes_its_bricks(tmp_path):
     )
     doc = json.loads((out / "calibration.json").read_text())
     pieces = doc["pieces"]
-    assert 60 <= pieces["count"] <= 120 and not pieces["warning"]
+    assert 60 <= pieces["count"] <= 120 and pieces["piece_aspect"] > 2
+    assert (
+        pieces["warning"].startswith("the pieces are taller than wide") and "turned by 90 degrees" in pieces["warning"]
+    )
     assert pieces["max_area_m2"] < 3 * pieces["median_area_m2"]
     ortho = json.loads((out / "rectified.json").read_text())
     assert sum(s["label"] == "piece" for s in ortho["shapes"]) == pieces["count"]

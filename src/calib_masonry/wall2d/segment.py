@@ -318,8 +318,46 @@ class Segmentation:
             }
         if self.coarse:
             doc["warning"] = f"{doc['warning']}; {self.coarse}" if doc["warning"] else self.coarse
+        aspect = piece_aspect(self.labels)
+        doc["piece_aspect"] = aspect
+        if aspect is not None and aspect > UPRIGHT_ASPECT:
+            turned = (
+                f"the pieces are taller than wide (height / width {aspect:.2f} on average), where masonry is laid with "
+                "its long side level: if the photo is turned by 90 degrees (its EXIF orientation lost), turn it "
+                "upright and rectify again"
+            )
+            doc["warning"] = f"{doc['warning']}; {turned}" if doc["warning"] else turned
         doc.update(method=self.method, method_note=self.note)
         return doc
+
+
+#: the pieces' mean height / width (:func:`piece_aspect`) above which they stand taller than wide, as
+#: the units of a photo turned by 90 degrees do: the laboratory photos rectified at 150-600 px/m
+#: 0.70-1.27 upright and 1.42-2.14 turned (the segmentation is coarsest, and least upright, at
+#: 150-200 px/m); 49 orthophotos of synth's brick and stone walls photographed 0.45-0.86 upright and
+#: 1.36-2.21 turned (docs/photo_path.md)
+UPRIGHT_ASPECT = 1.4
+
+
+def piece_aspect(labels: np.ndarray, *, min_pieces: int = 5, max_px: int = 2_000_000) -> float | None:
+    """The pieces' mean height over width in ``labels`` (0 mortar): the area-weighted geometric mean of
+    each piece's ratio (the square root of its second moments', rows over columns), on a grid
+    thinned to at most ``max_px`` pixels; None for fewer than ``min_pieces`` pieces."""
+    step = max(1, math.ceil(math.sqrt(labels.size / max_px)))
+    thin = np.asarray(labels)[::step, ::step]
+    lab = thin.ravel()
+    n = int(lab.max(initial=0)) + 1
+    count = np.bincount(lab, minlength=n).astype(np.float64)
+    moments = []
+    for x in (np.asarray(g, dtype=np.float64).ravel() for g in np.indices(thin.shape)):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.bincount(lab, weights=x, minlength=n) / count
+            moments.append(np.bincount(lab, weights=x * x, minlength=n) / count - mean**2)
+    keep = (count > 0) & (np.arange(n) > 0) & (moments[0] > 0) & (moments[1] > 0)
+    if int(keep.sum()) < min_pieces:
+        return None
+    log_ratio = 0.5 * np.log(moments[0][keep] / moments[1][keep])
+    return float(np.exp(np.average(log_ratio, weights=count[keep])))
 
 
 #: the least median area (m^2) of a wall's units: a small brick is 40 cm^2 and more on its face; a

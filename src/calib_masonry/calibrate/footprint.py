@@ -259,9 +259,10 @@ def _is_closed(spec, width_m: np.ndarray, theta_rad: np.ndarray) -> bool:
     """Whether the walls are to close into a ring: as the structure file declares (``closed``), else
     as :func:`~calib_masonry.build3d.place.ring_closes` decides from the estimates (a ring of three or
     more with a wall that has no theta yet is closed: the closure places that wall). Calibrations
-    alone (no structure file): a ring."""
+    alone (no structure file): a ring of three or more; one or two walls are open (an L: no ring
+    has two sides)."""
     if spec is None:
-        return True
+        return len(width_m) >= 3
     if spec.closed is not None:
         return bool(spec.closed)
     if len(width_m) >= 3 and not (np.all(np.isfinite(width_m)) and np.all(np.isfinite(theta_rad))):

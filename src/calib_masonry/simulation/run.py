@@ -354,8 +354,8 @@ def _dynamics_summary(scene: Scene, out) -> dict:
 
 
 def _grounded_at_end(scene: Scene, out) -> np.ndarray | None:
-    """``(B,)`` the bodies that the bonds Bullet still held at the end tie to the ground (None: no
-    bond was ever let go, or there are none)."""
+    """``(B,)`` the bodies that the bonds Bullet still held at the end tie to the ground (None: there
+    are no bonds, or the run kept no release times)."""
     from .scene import grounded_bodies
 
     if not scene.bonds or out.bond_release_time_s is None:

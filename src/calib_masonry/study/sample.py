@@ -412,6 +412,11 @@ def _material(sample: Sample, base: tuple = ()):
     return material_from_table({**dict(base), **drawn}, f"sample {sample.index}")
 
 
+def _unchecked_fraction(summary: dict) -> float | None:
+    unchecked, bonds = summary.get("bonds_unchecked"), summary.get("bonds") or 0
+    return None if unchecked is None else (unchecked / bonds if bonds else 0.0)
+
+
 def outcome(result) -> dict:
     """What a study keeps of a :class:`~calib_masonry.simulation.run.SimulationResult`."""
     m = result.metrics
@@ -420,6 +425,9 @@ def outcome(result) -> dict:
         "moved_fraction": moved,
         "toppled_fraction": m.toppled_fraction,
         "cracked_fraction": float(m.broken_fraction[-1]),
+        # the joints not checked since their piece was set free (None with --piece-joints): a larger
+        # PGA frees a piece sooner, and its cracked_fraction can be the smaller
+        "unchecked_fraction": _unchecked_fraction(result.summary),
         "roof_drift_m": float(m.roof_drift_m[-1]),
         "max_displacement_m": float(m.max_displacement_m.max()) if len(m.max_displacement_m) else 0.0,
         "outcome": m.outcome,

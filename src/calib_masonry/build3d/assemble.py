@@ -8,7 +8,7 @@ import numpy as np
 import shapely
 
 from ..errors import InputError
-from .bond import CornerTolerances, corner_clip_planes, find_end_faces
+from .bond import CornerTolerances, corner_clip_planes, course_ends, find_end_faces
 from .extrude import Polyhedron, clip_plan, polygon_area, prism
 from .place import Corner, Footprint, WallFrame, _footprint, closure_gap, corners, wall_frames
 
@@ -114,9 +114,16 @@ def simple_polygon(poly: np.ndarray) -> np.ndarray:
     return poly
 
 
-def brick_solid(poly: np.ndarray, wall: int, frames: list[WallFrame], corners: list[Corner]) -> Polyhedron | None:
-    """The prism of an outer-face polygon of wall ``wall``, extended and cut where it meets a corner."""
-    ext_poly, planes = corner_clip_planes(poly, wall, frames, corners)
+def brick_solid(
+    poly: np.ndarray,
+    wall: int,
+    frames: list[WallFrame],
+    corners: list[Corner],
+    ends: tuple[str | None, str | None] = (None, None),
+) -> Polyhedron | None:
+    """The prism of an outer-face polygon of wall ``wall``, extended and cut where it meets a corner
+    (``ends``: its place in its course at the wall's start and end, :func:`~.bond.course_ends`)."""
+    ext_poly, planes = corner_clip_planes(poly, wall, frames, corners, ends)
     solid: Polyhedron | None = prism(ext_poly, frames[wall])
     for point, normal in planes:
         solid = clip_plan(solid, point, normal)
@@ -149,10 +156,11 @@ def assemble(
     removed = []
     for w, wp in enumerate(walls):
         removed.append(tuple(wp.ids[i] for i in sorted(end_faces[w])))
-        for i, poly in enumerate(polys[w]):
-            if i in end_faces[w] or abs(polygon_area(poly)) <= 0:
-                continue
-            solid = brick_solid(poly, w, frames, cs)
+        kept = [i for i, poly in enumerate(polys[w]) if i not in end_faces[w] and abs(polygon_area(poly)) > 0]
+        ends = dict(zip(kept, course_ends([polys[w][i] for i in kept], w, frames, cs)))
+        for i in kept:
+            poly = polys[w][i]
+            solid = brick_solid(poly, w, frames, cs, ends[i])
             if solid is None:
                 continue
             bricks.append(

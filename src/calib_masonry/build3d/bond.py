@@ -17,10 +17,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import shapely
 
 from .place import Corner, WallFrame
 
-__all__ = ["CornerTolerances", "find_end_faces", "corner_clip_planes"]
+__all__ = ["CornerTolerances", "LAST", "SHELTERED", "find_end_faces", "course_ends", "corner_clip_planes"]
 
 
 @dataclass(frozen=True)
@@ -131,15 +132,130 @@ def find_end_faces(
     return remove
 
 
+#: a non-owner's brick whose end lies within this many end-face widths of its wall's end is the
+#: one next to the other wall's end face (the joint between them, mortar and a stone's irregular
+#: edge, is far narrower); it reaches back to the owner's inner face
+NEXT_TO_END_FACE = 1.5
+
+
+def _end_band(poly: np.ndarray, at_start: bool) -> tuple[float, float, float, float] | None:
+    """Where ``poly`` ``(k, 2)`` ends at its wall's start (``at_start``) or end: its outermost x,
+    the band ``d`` inward from it that is squared off when it is carried on (a quarter of its height,
+    at most half its width), and that band's z-span (None if the band holds nothing of it)."""
+    x, z = poly[:, 0], poly[:, 1]
+    d = min(0.5 * float(x.max() - x.min()), max(0.25 * float(z.max() - z.min()), 1e-3))
+    end = float(x.min() if at_start else x.max())
+    lo, hi = (end, end + d) if at_start else (end - d, end)
+    part = shapely.Polygon(poly).intersection(shapely.box(lo, float(z.min()), hi, float(z.max())))
+    if part.is_empty:
+        return None
+    _, zlo, _, zhi = part.bounds
+    return end, d, zlo, zhi
+
+
+def _carried_past(poly: np.ndarray, at_start: bool, to_x: float) -> np.ndarray:
+    """``poly`` ``(k, 2)`` with its end at the wall's start (``at_start``) or end carried on to
+    ``x = to_x``: the union with a rectangle over the z-span of its end band (:func:`_end_band`), so
+    an irregular stone's end runs on whole (before 2026-12-06 only its one outermost vertex was
+    moved, a sliver). A rectangle's end stays as it is, moved."""
+    band = _end_band(poly, at_start)
+    if band is None:
+        return poly
+    end, d, zlo, zhi = band
+    rect = shapely.box(to_x, zlo, end + d, zhi) if at_start else shapely.box(end - d, zlo, to_x, zhi)
+    u = shapely.Polygon(poly).union(rect)
+    if not isinstance(u, shapely.Polygon):
+        return poly
+    u = shapely.geometry.polygon.orient(u.simplify(0.0), 1.0)  # counter-clockwise, no collinear points
+    return np.asarray(u.exterior.coords, dtype=np.float64)[:-1]
+
+
+#: a piece's place in its course at a corner (:func:`course_ends`): it ends the course there
+LAST = "last"
+#: a piece of its own wall lies beyond it and reaches the corner: the corner is its wall's in
+#: this course, and nothing of the other wall comes near it
+SHELTERED = "sheltered"
+
+
+def course_ends(
+    polys: list[np.ndarray], wall: int, frames: list[WallFrame], corners: list[Corner]
+) -> list[tuple[str | None, str | None]]:
+    """Per polygon of wall ``wall`` (its kept pieces, end faces removed), its place in its course at
+    the wall's start and at its end: :data:`LAST` where nothing of the wall lies between it and the
+    wall's end in the way it would be carried past the corner (its end band's z-span,
+    :func:`_end_band`; another piece counts where 2 % of its area lies there), :data:`SHELTERED`
+    where a piece in that way reaches the corner (within half the end face's width of it), else
+    None. Only the last piece of a course may run past a corner: by distance alone a piece before
+    the corner's own could not be told from the one next to the other wall's end face where the end
+    face is about as wide as a unit (a hexagonal tower of 0.35 m walls and 0.40 m bricks). Pieces
+    far from any corner get (None, None)."""
+    fr = frames[wall]
+    w_at = [None, None]  # the end faces' width at the wall's start and end
+    for c in corners:
+        if c.convex and wall in (c.a, c.b) and c.a != c.b:
+            w = c.end_width_on(frames[c.b if wall == c.a else c.a].thickness_m)
+            w_at[0 if wall == c.b else 1] = w
+    out: list[tuple[str | None, str | None]] = [(None, None)] * len(polys)
+    if w_at == [None, None]:
+        return out
+    shapes = [shapely.Polygon(p) for p in polys]
+    tree = shapely.STRtree(shapes)
+    lo = np.array([p[:, 0].min() for p in polys])
+    hi = np.array([p[:, 0].max() for p in polys])
+    for i, p in enumerate(polys):
+        roles: list[str | None] = []
+        for at_start, w in zip((True, False), w_at):
+            near = w is not None and (
+                lo[i] <= (NEXT_TO_END_FACE + 1.0) * w
+                if at_start
+                else hi[i] >= fr.width_m - (NEXT_TO_END_FACE + 1.0) * w
+            )
+            band = _end_band(p, at_start) if near else None
+            if band is None:
+                roles.append(None)
+                continue
+            end, d, zlo, zhi = band
+            way = shapely.box(-1.0, zlo, end + d, zhi) if at_start else shapely.box(end - d, zlo, fr.width_m + 1.0, zhi)
+            hit = [
+                int(j) for j in tree.query(way) if j != i and shapes[j].intersection(way).area > 0.02 * shapes[j].area
+            ]
+            if not hit:
+                roles.append(LAST)
+            elif any(lo[j] <= 0.5 * w if at_start else hi[j] >= fr.width_m - 0.5 * w for j in hit):
+                roles.append(SHELTERED)
+            else:
+                roles.append(None)
+        out[i] = (roles[0], roles[1])
+    return out
+
+
 def corner_clip_planes(
-    poly: np.ndarray, wall: int, frames: list[WallFrame], corners: list[Corner]
+    poly: np.ndarray,
+    wall: int,
+    frames: list[WallFrame],
+    corners: list[Corner],
+    ends: tuple[str | None, str | None] = (None, None),
 ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
     """The polygon, extended where it runs through a corner, and the vertical planes that cut it.
 
-    A brick that reaches a corner (it owns that course) is extended past the wall end and cut by
-    the other wall's outer face; a brick that stops short of the corner is cut by the other wall's
-    inner face. At a right angle neither changes anything. Planes are ``(point_xy, normal_xy)``
-    keeping the side the normal points to.
+    A brick that reaches a corner (it owns that course) is carried past the wall end and cut by
+    the other wall's outer face. The brick next to the other wall's end face (the corner is the
+    other wall's in this course) is carried past the wall end too and cut by a plane parallel to
+    the other wall's inner face, through its own end on the outer face (the joint keeps the width
+    the photo shows; never nearer the corner than the inner face itself): at a corner that is not a
+    right angle the two walls' bands then meet without a hole (before 2026-12-06 that brick
+    stopped square at its end, and a triangle ``t^2 cot(turn) / 2`` stayed open at every corner of
+    every course: 7 % of a hexagonal tower's ring, 11 % of an octagonal one's). Any other brick
+    near a corner is cut by the other wall's inner face, unless a piece of its own wall beyond it
+    owns the corner in its course (before 2026-12-06 it was cut even then: a triangle of it was
+    lost wherever the owner's piece is shorter than the end face is wide). At a right angle none of
+    this changes anything. Planes are ``(point_xy, normal_xy)`` keeping the side the normal points
+    to.
+
+    ``ends``: the piece's place in its course at the wall's start and end (:func:`course_ends`);
+    only the last piece is carried on (one that reaches the corner but does not end its course,
+    where pieces overlap in a traced photo, keeps the other wall's outer face as its cut, as
+    before).
     """
     fr = frames[wall]
     planes: list[tuple[np.ndarray, np.ndarray]] = []
@@ -153,25 +269,33 @@ def corner_clip_planes(
         w = c.end_width_on(other.thickness_m)
         reach = 2.0 * (w + fr.thickness_m + other.thickness_m)
         right_angle = abs(np.cos(c.turn_rad)) < 1e-9
-        if wall == c.a:
-            xmax = poly[:, 0].max()
-            if xmax < fr.width_m - w - reach:
-                continue
-            owner = xmax >= fr.width_m - 0.5 * w
-            if owner and not right_angle:
-                poly = poly.copy()
-                ends = poly[:, 0] >= xmax - 1e-9
-                poly[ends, 0] = fr.width_m + reach
+        at_start = wall == c.b
+        if at_start:
+            end = float(poly[:, 0].min())
+            gone = end > w + reach
+            last, sheltered = ends[0] == LAST, ends[0] == SHELTERED
+            owner = end <= 0.5 * w
+            beside = last and not owner and end <= NEXT_TO_END_FACE * w  # next to the other's end face
+            past, face_x = -reach, max(end, w)
         else:
-            xmin = poly[:, 0].min()
-            if xmin > w + reach:
-                continue
-            owner = xmin <= 0.5 * w
-            if owner and not right_angle:
-                poly = poly.copy()
-                ends = poly[:, 0] <= xmin + 1e-9
-                poly[ends, 0] = -reach
+            end = float(poly[:, 0].max())
+            gone = end < fr.width_m - w - reach
+            last, sheltered = ends[1] == LAST, ends[1] == SHELTERED
+            owner = end >= fr.width_m - 0.5 * w
+            beside = last and not owner and end >= fr.width_m - NEXT_TO_END_FACE * w
+            past, face_x = fr.width_m + reach, min(end, fr.width_m - w)
+        if right_angle:  # as before 2026-12-06, to the bit: a right angle needs none of this
+            sheltered = beside = last = False
+        if gone or (sheltered and not owner):
+            continue
+        if last and (owner or beside):
+            poly = _carried_past(poly, at_start, past)
         normal = other.inward
-        point = other.origin_xy if owner else other.origin_xy + other.thickness_m * other.inward
+        if owner:
+            point = other.origin_xy
+        elif beside:
+            point = fr.origin_xy + face_x * fr.direction  # on this wall's outer face
+        else:
+            point = other.origin_xy + other.thickness_m * other.inward
         planes.append((point, normal))
     return poly, planes

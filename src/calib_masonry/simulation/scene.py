@@ -32,6 +32,7 @@ import numpy as np
 import shapely
 
 from ..build3d.assemble import MAX_GAP_M, Brick, brick_solid
+from ..build3d.bond import course_ends
 from ..build3d.contacts import (
     OUTLINE_POINTS,
     ContactPatch,
@@ -587,15 +588,21 @@ def body_from_polyhedron(
 
 
 def _cell_solid(
-    brick: Brick, outline: np.ndarray | None, frames: list[WallFrame], corners: list[Corner]
+    brick: Brick,
+    outline: np.ndarray | None,
+    frames: list[WallFrame],
+    corners: list[Corner],
+    ends: tuple[str | None, str | None] = (None, None),
 ) -> tuple[Polyhedron, float]:
     """The prism of ``outline`` (the brick's mortar cell in wall 2D, or its convex hull if None),
-    extruded and cut at corners; and the relative area change from taking the brick's hull."""
+    extruded and cut at corners (``ends``: the brick's place in its course there, as in the
+    build, :func:`~calib_masonry.build3d.bond.course_ends`); and the relative area change from
+    taking the brick's hull."""
     poly = shapely.Polygon(brick.polygon_m)
     hull = poly.convex_hull
     change = hull.area / poly.area - 1.0 if poly.area > 0 else 0.0
     xy = np.asarray(hull.exterior.coords)[:-1] if outline is None else outline
-    solid = brick_solid(xy, brick.wall, frames, corners)
+    solid = brick_solid(xy, brick.wall, frames, corners, ends)
     return (solid if solid is not None else brick.solid), change
 
 
@@ -962,9 +969,15 @@ def scene_geometry(
         for i, cell in zip(members, cells or []):
             outlines[i] = cell
 
+    ends: list[tuple[str | None, str | None]] = [(None, None)] * len(bricks)
+    for w in walls:
+        members = [i for i, b in enumerate(bricks) if b.wall == w]
+        for i, e in zip(members, course_ends([bricks[i].polygon_m for i in members], w, frames, corners)):
+            ends[i] = e
+
     def make_body(i: int, outline: np.ndarray | None) -> Body:
         raise_if_stopped()
-        solid, change = _cell_solid(bricks[i], outline, frames, corners)
+        solid, change = _cell_solid(bricks[i], outline, frames, corners, ends[i])
         return body_from_polyhedron(
             f"brick_{bricks[i].id:05d}", solid, MASONRY, mass_volume=bricks[i].volume, hull_volume_change=change
         )

@@ -139,18 +139,25 @@ def _ring_holes(structure, spec, mortar_m: float) -> float:
     return worst
 
 
+L_PLAN = [(2.4, 1.1, 0.0), (2.4, 1.1, 90.0), (1.2, 1.1, 180.0), (1.2, 1.1, 90.0), (1.2, 1.1, 180.0), (3.6, 1.1, 270.0)]
+
+
 @pytest.mark.parametrize(
-    ("sides", "layout"), [(6, "stretcher"), (8, "stones"), (4, "stones")], ids=["hexagon", "octagon", "square"]
+    ("sides", "layout"),
+    [(6, "stretcher"), (8, "stones"), (4, "stones"), ("L", "stretcher"), ("L", "stones")],
+    ids=["hexagon", "octagon", "square", "L-bricks", "L-stones"],
 )
 def test_polygonal_towers_leave_no_hole_at_their_corners(make_scenario, sides, layout):
     # at a corner that is not a right angle the owner's brick runs past its wall's end, and the
     # other wall's first brick reaches back to the owner's inner face: a hexagonal tower of
     # stretcher bond had a triangle t^2 cot(60)/2 open at every corner of every course (7 % of its
     # ring), an octagonal tower of stones 16 % (an irregular stone's end was carried past the
-    # corner by one vertex: a sliver); the truth (the same extrusion) had the same holes
+    # corner by one vertex: a sliver); the truth (the same extrusion) had the same holes. At an L
+    # plan's inner (re-entrant) corner the t x t of masonry that neither photo shows was left out:
+    # the two walls touched along the corner's edge alone, with no joint between them
     from calib_masonry.pipeline import build
 
-    walls = [(1.2, 1.1, 360.0 * k / sides) for k in range(sides)]
+    walls = L_PLAN if sides == "L" else [(1.2, 1.1, 360.0 * k / sides) for k in range(sides)]
     data = make_scenario(walls, layout=layout, t=0.3, closed=True, seed=31)
     spec = load_structure(data / "structure.toml")
     s = build(spec, progress=False).structure
@@ -160,6 +167,13 @@ def test_polygonal_towers_leave_no_hole_at_their_corners(make_scenario, sides, l
     for b in s.bricks:
         m = b.solid.to_trimesh()
         assert m.is_watertight and m.volume > 0
+    if sides == "L":  # the simulation joins the two walls of the inner corner over their mitre
+        from calib_masonry.build_folder import simulation_geometry
+
+        g = simulation_geometry(s)
+        wall = np.array([b.wall for b in s.bricks])
+        pairs = g.patch_pairs[(g.patch_pairs >= 0).all(axis=1)]
+        assert (2, 3) in {tuple(sorted(int(v) for v in w)) for w in wall[pairs] if w[0] != w[1]}
 
 
 def test_assemble_removes_given_end_faces():

@@ -190,10 +190,10 @@ def course_ends(
     face is about as wide as a unit (a hexagonal tower of 0.35 m walls and 0.40 m bricks). Pieces
     far from any corner get (None, None)."""
     fr = frames[wall]
-    w_at = [None, None]  # the end faces' width at the wall's start and end
+    w_at = [None, None]  # the end faces' width at the wall's start and end (a re-entrant corner's: its depth)
     for c in corners:
-        if c.convex and wall in (c.a, c.b) and c.a != c.b:
-            w = c.end_width_on(frames[c.b if wall == c.a else c.a].thickness_m)
+        if (c.convex or c.reentrant) and wall in (c.a, c.b) and c.a != c.b:
+            w = abs(c.end_width_on(frames[c.b if wall == c.a else c.a].thickness_m))
             w_at[0 if wall == c.b else 1] = w
     out: list[tuple[str | None, str | None]] = [(None, None)] * len(polys)
     if w_at == [None, None]:
@@ -261,6 +261,10 @@ def corner_clip_planes(
     planes: list[tuple[np.ndarray, np.ndarray]] = []
     poly = np.asarray(poly, dtype=np.float64)
     for c in corners:
+        if c.reentrant and wall in (c.a, c.b) and c.a != c.b:
+            poly, cuts = _reentrant(poly, wall, frames, c, ends)
+            planes += cuts
+            continue
         if not c.convex or wall not in (c.a, c.b):
             continue
         if c.a == c.b:
@@ -299,3 +303,39 @@ def corner_clip_planes(
             point = other.origin_xy + other.thickness_m * other.inward
         planes.append((point, normal))
     return poly, planes
+
+
+def _reentrant(
+    poly: np.ndarray, wall: int, frames: list[WallFrame], c: Corner, ends: tuple[str | None, str | None]
+) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """A piece at a re-entrant corner (an L or T plan's inner corner, :attr:`Corner.reentrant`): the
+    last of its course, where it reaches the corner's edge (within half the other wall's depth
+    there), is carried past its wall's end into the masonry that neither photo shows, between the
+    two walls' bands, up to the other wall's inner face and to the mitre through the corner's edge
+    and the inner faces' meeting point, so the two walls meet over that mitre (which wall's units
+    run through in which course is hidden in both photos). Before 2026-12-06 that masonry was left
+    out: a void of t x t at a right angle, the two walls touching along the corner's edge alone, with
+    no joint between them (the paper example's walls 3 and 4)."""
+    fr = frames[wall]
+    at_start = wall == c.b
+    other = frames[c.a if at_start else c.b]
+    w = abs(c.end_width_on(other.thickness_m))
+    end = float(poly[:, 0].min() if at_start else poly[:, 0].max())
+    reaches = end <= 0.5 * w if at_start else end >= fr.width_m - 0.5 * w
+    if ends[0 if at_start else 1] != LAST or not reaches:
+        return poly, []
+    reach = 2.0 * (w + fr.thickness_m + other.thickness_m)
+    poly = _carried_past(poly, at_start, -reach if at_start else fr.width_m + reach)
+    edge = fr.origin_xy if at_start else fr.origin_xy + fr.width_m * fr.direction  # the corner's edge
+    # where the two inner faces meet: edge + t_a n_a + s d_a = edge + t_b n_b + u d_b
+    a, b = (other, fr) if at_start else (fr, other)
+    m = np.column_stack([a.direction, -b.direction])
+    s, _ = np.linalg.solve(m, b.thickness_m * b.inward - a.thickness_m * a.inward)
+    inner = edge + a.thickness_m * a.inward + s * a.direction
+    along = inner - edge
+    normal = np.array([-along[1], along[0]])
+    own = edge + 0.5 * fr.thickness_m * fr.inward + (0.01 if at_start else -0.01) * fr.direction  # inside this band
+    if np.dot(own - edge, normal) < 0:
+        normal = -normal
+    # the other wall's inner face: keep the side of its outer face
+    return poly, [(other.origin_xy + other.thickness_m * other.inward, -other.inward), (edge, normal)]

@@ -126,6 +126,12 @@ class Corner:
     def convex(self) -> bool:
         return MIN_CORNER_TURN_RAD < self.turn_rad < math.pi - MIN_CORNER_TURN_RAD
 
+    @property
+    def reentrant(self) -> bool:
+        """A right turn seen from above (an L or T plan's inner corner): the photos of both walls
+        end at the corner's edge, and the masonry between their bands is hidden in both."""
+        return -math.pi + MIN_CORNER_TURN_RAD < self.turn_rad < -MIN_CORNER_TURN_RAD
+
     def end_width_on(self, thickness_other: float) -> float:
         return thickness_other / math.sin(self.turn_rad)
 

@@ -52,6 +52,14 @@ __all__ = [
 MATERIAL_FILE = "material.toml"  # a model's [material] (from its structure file), read by `simulate`
 
 
+def _overlap_share(structure, interpenetration) -> float | None:
+    """The worst pair's shared volume over the smaller brick's (None without a pair)."""
+    if interpenetration.pair is None:
+        return None
+    volumes = [b.volume for i in interpenetration.pair for b in structure.bricks if b.id == i]
+    return float(interpenetration.max_volume_m3 / min(volumes)) if volumes and min(volumes) > 0 else None
+
+
 def _summary(result: BuildResult, interpenetration) -> dict:
     s = result.structure
     spec = result.spec
@@ -114,6 +122,12 @@ def _summary(result: BuildResult, interpenetration) -> dict:
         "closure_gap_xy_m": s.closure_gap_xy.tolist(),
         "max_interpenetration_m3": interpenetration.max_volume_m3,
         "worst_pair": interpenetration.pair,
+        "worst_pair_share": _overlap_share(s, interpenetration),
+        "worst_pair_walls": (
+            [spec.walls[b.wall].name for i in interpenetration.pair for b in s.bricks if b.id == i]
+            if interpenetration.pair
+            else None
+        ),
         "seconds": {k: round(v, 4) for k, v in result.seconds.items()},
     }
 

@@ -77,6 +77,10 @@ def _cmd_build(args) -> int:
     return 0
 
 
+#: a build whose worst pair of bricks shares this much of the smaller one's volume says so
+OVERLAP_NOTE_SHARE = 0.1
+
+
 def _print_build(summary: dict, out) -> None:
     print(
         f"build: {summary['structure']}: {summary['bricks']} bricks "
@@ -99,6 +103,17 @@ def _print_build(summary: dict, out) -> None:
         print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, {what}, {w['corner_pieces_removed']} corner pieces removed")
         if "pieces" in w:
             print(f"  {'':>10}  scale from the {w['scale_source']}; {_pieces_line(w['pieces'])}")
+    share = summary.get("worst_pair_share")
+    if share is not None and share >= OVERLAP_NOTE_SHARE:
+        a, b = summary["worst_pair"]
+        walls = " and ".join(dict.fromkeys(summary.get("worst_pair_walls") or []))
+        print(
+            f"  note: brick_{a:05d} and brick_{b:05d} (wall {walls}) overlap by {share:.0%} of the smaller "
+            f"({summary['max_interpenetration_m3']:.2e} m^3): their traced outlines cross, as where a piece was "
+            "traced across a joint; the model's solids overlap there (the simulation's bodies do not: each is its "
+            "cell of the wall); check the wall's overlay, and for a photo wall fix its pieces in the LabelMe file "
+            'beside its orthophoto and build from that (mask = "<file>.json")'
+        )
     coverage = summary.get("joint_coverage") or {}
     hanging = coverage.get("units_without_bed_joint") or []
     if hanging:

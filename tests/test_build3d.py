@@ -344,3 +344,24 @@ def test_an_overlay_geos_cannot_node_is_done_again_from_valid_inputs():
     both = _overlay(shapely.intersection, np.array([bow, sq]), np.array([sq, sq]))
     assert shapely.area(both) == pytest.approx([0.18, 0.36])
     assert shapely.equals_exact(both[1], shapely.intersection(sq, sq))  # the element that did not fail: as it was
+
+
+def test_two_walls_that_both_claim_a_corner_are_not_carried_past_it():
+    # where the end faces were told apart wrongly (an end face about as wide as a unit: a hexagonal
+    # tower of 0.35 m walls and 0.40 m bricks, photographed), both walls' last pieces reach the
+    # corner in one course; carried past it, each would fill the corner and the two overlap there
+    # (the photographed hexagon: 8.0 litres, against 6.0 before they were carried)
+    from calib_masonry.build3d.bond import LAST, corner_roles
+    from calib_masonry.build3d.place import Footprint, WallGeometry
+
+    fp = Footprint((WallGeometry(1.6, 1.0, 0.0, 0.35), WallGeometry(1.6, 1.0, math.radians(60.0), 0.35)), closed=False)
+    frames, cs = wall_frames(fp), corners(fp)
+    a = [_rect(0.0, 1.17, 0.0, 0.2), _rect(0.0, 1.57, 0.22, 0.42)]  # course 2: a reaches the corner
+    b = [_rect(0.03, 0.8, 0.0, 0.2), _rect(0.45, 0.9, 0.22, 0.42)]  # course 1: b reaches it
+    roles = corner_roles([a, b], frames, cs)
+    # each course's last pieces are carried: the owner's past the corner, the other's back to it
+    assert roles[0][1][1] == LAST and roles[1][1][0] == LAST
+    assert roles[0][0][1] == LAST and roles[1][0][0] == LAST
+    b[1] = _rect(0.0, 0.9, 0.22, 0.42)
+    roles = corner_roles([a, b], frames, cs)
+    assert roles[0][1][1] is None and roles[1][1][0] is None  # both claim course 2: neither is carried

@@ -8,7 +8,7 @@ import numpy as np
 import shapely
 
 from ..errors import InputError
-from .bond import CornerTolerances, corner_clip_planes, course_ends, find_end_faces
+from .bond import CornerTolerances, corner_clip_planes, corner_roles, find_end_faces
 from .extrude import Polyhedron, clip_plan, polygon_area, prism
 from .place import Corner, Footprint, WallFrame, _footprint, closure_gap, corners, wall_frames
 
@@ -154,11 +154,15 @@ def assemble(
         end_faces = find_end_faces(polys, frames, cs, tolerances)
     bricks: list[Brick] = []
     removed = []
+    kept = [
+        [i for i, poly in enumerate(polys[w]) if i not in end_faces[w] and abs(polygon_area(poly)) > 0]
+        for w in range(len(walls))
+    ]
+    roles = corner_roles([[polys[w][i] for i in k] for w, k in enumerate(kept)], frames, cs)
     for w, wp in enumerate(walls):
         removed.append(tuple(wp.ids[i] for i in sorted(end_faces[w])))
-        kept = [i for i, poly in enumerate(polys[w]) if i not in end_faces[w] and abs(polygon_area(poly)) > 0]
-        ends = dict(zip(kept, course_ends([polys[w][i] for i in kept], w, frames, cs)))
-        for i in kept:
+        ends = dict(zip(kept[w], roles[w]))
+        for i in kept[w]:
             poly = polys[w][i]
             solid = brick_solid(poly, w, frames, cs, ends[i])
             if solid is None:

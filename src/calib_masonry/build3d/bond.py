@@ -21,7 +21,15 @@ import shapely
 
 from .place import Corner, WallFrame
 
-__all__ = ["CornerTolerances", "LAST", "SHELTERED", "find_end_faces", "course_ends", "corner_clip_planes"]
+__all__ = [
+    "CornerTolerances",
+    "LAST",
+    "SHELTERED",
+    "find_end_faces",
+    "course_ends",
+    "corner_roles",
+    "corner_clip_planes",
+]
 
 
 @dataclass(frozen=True)
@@ -227,6 +235,34 @@ def course_ends(
                 roles.append(None)
         out[i] = (roles[0], roles[1])
     return out
+
+
+def corner_roles(
+    polys: list[list[np.ndarray]], frames: list[WallFrame], corners: list[Corner]
+) -> list[list[tuple[str | None, str | None]]]:
+    """:func:`course_ends` of every wall's kept pieces (``polys[wall]``), less the claims two walls
+    make on one corner in one course: where the last piece of each reaches the corner (both seem to
+    own it, as where the end face is about as wide as a unit and the end faces were told apart
+    wrongly), neither is carried past it (each keeps its cut at the other wall's outer face, as
+    before 2026-12-06), since both would fill the corner and overlap there."""
+    roles = [course_ends(p, w, frames, corners) for w, p in enumerate(polys)]
+    for c in corners:
+        if not c.convex or c.a == c.b:
+            continue
+        fa, fb = frames[c.a], frames[c.b]
+        wa, wb = c.end_width_on(fb.thickness_m), c.end_width_on(fa.thickness_m)
+        own_a = [
+            i for i, p in enumerate(polys[c.a]) if roles[c.a][i][1] == LAST and p[:, 0].max() >= fa.width_m - 0.5 * wa
+        ]
+        own_b = [j for j, p in enumerate(polys[c.b]) if roles[c.b][j][0] == LAST and p[:, 0].min() <= 0.5 * wb]
+        for i in own_a:
+            za = polys[c.a][i][:, 1]
+            for j in own_b:
+                zb = polys[c.b][j][:, 1]
+                if min(za.max(), zb.max()) - max(za.min(), zb.min()) > 1e-3:
+                    roles[c.a][i] = (roles[c.a][i][0], None)
+                    roles[c.b][j] = (None, roles[c.b][j][1])
+    return roles
 
 
 def corner_clip_planes(

@@ -32,7 +32,7 @@ import numpy as np
 import shapely
 
 from ..build3d.assemble import MAX_GAP_M, Brick, brick_solid
-from ..build3d.bond import course_ends
+from ..build3d.bond import corner_roles
 from ..build3d.contacts import (
     OUTLINE_POINTS,
     ContactPatch,
@@ -970,9 +970,10 @@ def scene_geometry(
             outlines[i] = cell
 
     ends: list[tuple[str | None, str | None]] = [(None, None)] * len(bricks)
-    for w in walls:
-        members = [i for i, b in enumerate(bricks) if b.wall == w]
-        for i, e in zip(members, course_ends([bricks[i].polygon_m for i in members], w, frames, corners)):
+    members = [[i for i, b in enumerate(bricks) if b.wall == w] for w in range(len(frames))]
+    roles = corner_roles([[bricks[i].polygon_m for i in m] for m in members], frames, corners)
+    for m, r in zip(members, roles):
+        for i, e in zip(m, r):
             ends[i] = e
 
     def make_body(i: int, outline: np.ndarray | None) -> Body:

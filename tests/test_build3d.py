@@ -120,22 +120,20 @@ def _ring_holes(structure, spec, mortar_m: float) -> float:
     each brick's section is grown by a joint and 2 mm, so mortar joints (an irregular stone's up to
     twice as wide) close and only holes stay."""
     import shapely
-    import trimesh
 
     fp = spec.footprint
     frames = wall_frames(fp)
     outer = shapely.Polygon([f.origin_xy for f in frames])
     ring = outer.difference(outer.buffer(-fp.walls[0].thickness_m, join_style="mitre"))
-    mesh = trimesh.util.concatenate([b.solid.to_trimesh() for b in structure.bricks])
+    meshes = [(b.solid.to_trimesh(), b.solid.vertices[:, 2]) for b in structure.bricks]
     worst = 0.0
     for z in sorted({round(float(b.solid.vertices[:, 2].mean()), 3) for b in structure.bricks if b.wall == 0}):
-        section = mesh.section(plane_origin=[0.0, 0.0, z], plane_normal=[0.0, 0.0, 1.0])
-        if section is None:
-            continue
-        covered = shapely.union_all(
-            [shapely.Polygon(p[:, :2]).buffer(mortar_m + 0.002) for p in section.discrete if len(p) >= 3]
-        )
-        worst = max(worst, ring.difference(covered).area / ring.area)
+        parts = []
+        for mesh, zs in meshes:  # brick by brick: two solids meeting on a face would be traced as one loop
+            if zs.min() < z < zs.max():
+                section = mesh.section(plane_origin=[0.0, 0.0, z], plane_normal=[0.0, 0.0, 1.0])
+                parts += [shapely.Polygon(p[:, :2]).buffer(mortar_m + 0.002) for p in section.discrete if len(p) >= 3]
+        worst = max(worst, ring.difference(shapely.union_all(parts)).area / ring.area)
     return worst
 
 

@@ -138,12 +138,22 @@ def _ring_holes(structure, spec, mortar_m: float) -> float:
 
 
 L_PLAN = [(2.4, 1.1, 0.0), (2.4, 1.1, 90.0), (1.2, 1.1, 180.0), (1.2, 1.1, 90.0), (1.2, 1.1, 180.0), (3.6, 1.1, 270.0)]
+# a bay: a re-entrant corner of 45 degrees between walls 1 and 2, and a convex one of 45
+BAY_PLAN = [
+    (3.0, 1.1, 0.0),
+    (1.0, 1.1, 90.0),
+    (2**0.5, 1.1, 45.0),
+    (2**0.5, 1.1, 135.0),
+    (3.0, 1.1, 180.0),
+    (3.0, 1.1, 270.0),
+]
+PLANS = {"L": (L_PLAN, (2, 3)), "bay": (BAY_PLAN, (1, 2))}
 
 
 @pytest.mark.parametrize(
     ("sides", "layout"),
-    [(6, "stretcher"), (8, "stones"), (4, "stones"), ("L", "stretcher"), ("L", "stones")],
-    ids=["hexagon", "octagon", "square", "L-bricks", "L-stones"],
+    [(6, "stretcher"), (8, "stones"), (4, "stones"), ("L", "stretcher"), ("L", "stones"), ("bay", "stones")],
+    ids=["hexagon", "octagon", "square", "L-bricks", "L-stones", "bay-stones"],
 )
 def test_polygonal_towers_leave_no_hole_at_their_corners(make_scenario, sides, layout):
     # at a corner that is not a right angle the owner's brick runs past its wall's end, and the
@@ -155,7 +165,7 @@ def test_polygonal_towers_leave_no_hole_at_their_corners(make_scenario, sides, l
     # the two walls touched along the corner's edge alone, with no joint between them
     from calib_masonry.pipeline import build
 
-    walls = L_PLAN if sides == "L" else [(1.2, 1.1, 360.0 * k / sides) for k in range(sides)]
+    walls = PLANS[sides][0] if sides in PLANS else [(1.2, 1.1, 360.0 * k / sides) for k in range(sides)]
     data = make_scenario(walls, layout=layout, t=0.3, closed=True, seed=31)
     spec = load_structure(data / "structure.toml")
     s = build(spec, progress=False).structure
@@ -165,13 +175,13 @@ def test_polygonal_towers_leave_no_hole_at_their_corners(make_scenario, sides, l
     for b in s.bricks:
         m = b.solid.to_trimesh()
         assert m.is_watertight and m.volume > 0
-    if sides == "L":  # the simulation joins the two walls of the inner corner over their mitre
+    if sides in PLANS:  # the simulation joins the two walls of the inner corner over their mitre
         from calib_masonry.build_folder import simulation_geometry
 
         g = simulation_geometry(s)
         wall = np.array([b.wall for b in s.bricks])
         pairs = g.patch_pairs[(g.patch_pairs >= 0).all(axis=1)]
-        assert (2, 3) in {tuple(sorted(int(v) for v in w)) for w in wall[pairs] if w[0] != w[1]}
+        assert PLANS[sides][1] in {tuple(sorted(int(v) for v in w)) for w in wall[pairs] if w[0] != w[1]}
 
 
 def test_assemble_removes_given_end_faces():

@@ -122,6 +122,11 @@ def _summary(result: BuildResult, interpenetration) -> dict:
         "closure_gap_xy_m": s.closure_gap_xy.tolist(),
         "max_interpenetration_m3": interpenetration.max_volume_m3,
         "worst_pair": interpenetration.pair,
+        "corner_guesses": [
+            {"walls": [spec.walls[c.a].name, spec.walls[c.b].name], "courses": n}
+            for c, n in zip(s.corners, s.corner_guesses)
+            if n
+        ],
         "worst_pair_share": _overlap_share(s, interpenetration),
         "worst_pair_walls": (
             [spec.walls[b.wall].name for i in interpenetration.pair for b in s.bricks if b.id == i]

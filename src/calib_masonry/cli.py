@@ -103,6 +103,16 @@ def _print_build(summary: dict, out) -> None:
         print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, {what}, {w['corner_pieces_removed']} corner pieces removed")
         if "pieces" in w:
             print(f"  {'':>10}  scale from the {w['scale_source']}; {_pieces_line(w['pieces'])}")
+    guessed = summary.get("corner_guesses") or []
+    if guessed:
+        n = sum(c["courses"] for c in guessed)
+        where = ", ".join(f"{c['walls'][0]}/{c['walls'][1]} {c['courses']}" for c in guessed)
+        print(
+            f"  note: which wall runs through a corner was a guess in {n} course{'s' if n > 1 else ''} ({where}): "
+            "the end face the other wall shows there is about as wide as the units (summary.json corner_guesses); "
+            "the solids are nearly the same either way, but those bricks may be counted on the wrong wall: check "
+            "the corners on walls.png"
+        )
     share = summary.get("worst_pair_share")
     if share is not None and share >= OVERLAP_NOTE_SHARE:
         a, b = summary["worst_pair"]

@@ -86,6 +86,9 @@ class Structure3D:
     # the widest mortar joint (m) two units are joined across (the structure file's max_joint_m);
     # None: the default, MAX_GAP_M
     max_joint_m: float | None = None
+    # per corner (in ``corners``' order): the courses where which wall runs through was a guess
+    # (the end faces found, not given, and about as wide as the units: find_end_faces)
+    corner_guesses: tuple[int, ...] = ()
 
     @property
     def closure_error_m(self) -> float | None:
@@ -150,8 +153,9 @@ def assemble(
     frames = wall_frames(footprint)
     cs = corners(footprint)
     polys = [[simple_polygon(p) for p in w.polygons_m] for w in walls]
+    guesses: list[int] = []
     if end_faces is None:
-        end_faces = find_end_faces(polys, frames, cs, tolerances)
+        end_faces = find_end_faces(polys, frames, cs, tolerances, guesses)
     bricks: list[Brick] = []
     removed = []
     kept = [
@@ -195,4 +199,5 @@ def assemble(
         bricks=tuple(bricks),
         removed=tuple(removed),
         closure_gap_xy=closure_gap(footprint),
+        corner_guesses=tuple(guesses),
     )

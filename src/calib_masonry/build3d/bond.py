@@ -53,6 +53,8 @@ def _z_shared(e1, e2, frac: float) -> bool:
 #: two rival end-face candidates whose widths match their end widths within this (a fraction) of
 #: each other are told apart by their walls' unit lengths (:func:`_module_length`)
 TIE = 0.1
+#: rivals told apart by less than this, after that, are a guess (:func:`find_end_faces`'s ``guesses``)
+GUESS = 0.05
 
 
 def _module_length(ext: list, width_m: float) -> float | None:
@@ -71,15 +73,21 @@ def find_end_faces(
     frames: list[WallFrame],
     corners: list[Corner],
     tol: CornerTolerances = CornerTolerances(),
+    guesses: list[int] | None = None,
 ) -> list[set[int]]:
     """Indices (into ``polygons[n]``) of the end-face pieces to remove from each wall.
 
-    ``polygons[n]`` are wall ``n``'s outer-face polygons in wall metres ``(k, 2)``.
+    ``polygons[n]`` are wall ``n``'s outer-face polygons in wall metres ``(k, 2)``. ``guesses``
+    (a list, filled): per corner, in the order of ``corners``, the courses where the two walls'
+    candidates were told apart by less than :data:`GUESS` (an end face about as wide as the units
+    on both sides: which wall runs through there is a guess).
     """
     remove: list[set[int]] = [set() for _ in polygons]
     ext = [[_extent(p) for p in polys] for polys in polygons]
     module = [_module_length(e, f.width_m) for e, f in zip(ext, frames)]
     for c in corners:
+        if guesses is not None:
+            guesses.append(0)
         if not c.convex:
             continue
         fa, fb = frames[c.a], frames[c.b]
@@ -126,6 +134,8 @@ def find_end_faces(
                 # that is no unit of its own wall's length is the end face
                 da -= abs((ea[1] - ea[0]) / module[c.a] - 1.0)
                 db -= abs((eb[1] - eb[0]) / module[c.b] - 1.0)
+            if guesses is not None and abs(da - db) <= GUESS:
+                guesses[-1] += 1
             if da <= db:
                 remove[c.a].add(i)
             else:

@@ -206,11 +206,11 @@ def course_ends(
     None. Only the last piece of a course may run past a corner: by distance alone a piece before
     the corner's own could not be told from the one next to the other wall's end face where the end
     face is about as wide as a unit (a hexagonal tower of 0.35 m walls and 0.40 m bricks). Pieces
-    far from any corner get (None, None)."""
+    far from any corner, or at a right angle (where nothing is carried on), get None there."""
     fr = frames[wall]
     w_at = [None, None]  # the end faces' width at the wall's start and end (a re-entrant corner's: its depth)
     for c in corners:
-        if (c.convex or c.reentrant) and wall in (c.a, c.b) and c.a != c.b:
+        if ((c.convex and not c.right_angle) or c.reentrant) and wall in (c.a, c.b) and c.a != c.b:
             w = abs(c.end_width_on(frames[c.b if wall == c.a else c.a].thickness_m))
             w_at[0 if wall == c.b else 1] = w
     out: list[tuple[str | None, str | None]] = [(None, None)] * len(polys)
@@ -257,7 +257,7 @@ def corner_roles(
     before 2026-12-06), since both would fill the corner and overlap there."""
     roles = [course_ends(p, w, frames, corners) for w, p in enumerate(polys)]
     for c in corners:
-        if not c.convex or c.a == c.b:
+        if not c.convex or c.right_angle or c.a == c.b:
             continue
         fa, fb = frames[c.a], frames[c.b]
         wa, wb = c.end_width_on(fb.thickness_m), c.end_width_on(fa.thickness_m)
@@ -318,7 +318,6 @@ def corner_clip_planes(
         other = frames[c.b if wall == c.a else c.a]
         w = c.end_width_on(other.thickness_m)
         reach = 2.0 * (w + fr.thickness_m + other.thickness_m)
-        right_angle = abs(np.cos(c.turn_rad)) < 1e-9
         at_start = wall == c.b
         if at_start:
             end = float(poly[:, 0].min())
@@ -334,7 +333,7 @@ def corner_clip_planes(
             owner = end >= fr.width_m - 0.5 * w
             beside = last and not owner and end >= fr.width_m - NEXT_TO_END_FACE * w
             past, face_x = fr.width_m + reach, min(end, fr.width_m - w)
-        if right_angle:  # as before 2026-12-06, to the bit: a right angle needs none of this
+        if c.right_angle:  # as before 2026-12-06, to the bit: a right angle needs none of this
             sheltered = beside = last = False
         if gone or (sheltered and not owner):
             continue

@@ -127,6 +127,12 @@ class Corner:
         return MIN_CORNER_TURN_RAD < self.turn_rad < math.pi - MIN_CORNER_TURN_RAD
 
     @property
+    def right_angle(self) -> bool:
+        """A convex corner of 90 degrees: the owner's brick already fills it, so no brick is carried
+        past it (:func:`~calib_masonry.build3d.bond.corner_clip_planes`)."""
+        return abs(math.cos(self.turn_rad)) < 1e-9
+
+    @property
     def reentrant(self) -> bool:
         """A right turn seen from above (an L or T plan's inner corner): the photos of both walls
         end at the corner's edge, and the masonry between their bands is hidden in both."""

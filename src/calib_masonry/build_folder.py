@@ -52,12 +52,17 @@ __all__ = [
 MATERIAL_FILE = "material.toml"  # a model's [material] (from its structure file), read by `simulate`
 
 
-def _overlap_share(structure, interpenetration) -> float | None:
-    """The worst pair's shared volume over the smaller brick's (None without a pair)."""
-    if interpenetration.pair is None:
-        return None
-    volumes = [b.volume for i in interpenetration.pair for b in structure.bricks if b.id == i]
-    return float(interpenetration.max_volume_m3 / min(volumes)) if volumes and min(volumes) > 0 else None
+def _worst_pair(structure, spec, interpenetration) -> dict:
+    """The worst pair's share (its shared volume over the smaller brick's) and walls (None without
+    a pair)."""
+    pair = [b for i in interpenetration.pair or () for b in structure.bricks if b.id == i]
+    if not pair:
+        return {"worst_pair_share": None, "worst_pair_walls": None}
+    smaller = min(b.volume for b in pair)
+    return {
+        "worst_pair_share": float(interpenetration.max_volume_m3 / smaller) if smaller > 0 else None,
+        "worst_pair_walls": [spec.walls[b.wall].name for b in pair],
+    }
 
 
 def _summary(result: BuildResult, interpenetration) -> dict:
@@ -127,12 +132,7 @@ def _summary(result: BuildResult, interpenetration) -> dict:
             for c, n in zip(s.corners, s.corner_guesses)
             if n
         ],
-        "worst_pair_share": _overlap_share(s, interpenetration),
-        "worst_pair_walls": (
-            [spec.walls[b.wall].name for i in interpenetration.pair for b in s.bricks if b.id == i]
-            if interpenetration.pair
-            else None
-        ),
+        **_worst_pair(s, spec, interpenetration),
         "seconds": {k: round(v, 4) for k, v in result.seconds.items()},
     }
 

@@ -384,6 +384,32 @@ def test_ground_inside_the_outline_does_not_join_the_units_along_the_base(
         assert seg.labels.max() == count, (ground_m, seg.labels.max(), count)
 
 
+@pytest.mark.parametrize("band_m", [0.0, 0.03, 0.06])
+def test_a_band_of_mortar_along_the_top_does_not_join_the_top_course(band_m):
+    """A wall ending in a band of mortar (a capping; synth's walls whose height leaves under 0.4 of
+    a course) whose outline takes the band in: the band is a plateau the top-hat does not find, and
+    the top course's head joints stop a few pixels short of it, so the band joined the course into
+    one piece (a 1.9 m wall's top course: one piece of 0.31 m^2). A band along the top or the
+    bottom that no joint crosses is not a unit; a wall of long units with few head joints, whose
+    thin top course is crossed by them as rarely as its other courses, keeps it."""
+    from calib_masonry.wall2d.segment import segment_wall
+
+    px = 400.0
+    for courses, lengths, mortar_m, seed in (
+        ([0.075] * 10, (0.2, 0.23), 0.01, 3),
+        ([0.05] + [0.2] * 3, (0.6, 0.8), 0.01, 5),
+    ):
+        rgb, count = _drawn_orthophoto(courses, lengths, mortar_m, px, 0.0, seed)
+        band = np.tile(np.array([0.80, 0.78, 0.72], np.float32), (int(round(band_m * px)), rgb.shape[1], 1))
+        seg = segment_wall(np.concatenate([band, rgb]), px)
+        assert seg.method == "mortar" and seg.labels.max() == count, (courses[0], band_m, seg.labels.max(), count)
+        # the module is the pieces' median height and length (it was the square root of their
+        # median area: 12.3 x 12.3 cm for these 6.5 x 20-23 cm bricks)
+        if lengths[1] < 0.5:  # (the long units, two a course, end where the wall ends: no module)
+            height, length = seg.summary()["module_m"]
+            assert courses[-1] - 2 * mortar_m < height < courses[-1] and lengths[0] - 2 * mortar_m < length < lengths[1]
+
+
 def test_with_the_width_measured_the_advice_is_about_the_corners_not_the_scale(real_calibrations):
     """With --known-width the laboratory photos' H is known to +-3 %: the note said "W and H are
     known only to ..." and told the user to pin the scale with --known-width, which was given. It

@@ -365,7 +365,7 @@ def _cmd_rectify(args) -> int:
 def _pieces_line(p: dict) -> str:
     return (
         f"segmentation: {p['count']} pieces, median {p['median_area_m2'] * 1e4:.0f} cm^2 "
-        f"(largest {p['max_area_m2'] * 1e4:.0f} cm^2), module {p['module_m'][0] * 100:.1f} x {p['module_m'][1] * 100:.1f} cm"
+        f"(largest {p['max_area_m2'] * 1e4:.0f} cm^2), module {p['module_m'][0] * 100:.1f} cm high x {p['module_m'][1] * 100:.1f} cm long"
         + (f"; warning: {p['warning']}" if p.get("warning") else "")
     )
 

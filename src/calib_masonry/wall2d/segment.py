@@ -299,6 +299,31 @@ class Segmentation:
         out.setflags(write=False)
         return out
 
+    def padded_top(self, rows: int) -> "Segmentation":
+        """The same segmentation of an orthophoto ``rows`` rows taller, the rows added on top
+        holding no piece (a wall's orthophoto whose top band was not seen as wall and was left
+        out of the segmentation: :func:`calib_masonry.pipeline.photo_wall`)."""
+        if rows <= 0:
+            return self
+
+        def pad(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else np.pad(a, ((rows, 0), (0, 0)))
+
+        pieces = self.pieces
+        if pieces is not None:
+            from dataclasses import replace as _replace
+
+            pieces = _replace(pieces, labels=pad(pieces.labels), joints=pad(pieces.joints))
+        return Segmentation(
+            mask=pad(self.mask),
+            method=self.method,
+            px_per_m=self.px_per_m,
+            pieces=pieces,
+            note=self.note,
+            coarse=self.coarse,
+            known_labels=pad(self.known_labels),
+        )
+
     def summary(self) -> dict:
         if self.pieces is not None:
             doc = self.pieces.summary()
@@ -306,14 +331,19 @@ class Segmentation:
             a = np.bincount(self.labels.ravel())[1:]
             a = a[a > 0] / self.px_per_m**2
             n = len(a)
-            side = float(np.sqrt(np.median(a))) if n else 0.0
+            # (course height, unit length) as the joints' partition gives it: the pieces' median
+            # height and length (their square root of area, 18.7 x 18.7 cm, said nothing of 30 x 12
+            # cm bricks)
+            boxes = [b for b in ndimage.find_objects(self.labels) if b is not None]
+            size = np.array([[b[0].stop - b[0].start, b[1].stop - b[1].start] for b in boxes], dtype=np.float64)
+            module = np.median(size, axis=0) / self.px_per_m if len(size) else np.zeros(2)
             doc = {
                 "count": n,
                 "median_area_m2": float(np.median(a)) if n else 0.0,
                 "max_area_m2": float(a.max()) if n else 0.0,
                 "min_area_m2": float(a.min()) if n else 0.0,
-                "module_m": [side, side],
-                "module_source": "the pieces' median area",
+                "module_m": [float(module[0]), float(module[1])],
+                "module_source": "the pieces' median height and length",
                 "warning": "" if n > 1 else "the segmentation found one piece: no joints stand out",
             }
         if self.coarse:
@@ -422,6 +452,56 @@ def _joints_to_the_border(units: np.ndarray, band: int) -> np.ndarray:
     return out
 
 
+#: how deep a band along the orthophoto's top or bottom (m) may be that :func:`_bands_without_joints`
+#: takes out: a capping or bed of mortar, a sill (a course of masonry is crossed by its head joints)
+JOINTLESS_BAND_M = 0.10
+#: ... a row whose share of mortar is under this fraction of the median row's
+JOINTLESS_SHARE = 0.25
+
+
+def _bands_without_joints(units: np.ndarray, valid: np.ndarray | None, band: int) -> np.ndarray:
+    """``units`` ``(rows, cols)`` without a band along its top and its bottom, at most ``band``
+    deep, that holds a row the mortar top-hat found (almost) no joint across: a row through a course
+    of masonry crosses its head joints, so such a row is a band of another kind along the wall's
+    edge, a capping or bed of mortar wider than the top-hat finds (a plateau, not a line), a beam or
+    sill, and as a unit it joined every unit of the course beside it (synth's walls end in up to 0.4
+    of a course of mortar: the top course of a wall as one piece; the band's own texture may show
+    a few specks of "mortar"). A row with almost no joint has a share of mortar under a quarter of
+    the wall's own median row's (its head joints' share, most rows being rows through courses), so
+    that a wall of long units, whose rows cross few joints, keeps its courses; everything from the
+    edge to the deepest such row that three rows through a course (neither almost jointless nor
+    over half mortar, as a bed joint's row is) follow is taken out: the top course's head joints
+    stop a few rows short of a band the top-hat does not find, and those rows joined the course.
+    Unchanged where the median row crosses no joint."""
+    rows = units.shape[0]
+    seen = np.ones_like(units) if valid is None else valid
+    counted = seen.sum(axis=1)
+    share = 1.0 - (units & seen).sum(axis=1) / np.maximum(counted, 1)
+    typical = float(np.median(share[counted > 0])) if (counted > 0).any() else 0.0
+    if typical <= 0.0:
+        return units
+    jointless = (counted > 0) & (share < JOINTLESS_SHARE * typical)
+    course = (counted > 0) & ~jointless & (share <= 0.5)
+    run = np.convolve(course.astype(np.int64), np.ones(3, dtype=np.int64), mode="valid") == 3  # rows k..k+2
+
+    def depth(flags_run: np.ndarray, flags_jointless: np.ndarray) -> int:
+        """Rows from this edge to the masonry: to just past the deepest almost jointless row within
+        ``band`` that three rows through a course follow (0: none)."""
+        for j in np.flatnonzero(flags_jointless[:band])[::-1]:
+            if j + 1 < len(flags_run) and flags_run[j + 1]:
+                return int(j) + 1
+        return 0
+
+    out = units.copy()
+    top = depth(run, jointless)
+    bottom = depth(run[::-1], jointless[::-1])
+    if top:
+        out[:top] = False
+    if bottom:
+        out[rows - bottom :] = False
+    return out
+
+
 def segment_by_colour(
     rgb: np.ndarray, px_per_m: float, valid: np.ndarray | None = None
 ) -> tuple[np.ndarray | None, str]:
@@ -521,6 +601,7 @@ def segment_wall(
     # the joints carried on straight to the orthophoto's sides, as the colour split's are: a strip of
     # ground or sky inside the outline joined the units along it (a course of bricks as one piece)
     units = _joints_to_the_border(mortar_mask, int(round(EDGE_BAND_M * px_per_m)))  # only takes units away
+    units = _bands_without_joints(units, valid, int(round(JOINTLESS_BAND_M * px_per_m)))  # so does this
     labels = label_bricks(units)
     why = mortar_plausible(units, labels, px_per_m)
     if not why:

@@ -66,6 +66,8 @@ def _worst_pair(structure, spec, interpenetration) -> dict:
 
 
 def _summary(result: BuildResult, interpenetration) -> dict:
+    from .pipeline import anchored_note
+
     s = result.structure
     spec = result.spec
     walls = []
@@ -96,6 +98,7 @@ def _summary(result: BuildResult, interpenetration) -> dict:
                         "fitted_width_m": result.photos[wall.name].calibration.result.width_m,
                         "fitted_height_m": result.photos[wall.name].calibration.result.height_m,
                         "scale_source": result.photos[wall.name].calibration.scale_source,
+                        "height_anchored": anchored_note(result.photos[wall.name]),
                         "pieces": result.photos[wall.name].segmentation,
                         "dice_against": "the wall's own segmented mask: how well the polygons fit it, not how "
                         "well the segmentation follows the stones",
@@ -144,6 +147,7 @@ def _write_photo_walls(
     ``folder/<name>``. The PNGs are encoded on a second thread while this one draws the figures
     (Pillow encodes without the GIL): 3.1 -> 1.85 s for the paper example's six walls."""
     from .calibrate.figures import plot_calibration
+    from .pipeline import anchored_note
 
     def images() -> None:
         for name, pw in photos.items():
@@ -153,7 +157,12 @@ def _write_photo_walls(
     for name, pw in photos.items():
         (folder / name).mkdir(parents=True)
         doc = pw.calibration.to_json()
-        doc.update(used_width_m=pw.wall.width_m, used_height_m=pw.wall.height_m, rectified_shape=list(pw.mask.shape))
+        doc.update(
+            used_width_m=pw.wall.width_m,
+            used_height_m=pw.wall.height_m,
+            height_anchored=anchored_note(pw),
+            rectified_shape=list(pw.mask.shape),
+        )
         if pw.segmentation:
             doc["pieces"] = pw.segmentation
         write_json(folder / name / "calibration.json", doc)
@@ -169,7 +178,13 @@ def _write_photo_walls(
     with background(images) as job:  # waited for however the figures end
         if figures:
             for name, pw in photos.items():
-                plot_calibration(pw.calibration, pw.rectified, folder / name / "overlay.png", photo_size=pw.photo_size)
+                plot_calibration(
+                    pw.calibration,
+                    pw.rectified,
+                    folder / name / "overlay.png",
+                    photo_size=pw.photo_size,
+                    ortho_m=(pw.wall.width_m, pw.wall.height_m),
+                )
     job.result()
 
 

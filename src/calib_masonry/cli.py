@@ -103,6 +103,8 @@ def _print_build(summary: dict, out) -> None:
         print(f"  {w['name']:>10}: {w['bricks']:5d} bricks, {what}, {w['corner_pieces_removed']} corner pieces removed")
         if "pieces" in w:
             print(f"  {'':>10}  scale from the {w['scale_source']}; {_pieces_line(w['pieces'])}")
+            if w.get("height_anchored"):
+                print(f"  {'':>10}  {w['height_anchored']}")
     guessed = summary.get("corner_guesses") or []
     if guessed:
         n = sum(c["courses"] for c in guessed)

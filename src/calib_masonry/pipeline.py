@@ -58,6 +58,9 @@ class PhotoWall:
     segmentation: dict = field(default_factory=dict)  # the pieces found (wall2d.segment.Segmentation.summary)
     labels: np.ndarray | None = None  # the pieces labelled, where they touch (the joints' partition)
     occluders_ortho: tuple = ()  # the occluders in the orthophoto's pixels
+    # the typed H lay beyond the fitted H's noise: the orthophoto keeps the photo's vertical scale
+    # from the base instead of stretching the outline onto H (calibrate.rectify.wall_stretch)
+    anchored: bool = False
 
 
 #: rectify's flags and the [[wall]] keys that say the same in a structure file, for the advice of
@@ -88,6 +91,13 @@ def as_wall_keys(message: str) -> str:
     return said if said == message else f"{said} (keys of the wall's [[wall]] table)"
 
 
+#: a photo wall's typed H this many of the fitted H's sigmas from it (the photo scaled by the typed
+#: W) is not stretched onto: the outline's top is then not the wall's (a band of mortar or a
+#: capping left out of it: synth's walls end in up to 0.4 of a course of mortar), and stretching
+#: moved every course by its share of the difference (a 4 m wall's outline 5 cm short: the top
+#: courses 5 cm off, precision against the truth 0.77); the photo's own scale is kept from the base
+ANCHOR_SIGMAS = 3.0
+
 #: how far a photo wall's typed H may lie from the H its photo gives when scaled by its typed W
 #: (and 5 sigmas of that H): past it, a typing error (a factor of 10, W and H swapped)
 TYPED_SIZE_TOLERANCE = 0.10
@@ -97,7 +107,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
     """Calibrate a wall's photo (``photo``, or read from ``wall.image``), rectify it onto the wall
     (W x H) and segment its masonry units (:func:`calib_masonry.wall2d.segment.segment_wall`),
     leaving out the wall's occluders."""
-    from .calibrate.rectify import calibrate_photo, rectify, valid_ortho, wall_config
+    from .calibrate.rectify import calibrate_photo, ortho_from_photo, rectify, valid_ortho, wall_config
     from .errors import CalibMasonryError
     from .process import raise_if_stopped
     from .wall2d.segment import segment_wall
@@ -111,6 +121,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
     res = cal.result
     width = res.width_m if math.isnan(wall.width_m) else wall.width_m
     height = res.height_m if math.isnan(wall.height_m) else wall.height_m
+    anchored = False
     if not math.isnan(wall.width_m) and not math.isnan(wall.height_m) and config.known_width_m == wall.width_m:
         # W and H typed: the photo scaled by W gives its own H; one typed 10 times too large, or the
         # two swapped, stretched the orthophoto onto the typed W x H without a word (1,674 pieces)
@@ -121,12 +132,21 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
                 f"{res.sigma('height_m'):.2g} m, but height_m = {wall.height_m:g} is typed ({off:.0%} off); check "
                 "width_m and height_m (or leave height_m out to take it from the photo)"
             )
+        anchored = abs(res.height_m - wall.height_m) > ANCHOR_SIGMAS * res.sigma("height_m")
     raise_if_stopped()
-    # the fitted wall's frame stretched onto the typed W x H: the photo's outline maps onto the wall
-    rect = rectify(cal, px_per_m=spec.photo_px_per_m, width_m=width, height_m=height)
+    # the fitted wall's frame stretched onto the typed W x H: the photo's outline maps onto the wall;
+    # or, where the typed H is beyond the fitted H's noise, the height kept at the photo's scale
+    rect = rectify(cal, px_per_m=spec.photo_px_per_m, width_m=width, height_m=height, anchored=anchored)
     raise_if_stopped()
-    valid = valid_ortho(cal, spec.photo_px_per_m, width_m=width, height_m=height)
-    seg = segment_wall(rect, spec.photo_px_per_m, valid=valid if not valid.all() else None)
+    valid = valid_ortho(cal, spec.photo_px_per_m, width_m=width, height_m=height, anchored=anchored)
+    # anchored under a taller typed H: the rows above the outline's top are no wall the photo showed;
+    # the rest is segmented as an orthophoto of its own (its top edge the outline's, where the joints
+    # run on to the border), then put back under them with no piece there: segmented with the rows
+    # left out as occluded, the top course's head joints stopped a pixel short of them and the course
+    # was one piece (five walls of an irregular pentagon, each 5 cm short at the top)
+    above = int(np.argmax(valid.any(axis=1))) if anchored and height > res.height_m and valid.any() else 0
+    seen = valid[above:]
+    seg = segment_wall(rect[above:], spec.photo_px_per_m, valid=seen if not seen.all() else None).padded_top(above)
     # keep a preview of the photo for the overlay figure, not the photo: six 6 MP photos held
     # until the figures are drawn were 430 MB of a build's peak
     step = max(1, math.ceil(max(cal.photo.rgb.shape[:2]) / 900))  # what the figure shows
@@ -141,14 +161,12 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
         wall=replace(wall, width_m=width, height_m=height),
         photo_size=cal.photo.size,
         segmentation=seg.summary(),
-        occluders_ortho=tuple(_ortho_polygon(cal, poly, seg.mask.shape, width, height) for poly in cal.occluders),
+        occluders_ortho=tuple(
+            ortho_from_photo(cal, poly, seg.mask.shape, width_m=width, height_m=height, anchored=anchored)
+            for poly in cal.occluders
+        ),
+        anchored=anchored,
     )
-
-
-def _ortho_polygon(cal, poly, shape, width, height) -> np.ndarray:
-    from .calibrate.rectify import ortho_from_photo
-
-    return ortho_from_photo(cal, poly, shape, width_m=width, height_m=height)
 
 
 def resolve_photo_walls(
@@ -256,6 +274,24 @@ def unit_margins(polygons_m, width_m: float, height_m: float) -> tuple[float, fl
     pts = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in polygons_m])
     (x0, z0), (x1, z1) = pts.min(axis=0), pts.max(axis=0)
     return float(x0), float(width_m - x1), float(z0), float(height_m - z1)
+
+
+def anchored_note(pw: PhotoWall) -> str:
+    """What a photo wall's orthophoto did with a typed H beyond the fitted H's noise ("" where it
+    stretched the outline onto the typed H, as the method does)."""
+    if not pw.anchored:
+        return ""
+    res = pw.calibration.result
+    h, fit, sigma = pw.wall.height_m, res.height_m, res.sigma("height_m")
+    where = (
+        f"nothing is built above {fit:.3f} m (what the outline left out there: a band of mortar, a capping)"
+        if h > fit
+        else f"the outline's top is cut at {h:.3f} m"
+    )
+    return (
+        f"height_m = {h:.3f} m is {abs(h - fit) / sigma:.1f} sigma from the outline's {fit:.3f} +- {sigma:.3f} m: "
+        f"the orthophoto keeps the photo's scale from the base, not stretched onto it; {where}"
+    )
 
 
 def _source(wall: WallSpec) -> str:

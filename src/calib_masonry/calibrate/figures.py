@@ -10,7 +10,9 @@ import numpy as np
 __all__ = ["plot_calibration", "plot_corner", "plot_footprint"]
 
 
-def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | None = None) -> None:
+def plot_calibration(
+    cal, rect, path: Path, *, photo_size: tuple[int, int] | None = None, ortho_m: tuple[float, float] | None = None
+) -> None:
     """Left: the photo, the fitted wall outline (green) and its 1 m grid drawn through the camera
     (white), the clicked or detected corners (red), the bed (orange) and head (cyan) joint segments
     used by the fit. Right: the rectified orthophoto with a 1 m grid and metre ticks.
@@ -18,7 +20,9 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
     ``rect`` is the orthophoto ``(rows, cols, 3)``, or a callable that returns it: the photo's
     panel is drawn while it runs (``rectify`` resamples on other threads meanwhile).
     ``photo_size`` ``(width, height)``: the photo's size in pixels when ``cal.photo.rgb`` is a
-    reduced copy of it (a build keeps only a preview of each photo, not the photo).
+    reduced copy of it (a build keeps only a preview of each photo, not the photo). ``ortho_m``
+    ``(W, H)``: the orthophoto's size in metres where it is not the fitted wall's (a build's typed
+    W and H).
 
     Drawn with Pillow (:mod:`calib_masonry._raster`), not matplotlib: importing and drawing a
     matplotlib figure was a quarter of ``rectify``'s time."""
@@ -28,11 +32,12 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
     rgb = cal.photo.rgb
     width, height = photo_size if photo_size is not None else (rgb.shape[1], rgb.shape[0])
     w_m, h_m = res.width_m, res.height_m
+    ow, oh = ortho_m if ortho_m is not None else (w_m, h_m)
     side, top, bottom, margin, gap = 760, 64, 48, 12, 78  # px: panel images at most side x side
     k = side / max(width, height)
     photo_wh = (max(1, round(width * k)), max(1, round(height * k)))
-    kr = side / max(w_m, h_m)
-    ortho_wh = (max(1, round(w_m * kr)), max(1, round(h_m * kr)))
+    kr = side / max(ow, oh)
+    ortho_wh = (max(1, round(ow * kr)), max(1, round(oh * kr)))
     cam = res.camera_json()
     k1, k2 = res.distortion
     left_title = (
@@ -83,17 +88,17 @@ def plot_calibration(cal, rect, path: Path, *, photo_size: tuple[int, int] | Non
     if callable(rect):
         rect = rect()
     rows, cols = rect.shape[:2]
-    b = canvas.image_panel(rect, x0, top, ortho_wh, (0.0, 0.0, w_m, h_m), flip=True)
-    for x in np.arange(step_m, w_m - 1e-9, step_m):
-        canvas.polyline(b, [[x, 0], [x, h_m]], "white", alpha=0.7)
-    for z in np.arange(step_m, h_m - 1e-9, step_m):
-        canvas.polyline(b, [[0, z], [w_m, z]], "white", alpha=0.7)
+    b = canvas.image_panel(rect, x0, top, ortho_wh, (0.0, 0.0, ow, oh), flip=True)
+    for x in np.arange(step_m, ow - 1e-9, step_m):
+        canvas.polyline(b, [[x, 0], [x, oh]], "white", alpha=0.7)
+    for z in np.arange(step_m, oh - 1e-9, step_m):
+        canvas.polyline(b, [[0, z], [ow, z]], "white", alpha=0.7)
     # metre ticks: every 1, 2 or 5 x 10^k m, at least 45 px apart
-    for x in np.arange(0.0, w_m + 1e-9, nice_step(w_m, ortho_wh[0])):
+    for x in np.arange(0.0, ow + 1e-9, nice_step(ow, ortho_wh[0])):
         ((px, py),) = b.xy([[x, 0.0]])
         canvas.draw.line([(px, py), (px, py + 4)], fill=(0, 0, 0, 255))
         canvas.text((px, py + 6), f"{x:g}", size=11, anchor="ma")
-    for z in np.arange(0.0, h_m + 1e-9, nice_step(h_m, ortho_wh[1])):
+    for z in np.arange(0.0, oh + 1e-9, nice_step(oh, ortho_wh[1])):
         ((px, py),) = b.xy([[0.0, z]])
         canvas.draw.line([(px - 4, py), (px, py)], fill=(0, 0, 0, 255))
         canvas.text((px - 6, py), f"{z:g}", size=11, anchor="rm")

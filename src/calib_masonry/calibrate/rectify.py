@@ -51,6 +51,7 @@ if TYPE_CHECKING:
     from .fit import CalibrationResult
 
 __all__ = [
+    "wall_stretch",
     "CalibrateConfig",
     "PhotoCalibration",
     "calibrate_photo",
@@ -1387,10 +1388,14 @@ def rectify(
     px_per_m: float | None = None,
     width_m: float | None = None,
     height_m: float | None = None,
+    anchored: bool = False,
 ) -> np.ndarray:
     """The metric orthophoto ``(rows, cols, 3)`` of a calibrated photo's wall, at ``px_per_m``
     (default: the photo's own finest resolution on the wall). ``width_m`` / ``height_m`` stretch the
-    fitted wall onto a measured size (the photo's outline then maps onto the W x H given)."""
+    fitted wall onto a measured size (the photo's outline then maps onto the W x H given);
+    ``anchored``: the height is not stretched but kept at the photo's own scale from the wall's
+    base, the orthophoto ``height_m`` high (above the fitted top it shows what the photo shows
+    there; below it, the outline's top is cut off), see :func:`wall_stretch`."""
     res = calibration.result
     width = res.width_m if width_m is None else float(width_m)
     height = res.height_m if height_m is None else float(height_m)
@@ -1400,34 +1405,54 @@ def rectify(
     ppm = native_px_per_m(res) if px_per_m is None else float(px_per_m)
     if not (math.isfinite(ppm) and ppm > 0):
         raise InputError(f"rectify: px_per_m = {ppm} must be > 0")
-    stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
+    stretch = wall_stretch(res, width, height, anchored)
     return rectify_image(calibration.photo.rgb, stretch @ res.wall_from_image, width, height, ppm, lens=lens_of(res))
 
 
+def wall_stretch(res, width_m: float, height_m: float, anchored: bool = False) -> np.ndarray:
+    """3x3 map of the fitted wall's metres onto an orthophoto ``width_m`` x ``height_m``: each axis
+    stretched by the given size over the fitted one, or with ``anchored`` the height at the photo's
+    own scale (the base where the outline's base is). A wall whose typed W scales the photo and
+    whose typed H lies beyond the fitted H's noise (an outline that left out a band of mortar at
+    the top, or took in one below the eaves) is anchored by :func:`calib_masonry.pipeline.photo_wall`:
+    stretched, every course would be moved by its share of the difference."""
+    return np.diag([width_m / res.width_m, 1.0 if anchored else height_m / res.height_m, 1.0])
+
+
 def ortho_from_photo(
-    calibration: PhotoCalibration, points: np.ndarray, shape: tuple[int, int], *, width_m=None, height_m=None
+    calibration: PhotoCalibration,
+    points: np.ndarray,
+    shape: tuple[int, int],
+    *,
+    width_m=None,
+    height_m=None,
+    anchored: bool = False,
 ) -> np.ndarray:
     """Photo pixels ``(n, 2)`` -> the pixels of the orthophoto :func:`rectify` makes of shape
-    ``shape`` (rows, cols) (lens undone, stretched onto ``width_m`` x ``height_m`` as there)."""
+    ``shape`` (rows, cols) (lens undone, stretched onto ``width_m`` x ``height_m`` or ``anchored``
+    as there)."""
     from .camera import project
 
     res = calibration.result
     width = res.width_m if width_m is None else float(width_m)
     height = res.height_m if height_m is None else float(height_m)
-    stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
+    stretch = wall_stretch(res, width, height, anchored)
     ideal = res.undistort(np.asarray(points, dtype=np.float64).reshape(-1, 2))
     return project(rect_from_wall(width, height, shape) @ stretch @ res.wall_from_image, ideal)
 
 
-def valid_ortho(calibration: PhotoCalibration, px_per_m: float, *, width_m=None, height_m=None) -> np.ndarray:
+def valid_ortho(
+    calibration: PhotoCalibration, px_per_m: float, *, width_m=None, height_m=None, anchored: bool = False
+) -> np.ndarray:
     """``(rows, cols)`` True where :func:`rectify`'s orthophoto (same arguments) shows the wall:
-    inside the photo and outside every occluder the calibration was given."""
+    inside the photo and outside every occluder the calibration was given (and, ``anchored``,
+    not above the fitted outline's top: what the photo shows there was not taken for wall)."""
     from .outline import polygon_mask
 
     res = calibration.result
     width = res.width_m if width_m is None else float(width_m)
     height = res.height_m if height_m is None else float(height_m)
-    stretch = np.diag([width / res.width_m, height / res.height_m, 1.0])
+    stretch = wall_stretch(res, width, height, anchored)
     rows, cols = calibration.photo.rgb.shape[:2]
     wall_from_image = stretch @ res.wall_from_image
     lens = lens_of(res)
@@ -1439,8 +1464,15 @@ def valid_ortho(calibration: PhotoCalibration, px_per_m: float, *, width_m=None,
         valid = rectify_image(ones, wall_from_image, width, height, px_per_m, nearest=True, lens=lens) > 0.5
     for poly in calibration.occluders:
         valid &= ~polygon_mask(
-            valid.shape, ortho_from_photo(calibration, poly, valid.shape, width_m=width, height_m=height)
+            valid.shape,
+            ortho_from_photo(calibration, poly, valid.shape, width_m=width, height_m=height, anchored=anchored),
         )
+    if anchored and height > res.height_m:
+        # the rows whose centres lie above the fitted top (z = res.height_m; row r's centre is at
+        # z = (rows - 0.5 - r) height / rows)
+        rows_out = valid.shape[0]
+        above = int(np.clip(round(rows_out * (1.0 - res.height_m / height)), 0, rows_out))
+        valid[:above] = False
     return valid
 
 

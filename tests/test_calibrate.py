@@ -2267,4 +2267,11 @@ def test_a_wall_ending_in_a_band_of_mortar_is_built_brick_for_brick_from_its_pho
     m = compare_dirs(tmp_path / "b", tmp_path / "data" / "truth")
     assert m["precision"] >= 0.98 and m["recall"] >= 0.98, (m["precision"], m["recall"], summary["walls"][0])
     assert m["centroid_error_mm"]["max"] < 10.0
-    assert "not stretched onto it" in summary["walls"][0]["height_anchored"]
+    w = summary["walls"][0]
+    assert "not stretched onto it" in w["height_anchored"] and w["fitted_height_m"] < 3.97
+    # the orthophoto is the typed 4 m high, nothing a unit above the outline's top
+    from calib_masonry.io import read_mask
+
+    mask = read_mask(tmp_path / "b" / "photos" / "w0" / "mask.png")
+    above = int((1.0 - w["fitted_height_m"] / 4.0) * mask.shape[0])
+    assert mask.shape[0] == round(4.0 * spec.photo_px_per_m) and above > 5 and not mask[:above].any()

@@ -289,7 +289,7 @@ def anchored_note(pw: PhotoWall) -> str:
         else f"the outline's top is cut at {h:.3f} m"
     )
     return (
-        f"height_m = {h:.3f} m is {abs(h - fit) / sigma:.1f} sigma from the outline's {fit:.3f} +- {sigma:.3f} m: "
+        f"height_m = {h:.3f} m is {abs(h - fit) / max(sigma, 1e-12):.1f} sigma from the outline's {fit:.3f} +- {sigma:.3f} m: "
         f"the orthophoto keeps the photo's scale from the base, not stretched onto it; {where}"
     )
 

@@ -195,6 +195,12 @@ LAST = "last"
 SHELTERED = "sheltered"
 
 
+def _reaches_corner(poly: np.ndarray, at_start: bool, width_m: float, w: float) -> bool:
+    """Whether a piece (wall metres) reaches its wall's start (``at_start``) or end within half the
+    other wall's end-face width ``w``: it owns the corner in its course."""
+    return float(poly[:, 0].min()) <= 0.5 * w if at_start else float(poly[:, 0].max()) >= width_m - 0.5 * w
+
+
 def course_ends(
     polys: list[np.ndarray], wall: int, frames: list[WallFrame], corners: list[Corner]
 ) -> list[tuple[str | None, str | None]]:
@@ -239,7 +245,7 @@ def course_ends(
             ]
             if not hit:
                 roles.append(LAST)
-            elif any(lo[j] <= 0.5 * w if at_start else hi[j] >= fr.width_m - 0.5 * w for j in hit):
+            elif any(_reaches_corner(polys[j], at_start, fr.width_m, w) for j in hit):
                 roles.append(SHELTERED)
             else:
                 roles.append(None)
@@ -262,9 +268,13 @@ def corner_roles(
         fa, fb = frames[c.a], frames[c.b]
         wa, wb = c.end_width_on(fb.thickness_m), c.end_width_on(fa.thickness_m)
         own_a = [
-            i for i, p in enumerate(polys[c.a]) if roles[c.a][i][1] == LAST and p[:, 0].max() >= fa.width_m - 0.5 * wa
+            i
+            for i, p in enumerate(polys[c.a])
+            if roles[c.a][i][1] == LAST and _reaches_corner(p, False, fa.width_m, wa)
         ]
-        own_b = [j for j, p in enumerate(polys[c.b]) if roles[c.b][j][0] == LAST and p[:, 0].min() <= 0.5 * wb]
+        own_b = [
+            j for j, p in enumerate(polys[c.b]) if roles[c.b][j][0] == LAST and _reaches_corner(p, True, fb.width_m, wb)
+        ]
         for i in own_a:
             za = polys[c.a][i][:, 1]
             for j in own_b:
@@ -323,14 +333,14 @@ def corner_clip_planes(
             end = float(poly[:, 0].min())
             gone = end > w + reach
             last, sheltered = ends[0] == LAST, ends[0] == SHELTERED
-            owner = end <= 0.5 * w
+            owner = _reaches_corner(poly, True, fr.width_m, w)
             beside = last and not owner and end <= NEXT_TO_END_FACE * w  # next to the other's end face
             past, face_x = -reach, max(end, w)
         else:
             end = float(poly[:, 0].max())
             gone = end < fr.width_m - w - reach
             last, sheltered = ends[1] == LAST, ends[1] == SHELTERED
-            owner = end >= fr.width_m - 0.5 * w
+            owner = _reaches_corner(poly, False, fr.width_m, w)
             beside = last and not owner and end >= fr.width_m - NEXT_TO_END_FACE * w
             past, face_x = fr.width_m + reach, min(end, fr.width_m - w)
         if c.right_angle:  # as before 2026-12-06, to the bit: a right angle needs none of this

@@ -8,7 +8,7 @@ that touch only diagonally stay apart.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -311,9 +311,7 @@ class Segmentation:
 
         pieces = self.pieces
         if pieces is not None:
-            from dataclasses import replace as _replace
-
-            pieces = _replace(pieces, labels=pad(pieces.labels), joints=pad(pieces.joints))
+            pieces = replace(pieces, labels=pad(pieces.labels), joints=pad(pieces.joints))
         return Segmentation(
             mask=pad(self.mask),
             method=self.method,
@@ -634,8 +632,6 @@ def segment_wall(
             "that holds as many"
         )
     if work is not rgb:
-        from dataclasses import replace
-
         labels = _resampled(pieces.labels, rgb.shape[:2], order=0)
         pieces = replace(pieces, labels=labels.astype(np.int32), px_per_m=float(px_per_m))
     mask = pieces_mask(pieces, mortar=~mortar_mask)

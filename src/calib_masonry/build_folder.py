@@ -18,7 +18,7 @@ import numpy as np
 
 from ._threads import background, background_process
 from .build3d.assemble import Structure3D, joint_width
-from .build3d.contacts import max_interpenetration, widest_bed
+from .build3d.contacts import max_interpenetration, narrowest_beds
 from .build3d.export import bricks_from_json, bricks_json_bytes, export_mesh, plot_model, plot_walls, write_bricks_json
 from .build3d.place import Footprint, WallGeometry, closure_gap, corners, footprint_is_closed, wall_frames
 from .build3d.scale import wall_from_image
@@ -351,30 +351,41 @@ def write_build(
                 width = mortar_width_m(spec, result)
                 if width is not None:
                     summary["joint_coverage"]["mortar_width_p95_m"] = round(width, 4)
-                bed = widest_bed_m(s, computed.without_bed_joint())
+                bed, over = hanging_beds(s, computed.without_bed_joint())
                 if bed is not None:
                     summary["joint_coverage"]["widest_bed_m"] = round(bed, 4)
+                if over:
+                    summary["joint_coverage"]["units_over_opening"] = [computed.names[k] for k in over]
         write_json(stage / "summary.json", summary)
     return summary
 
 
-def widest_bed_m(structure: Structure3D, hanging) -> float | None:
+def hanging_beds(structure: Structure3D, hanging) -> tuple[float | None, list[int]]:
     """The widest of the narrowest beds under the units ``hanging`` (indices of
     ``structure.bricks``: the simulation geometry's ``without_bed_joint``), the gap between each
     and the units beneath it (:func:`~calib_masonry.build3d.contacts.narrowest_beds`, searched to
-    the structure files' widest reach): a reach above it joins each to a unit beneath. None where
-    none has a unit beneath within that search."""
+    the structure files' widest reach, :data:`~calib_masonry.spec.MAX_JOINT_M`): a reach above it
+    joins each to a unit beneath (None where none has a unit beneath within that search); and
+    those of ``hanging`` with no unit beneath within it, which no reach joins: they span an
+    opening (a window, a door, a void in the mask)."""
     from .spec import MAX_JOINT_M
 
-    return widest_bed(structure.bricks, search_m=MAX_JOINT_M, ground_m=joint_width(structure), only=hanging)
+    hanging = np.asarray(hanging, dtype=np.int64)
+    beds = narrowest_beds(structure.bricks, search_m=MAX_JOINT_M, ground_m=joint_width(structure), only=hanging)
+    ours = beds[hanging]
+    finite = ours[np.isfinite(ours)]
+    return (float(finite.max()) if finite.size else None), hanging[np.isinf(ours)].tolist()
 
 
 def mortar_width_m(spec, result) -> float | None:
     """The width (m) that 95 % of the mortar joints' length in the walls' masks is narrower than
     (:func:`~calib_masonry.wall2d.trace.mortar_widths`; a photo wall's segmented pieces): what the
-    joint reach must span to join the units across their own joints. None where no wall has a
-    mask or pieces to measure (a LabelMe file's polygons, traces given)."""
+    joint reach must span to join the units across their own joints. Gaps wider than the widest
+    reach a structure file allows (:data:`~calib_masonry.spec.MAX_JOINT_M`) are openings, not
+    joints, and do not count. None where no wall has a mask or pieces to measure (a LabelMe file's
+    polygons, traces given)."""
     from .io import read_mask_labels
+    from .spec import MAX_JOINT_M
     from .wall2d.trace import mortar_widths
 
     found = []
@@ -386,8 +397,12 @@ def mortar_width_m(spec, result) -> float | None:
             mask, _ = read_mask_labels(wall.mask, field=f"wall '{wall.name}' mask")
         else:
             continue
-        found.append(mortar_widths(mask) * (wall.width_m / mask.shape[1]))
+        # a gap wider than any reach a structure file allows is an opening, not a joint (a window
+        # 1 m wide put the 95th percentile of a 3 x 3 m wall's 1.5 cm joints at 45 cm)
+        m_per_px = wall.width_m / mask.shape[1]
+        found.append(mortar_widths(mask, max_px=MAX_JOINT_M / m_per_px) * m_per_px)
     widths = np.concatenate(found) if found else np.zeros(0)
+    widths = widths[widths <= MAX_JOINT_M]  # and the branches into its corners of that width
     return float(np.percentile(widths, 95)) if widths.size else None
 
 

@@ -127,9 +127,11 @@ def _print_build(summary: dict, out) -> None:
             'beside its orthophoto and build from that (mask = "<file>.json")'
         )
     coverage = summary.get("joint_coverage") or {}
-    hanging = coverage.get("units_without_bed_joint") or []
+    over = coverage.get("units_over_opening") or []
+    hanging = [name for name in coverage.get("units_without_bed_joint") or [] if name not in set(over)]
     if hanging:
         from .build3d.assemble import reach_over
+        from .spec import MAX_JOINT_M
 
         n = len(hanging)
         reach = summary["max_joint_m"]  # build writes it since it became a setting
@@ -141,18 +143,36 @@ def _print_build(summary: dict, out) -> None:
                 f"{bed * 100:.1f} cm wide"
             )
         if width is not None and width > reach:
+            advice = bed is None and reach_over(width) <= MAX_JOINT_M
             said.append(
                 f"95 % of the length of the masks' mortar joints is narrower than {width * 100:.1f} cm"
-                + ("" if bed is not None else f": max_joint_m = {reach_over(width):g} would reach across them")
+                + (f": max_joint_m = {reach_over(width):g} would reach across them" if advice else "")
             )
         measured = f" ({'; '.join(said)})" if said else ""
         print(
             f"  note: {n} unit{'s' if n > 1 else ''} above the lowest course {'have' if n > 1 else 'has'} no joint "
-            f"beneath (a bed wider than max_joint_m = {reach:g} m, or a void) and "
-            f"{'hang' if n > 1 else 'hangs'} from side joints: {', '.join(hanging[:5])}{', ...' if n > 5 else ''} "
+            f"beneath (a bed wider than max_joint_m = {reach:g} m) and "
+            f"{'hang' if n > 1 else 'hangs'} from side joints: {_names(hanging)} "
             f"(summary.json joint_coverage); for wide mortar beds raise max_joint_m in [structure]{measured}, for "
             "units traced too small trace with more vertices"
         )
+    if over:
+        from .spec import MAX_JOINT_M
+
+        n = len(over)
+        print(
+            f"  note: {n} unit{'s' if n > 1 else ''} {'have' if n > 1 else 'has'} nothing beneath within "
+            f"{MAX_JOINT_M:g} m (the widest joint a structure file allows): {'they span' if n > 1 else 'it spans'} "
+            f"an opening (a window, a door, a void in the mask) and {'hang' if n > 1 else 'hangs'} from side "
+            f"joints: {_names(over)} (summary.json joint_coverage units_over_opening); the model has no lintel "
+            "or arch: the joints' tension holds them, dry or once cracked they fall. Draw a lintel as a unit in "
+            "the mask where the wall has one"
+        )
+
+
+def _names(names: list[str], shown: int = 5) -> str:
+    """The first ``shown`` of ``names``, comma-separated, with an ellipsis if there are more."""
+    return ", ".join(names[:shown]) + (", ..." if len(names) > shown else "")
 
 
 def _cmd_compare(args) -> int:

@@ -562,14 +562,21 @@ def enclosed_holes(mask: np.ndarray) -> int:
     return int(keep.sum())
 
 
-def mortar_widths(mask: np.ndarray) -> np.ndarray:
+def mortar_widths(mask: np.ndarray, max_px: float | None = None) -> np.ndarray:
     """The mortar's width (pixels) at every pixel of its medial axis (twice the distance to the
     nearest unit), away from the image's border: the local widths of the joints between the
-    units of ``mask`` (bricks True), along their length."""
+    units of ``mask`` (bricks True), along their length. With ``max_px``, the parts of the mortar
+    a disk ``max_px`` across fits in (an opening: a window, a door, a void) are no joint and left
+    out, with their medial axis's branches of every width."""
+    from scipy import ndimage
     from skimage.morphology import medial_axis
 
     axis, dist = medial_axis(~np.asarray(mask, dtype=bool), return_distance=True)
     axis[:2], axis[-2:], axis[:, :2], axis[:, -2:] = False, False, False, False
+    if max_px is not None:
+        core = dist > 0.5 * max_px  # the centres of the disks that fit
+        if core.any():
+            axis &= ndimage.distance_transform_edt(~core) > 0.5 * max_px + 1.0
     return 2.0 * dist[axis]
 
 

@@ -155,7 +155,11 @@ def plot_walls(
 
     spec = structure.footprint
     widths = [w.width_m for w in spec.walls]
-    fig = plt.figure(figsize=(min(24, 3.0 + 1.6 * sum(widths)), 6), layout="constrained")
+    # as wide as the walls drawn 4.6 inches for the tallest (a 10.8 x 7 m facade had 1.6 inches a
+    # metre of width: three quarters of its figure empty), with room for the colour bar
+    per_m = 4.6 / max(w.height_m for w in spec.walls)
+    width_in = min(24.0, max(5.0, 1.8 + per_m * sum(widths) + 0.25 * len(widths)))
+    fig = plt.figure(figsize=(width_in, 6), layout="constrained")
     axes = fig.subplots(1, len(spec.walls), gridspec_kw={"width_ratios": widths}, squeeze=False)
     cmap = plt.get_cmap("viridis")
     for w, ax in enumerate(axes[0]):

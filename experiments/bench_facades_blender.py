@@ -48,8 +48,17 @@ Each facade is calibrated twice, automatically: with the focal length and the ey
 EXIF and a tape would give them; the scale from the camera's height), and with the focal length and
 the wall's width given (`--known-width`). A case succeeds when W and H are within 2 % of the truth.
 Printed: a row per facade and mode (the errors, H's error in the fit's own sigma, the largest
-distance of a fitted top corner from the truth), then per mode the count and how many failures were
+distance of a fitted top corner from the truth; with the width given also the segmentation of its
+orthophoto at the build's 300 px/m: the method, the pieces and their module, against the texture's
+40 x 18 cm bricks, the openings left out against the windows and doors drawn, and the share of
+those, frames included, that pieces cover), then per mode the count and how many failures were
 overconfident (|z| above 2).
+
+The segmentation, 2026-12-07 (seventy-second session; renders 13201-13212, made that day, the same
+renders before and after): before, the windows joined the bricks around them into pieces 40-70 times
+a brick, the top-hat's pieces were refused and the joints' partition cut every facade into blobs
+(module 26-28 x 27-49 cm, 96 % of the openings covered by pieces); with the openings left out
+(`wall2d.segment.find_openings`), see docs/photo_path.md.
 
     .venv/bin/python experiments/bench_facades_blender.py [--first 13001] [--count 12] [--keep DIR]
 """
@@ -196,6 +205,31 @@ def render(wall, texture, holes, rise: float, cam: dict, rng: np.random.Generato
     shoot(sc, cam, RES)
 
 
+def segmentation_row(cal, wall, holes) -> str:
+    """The segmentation of a calibrated facade's orthophoto (at the build's 300 px/m): the pieces'
+    method, count and module (the texture's bricks are 40 x 18 cm), the openings left out against
+    the windows and doors drawn, and the share of those (with their frames) the pieces cover."""
+    from calib_masonry.calibrate.rectify import rectify, segment_orthophoto
+
+    ppm = 300.0
+    rect = rectify(cal, px_per_m=ppm)
+    seg, *_ = segment_orthophoto(cal, rect, ppm)
+    p = seg.summary()
+    rows, cols = seg.mask.shape
+    scale = cols / cal.result.width_m  # the fitted wall's metres; the holes are the truth's
+    drawn = np.zeros((rows, cols), dtype=bool)
+    for x, z, w, h in holes:
+        f = cal.result.width_m / wall.width_m
+        c0, c1 = int((x - 0.08) * f * scale), int((x + w + 0.08) * f * scale)
+        r0, r1 = rows - int((z + h + 0.08) * f * scale), rows - int(max(0.0, z - 0.08) * f * scale)
+        drawn[max(r0, 0) : max(r1, 0), max(c0, 0) : max(c1, 0)] = True
+    covered = (seg.mask & drawn).sum() / max(1, drawn.sum())
+    return (
+        f"{p['method']:>7} {p['count']:4d} pieces, module {p['module_m'][0] * 100:4.1f} x {p['module_m'][1] * 100:4.1f} cm, "
+        f"openings {p.get('openings', 0)} of {len(holes)}, pieces over them {covered:.0%}"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--first", type=int, default=13001)
@@ -206,7 +240,7 @@ def main() -> None:
     a = ap.parse_args()
     folder = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="facades-blender-"))
     folder.mkdir(parents=True, exist_ok=True)
-    cases = []
+    cases, holes_of = [], {}
     for seed in range(a.first, a.first + a.count):  # every photo first: Blender, then JAX
         wall, texture, holes, rise, cam, rng = facade(seed)
         path = folder / f"facade{seed}.jpg"
@@ -217,6 +251,7 @@ def main() -> None:
             render(wall, texture, holes, rise, cam, rng, path)
             print(f"rendered {path.name} in {time.perf_counter() - t0:.1f} s", flush=True)
         cases.append((seed, wall, cam, path))
+        holes_of[seed] = holes
 
     import calib_masonry as cm
     from calib_masonry.errors import CalibMasonryError
@@ -246,6 +281,8 @@ def main() -> None:
                 top = float(np.abs(np.asarray(res.corners_px())[2:] - truth[2:]).max())
                 overconfident[mode] += not good and abs(z) > 2.0
                 row = f"{ew:+7.2%} {eh:+7.2%} {z:+6.1f} {top:6.1f}  " + ("ok" if good else "FAIL")
+                if mode == "width":
+                    row += "  " + segmentation_row(cal, wall, holes_of[seed])
             except CalibMasonryError as exc:
                 good, row = False, f"{'-':>7} {'-':>7} {'-':>6} {'-':>6}  FAIL: {exc}"
             ok[mode] += good

@@ -410,6 +410,47 @@ def test_a_band_of_mortar_along_the_top_does_not_join_the_top_course(band_m):
             assert courses[-1] - 2 * mortar_m < height < courses[-1] and lengths[0] - 2 * mortar_m < length < lengths[1]
 
 
+@pytest.mark.parametrize("buff", [False, True])
+def test_a_window_is_left_out_and_the_bricks_around_it_are_found(buff):
+    """A brick facade's window (dark glass in a pale frame) joins the bricks around it into one piece
+    of the top-hat, 40-70 times the median: the pieces' sizes differed wildly, and the joints'
+    partition cut the whole wall into blobs (12 Blender-rendered facades: 40 x 18 cm bricks found
+    as pieces of 26-28 x 27-49 cm, 96 % of the windows' area covered by pieces). A region of another
+    colour without unit-sized pieces is now an opening, left out as an occluder is, and the
+    top-hat's pieces are the wall's bricks. A patch of buff bricks beside it, of another colour but
+    with its joints, is no opening."""
+    from calib_masonry.wall2d.segment import segment_wall
+
+    px = 400.0
+    rgb, _ = _drawn_orthophoto([0.075] * 10, (0.2, 0.23), 0.01, px, 0.0, 7)
+    r0, r1, c0, c1 = int(0.2 * px), int(0.6 * px), int(0.3 * px), int(0.75 * px)  # 0.4 x 0.45 m
+    frame = int(0.03 * px)
+    rgb[r0:r1, c0:c1] = (0.85, 0.85, 0.82)
+    rgb[r0 + frame : r1 - frame, c0 + frame : c1 - frame] = (0.20, 0.24, 0.30)
+    b0, b1 = int(1.1 * px), int(1.6 * px)
+    if buff:
+        patch = rgb[r0:r1, b0:b1]
+        brick = patch[..., 0] < 0.7  # not the pale mortar
+        patch[brick] = patch[brick][:, [1, 1, 2]] * (1.9, 1.6, 1.3)  # buff bricks, their joints kept
+    seg = segment_wall(rgb, px)
+    summary = seg.summary()
+    assert seg.method == "mortar" and summary["openings"] == 1 and seg.labels[r0:r1, c0:c1].max() == 0
+    # the opening is the window with its frame, not the bricks around it
+    assert 0.9 < summary["openings_m2"] / ((r1 - r0) * (c1 - c0) / px**2) < 1.4, summary["openings_m2"]
+    patch = seg.labels[r0:r1, b0:b1]
+    assert len(np.unique(patch[patch > 0])) >= 15 and (patch > 0).mean() > 0.7
+    # the bricks are each one piece (the drawn wall's bricks: 6.5 x 20-23 cm)
+    height, length = summary["module_m"]
+    assert 0.055 < height < 0.075 and 0.18 < length < 0.23
+    # the polygon LabelMe gets ('opening', beside the pieces) is the window's, with the 2 cm margin
+    # kept clear of pieces and the 1-2 cm the smoothed colour spreads
+    from calib_masonry.calibrate.rectify import opening_polygons
+
+    (poly,) = opening_polygons(seg)
+    for corner, truth in ((poly.min(axis=0), (c0, r0)), (poly.max(axis=0), (c1, r1))):
+        assert np.allclose(corner, truth, atol=0.05 * px), (corner, truth)
+
+
 def test_with_the_width_measured_the_advice_is_about_the_corners_not_the_scale(real_calibrations):
     """With --known-width the laboratory photos' H is known to +-3 %: the note said "W and H are
     known only to ..." and told the user to pin the scale with --known-width, which was given. It
@@ -753,6 +794,26 @@ def test_labelme_round_trip_edits_one_stone_and_builds_it(tmp_path):
     # three stones of 1.45 x 0.8 m and the edited one of 0.65 x 0.8 m (to a pixel at 100 px/m)
     assert areas[0] == pytest.approx(0.65 * 0.8, rel=0.05)
     assert all(a == pytest.approx(1.45 * 0.8, rel=0.05) for a in areas[1:])
+
+
+def test_labelme_openings_are_kept_apart_from_the_pieces(tmp_path):
+    """The openings a segmentation left out are written as 'opening' shapes beside the pieces; read
+    back (with 'window' and 'door' drawn by hand), they make no piece of the wall's mask, and as a
+    photo's occluders they are left out of its fit and segmentation as occluders are."""
+    from calib_masonry.labelme import labelme_labels, read_labelme, read_occluders, write_labelme
+
+    square = np.array([[10.0, 10.0], [60.0, 10.0], [60.0, 40.0], [10.0, 40.0]])
+    path = tmp_path / "rectified.json"
+    write_labelme(path, "rectified.png", (100, 200), pieces=[square], openings=[square + (100.0, 0.0)])
+    doc = json.loads(path.read_text())
+    assert sorted(sh["label"] for sh in doc["shapes"]) == ["opening", "piece"]
+    for label, dx in (("window", 0.0), ("Door", 60.0)):
+        doc["shapes"].append({"label": label, "points": (square + (dx, 50.0)).tolist(), "shape_type": "polygon"})
+    path.write_text(json.dumps(doc))
+    back = read_labelme(path)
+    assert len(back.pieces) == 1 and len(back.openings) == 3 and back.occluders == ()
+    assert labelme_labels(back).max() == 1
+    assert len(read_occluders(path)) == 3
 
 
 def _mask_shape(label: str, region: np.ndarray) -> dict:

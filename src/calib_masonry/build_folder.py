@@ -173,6 +173,7 @@ def _write_photo_walls(
             pw.mask.shape,
             pieces=[b.vertices_xy for b in trace.bricks] if trace is not None else [],
             occluders_ortho=pw.occluders_ortho,
+            openings_ortho=pw.openings_ortho,
             photo_size=pw.photo_size,
         )
     with background(images) as job:  # waited for however the figures end

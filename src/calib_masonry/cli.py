@@ -326,7 +326,7 @@ def _calibrate_config(args):
         ann = read_photo_annotation(args.labelme)
         if ann.outline is not None and not corners:
             kwargs["corners_px"] = tuple(float(v) for v in ann.outline.ravel())
-        occluders = ann.occluders
+        occluders = ann.not_masonry
         kwargs["annotation_size"] = (ann.shape[1], ann.shape[0])
     if corners:
         kwargs["corners_px"] = parse_corners(corners)
@@ -388,6 +388,12 @@ def _pieces_line(p: dict) -> str:
     return (
         f"segmentation: {p['count']} pieces, median {p['median_area_m2'] * 1e4:.0f} cm^2 "
         f"(largest {p['max_area_m2'] * 1e4:.0f} cm^2), module {p['module_m'][0] * 100:.1f} cm high x {p['module_m'][1] * 100:.1f} cm long"
+        + (
+            f"; {p['openings']} opening{'s' if p['openings'] > 1 else ''} left out ({p['openings_m2']:.2f} m^2: windows, "
+            "doors; 'opening' polygons in its rectified.json)"
+            if p.get("openings")
+            else ""
+        )
         + (f"; warning: {p['warning']}" if p.get("warning") else "")
     )
 

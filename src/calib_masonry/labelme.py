@@ -2,7 +2,8 @@
 
 ``rectify`` and ``build`` write, beside each orthophoto, a LabelMe file whose polygons are the wall
 (label ``wall``: the orthophoto's outline), the occluders (``occluder``) and every piece the
-segmentation found (``piece``). Opened in LabelMe, a wrong stone is fixed by dragging its vertices,
+segmentation found (``piece``), and the openings it left out (``opening``: windows and doors, no
+piece there). Opened in LabelMe, a wrong stone is fixed by dragging its vertices,
 a missing one drawn, a false one deleted; ``build`` reads the corrected file as the wall's mask
 (``mask = "wall1.json"`` in structure.toml, or any command that takes a mask). Beside each photo it
 also writes one whose ``wall`` polygon is the fitted outline and whose ``occluder`` polygons are
@@ -14,8 +15,9 @@ The format (LabelMe 5): ``{"version", "flags", "shapes": [{"label", "points": [[
 convention (the image spans 0..width): this module converts to and from this project's
 pixel-centre convention (x - 0.5). Polygons, rectangles and masks (LabelMe's AI masks: a box and a
 base64 PNG of it) are read; labels ``piece``, ``stone``,
-``brick`` and ``unit`` are pieces, ``occluder`` occluders, ``wall`` or ``outline`` the outline;
-other labels are named in the error. Reading needs no GUI (plain JSON).
+``brick`` and ``unit`` are pieces, ``occluder`` occluders, ``opening``, ``window`` and ``door``
+openings (no masonry there: left out of a photo's fit and segmentation as occluders are), ``wall``
+or ``outline`` the outline; other labels are named in the error. Reading needs no GUI (plain JSON).
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ __all__ = [
 LABELME_VERSION = "5.4.1"
 PIECE_LABELS = ("piece", "stone", "brick", "unit")
 OCCLUDER_LABELS = ("occluder",)
+OPENING_LABELS = ("opening", "window", "door")
 OUTLINE_LABELS = ("wall", "outline")
 
 
@@ -56,6 +59,12 @@ class LabelMe:
     occluders: tuple[np.ndarray, ...] = ()
     outline: np.ndarray | None = None
     source: Path | None = field(default=None, compare=False)
+    openings: tuple[np.ndarray, ...] = ()  # windows and doors: no masonry there
+
+    @property
+    def not_masonry(self) -> tuple[np.ndarray, ...]:
+        """The polygons a photo's fit and segmentation leave out: the occluders and the openings."""
+        return self.occluders + self.openings
 
 
 def _shape(label: str, points: np.ndarray) -> dict:
@@ -78,16 +87,18 @@ def write_labelme(
     pieces=(),
     occluders=(),
     outline: np.ndarray | None = None,
+    openings=(),
 ) -> dict:
     """Write a LabelMe file for the image ``image_path`` (relative to the file, as LabelMe wants it)
-    of ``shape`` ``(rows, cols)``: the outline, occluders and pieces (polygons ``(n, 2)`` in
-    pixel-centre coordinates). Returns the document."""
+    of ``shape`` ``(rows, cols)``: the outline, occluders, openings and pieces (polygons ``(n, 2)``
+    in pixel-centre coordinates). Returns the document."""
     from ._json import write_json
 
     shapes = []
     if outline is not None:
         shapes.append(_shape("wall", np.asarray(outline, dtype=float)))
     shapes += [_shape("occluder", np.asarray(p, dtype=float)) for p in occluders]
+    shapes += [_shape("opening", np.asarray(p, dtype=float)) for p in openings]
     shapes += [_shape("piece", np.asarray(p, dtype=float)) for p in pieces]
     doc = {
         "version": LABELME_VERSION,
@@ -122,7 +133,7 @@ def read_labelme(path: str | Path, *, field_name: str = "LabelMe file") -> Label
         ) from None
     if not (0 < rows <= 200_000 and 0 < cols <= 200_000):
         raise InputError(f"{where}: image size {cols} x {rows} px is impossible")
-    pieces, occluders, outline = [], [], None
+    pieces, occluders, openings, outline = [], [], [], None
     for i, sh in enumerate(doc["shapes"]):
         label = str(sh.get("label", "")).strip().lower() if isinstance(sh, dict) else ""
         kind = sh.get("shape_type", "polygon") if isinstance(sh, dict) else None
@@ -148,6 +159,8 @@ def read_labelme(path: str | Path, *, field_name: str = "LabelMe file") -> Label
             pieces.append(pts)
         elif label in OCCLUDER_LABELS:
             occluders.append(pts)
+        elif label in OPENING_LABELS:
+            openings.append(pts)
         elif label in OUTLINE_LABELS:
             if outline is not None:
                 raise InputError(f"{where}: more than one '{label}' polygon; keep one outline of the wall")
@@ -155,7 +168,8 @@ def read_labelme(path: str | Path, *, field_name: str = "LabelMe file") -> Label
         else:
             raise InputError(
                 f"{where}: shape {i + 1} has the label '{sh.get('label')}'; use 'piece' (or stone, brick) for "
-                "masonry units, 'occluder' for what hides the wall, 'wall' for its outline"
+                "masonry units, 'occluder' for what hides the wall, 'opening' for a window or a door, 'wall' for "
+                "its outline"
             )
     return LabelMe(
         shape=(rows, cols),
@@ -164,6 +178,7 @@ def read_labelme(path: str | Path, *, field_name: str = "LabelMe file") -> Label
         occluders=tuple(occluders),
         outline=outline,
         source=path,
+        openings=tuple(openings),
     )
 
 
@@ -271,9 +286,9 @@ def read_occluders(path: str | Path) -> tuple[np.ndarray, ...]:
         raise InputError(f"--occluders {path}: not readable as JSON ({exc})") from None
     if isinstance(doc, dict):
         ann = read_labelme(path, field_name="--occluders")
-        if not ann.occluders:
-            raise InputError(f"--occluders {path}: no shape labelled 'occluder'")
-        return ann.occluders
+        if not ann.not_masonry:
+            raise InputError(f"--occluders {path}: no shape labelled 'occluder' (or 'opening')")
+        return ann.not_masonry
     if not isinstance(doc, list) or not doc:
         raise InputError(f"--occluders {path}: give a list of polygons [[[x, y], ...], ...]")
     out = []
@@ -288,9 +303,11 @@ def read_occluders(path: str | Path) -> tuple[np.ndarray, ...]:
     return tuple(out)
 
 
-def write_labelme_pair(folder: Path, calibration, ortho_shape, *, pieces, occluders_ortho, photo_size=None) -> None:
+def write_labelme_pair(
+    folder: Path, calibration, ortho_shape, *, pieces, occluders_ortho, photo_size=None, openings_ortho=()
+) -> None:
     """Two LabelMe files in ``folder``: ``rectified.json`` (over rectified.png: the wall's outline,
-    the occluders and every piece, in its pixels) and ``photo.json`` (over the photo: the fitted
+    the occluders, the openings the segmentation left out and every piece, in its pixels) and ``photo.json`` (over the photo: the fitted
     outline as a 'wall' polygon, the occluders); corrected in LabelMe, the first is a wall's mask
     for ``build`` (``mask = ".../rectified.json"``), the second goes back to ``rectify --labelme``."""
     import os
@@ -304,6 +321,7 @@ def write_labelme_pair(folder: Path, calibration, ortho_shape, *, pieces, occlud
         outline=outline,
         occluders=occluders_ortho,
         pieces=pieces,
+        openings=openings_ortho,
     )
     photo = calibration.photo
     size = photo_size or photo.size

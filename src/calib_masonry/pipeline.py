@@ -58,6 +58,7 @@ class PhotoWall:
     segmentation: dict = field(default_factory=dict)  # the pieces found (wall2d.segment.Segmentation.summary)
     labels: np.ndarray | None = None  # the pieces labelled, where they touch (the joints' partition)
     occluders_ortho: tuple = ()  # the occluders in the orthophoto's pixels
+    openings_ortho: tuple = ()  # the openings the segmentation left out (windows, doors), likewise
     # the typed H lay beyond the fitted H's noise: the orthophoto keeps the photo's vertical scale
     # from the base instead of stretching the outline onto H (calibrate.rectify.wall_stretch)
     anchored: bool = False
@@ -107,7 +108,14 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
     """Calibrate a wall's photo (``photo``, or read from ``wall.image``), rectify it onto the wall
     (W x H) and segment its masonry units (:func:`calib_masonry.wall2d.segment.segment_wall`),
     leaving out the wall's occluders."""
-    from .calibrate.rectify import calibrate_photo, ortho_from_photo, rectify, valid_ortho, wall_config
+    from .calibrate.rectify import (
+        calibrate_photo,
+        opening_polygons,
+        ortho_from_photo,
+        rectify,
+        valid_ortho,
+        wall_config,
+    )
     from .errors import CalibMasonryError
     from .process import raise_if_stopped
     from .wall2d.segment import segment_wall
@@ -165,6 +173,7 @@ def photo_wall(wall: WallSpec, spec: StructureSpec, photo: Photo | None = None) 
             ortho_from_photo(cal, poly, seg.mask.shape, width_m=width, height_m=height, anchored=anchored)
             for poly in cal.occluders
         ),
+        openings_ortho=tuple(opening_polygons(seg)),
         anchored=anchored,
     )
 

@@ -1711,11 +1711,13 @@ def rectify_to_folder(
                 write_rgb(stage / "rectified.png", rect)
             doc["rectified_shape"] = list(rect.shape[:2])
             if pieces:
-                seg, polygons, occ = jobs[0].result()
+                seg, polygons, occ, openings = jobs[0].result()
                 doc["pieces"] = seg.summary()
                 from ..labelme import write_labelme_pair
 
-                write_labelme_pair(stage, cal, rect.shape[:2], pieces=polygons, occluders_ortho=occ)
+                write_labelme_pair(
+                    stage, cal, rect.shape[:2], pieces=polygons, occluders_ortho=occ, openings_ortho=openings
+                )
                 write_mask(stage / "pieces_mask.png", _upsampled_mask(seg.mask, rect.shape[:2]))
         finally:  # nothing runs on after this function, however it ends
             for j in jobs:
@@ -1731,8 +1733,8 @@ SEGMENT_PX_PER_M = 300.0
 def segment_orthophoto(cal: PhotoCalibration, rect: np.ndarray, px_per_m: float):
     """The masonry units of a calibrated photo's orthophoto ``rect`` (at ``px_per_m``), segmented at
     no more than :data:`SEGMENT_PX_PER_M` (a finer orthophoto is shrunk first): the
-    :class:`~calib_masonry.wall2d.segment.Segmentation`, the pieces' polygons and the occluders in
-    ``rect``'s pixels."""
+    :class:`~calib_masonry.wall2d.segment.Segmentation`, the pieces' polygons, the occluders and the
+    openings it left out (windows, doors) in ``rect``'s pixels."""
     from ..wall2d.segment import segment_wall
     from .segments import shrink
 
@@ -1748,7 +1750,18 @@ def segment_orthophoto(cal: PhotoCalibration, rect: np.ndarray, px_per_m: float)
     up = np.array([rect.shape[1] / small.shape[1], rect.shape[0] / small.shape[0]])
     polygons = [(p + 0.5) * up - 0.5 for p in polygons]
     occluders = [ortho_from_photo(cal, poly, rect.shape[:2]) for poly in cal.occluders]
-    return seg, polygons, occluders
+    openings = [(p + 0.5) * up - 0.5 for p in opening_polygons(seg)]
+    return seg, polygons, occluders, openings
+
+
+def opening_polygons(seg) -> list[np.ndarray]:
+    """The openings a :class:`~calib_masonry.wall2d.segment.Segmentation` left out (windows,
+    doors), one polygon each in its pixels, as :func:`piece_polygons` draws pieces."""
+    if seg.openings is None:
+        return []
+    from scipy import ndimage
+
+    return piece_polygons(ndimage.label(seg.openings)[0].astype(np.int32), tolerance_px=1.5)
 
 
 def piece_polygons(labels: np.ndarray, *, tolerance_px: float = 1.5) -> list[np.ndarray]:

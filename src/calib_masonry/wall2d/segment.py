@@ -283,6 +283,8 @@ class Segmentation:
     # the mask's labels where the caller has them (:func:`segment_wall` labels the top-hat's mask
     # to judge it): :attr:`labels` then does not label it again (0.06 s of a rectify)
     known_labels: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # the openings left out of the wall (windows, doors: :func:`find_openings`), True there; None: none
+    openings: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @cached_property
     def labels(self) -> np.ndarray:
@@ -320,6 +322,7 @@ class Segmentation:
             note=self.note,
             coarse=self.coarse,
             known_labels=pad(self.known_labels),
+            openings=pad(self.openings),
         )
 
     def summary(self) -> dict:
@@ -356,6 +359,9 @@ class Segmentation:
             )
             doc["warning"] = f"{doc['warning']}; {turned}" if doc["warning"] else turned
         doc.update(method=self.method, method_note=self.note)
+        if self.openings is not None:
+            _, n = ndimage.label(self.openings)
+            doc.update(openings=int(n), openings_m2=float(self.openings.sum() / self.px_per_m**2))
         return doc
 
 
@@ -393,6 +399,10 @@ def piece_aspect(labels: np.ndarray, *, min_pieces: int = 5, max_px: int = 2_000
 MIN_UNIT_AREA_M2 = 10e-4
 
 
+#: how :func:`mortar_plausible` begins when the pieces' sizes differ wildly
+WILD = "the mortar top-hat's pieces differ wildly in size"
+
+
 def mortar_plausible(mask: np.ndarray, labels: np.ndarray | None = None, px_per_m: float | None = None) -> str:
     """Why a top-hat mortar mask does not look like masonry ("" when it does): bricks of one
     format give pieces of similar size (the median piece within a third of the area-weighted mean,
@@ -415,8 +425,23 @@ def mortar_plausible(mask: np.ndarray, labels: np.ndarray | None = None, px_per_
     weighted = float((a * a).sum() / a.sum())
     ratio = median / weighted
     if ratio < 0.3:
-        return f"the mortar top-hat's pieces differ wildly in size (median {ratio:.2f} of the weighted mean)"
+        return f"{WILD} (median {ratio:.2f} of the weighted mean)"
     return ""
+
+
+def _top_hat_units(
+    mortar_mask: np.ndarray, px_per_m: float, valid: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """The units the mortar top-hat's mask ``mortar_mask`` (True off the joints) gives within
+    ``valid``, their labels, and why they do not look like masonry ("" when they do)."""
+    if valid is not None:
+        mortar_mask = mortar_mask & valid
+    # the joints carried on straight to the orthophoto's sides, as the colour split's are: a strip of
+    # ground or sky inside the outline joined the units along it (a course of bricks as one piece)
+    units = _joints_to_the_border(mortar_mask, int(round(EDGE_BAND_M * px_per_m)))  # only takes units away
+    units = _bands_without_joints(units, valid, int(round(JOINTLESS_BAND_M * px_per_m)))  # so does this
+    labels = label_bricks(units)
+    return units, labels, mortar_plausible(units, labels, px_per_m)
 
 
 #: the colour split (:func:`segment_by_colour`): the orthophoto is smoothed over this (m) first, and
@@ -576,6 +601,65 @@ def _resampled(img: np.ndarray, shape: tuple[int, int], *, order: int) -> np.nda
     )
 
 
+#: an opening (a window, a door) differs from the units in colour by this many of the units' own
+#: spread (pieces' mean chromaticity, robust): the facades' glass and frames stood at 4-6 in red and
+#: blue on red brick, a run of bricks the top-hat joined 0.3-0.7
+OPENING_COLOUR_SIGMAS = 6.0
+#: the least spread of the units' chromaticity taken (units of one tone, drawn: a red share of 0.06
+#: at six of it)
+OPENING_SPREAD_FLOOR = 0.01
+#: an opening holds a disk this wide (m): the mortar's joints, of the same outlier colour, do not
+OPENING_DISK_M = 0.10
+#: and is at least this large (m^2: a slit window 0.2 x 0.75 m; a rubble wall's largest stones are
+#: under 0.1) and this many median pieces (the facades' windows 20-70)
+OPENING_MIN_M2 = 0.15
+OPENING_MIN_PIECES = 8.0
+#: of an opening, at most this share is pieces of a unit's size: glass, a frame and a door hold
+#: none (the top-hat joins them into one piece or takes a pale frame for mortar), a patch of bricks
+#: of another colour is mostly its bricks
+OPENING_MASONRY_SHARE = 0.1
+
+
+def find_openings(
+    rgb: np.ndarray, labels: np.ndarray, px_per_m: float, valid: np.ndarray | None = None
+) -> np.ndarray | None:
+    """The openings of a wall's orthophoto (windows and doors, with their frames; True there), from
+    the mortar top-hat's pieces ``labels`` whose sizes differ wildly (a window's glass and frame
+    join the bricks around it into one piece 40-70 times the median): the regions at least
+    :data:`OPENING_MIN_M2` and :data:`OPENING_MIN_PIECES` median pieces large, a disk
+    :data:`OPENING_DISK_M` wide within them, whose colour (chromaticity, smoothed over 2 cm) lies
+    :data:`OPENING_COLOUR_SIGMAS` of the units' spread from the units' (the pieces of a unit's
+    size), with next to no unit-sized piece in them. None where there is none."""
+    from skimage.morphology import disk
+
+    a = np.bincount(labels.ravel())
+    ids = np.flatnonzero(a[1:]) + 1
+    if len(ids) < 4:
+        return None
+    median = float(np.median(a[ids]))
+    units = ids[a[ids] <= 3.0 * median]
+    total = np.asarray(rgb, dtype=np.float64).sum(axis=2) + 1e-6
+    # red and blue shares (the light left out), smoothed over 2 cm: the units' own with their joints'
+    chroma = [ndimage.gaussian_filter(rgb[..., c] / total, 0.02 * px_per_m) for c in (0, 2)]
+    means = np.stack([ndimage.mean(c, labels, units) for c in chroma], axis=1)
+    centre = np.median(means, axis=0)
+    spread = np.maximum(1.4826 * np.median(np.abs(means - centre), axis=0), OPENING_SPREAD_FLOOR)
+    z2 = sum(((c - m) / d) ** 2 for c, m, d in zip(chroma, centre, spread))
+    other = z2 > OPENING_COLOUR_SIGMAS**2
+    if valid is not None:
+        other &= valid
+    other = opening(other, disk(max(1, int(round(0.5 * OPENING_DISK_M * px_per_m)))))
+    regions, n = ndimage.label(other)
+    if n == 0:
+        return None
+    size = np.bincount(regions.ravel(), minlength=n + 1).astype(np.float64)
+    masonry = np.bincount(regions.ravel(), weights=np.isin(labels, units).ravel(), minlength=n + 1)
+    least = max(OPENING_MIN_M2 * px_per_m**2, OPENING_MIN_PIECES * median)
+    keep = np.flatnonzero((size >= least) & (masonry <= OPENING_MASONRY_SHARE * size))
+    keep = keep[keep > 0]
+    return np.isin(regions, keep) if keep.size else None
+
+
 def segment_wall(
     rgb: np.ndarray,
     px_per_m: float,
@@ -594,21 +678,46 @@ def segment_wall(
 
     config = config or PhotoSegmentConfig(window_px=int(round(0.5 * px_per_m)))
     mortar_mask = segment_photo(rgb, config)
-    if valid is not None:
-        mortar_mask &= valid
-    # the joints carried on straight to the orthophoto's sides, as the colour split's are: a strip of
-    # ground or sky inside the outline joined the units along it (a course of bricks as one piece)
-    units = _joints_to_the_border(mortar_mask, int(round(EDGE_BAND_M * px_per_m)))  # only takes units away
-    units = _bands_without_joints(units, valid, int(round(JOINTLESS_BAND_M * px_per_m)))  # so does this
-    labels = label_bricks(units)
-    why = mortar_plausible(units, labels, px_per_m)
+    units, labels, why = _top_hat_units(mortar_mask, px_per_m, valid)
     if not why:
         return Segmentation(
             mask=units, method="mortar", px_per_m=float(px_per_m), note="the mortar top-hat", known_labels=labels
         )
+    holes, left_out = None, ""
+    if why.startswith(WILD):
+        # a few pieces far larger than the rest: a facade's windows and doors, each joined with the
+        # bricks around it into one piece, made the top-hat's pieces implausible and the joints'
+        # partition cut the whole wall into blobs (module 27.6 x 26.6 cm for 40 x 18 cm bricks);
+        # with them left out, as occluders are, the top-hat's pieces may be the wall's units, and
+        # where they are not (joints too faint on a facade seen at 23 degrees) the other methods
+        # run without them
+        holes = find_openings(rgb, labels, px_per_m, valid)
+        if holes is not None:
+            holes = ndimage.binary_dilation(holes, iterations=max(1, int(round(0.02 * px_per_m))))
+            n = ndimage.label(holes)[1]
+            left_out = (
+                f"{n} opening{'s' if n > 1 else ''} left out (regions of another colour without units, "
+                f"{holes.sum() / px_per_m**2:.2f} m^2: windows, doors)"
+            )
+            valid = ~holes if valid is None else valid & ~holes
+            kept, kept_labels, still = _top_hat_units(mortar_mask, px_per_m, valid)
+            if not still:
+                return Segmentation(
+                    mask=kept,
+                    method="mortar",
+                    px_per_m=float(px_per_m),
+                    note=f"the mortar top-hat, {left_out}; before, {why}",
+                    known_labels=kept_labels,
+                    openings=holes,
+                )
+            why = f"{why}; {left_out}, {still}"
+    if valid is not None:
+        mortar_mask &= valid
     colour, not_colour = segment_by_colour(rgb, px_per_m, valid)
     if colour is not None:  # broad mortar, paler or greyer than the units
-        return Segmentation(mask=colour, method="colour", px_per_m=float(px_per_m), note=f"{why}: the mortar's colour")
+        return Segmentation(
+            mask=colour, method="colour", px_per_m=float(px_per_m), note=f"{why}: the mortar's colour", openings=holes
+        )
     why = f"{why}; {not_colour}"
     # the joints' partition at one resolution, whatever the orthophoto's (its pieces changed by a
     # third between 300 and 550 px/m, measured), then back to the orthophoto's pixels
@@ -642,4 +751,5 @@ def segment_wall(
         pieces=pieces,
         note=f"{why}: the joints' partition",
         coarse=coarse,
+        openings=holes,
     )

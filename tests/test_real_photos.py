@@ -410,19 +410,20 @@ def test_a_band_of_mortar_along_the_top_does_not_join_the_top_course(band_m):
             assert courses[-1] - 2 * mortar_m < height < courses[-1] and lengths[0] - 2 * mortar_m < length < lengths[1]
 
 
-@pytest.mark.parametrize("buff", [False, True])
-def test_a_window_is_left_out_and_the_bricks_around_it_are_found(buff):
+@pytest.mark.parametrize("courses, buff", [(10, False), (10, True), (40, False)])
+def test_a_window_is_left_out_and_the_bricks_around_it_are_found(courses, buff):
     """A brick facade's window (dark glass in a pale frame) joins the bricks around it into one piece
     of the top-hat, 40-70 times the median: the pieces' sizes differed wildly, and the joints'
     partition cut the whole wall into blobs (12 Blender-rendered facades: 40 x 18 cm bricks found
     as pieces of 26-28 x 27-49 cm, 96 % of the windows' area covered by pieces). A region of another
     colour without unit-sized pieces is now an opening, left out as an occluder is, and the
     top-hat's pieces are the wall's bricks. A patch of buff bricks beside it, of another colour but
-    with its joints, is no opening."""
+    with its joints, is no opening. In a wall four times as tall, the top-hat's pieces looked like
+    masonry with the window and the bricks around it one piece of them (0.33 m^2): left out too."""
     from calib_masonry.wall2d.segment import segment_wall
 
     px = 400.0
-    rgb, _ = _drawn_orthophoto([0.075] * 10, (0.2, 0.23), 0.01, px, 0.0, 7)
+    rgb, _ = _drawn_orthophoto([0.075] * courses, (0.2, 0.23), 0.01, px, 0.0, 7)
     r0, r1, c0, c1 = int(0.2 * px), int(0.6 * px), int(0.3 * px), int(0.75 * px)  # 0.4 x 0.45 m
     frame = int(0.03 * px)
     rgb[r0:r1, c0:c1] = (0.85, 0.85, 0.82)

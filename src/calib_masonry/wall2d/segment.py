@@ -620,6 +620,15 @@ OPENING_MIN_PIECES = 8.0
 OPENING_MASONRY_SHARE = 0.1
 
 
+def _has_giant(labels: np.ndarray, px_per_m: float) -> bool:
+    """Whether a piece of ``labels`` is as large as :func:`find_openings` asks of an opening."""
+    a = np.bincount(labels.ravel())[1:]
+    a = a[a > 0]
+    if len(a) < 4:
+        return False
+    return float(a.max()) >= max(OPENING_MIN_M2 * px_per_m**2, OPENING_MIN_PIECES * float(np.median(a)))
+
+
 def find_openings(
     rgb: np.ndarray, labels: np.ndarray, px_per_m: float, valid: np.ndarray | None = None
 ) -> np.ndarray | None:
@@ -679,38 +688,42 @@ def segment_wall(
     config = config or PhotoSegmentConfig(window_px=int(round(0.5 * px_per_m)))
     mortar_mask = segment_photo(rgb, config)
     units, labels, why = _top_hat_units(mortar_mask, px_per_m, valid)
+    holes, left_out = None, ""
+    # a piece far larger than the rest may be an opening: a facade's windows and doors, each joined
+    # with the bricks around it into one piece, made the top-hat's pieces implausible and the
+    # joints' partition cut the whole wall into blobs (module 27.6 x 26.6 cm for 40 x 18 cm
+    # bricks), or, one window in a large wall, left them plausible with the window a unit; with the
+    # openings left out, as occluders are, the top-hat's pieces may be the wall's units, and where
+    # they are not (joints too faint on a facade seen at 23 degrees) the other methods run without
+    # them
+    if (not why or why.startswith(WILD)) and _has_giant(labels, px_per_m):
+        holes = find_openings(rgb, labels, px_per_m, valid)
+    if holes is not None:
+        holes = ndimage.binary_dilation(holes, iterations=max(1, int(round(0.02 * px_per_m))))
+        n = ndimage.label(holes)[1]
+        left_out = (
+            f"{n} opening{'s' if n > 1 else ''} left out (regions of another colour without units, "
+            f"{holes.sum() / px_per_m**2:.2f} m^2: windows, doors)"
+        )
+        seen = ~holes if valid is None else valid & ~holes
+        kept, kept_labels, still = _top_hat_units(mortar_mask, px_per_m, seen)
+        if not still:
+            return Segmentation(
+                mask=kept,
+                method="mortar",
+                px_per_m=float(px_per_m),
+                note=f"the mortar top-hat, {left_out}" + (f"; before, {why}" if why else ""),
+                known_labels=kept_labels,
+                openings=holes,
+            )
+        if why:
+            why, valid = f"{why}; {left_out}, {still}", seen
+        else:
+            holes = None  # the top-hat's pieces were plausible with them and are not without: keep them
     if not why:
         return Segmentation(
             mask=units, method="mortar", px_per_m=float(px_per_m), note="the mortar top-hat", known_labels=labels
         )
-    holes, left_out = None, ""
-    if why.startswith(WILD):
-        # a few pieces far larger than the rest: a facade's windows and doors, each joined with the
-        # bricks around it into one piece, made the top-hat's pieces implausible and the joints'
-        # partition cut the whole wall into blobs (module 27.6 x 26.6 cm for 40 x 18 cm bricks);
-        # with them left out, as occluders are, the top-hat's pieces may be the wall's units, and
-        # where they are not (joints too faint on a facade seen at 23 degrees) the other methods
-        # run without them
-        holes = find_openings(rgb, labels, px_per_m, valid)
-        if holes is not None:
-            holes = ndimage.binary_dilation(holes, iterations=max(1, int(round(0.02 * px_per_m))))
-            n = ndimage.label(holes)[1]
-            left_out = (
-                f"{n} opening{'s' if n > 1 else ''} left out (regions of another colour without units, "
-                f"{holes.sum() / px_per_m**2:.2f} m^2: windows, doors)"
-            )
-            valid = ~holes if valid is None else valid & ~holes
-            kept, kept_labels, still = _top_hat_units(mortar_mask, px_per_m, valid)
-            if not still:
-                return Segmentation(
-                    mask=kept,
-                    method="mortar",
-                    px_per_m=float(px_per_m),
-                    note=f"the mortar top-hat, {left_out}; before, {why}",
-                    known_labels=kept_labels,
-                    openings=holes,
-                )
-            why = f"{why}; {left_out}, {still}"
     if valid is not None:
         mortar_mask &= valid
     colour, not_colour = segment_by_colour(rgb, px_per_m, valid)

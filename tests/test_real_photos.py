@@ -797,6 +797,32 @@ def test_labelme_round_trip_edits_one_stone_and_builds_it(tmp_path):
     assert all(a == pytest.approx(1.45 * 0.8, rel=0.05) for a in areas[1:])
 
 
+def test_a_shaded_band_without_visible_joints_is_split_not_the_whole_wall():
+    """A brick wall whose top two courses lie in an eave's shade (dark, the joints faint): the
+    top-hat sees no joint there, the band is one piece among bricks, and its pieces were refused
+    for their sizes; the colour split then took the band for mortar (no unit in it: 108 pieces for
+    126 bricks), and on three Blender facades the joints' partition cut the whole wall into blobs.
+    Now only the pieces far larger than the rest are split by the joints' partition, with the
+    rest's course height and unit length."""
+    from calib_masonry.wall2d.segment import segment_wall
+
+    px = 400.0
+    rgb, _ = _drawn_orthophoto([0.075] * 14, (0.2, 0.23), 0.01, px, 0.0, 7)
+    band = slice(0, int(0.15 * px))
+    top = rgb[band]
+    mortar = top[..., 0] > 0.7
+    top[mortar] *= 0.55
+    rgb[band] = top * 0.45
+    seg = segment_wall(rgb, px)
+    summary = seg.summary()
+    assert seg.method == "mortar" and "split by the joints' partition" in seg.note
+    inside = seg.labels[band]
+    assert len(np.unique(inside[inside > 0])) >= 6 and (inside > 0).mean() > 0.6
+    height, length = summary["module_m"]
+    assert 0.055 < height < 0.075 and 0.18 < length < 0.23
+    assert summary["max_area_m2"] < 4 * 0.065 * 0.215
+
+
 def test_labelme_openings_are_kept_apart_from_the_pieces(tmp_path):
     """The openings a segmentation left out are written as 'opening' shapes beside the pieces; read
     back (with 'window' and 'door' drawn by hand), they make no piece of the wall's mask, and as a

@@ -669,6 +669,64 @@ def find_openings(
     return np.isin(regions, keep) if keep.size else None
 
 
+def _partition(rgb: np.ndarray, px_per_m: float, config, valid: np.ndarray | None):
+    """The joints' partition (:func:`~calib_masonry.wall2d.pieces.segment_pieces`) of ``rgb`` at
+    one resolution, whatever the orthophoto's (its pieces changed by a third between 300 and 550
+    px/m, measured), never finer than the orthophoto (a 20 px/m orthophoto of a 14 x 75 m fit was
+    taken to 300 px/m: 96 Mpx, 10 GB, for detail that is not there) and never above
+    :data:`MAX_PIECES_PIXELS`, its labels back in the orthophoto's pixels; and the scale it ran at."""
+    from .pieces import segment_pieces
+
+    f = min(PIECES_PX_PER_M / px_per_m, 1.0, math.sqrt(MAX_PIECES_PIXELS / max(1, rgb.shape[0] * rgb.shape[1])))
+    work, work_valid = rgb, valid
+    if abs(f - 1.0) > 0.05:
+        shape = (max(8, round(rgb.shape[0] * f)), max(8, round(rgb.shape[1] * f)))
+        work = _resampled(np.asarray(rgb, dtype=np.float32), shape, order=1)
+        work_valid = None if valid is None else _resampled(valid.astype(np.float32), shape, order=1) > 0.5
+    work_ppm = px_per_m * work.shape[1] / rgb.shape[1]
+    pieces = segment_pieces(work, work_ppm, config, valid=work_valid)
+    if work is not rgb:
+        labels = _resampled(pieces.labels, rgb.shape[:2], order=0)
+        pieces = replace(pieces, labels=labels.astype(np.int32), px_per_m=float(px_per_m))
+    return pieces, work_ppm
+
+
+#: the top-hat's pieces this many median pieces large or more, at most this share of its pieces'
+#: area, are split by the joints' partition where the rest looks like masonry
+GIANT_SHARE = 0.25
+
+
+def _giants_split(rgb, px_per_m, labels, valid, config) -> tuple[np.ndarray, int] | None:
+    """The top-hat's ``labels`` with its pieces far larger than the rest (at least
+    :data:`OPENING_MIN_PIECES` median pieces: a course whose head joints the top-hat did not see on
+    a facade's far side, a band of bricks in an eave's shade) split by the joints' partition, the
+    course height and unit length given by the rest's; and how many were split. None where there
+    is none, where they hold more than :data:`GIANT_SHARE` of the pieces' area, or where the rest
+    does not look like masonry."""
+    a = np.bincount(labels.ravel())
+    ids = np.flatnonzero(a[1:]) + 1
+    if len(ids) < 4:
+        return None
+    giant_ids = ids[a[ids] >= OPENING_MIN_PIECES * float(np.median(a[ids]))]
+    if not giant_ids.size or a[giant_ids].sum() > GIANT_SHARE * a[ids].sum():
+        return None
+    from .pieces import pieces_mask
+
+    giant = np.isin(labels, giant_ids)
+    rest = np.where(giant, 0, labels).astype(np.int32)
+    if mortar_plausible(rest > 0, rest, px_per_m):
+        return None
+    boxes = [b for b in ndimage.find_objects(rest) if b is not None]
+    size = np.median([[b[0].stop - b[0].start, b[1].stop - b[1].start] for b in boxes], axis=0) / px_per_m
+    inside = giant if valid is None else giant & valid
+    pieces, _ = _partition(rgb, px_per_m, replace(config, module_m=(float(size[0]), float(size[1]))), inside)
+    split = np.where(inside & (pieces.labels > 0), pieces.labels + int(rest.max()), 0)
+    # the partition's pieces touch: a pixel's line taken off where two meet, as its own mask has
+    joined = replace(pieces, labels=np.where(giant, split, rest).astype(np.int32))
+    mask = pieces_mask(joined)
+    return np.where(mask, joined.labels, 0).astype(np.int32), int(len(giant_ids))
+
+
 def segment_wall(
     rgb: np.ndarray,
     px_per_m: float,
@@ -683,7 +741,7 @@ def segment_wall(
     are broad (:func:`segment_by_colour`: rubble and stone walls), else the joints' partition
     (:func:`calib_masonry.wall2d.pieces.segment_pieces`: stones, plaster, speckle, cracks).
     ``valid``: the pixels that are wall (False under an occluder): no piece covers the others."""
-    from .pieces import PieceConfig, pieces_mask, segment_pieces
+    from .pieces import PieceConfig, pieces_mask
 
     config = config or PhotoSegmentConfig(window_px=int(round(0.5 * px_per_m)))
     mortar_mask = segment_photo(rgb, config)
@@ -724,6 +782,23 @@ def segment_wall(
         return Segmentation(
             mask=units, method="mortar", px_per_m=float(px_per_m), note="the mortar top-hat", known_labels=labels
         )
+    if why.startswith(WILD):
+        # a few pieces of brick the top-hat saw no joints in (faint or shaded), among pieces that
+        # look like masonry: those split by the joints' partition, not the whole wall (3 of 35
+        # Blender facades became blobs of 25-32 x 28-49 cm for their 18 x 40 cm bricks)
+        pc = pieces_config or PieceConfig()
+        split = _giants_split(rgb, px_per_m, kept_labels if holes is not None else labels, valid, pc)
+        if split is not None:
+            joined, n = split
+            return Segmentation(
+                mask=joined > 0,
+                method="mortar",
+                px_per_m=float(px_per_m),
+                note=f"the mortar top-hat, its {n} piece{'s' if n > 1 else ''} far larger than the rest split by "
+                f"the joints' partition ({why})",
+                known_labels=joined,
+                openings=holes,
+            )
     if valid is not None:
         mortar_mask &= valid
     colour, not_colour = segment_by_colour(rgb, px_per_m, valid)
@@ -736,15 +811,8 @@ def segment_wall(
     # third between 300 and 550 px/m, measured), then back to the orthophoto's pixels
     # never finer than the orthophoto (a 20 px/m orthophoto of a 14 x 75 m fit was taken to 300 px/m:
     # 96 Mpx, 10 GB, for detail that is not there) and never above MAX_PIECES_PIXELS
-    f = min(PIECES_PX_PER_M / px_per_m, 1.0, math.sqrt(MAX_PIECES_PIXELS / max(1, rgb.shape[0] * rgb.shape[1])))
-    work, work_valid = rgb, valid
-    if abs(f - 1.0) > 0.05:
-        shape = (max(8, round(rgb.shape[0] * f)), max(8, round(rgb.shape[1] * f)))
-        work = _resampled(np.asarray(rgb, dtype=np.float32), shape, order=1)
-        work_valid = None if valid is None else _resampled(valid.astype(np.float32), shape, order=1) > 0.5
     pc = pieces_config or PieceConfig()
-    work_ppm = px_per_m * work.shape[1] / rgb.shape[1]
-    pieces = segment_pieces(work, work_ppm, pc, valid=work_valid)
+    pieces, work_ppm = _partition(rgb, px_per_m, pc, valid)
     coarse = ""
     if work_ppm * pc.joint_width_m < MIN_JOINT_PX:
         coarse = (
@@ -753,9 +821,6 @@ def segment_wall(
             f"{math.ceil(MIN_JOINT_PX / pc.joint_width_m)} px/m or more (--px-per-m, photo_px_per_m), from a photo "
             "that holds as many"
         )
-    if work is not rgb:
-        labels = _resampled(pieces.labels, rgb.shape[:2], order=0)
-        pieces = replace(pieces, labels=labels.astype(np.int32), px_per_m=float(px_per_m))
     mask = pieces_mask(pieces, mortar=~mortar_mask)
     return Segmentation(
         mask=mask,

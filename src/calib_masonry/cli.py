@@ -129,9 +129,10 @@ def _print_build(summary: dict, out) -> None:
     coverage = summary.get("joint_coverage") or {}
     over = coverage.get("units_over_opening") or []
     hanging = [name for name in coverage.get("units_without_bed_joint") or [] if name not in set(over)]
+    from .spec import MAX_JOINT_M
+
     if hanging:
         from .build3d.assemble import reach_over
-        from .spec import MAX_JOINT_M
 
         n = len(hanging)
         reach = summary["max_joint_m"]  # build writes it since it became a setting
@@ -157,8 +158,6 @@ def _print_build(summary: dict, out) -> None:
             "units traced too small trace with more vertices"
         )
     if over:
-        from .spec import MAX_JOINT_M
-
         n = len(over)
         print(
             f"  note: {n} unit{'s' if n > 1 else ''} {'have' if n > 1 else 'has'} nothing beneath within "

@@ -307,9 +307,10 @@ def write_labelme_pair(
     folder: Path, calibration, ortho_shape, *, pieces, occluders_ortho, photo_size=None, openings_ortho=()
 ) -> None:
     """Two LabelMe files in ``folder``: ``rectified.json`` (over rectified.png: the wall's outline,
-    the occluders, the openings the segmentation left out and every piece, in its pixels) and ``photo.json`` (over the photo: the fitted
-    outline as a 'wall' polygon, the occluders); corrected in LabelMe, the first is a wall's mask
-    for ``build`` (``mask = ".../rectified.json"``), the second goes back to ``rectify --labelme``."""
+    the occluders, the openings the segmentation left out and every piece, in its pixels) and
+    ``photo.json`` (over the photo: the fitted outline as a 'wall' polygon, the occluders);
+    corrected in LabelMe, the first is a wall's mask for ``build`` (``mask = ".../rectified.json"``),
+    the second goes back to ``rectify --labelme``."""
     import os
 
     rows, cols = ortho_shape

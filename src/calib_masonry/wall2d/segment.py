@@ -335,9 +335,7 @@ class Segmentation:
             # (course height, unit length) as the joints' partition gives it: the pieces' median
             # height and length (their square root of area, 18.7 x 18.7 cm, said nothing of 30 x 12
             # cm bricks)
-            boxes = [b for b in ndimage.find_objects(self.labels) if b is not None]
-            size = np.array([[b[0].stop - b[0].start, b[1].stop - b[1].start] for b in boxes], dtype=np.float64)
-            module = np.median(size, axis=0) / self.px_per_m if len(size) else np.zeros(2)
+            module = median_box_m(self.labels, self.px_per_m)
             doc = {
                 "count": n,
                 "median_area_m2": float(np.median(a)) if n else 0.0,
@@ -363,6 +361,14 @@ class Segmentation:
             _, n = ndimage.label(self.openings)
             doc.update(openings=int(n), openings_m2=float(self.openings.sum() / self.px_per_m**2))
         return doc
+
+
+def median_box_m(labels: np.ndarray, px_per_m: float) -> np.ndarray:
+    """The median height and length (m) of the pieces' bounding boxes in ``labels`` (0 mortar):
+    the course height and unit length they give. Zeros where there is no piece."""
+    boxes = [b for b in ndimage.find_objects(labels) if b is not None]
+    size = np.array([[b[0].stop - b[0].start, b[1].stop - b[1].start] for b in boxes], dtype=np.float64)
+    return np.median(size, axis=0) / px_per_m if len(size) else np.zeros(2)
 
 
 #: the pieces' mean height / width (:func:`piece_aspect`) above which they stand taller than wide, as
@@ -620,13 +626,18 @@ OPENING_MIN_PIECES = 8.0
 OPENING_MASONRY_SHARE = 0.1
 
 
+def _least_opening_px(px_per_m: float, median_px: float) -> float:
+    """The least area (pixels) of an opening among pieces of median area ``median_px``."""
+    return max(OPENING_MIN_M2 * px_per_m**2, OPENING_MIN_PIECES * median_px)
+
+
 def _has_giant(labels: np.ndarray, px_per_m: float) -> bool:
     """Whether a piece of ``labels`` is as large as :func:`find_openings` asks of an opening."""
     a = np.bincount(labels.ravel())[1:]
     a = a[a > 0]
     if len(a) < 4:
         return False
-    return float(a.max()) >= max(OPENING_MIN_M2 * px_per_m**2, OPENING_MIN_PIECES * float(np.median(a)))
+    return float(a.max()) >= _least_opening_px(px_per_m, float(np.median(a)))
 
 
 def find_openings(
@@ -663,8 +674,7 @@ def find_openings(
         return None
     size = np.bincount(regions.ravel(), minlength=n + 1).astype(np.float64)
     masonry = np.bincount(regions.ravel(), weights=np.isin(labels, units).ravel(), minlength=n + 1)
-    least = max(OPENING_MIN_M2 * px_per_m**2, OPENING_MIN_PIECES * median)
-    keep = np.flatnonzero((size >= least) & (masonry <= OPENING_MASONRY_SHARE * size))
+    keep = np.flatnonzero((size >= _least_opening_px(px_per_m, median)) & (masonry <= OPENING_MASONRY_SHARE * size))
     keep = keep[keep > 0]
     return np.isin(regions, keep) if keep.size else None
 
@@ -716,8 +726,7 @@ def _giants_split(rgb, px_per_m, labels, valid, config) -> tuple[np.ndarray, int
     rest = np.where(giant, 0, labels).astype(np.int32)
     if mortar_plausible(rest > 0, rest, px_per_m):
         return None
-    boxes = [b for b in ndimage.find_objects(rest) if b is not None]
-    size = np.median([[b[0].stop - b[0].start, b[1].stop - b[1].start] for b in boxes], axis=0) / px_per_m
+    size = median_box_m(rest, px_per_m)
     inside = giant if valid is None else giant & valid
     pieces, _ = _partition(rgb, px_per_m, replace(config, module_m=(float(size[0]), float(size[1]))), inside)
     split = np.where(inside & (pieces.labels > 0), pieces.labels + int(rest.max()), 0)
@@ -744,9 +753,10 @@ def segment_wall(
     from .pieces import PieceConfig, pieces_mask
 
     config = config or PhotoSegmentConfig(window_px=int(round(0.5 * px_per_m)))
+    pc = pieces_config or PieceConfig()
     mortar_mask = segment_photo(rgb, config)
     units, labels, why = _top_hat_units(mortar_mask, px_per_m, valid)
-    holes, left_out = None, ""
+    holes = None
     # a piece far larger than the rest may be an opening: a facade's windows and doors, each joined
     # with the bricks around it into one piece, made the top-hat's pieces implausible and the
     # joints' partition cut the whole wall into blobs (module 27.6 x 26.6 cm for 40 x 18 cm
@@ -786,7 +796,6 @@ def segment_wall(
         # a few pieces of brick the top-hat saw no joints in (faint or shaded), among pieces that
         # look like masonry: those split by the joints' partition, not the whole wall (3 of 35
         # Blender facades became blobs of 25-32 x 28-49 cm for their 18 x 40 cm bricks)
-        pc = pieces_config or PieceConfig()
         split = _giants_split(rgb, px_per_m, kept_labels if holes is not None else labels, valid, pc)
         if split is not None:
             joined, n = split
@@ -807,11 +816,6 @@ def segment_wall(
             mask=colour, method="colour", px_per_m=float(px_per_m), note=f"{why}: the mortar's colour", openings=holes
         )
     why = f"{why}; {not_colour}"
-    # the joints' partition at one resolution, whatever the orthophoto's (its pieces changed by a
-    # third between 300 and 550 px/m, measured), then back to the orthophoto's pixels
-    # never finer than the orthophoto (a 20 px/m orthophoto of a 14 x 75 m fit was taken to 300 px/m:
-    # 96 Mpx, 10 GB, for detail that is not there) and never above MAX_PIECES_PIXELS
-    pc = pieces_config or PieceConfig()
     pieces, work_ppm = _partition(rgb, px_per_m, pc, valid)
     coarse = ""
     if work_ppm * pc.joint_width_m < MIN_JOINT_PX:

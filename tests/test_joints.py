@@ -639,8 +639,7 @@ def test_a_dry_toe_crushes_at_the_masonrys_strength_and_the_block_tips_sooner():
 
 
 def test_the_static_programme_answers_each_question_as_if_asked_first():
-    # the programme is kept between questions on the same joints (HiGHS starts from its last
-    # answer); a dry column of three blocks tips as a whole at lam = b / h = 0.444: loads up and
+    # the programme is kept between questions (HiGHS starts from its last answer); a dry column of three blocks tips as a whole at lam = b / h = 0.444: loads up and
     # down across it, friction capacities that change, and a change of the intact joints between,
     # each answered as a model asked nothing before answers it
     dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6)
@@ -658,7 +657,7 @@ def test_the_static_programme_answers_each_question_as_if_asked_first():
     questions.append((np.array([False, True, True]), 0.3, None))
     questions.append((np.zeros(3, bool), 0.3, None))
     kept = JointModel(sc)
-    answers = []
+    answers, models = [], set()
     for intact, lam, c in questions:
         load = kept._load(np.array([lam * G, 0.0, -G]))
         pick = ~intact[jc]
@@ -667,7 +666,11 @@ def test_the_static_programme_answers_each_question_as_if_asked_first():
         fresh = JointModel(sc).has_equilibrium(intact, jc[pick], kc[pick], load, free, shear_capacity=caps)
         assert got == fresh, (intact, lam, c)
         answers.append(got)
+        models.add(id(kept._programme[1]))
     assert answers == [True, False, True, False, True, False, True] + [False, True, True, False] + [True, True]
+    # one HiGHS model answered them all, the change of the intact joints included (its matrix
+    # holds every corner: each question starts from the last one's basis)
+    assert len(models) == 1
 
 
 def test_a_stalled_solve_with_an_equilibrium_ends_at_its_least_out_of_balance_iterate():
@@ -693,10 +696,10 @@ def test_a_stalled_solve_with_an_equilibrium_ends_at_its_least_out_of_balance_it
     assert jm.stalled_in_equilibrium == 0
 
 
-def test_a_question_the_dual_simplex_leaves_open_is_answered_by_the_primal_or_the_interior_point(monkeypatch):
+def test_a_question_the_dual_simplex_leaves_open_is_answered_by_the_interior_point_or_the_primal(monkeypatch):
     # the dual simplex from the last basis can run without end on these programmes (a laboratory
     # wall's shear test sat in one question for 20 minutes): it gets a number of iterations, then
-    # the primal simplex answers from scratch, then the interior-point solver; a question none
+    # the interior-point solver answers from scratch, then the primal simplex; a question none
     # answers is taken for no and counted
     from calib_masonry.simulation import joints
 
@@ -713,13 +716,32 @@ def test_a_question_the_dual_simplex_leaves_open_is_answered_by_the_primal_or_th
         return got, jm.unanswered
 
     assert answers() == ([True, False, True], 0)  # sliding at mu = 0.5, tipping at 0.25
-    monkeypatch.setattr(joints, "DUAL_ITERATIONS", 0)  # the primal simplex answers
+    monkeypatch.setattr(joints, "DUAL_ITERATIONS", 0)  # the interior point answers
     assert answers() == ([True, False, True], 0)
-    monkeypatch.setattr(joints, "PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN", 0)  # the interior point
+    monkeypatch.setattr(joints, "IPM_ITERATIONS", 0)  # the primal simplex
     assert answers() == ([True, False, True], 0)
-    monkeypatch.setattr(joints, "IPM_ITERATIONS", 0)
+    monkeypatch.setattr(joints, "PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN", 0)
     got, unanswered = answers()
     assert unanswered >= 2 and not any(got[1:])
+
+
+def test_every_question_on_a_kept_programme_gets_its_own_seconds(monkeypatch):
+    # HiGHS's time limit counts the model's run time over every question asked of it: with the
+    # limit set once, a kept programme that had run SOLVER_SECONDS in all answered nothing more
+    from calib_masonry.simulation import joints
+
+    monkeypatch.setattr(joints, "SOLVER_SECONDS", 0.003)
+    sc, _ = _dry_block((0.2, 0.3, 0.8), (1.0, 0.0), 0.5)
+    jm = JointModel(sc)
+    jc, kc = np.nonzero(jm.corner_mask)
+    free = np.zeros(1, bool)
+    got = []
+    for _ in range(300):
+        for lam in (0.2, 0.3):
+            got.append(jm.has_equilibrium(np.zeros(1, bool), jc, kc, jm._load(np.array([lam * G, 0.0, -G])), free))
+    assert jm.unanswered == 0
+    assert got == [True, False] * 300
+    assert jm._programme[1].getRunTime() > 2 * joints.SOLVER_SECONDS  # the questions together
 
 
 def test_the_question_a_dry_walls_shear_test_stuck_in_is_answered(tmp_path):

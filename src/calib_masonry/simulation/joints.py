@@ -554,12 +554,12 @@ def _feasibility_programme(A: sp.csc_matrix, lo, hi, row_lo, row_hi):
 
 
 # the static programme's iterations (:func:`_feasible`): the dual simplex from the last basis; then
-# the primal simplex from scratch, per row and column; then the interior-point solver from scratch;
+# the interior-point solver from scratch; then the primal simplex from scratch, per row and column;
 # and each solver's seconds, a net for a solver stuck within its iterations
 DUAL_ITERATIONS = 1000
 IPM_ITERATIONS = 1000
 PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN = 2
-SOLVER_SECONDS = 30.0
+SOLVER_SECONDS = 60.0
 
 
 def _feasible(h) -> bool | None:
@@ -573,33 +573,51 @@ def _feasible(h) -> bool | None:
     3 s and 4,374 in more than 30; the interior-point solver finds it infeasible in 16 iterations
     (0.4 s), the primal simplex in 4,172-4,317 (0.7 s). The dual simplex, which a question on the
     same matrix starts from the last answer's basis (0-39 iterations where measured), is given
-    :data:`DUAL_ITERATIONS`; a question it leaves open is put again from scratch to the primal
-    simplex (:data:`PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN`), whose basis the next question's dual
-    simplex starts from, then to the interior-point solver without crossover
-    (:data:`IPM_ITERATIONS`; on SW.200.1's and SW.250.1's shear tests with the dry joints crushing at
-    56.8 MPa it left one question each open, which the primal simplex answered). Limits on
-    iterations, so that a question gets the same answer on any machine; :data:`SOLVER_SECONDS` is a
-    net for a solver stuck within them, after which the next solver answers the same question."""
+    :data:`DUAL_ITERATIONS`; a question it leaves open is put again from scratch to the
+    interior-point solver with crossover (:data:`IPM_ITERATIONS`), whose basis the next question's
+    dual simplex starts from where the answer is yes, then to the primal simplex
+    (:data:`PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN`; on SW.200.1's and SW.250.1's shear tests with
+    the dry joints crushing at 56.8 MPa the interior point left one question each open, which the
+    primal simplex answered). Limits on iterations, so that a question gets the same answer on any
+    machine; :data:`SOLVER_SECONDS` is a net for a solver stuck within them, after which the next
+    solver answers the same question: each solver gets its own, counted from when it starts."""
     import highspy
 
     answered = (highspy.HighsModelStatus.kOptimal, highspy.HighsModelStatus.kInfeasible)
     lp = h.getLp()
     h.setOptionValue("simplex_iteration_limit", DUAL_ITERATIONS)
-    h.setOptionValue("time_limit", SOLVER_SECONDS)
+    # HiGHS's time limit is on the model's run time since it was made, over every question and
+    # solver (highspy 1.15.1): each solver gets its own seconds from when it starts (set once, the
+    # primal simplex's 30 s left the interior point none, and a kept model that had run 30 s in all
+    # answered nothing more)
+    h.setOptionValue("time_limit", h.getRunTime() + SOLVER_SECONDS)
     h.run()
     status = h.getModelStatus()
+    # the interior point with crossover: an answer yes leaves a basis the next question's dual
+    # simplex starts from. Before the primal simplex: on a house of 590 bricks (10,684 rows, 35,720
+    # columns) the interior point answered in 12-29 s where the primal simplex from scratch had not
+    # in 30; on SW.30.2's question 0.4 s against 0.7
+    # (the crossover's simplex clean-up is held to the simplex's iteration limit: the dual's 1,000
+    # left one of the house's questions open)
+    simplex_limit = int(PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN * (lp.num_row_ + lp.num_col_))
+    ipm = {
+        "solver": "ipm",
+        "run_crossover": "on",
+        "ipm_iteration_limit": IPM_ITERATIONS,
+        "simplex_iteration_limit": simplex_limit,
+    }
     primal = {
         "solver": "simplex",
-        "simplex_strategy": 4,  # the primal simplex
-        "simplex_iteration_limit": int(PRIMAL_ITERATIONS_PER_ROW_AND_COLUMN * (lp.num_row_ + lp.num_col_)),
-    }
-    ipm = {"solver": "ipm", "run_crossover": "off", "ipm_iteration_limit": IPM_ITERATIONS}
-    for options in (primal, ipm):
+        "simplex_strategy": 4,
+        "simplex_iteration_limit": simplex_limit,
+    }  # the primal simplex
+    for options in (ipm, primal):
         if status in answered:
             break
         h.clearSolver()
         for name, value in options.items():
             h.setOptionValue(name, value)
+        h.setOptionValue("time_limit", h.getRunTime() + SOLVER_SECONDS)
         try:
             h.run()
             status = h.getModelStatus()
@@ -607,9 +625,10 @@ def _feasible(h) -> bool | None:
             # the next question's dual simplex (its iteration limit is set above, at every question)
             h.setOptionValue("solver", "choose")
             h.setOptionValue("simplex_strategy", 1)
-            if options is ipm:
+            if options is ipm and h.getInfo().basis_validity != highspy.BasisValidity.kBasisValidityValid:
                 h.clearSolver()  # from scratch, not from an interior point
-            # (the primal simplex's basis is where the next question's dual simplex starts)
+            # (the primal simplex's basis, or the crossover's, is where the next question's dual
+            # simplex starts)
     if status not in answered:
         return None
     return status == highspy.HighsModelStatus.kOptimal
@@ -1179,58 +1198,59 @@ class JointModel:
         # the corners: the contacts' and every corner of each intact joint, which bears as a contact
         # with the joint's strength: a tension up to f_t and a cohesion c over its share of the patch
         ij, ik = np.nonzero(intact[:, None] & self.corner_mask)
-        cj, ck = np.concatenate([jc, ij]), np.concatenate([kc, ik])
-        C, n_contact = cj.size, jc.size
-        share = np.concatenate([np.zeros(n_contact), self._corner_share[ij, 0]])
-        tension = np.zeros(C)
-        cohesion = np.zeros(C)
-        if ij.size:
-            tension[n_contact:] = self.tensile_strength[ij] * share[n_contact:]
-            cohesion[n_contact:] = self.cohesion[ij] * share[n_contact:]
         H = len(self.held_rotation)
-        if C + H == 0:
+        if jc.size + ij.size + H == 0:
             return not np.any(rhs[keep_rows])
-
+        # the programme's matrix holds every corner of every joint and every body's rows, whichever
+        # joints are intact, which corners touch and which bodies float: a question differs from
+        # the last in its bounds alone, and HiGHS's dual simplex starts from the last answer's
+        # basis (0.004-0.015 s against 0.45-0.6 s from scratch on a laboratory wall's 1,400
+        # corners). Before, each crack round's joints made a new matrix, asked from scratch: on a
+        # house of 590 bricks (10,684 rows, 35,720 columns) 15-39 s a question, where the next
+        # round's question from the kept basis took 2.5 s (644 iterations). A corner that is
+        # neither intact nor a contact is held at zero, a floating body's rows are free.
+        if self._programme is None:
+            aj, ak = np.nonzero(self.corner_mask)
+            index = np.full(self.corner_mask.shape, -1, dtype=np.int64)
+            index[aj, ak] = np.arange(aj.size)
+            A = self._programme_matrix(aj, ak)
+            zero, free = np.zeros(A.shape[1]), np.full(A.shape[0], np.inf)
+            self._programme = (index, _feasibility_programme(A, zero, zero, -free, free))
+        index, h = self._programme
+        C = int(self.corner_mask.sum())
+        ci, ii = index[jc, kc], index[ij, ik]
         # the unknowns: each corner's normal force F_n (in its joint's frame, on b; F_n < 0
         # presses), its shear in four non-negative parts F_u = u+ - u-, F_v = v+ - v-, and a held
         # rotation's moments: [F_n (C), u+ (C), u- (C), v+ (C), v- (C), M (3 H)]
         nvar = 5 * C + 3 * H
-        lo, hi = np.zeros(nvar), np.full(nvar, np.inf)
-        hi[:C] = tension  # F_n <= f_t A_c (0 for a contact: no tension)
-        # and F_n >= -f_c A_c where the masonry's crushing strength is given (-inf where not)
-        lo[:C] = -self._corner_cap[cj, ck]
-        lo[5 * C :] = -np.inf
-        if shear_capacity is not None and n_contact:
+        lo, hi = np.zeros(nvar), np.zeros(nvar)
+        # F_n <= f_t A_c (0 for a contact: no tension), and F_n >= -f_c A_c where the masonry's
+        # crushing strength is given (-inf where not)
+        hi[ii] = self.tensile_strength[ij] * self._corner_share[ij, 0]
+        lo[ii] = -self._corner_cap[ij, ik]
+        lo[ci] = -self._corner_cap[jc, kc]
+        cap = np.inf if shear_capacity is None else np.asarray(shear_capacity, np.float64)
+        for part in range(1, 5):
+            hi[part * C + ii] = np.inf
             # and the contacts' friction within ``shear_capacity`` along u and along v
-            cap = np.asarray(shear_capacity, np.float64)
-            for part in range(1, 5):
-                hi[part * C : part * C + n_contact] = cap
+            hi[part * C + ci] = cap
+        lo[5 * C :], hi[5 * C :] = -np.inf, np.inf
         # the bodies' equilibrium, then friction inside the square inscribed in Coulomb's cone,
         # c A_c + mu N, one row a corner (:meth:`_programme_matrix`)
-        b_eq = rhs[keep_rows]
-        row_lo = np.concatenate([b_eq, np.full(C, -np.inf)])
-        row_hi = np.concatenate([b_eq, cohesion])
-        # the programme's matrix is fixed by which joints are intact, which corners may touch and
-        # which bodies float; the load and the friction's bounds change from question to question.
-        # HiGHS keeps its last basis, so a question on the same matrix starts from the last answer:
-        # 0.004-0.015 s against 0.45-0.6 s from scratch on a laboratory wall's 1,400 corners
-        # (a shear test asks a few times a frame while it stalls); the matrix is built only then
-        key = (intact.tobytes(), jc.tobytes(), kc.tobytes(), free_bodies.tobytes())
-        lp = self._programme
-        if lp is None or lp[0] != key:
-            A = self._programme_matrix(cj, ck, keep_rows)
-            lp = self._programme = (key, _feasibility_programme(A, lo, hi, row_lo, row_hi))
-        else:
-            lp[1].changeColsBounds(nvar, np.arange(nvar, dtype=np.int32), *_highs_bounds(lo, hi))
-            lp[1].changeRowsBounds(row_lo.size, np.arange(row_lo.size, dtype=np.int32), *_highs_bounds(row_lo, row_hi))
-        answer = _feasible(lp[1])
+        row_lo = np.concatenate([np.where(keep_rows, rhs, -np.inf), np.full(C, -np.inf)])
+        row_hi = np.concatenate([np.where(keep_rows, rhs, np.inf), np.full(C, np.inf)])
+        row_hi[6 * self.nb + ii] = self.cohesion[ij] * self._corner_share[ij, 0]
+        row_hi[6 * self.nb + ci] = 0.0
+        h.changeColsBounds(nvar, np.arange(nvar, dtype=np.int32), *_highs_bounds(lo, hi))
+        h.changeRowsBounds(row_lo.size, np.arange(row_lo.size, dtype=np.int32), *_highs_bounds(row_lo, row_hi))
+        answer = _feasible(h)
         if answer is None:
             self.unanswered += 1
         return bool(answer)
 
-    def _programme_matrix(self, cj: np.ndarray, ck: np.ndarray, keep_rows: np.ndarray) -> sp.csc_matrix:
+    def _programme_matrix(self, cj: np.ndarray, ck: np.ndarray) -> sp.csc_matrix:
         """The matrix of :meth:`has_equilibrium`'s programme on the corners ``cj, ck`` (C,): the
-        equilibrium rows of the bodies ``keep_rows`` (6 B,) (each corner's force on its two bodies,
+        equilibrium rows of every body (6 B; each corner's force on its two bodies,
         ``L^T F``; a held rotation's moments), then one friction row a corner,
         ``u+ + u- + v+ + v- + mu F_n`` (the square inscribed in Coulomb's cone: exact along the
         joint's u and v, sqrt(2) weak along a diagonal; the octagon, 7.6 % weak, made the programme
@@ -1250,7 +1270,7 @@ class JointModel:
             vals.append(np.ones(3))
         A_eq = sp.coo_matrix(
             (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(6 * self.nb, nvar)
-        ).tocsr()[keep_rows]
+        ).tocsr()
         A_ub = sp.csr_matrix(
             (
                 np.concatenate([np.full(C, self.material.friction), np.ones(4 * C)]),

@@ -608,9 +608,9 @@ def _feasible(h) -> bool | None:
     }
     primal = {
         "solver": "simplex",
-        "simplex_strategy": 4,
+        "simplex_strategy": 4,  # the primal simplex
         "simplex_iteration_limit": simplex_limit,
-    }  # the primal simplex
+    }
     for options in (ipm, primal):
         if status in answered:
             break

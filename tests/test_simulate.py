@@ -498,6 +498,36 @@ def test_pushover_tips_a_rigid_block_at_b_over_h(b, h):
     assert slower == pytest.approx(value, rel=0.02)  # the ramp is slow enough: halving it changes < 2 %
 
 
+def test_a_pushover_that_runs_away_under_its_own_weight_says_so_and_names_what_moved():
+    # a dry block overhanging its support by a quarter of its length (its centroid 0.1 m past the
+    # edge) cannot stand: the pushover's collapse is read at the ramp's start, and the summary says
+    # that the weight, not the load, did it, naming the block; one that stands gets no such note
+    from calib_masonry.simulation.run import simulate_scene
+
+    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6)
+
+    def scene(offset):
+        base = replace(_block((0.4, 0.4, 0.4), (0.0, 0.0, 0.2)), name="base")
+        top = replace(_block((0.4, 0.4, 0.4), (offset, 0.0, 0.6)), name="top")
+        lo, hi = max(-0.2, offset - 0.2), min(0.2, offset + 0.2)
+        bonds = (
+            Bond.rectangle(0, -1, (0, 0, 0), (0, 0, -1.0), (1.0, 0, 0), 0.4, 0.4),
+            Bond.rectangle(0, 1, ((lo + hi) / 2, 0, 0.4), (0, 0, 1.0), (1.0, 0, 0), hi - lo, 0.4),
+        )
+        p = Pushover(rate_g_per_s=0.01, max_g=0.6, direction_deg=90.0)
+        return Scene(
+            bodies=(base, top), bonds=bonds, material=dry, pushover=p, duration_s=p.duration_s, solver=_solver(0.3)
+        )
+
+    falls = simulate_scene(scene(0.3), "overhang", progress=False, blend_path=None).summary
+    assert falls["collapse_multiplier_g"] is not None and falls["collapse_multiplier_g"] <= 0.01
+    assert falls["pushover"]["ran_away_first"][0] == "top"
+    assert "own weight" in falls["pushover"]["note"]
+    stands = simulate_scene(scene(0.1), "set back", progress=False, blend_path=None).summary
+    assert stands["collapse_multiplier_g"] > 0.2  # the pair tips about the base's toe at 0.5 g, or slides
+    assert "ran_away_first" not in stands["pushover"]
+
+
 def _panel(courses, per_course, length, height, thickness):
     """A dry-stacked running-bond panel: odd courses start with a half brick."""
     blocks = []

@@ -542,6 +542,8 @@ def _cmd_simulate(args) -> int:
             + (f"{value:.3f} g" if value is not None else f"above {args.pushover_max:g} g (no collapse)")
             + f"; {s['bonds_broken_fraction']:.1%} of bonds broken; stepping {s['seconds']['stepping']:.1f} s -> {args.out}"
         )
+        if "ran_away_first" in s["pushover"]:
+            print(f"  note: {s['pushover']['note']}")
         return 0
     print(_quake_line(s, args.out))
     return 0

@@ -41,6 +41,8 @@ __all__ = [
     "structure_height",
     "pushover_stop",
     "collapse_multiplier",
+    "ran_away_first",
+    "AT_START_S",
     "plot_pushover",
     "ONSET_DRIFT",
     "runaway_m",
@@ -153,6 +155,17 @@ def _watched(scene: Scene) -> slice:
     return slice(None)
 
 
+def _moved(scene: Scene, out: RunOutput, m: Metrics) -> np.ndarray:
+    """``(F, W, 3)`` the watched bricks' (:func:`_watched`) displacements relative to the ground
+    plate, from the end of the warm-up."""
+    start, watched = m.start_frame, _watched(scene)
+    return (
+        out.positions[start:, watched]
+        - out.positions[start, watched]
+        - (out.plate[start:] - out.plate[start])[:, None, :]
+    )
+
+
 def pushover_stop(scene: Scene, settle_s: float = 1.0):
     """A ``stop`` for :func:`~calib_masonry.simulation.loop.run`: true ``settle_s`` after the largest
     brick displacement (from the end of the warm-up, relative to the plate; a shear test's beam's)
@@ -184,12 +197,7 @@ def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float
     start = m.start_frame
     t = out.time[start:] - out.time[start]
     lam = p.lateral_g(t)
-    watched = _watched(scene)
-    rel = (
-        out.positions[start:, watched]
-        - out.positions[start, watched]
-        - (out.plate[start:] - out.plate[start])[:, None, :]
-    )
+    rel = _moved(scene, out, m)
     dmax = np.linalg.norm(rel, axis=2).max(axis=1)
     height = structure_height(scene)
     limit = runaway_m(scene)
@@ -211,6 +219,24 @@ def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float
         at_free = float(lam[before[-1]]) if before.size else 0.0
         value = at_free if value is None else min(value, at_free)
     return value, lam, m.roof_drift_m[start:]
+
+
+#: A pushover whose collapse is read within this much of its ramp (s) ran away under its own weight:
+#: the lateral load had not yet reached anything a structure that stands could not carry
+AT_START_S = 1.0
+
+
+def ran_away_first(scene: Scene, out: RunOutput, m: Metrics, at_most: int = 5) -> list[str]:
+    """The names of the (at most ``at_most``) bricks that had moved furthest when the pushover's
+    displacement first ran away (:func:`runaway_m`), furthest first; empty if nothing ran away."""
+    dist = np.linalg.norm(_moved(scene, out, m), axis=2)
+    frames = np.flatnonzero(dist.max(axis=1) > runaway_m(scene))
+    if not frames.size:
+        return []
+    names = [b.name for b in scene.bodies][_watched(scene)]
+    d = dist[frames[0]]
+    order = np.argsort(-d, kind="stable")
+    return [names[k] for k in order[:at_most] if d[k] > runaway_m(scene)]
 
 
 def _beam_set_free(scene: Scene, out: RunOutput) -> float | None:

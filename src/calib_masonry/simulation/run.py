@@ -399,7 +399,7 @@ def _spread(values: np.ndarray) -> dict | None:
 
 
 def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) -> dict:
-    from .results import ONSET_DRIFT, failure_mode_counts, mechanism
+    from .results import AT_START_S, ONSET_DRIFT, failure_mode_counts, mechanism, ran_away_first
 
     s = scene.solver
     k = scene_joint_stiffness(scene)
@@ -524,6 +524,14 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
             summary["pushover"]["note"] = (
                 f"no collapse up to {scene.pushover.max_g:g} g: the collapse multiplier is above it; "
                 "raise --pushover-max to find it"
+            )
+        elif curve[0] <= scene.pushover.rate_g_per_s * AT_START_S and "shear_test" not in scene.notes:
+            first = ran_away_first(scene, out, m)
+            summary["pushover"]["ran_away_first"] = first
+            summary["pushover"]["note"] = (
+                f"it ran away in the ramp's first {AT_START_S:g} s, under its own weight rather than the load: "
+                f"{', '.join(first)} moved first (a unit over an opening with no lintel, or stones that cannot "
+                "bear on one another as traced: see build's notes and joints.max_utilisation_at_end_of_warmup)"
             )
         summary["collapse_multiplier_g"] = curve[0]
         summary["ground_motion"] = None

@@ -313,6 +313,29 @@ def test_a_dry_wall_with_a_door_and_a_window_under_lintels_matches_limit_analysi
     assert out.summary["collapse_multiplier_g"] == pytest.approx(expected, rel=0.10)
 
 
+@pytest.mark.slow
+def test_a_dry_stone_wall_whose_stones_jam_in_bullet_collapses_where_the_joint_model_has_no_equilibrium(make_scenario):
+    # a synthetic coursed wall of 15 irregular stones (2.4 x 2.0 m, 0.4 m thick), dry, pushed along
+    # -X: the joint model let its stones go at 0.366 g (the non-associative programme: 0.362 g), but
+    # in Bullet they moved 7 mm, jammed, and ran away only at 0.502 g, or at 0.534 g with twice the
+    # substeps and iterations: the multiplier followed Bullet's settings. It is now read where the
+    # joint model let a stone go, at the default settings and at twice them alike.
+    from calib_masonry.simulation.run import simulate_scene
+
+    g = _structure_geometry(make_scenario([(2.4, 2.0, 0.0)], layout="stones", closed=False, t=0.4, seed=31))
+    p = Pushover(rate_g_per_s=0.01, max_g=1.0, direction_deg=180.0)
+    scene = scene_from_geometry(g, duration_s=p.duration_s, material=DRY, foundation=True, pushover=p)
+    expected = limit_load(scene, DRY.friction, (-1.0, 0.0, 0.0), associative=False)
+    assert expected is not None and expected < 0.8 * limit_load(scene, DRY.friction, (-1.0, 0.0, 0.0))
+    values = []
+    for k in (1, 2):
+        solver = replace(scene.solver, substeps=k * scene.solver.substeps, iterations=k * scene.solver.iterations)
+        out = simulate_scene(replace(scene, solver=solver), "stones", progress=False, blend_path=None)
+        values.append(out.summary["collapse_multiplier_g"])
+    assert values[0] == pytest.approx(expected, rel=0.10)
+    assert values[1] == pytest.approx(values[0], abs=0.005)
+
+
 def _one_stone_geometry(tmp_path, length=1.0, height=1.0, t=0.2):
     """One rectangular stone drawn as a mask, built through the pipeline."""
     from PIL import Image

@@ -191,8 +191,8 @@ def pushover_stop(scene: Scene, settle_s: float = 1.0):
 def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float | None, np.ndarray, np.ndarray]:
     """The pushover's collapse multiplier (g), or None if the structure (a shear test's loading beam)
     did not run away within the ramp; and the lateral acceleration (g) and roof displacement (m) at every frame from the
-    end of the warm-up (the pushover curve). A shear test's multiplier is at most the last load
-    before the joint model set its beam free (:func:`_beam_set_free`)."""
+    end of the warm-up (the pushover curve). The multiplier is at most the last load before the
+    joint model set a brick (a shear test's beam) free (:func:`_set_free`)."""
     p = scene.pushover
     start = m.start_frame
     t = out.time[start:] - out.time[start]
@@ -209,12 +209,16 @@ def collapse_multiplier(scene: Scene, out: RunOutput, m: Metrics) -> tuple[float
     if run_away.size:
         calm = np.flatnonzero(speed[: run_away[0]] <= ONSET_DRIFT * height)
         value = float(lam[calm[-1]]) if calm.size else 0.0
-    free = _beam_set_free(scene, out)
+    # a shear test's beam carries the load only while a held joint ties it to the ground: the
+    # joint model then found no equilibrium of what carries it. Set free on the stones below it
+    # that still hold (fixed in Bullet), it would slide on them at mu instead of falling with the
+    # wall (WI1.175: 107.7 kN, the rigid rocking bound 68.9 kN). Likewise any brick of a pushover:
+    # set free, it moves on Bullet's contacts, whose finite motion can jam it (a dry stone wall
+    # pushed along -X: let go at 0.366 g where the non-associative programme gives 0.362 g, it
+    # moved 7 mm, stopped, and ran away at 0.502 g, or 0.534 g at twice Bullet's substeps and
+    # iterations): the mechanism is the joint model's, read where it has no equilibrium
+    free = _set_free(scene, out)
     if free is not None:
-        # a shear test's beam carries the load only while a held joint ties it to the ground: the
-        # joint model then found no equilibrium of what carries it. Set free on the stones below it
-        # that still hold (fixed in Bullet), it would slide on them at mu instead of falling with the
-        # wall (WI1.175: 107.7 kN, the rigid rocking bound 68.9 kN)
         before = np.flatnonzero(t < free)
         at_free = float(lam[before[-1]]) if before.size else 0.0
         value = at_free if value is None else min(value, at_free)
@@ -240,16 +244,21 @@ def ran_away_first(scene: Scene, out: RunOutput, m: Metrics, at_most: int = 5) -
     return [names[k] for k in order[:at_most] if d[k] > runaway_m(scene)]
 
 
-def _beam_set_free(scene: Scene, out: RunOutput) -> float | None:
-    """When (s, from the end of the warm-up) no held joint tied a shear test's loading beam to the
-    ground any more: the joint model let go the last chain of them. None for another run, or if
-    the beam stayed held."""
-    if "shear_test" not in scene.notes or out.bond_release_time_s is None:
-        return None
-    beam = scene.notes["shear_test"]["beam"]
+def _set_free(scene: Scene, out: RunOutput) -> float | None:
+    """When (s, from the end of the warm-up) the joint model first let go joints that left a watched
+    body (:func:`_watched`: every brick, a shear test's beam), tied to the ground by held joints
+    before, tied by none: it found no equilibrium with them. None if it never did (or nothing was
+    tied: a structure on dry contacts alone)."""
     released = out.bond_release_time_s
+    if released is None or not scene.bonds:
+        return None
+    watched = np.zeros(len(scene.bodies), dtype=bool)
+    watched[_watched(scene)] = True
+    tied = grounded_bodies(scene.bonds, len(scene.bodies)) & watched
+    if not tied.any():
+        return None
     for t in np.unique(released[np.isfinite(released)]):
-        if not grounded_bodies(scene.bonds, len(scene.bodies), ~(released <= t))[beam]:
+        if (tied & ~grounded_bodies(scene.bonds, len(scene.bodies), ~(released <= t))).any():
             return float(t)
     return None
 

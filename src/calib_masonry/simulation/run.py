@@ -529,8 +529,9 @@ def _summary(scene: Scene, out, m, curve, name: str, shear: dict | None = None) 
             first = ran_away_first(scene, out, m)
             summary["pushover"]["ran_away_first"] = first
             summary["pushover"]["note"] = (
-                f"it ran away in the ramp's first {AT_START_S:g} s, under its own weight rather than the load: "
-                f"{', '.join(first)} moved first (a unit over an opening with no lintel, or stones that cannot "
+                f"it ran away in the ramp's first {AT_START_S:g} s, under its own weight rather than the load"
+                + (f": {', '.join(first)} moved first" if first else "")
+                + " (a unit over an opening with no lintel, or stones that cannot "
                 "bear on one another as traced: see build's notes and joints.max_utilisation_at_end_of_warmup)"
             )
         summary["collapse_multiplier_g"] = curve[0]

@@ -639,9 +639,10 @@ def test_a_dry_toe_crushes_at_the_masonrys_strength_and_the_block_tips_sooner():
 
 
 def test_the_static_programme_answers_each_question_as_if_asked_first():
-    # the programme is kept between questions (HiGHS starts from its last answer); a dry column of three blocks tips as a whole at lam = b / h = 0.444: loads up and
-    # down across it, friction capacities that change, and a change of the intact joints between,
-    # each answered as a model asked nothing before answers it
+    # the programme is kept between questions (HiGHS starts from its last answer); a dry column of
+    # three blocks tips as a whole at lam = b / h = 0.444: loads up and down across it, friction
+    # capacities that change, and a change of the intact joints between, each answered as a model
+    # asked nothing before answers it
     dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6)
     sc = _column(3, material=dry)
     jc, kc = np.nonzero(JointModel(sc).corner_mask)

@@ -235,13 +235,14 @@ def ran_away_first(scene: Scene, out: RunOutput, m: Metrics, at_most: int = 5) -
     """The names of the (at most ``at_most``) bricks that had moved furthest when the pushover's
     displacement first ran away (:func:`runaway_m`), furthest first; empty if nothing ran away."""
     dist = np.linalg.norm(_moved(scene, out, m), axis=2)
-    frames = np.flatnonzero(dist.max(axis=1) > runaway_m(scene))
+    limit = runaway_m(scene)
+    frames = np.flatnonzero(dist.max(axis=1) > limit)
     if not frames.size:
         return []
     names = [b.name for b in scene.bodies][_watched(scene)]
     d = dist[frames[0]]
     order = np.argsort(-d, kind="stable")
-    return [names[k] for k in order[:at_most] if d[k] > runaway_m(scene)]
+    return [names[k] for k in order[:at_most] if d[k] > limit]
 
 
 def _set_free(scene: Scene, out: RunOutput) -> float | None:

@@ -273,7 +273,8 @@ def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
     """How the structure failed, from the joints that let go where the collapse has begun: the
     first frame after the warm-up at which a brick has moved by the run-away displacement
     (:func:`runaway_m`; under a ground motion in the verdict's motion of the freed pieces, as the
-    metrics read it). The joints taking part are those Bullet let go by then (the joint model
+    metrics read it), or in a pushover where the joint model set a brick free before that
+    (:func:`_set_free`). The joints taking part are those Bullet let go by then (the joint model
     found no equilibrium with them); each opened (it cracked in tension) or slid (in shear or
     crushing). Without any (a run the joint model did not watch), they are those whose two sides moved
     apart by at least :data:`MECHANISM_SHARE` of the largest such motion (and 1 mm), opened where
@@ -292,6 +293,11 @@ def mechanism(scene: Scene, out: RunOutput, m: Metrics) -> dict | None:
         return None
     f = start + int(moved[0])
     t_f = float(out.time[f] - out.time[start])
+    if scene.pushover is not None:
+        # where the joint model let a brick go, as the multiplier is read (:func:`collapse_multiplier`):
+        # a freed stone that jams in Bullet runs away later by as much as its settings say
+        free = _set_free(scene, out)
+        t_f = t_f if free is None else min(t_f, free)
     p = np.array([bd.location for bd in scene.bonds])
     n = np.array([bd.normal for bd in scene.bonds])
     released = out.bond_release_time_s

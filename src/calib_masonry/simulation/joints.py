@@ -84,7 +84,9 @@ equilibrium at all (:meth:`JointModel.has_equilibrium`, with each contact's fric
 both Coulomb's cone and ``mu N`` of the iteration's least out-of-balance iterate: one step of
 Gilbert, Casapulla & Ahmed's non-associative programme, from the model's own state); if it has,
 the iteration failed and not the structure, and the solve ends at that iterate instead of where
-its last steps threw it (a fallback step is taken whatever it does: on a dry stone wall, WI2.175,
+its last steps threw it; if it has none even with Coulomb's cone alone, the load is beyond the most
+the joints can carry and the solve is a mechanism (:attr:`JointModel.no_equilibrium`: the crack
+rounds end and the cracked joints are let go) however little its iterate moved (a fallback step is taken whatever it does: on a dry stone wall, WI2.175,
 kilometres and 1e11 N out of balance at 0.10 g, read as the collapse, where the programme says
 0.23 g; with the check its pushover collapses at 0.232-0.234 g at three load rates and three
 tolerances, experiments/dry_pushover_lp.py). A structure whose cracked joints leave a mechanism has no
@@ -691,6 +693,11 @@ class JointModel:
         # of those, the ones whose load the static programme found an equilibrium for (ended at
         # their least out-of-balance iterate: ``settings.check_equilibrium``)
         self.stalled_in_equilibrium = 0
+        # and those whose load has no equilibrium on its joints and contacts even with Coulomb's
+        # cone alone (beyond the static programme's largest load: a collapse under any flow rule);
+        # ``no_equilibrium`` says whether the last solve was one
+        self.without_equilibrium = 0
+        self.no_equilibrium = False
         # questions to the static programme that none of its solvers answered (taken for no)
         self.unanswered = 0
         self.n_all = len(bonds)
@@ -1070,6 +1077,7 @@ class JointModel:
         without convergence when ``settings.stall_iter`` (ten) iterations have neither halved the
         out-of-balance force nor grown the motion tenfold (a mechanism's run-away)."""
         self.converged = True
+        self.no_equilibrium = False
         self.solves += 1
         if jc.size == 0:
             return self._solve(intact, np.zeros((self.n_all, self.outline.shape[1]), bool), rhs)
@@ -1145,6 +1153,7 @@ class JointModel:
                     best = (off, U)
         if not self.converged:
             self.unconverged_solves += 1
+            unanswered = self.unanswered  # a question none of HiGHS's solvers answered is no collapse
             if check and self.has_equilibrium(
                 intact, jc, kc, rhs, free_bodies, self._friction_capacity(jc, kc, P @ best[1])
             ):
@@ -1154,6 +1163,13 @@ class JointModel:
                 self.stalled_in_equilibrium += 1
                 U = best[1]
                 r = self._residual(K0, P, jc, kc, U, rhs)[0]
+            elif check and not self.has_equilibrium(intact, jc, kc, rhs, free_bodies) and unanswered == self.unanswered:
+                # nor with the cone alone: the load is beyond the most the joints and contacts can
+                # carry, a collapse whatever the flow rule, though the iterate may have moved by
+                # micrometres (a dry stone wall's 400 iterations ended so from 0.129 g, its static
+                # programme's load, and nothing was let go until 0.138 g): a mechanism (:meth:`crack`)
+                self.no_equilibrium = True
+                self.without_equilibrium += 1
             self.worst_unconverged = max(self.worst_unconverged, float(np.max(np.abs(r) / limit)))
         return U
 
@@ -1425,9 +1441,9 @@ class JointModel:
         self.uncracked_utilisation = np.where(intact, state.utilisation, 0.0)
         kept = state
         for rounds in range(self.settings.max_rounds + 1):
-            if (
-                runaway_m is not None
-                and self._motion(self._last[2], np.flatnonzero(self._linked(intact, closed) & ~self._pad(intact))).max(
+            if runaway_m is not None and (
+                self.no_equilibrium
+                or self._motion(self._last[2], np.flatnonzero(self._linked(intact, closed) & ~self._pad(intact))).max(
                     initial=0.0
                 )
                 > runaway_m

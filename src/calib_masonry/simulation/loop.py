@@ -582,6 +582,7 @@ def _contact_solves(tracker) -> dict | None:
         "unconverged": int(m.unconverged_solves),
         "worst_unconverged_in_tolerances": round(float(m.worst_unconverged), 3) if m.unconverged_solves else None,
         "stalled_in_equilibrium": int(m.stalled_in_equilibrium),
+        "without_equilibrium": int(m.without_equilibrium),
         "equilibrium_questions_unanswered": int(m.unanswered),
     }
 

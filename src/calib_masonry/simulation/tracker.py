@@ -378,7 +378,12 @@ class CrackTracker:
             self.break_mode[new] = modes
             self.max_utilisation = float(np.where(intact & self.intact, state.utilisation, 0.0).max(initial=0.0))
             candidates = np.flatnonzero(~self.intact & self.held & ~frozen)
-            release = candidates[self.model.corner_motion(candidates) > self.release_m]
+            if self.model.no_equilibrium:
+                # the load has no equilibrium even with every contact at Coulomb's cone: the cracked
+                # joints cannot hold what they hold, whatever the iterate's small motion says
+                release = candidates
+            else:
+                release = candidates[self.model.corner_motion(candidates) > self.release_m]
             if not release.size:
                 break
             released.append(release)

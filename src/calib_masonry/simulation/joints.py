@@ -84,12 +84,14 @@ equilibrium at all (:meth:`JointModel.has_equilibrium`, with each contact's fric
 both Coulomb's cone and ``mu N`` of the iteration's least out-of-balance iterate: one step of
 Gilbert, Casapulla & Ahmed's non-associative programme, from the model's own state); if it has,
 the iteration failed and not the structure, and the solve ends at that iterate instead of where
-its last steps threw it; if it has none even with Coulomb's cone alone, the load is beyond the most
-the joints can carry and the solve is a mechanism (:attr:`JointModel.no_equilibrium`: the crack
-rounds end and the cracked joints are let go) however little its iterate moved (a fallback step is taken whatever it does: on a dry stone wall, WI2.175,
+its last steps threw it (a fallback step is taken whatever it does: on a dry stone wall, WI2.175,
 kilometres and 1e11 N out of balance at 0.10 g, read as the collapse, where the programme says
 0.23 g; with the check its pushover collapses at 0.232-0.234 g at three load rates and three
-tolerances, experiments/dry_pushover_lp.py). A structure whose cracked joints leave a mechanism has no
+tolerances, experiments/dry_pushover_lp.py). If it has none even with Coulomb's cone alone, the
+load is beyond the most the joints can carry, and the solve is a mechanism however little its
+iterate moved (:attr:`JointModel.no_equilibrium`: the crack rounds end and the cracked joints are
+let go; a dry stone wall's 400-iteration solves ended micrometres from their start above its
+static programme's load, and it stood to 1.06 times that load, docs/stone_walls.md). A structure whose cracked joints leave a mechanism has no
 such equilibrium: the iteration then runs away along the mechanism (held only by the weak springs
 below), and the joints that move by more than
 ``release_m`` (1 mm; an equilibrium moves them by microns) are the ones Bullet lets go (see

@@ -91,9 +91,9 @@ tolerances, experiments/dry_pushover_lp.py). If it has none even with Coulomb's 
 load is beyond the most the joints can carry, and the solve is a mechanism however little its
 iterate moved (:attr:`JointModel.no_equilibrium`: the crack rounds end and the cracked joints are
 let go; a dry stone wall's 400-iteration solves ended micrometres from their start above its
-static programme's load, and it stood to 1.06 times that load, docs/stone_walls.md). A structure whose cracked joints leave a mechanism has no
-such equilibrium: the iteration then runs away along the mechanism (held only by the weak springs
-below), and the joints that move by more than
+static programme's load, and it stood to 1.06 times that load, docs/stone_walls.md). A structure
+whose cracked joints leave a mechanism has no such equilibrium: the iteration then runs away along
+the mechanism (held only by the weak springs below), and the joints that move by more than
 ``release_m`` (1 mm; an equilibrium moves them by microns) are the ones Bullet lets go (see
 :class:`CrackTracker`; a pushover or a shear test, whose load rises slowly from one equilibrium to
 the next, lets go at the verdict's run-away displacement and iterates to convergence instead:

@@ -697,6 +697,40 @@ def test_a_stalled_solve_with_an_equilibrium_ends_at_its_least_out_of_balance_it
     assert jm.stalled_in_equilibrium == 0
 
 
+def test_a_load_without_equilibrium_is_a_mechanism_even_where_the_capped_question_went_unanswered(monkeypatch):
+    # a block on a dry footing beyond sliding, solved with an iteration cut short: the capped
+    # question (friction within mu N of the iterate) and the cone's both say no, a mechanism. Where
+    # no solver answered the capped question, the cone's definite no still is one (the count of
+    # unanswered questions taken before the first question hid it); an unanswered cone's is not
+    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6)
+    sc = Scene(
+        bodies=(_block("b", (0.4, 0.3, 0.6), (0, 0, 0.3)),),
+        bonds=(Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, 0.4, 0.3),),
+        material=dry,
+    )
+    g = np.array([0.8 * G, 0.0, -G])
+    real = JointModel.has_equilibrium
+
+    def solve(unanswered_when):
+        def ask(self, *args, **kwargs):
+            capped = len(args) > 5 or kwargs.get("shear_capacity") is not None
+            if unanswered_when(capped):
+                self.unanswered += 1
+                return False
+            return real(self, *args, **kwargs)
+
+        with monkeypatch.context() as m:
+            m.setattr(JointModel, "has_equilibrium", ask)
+            jm = JointModel(sc, settings=ContactSettings(max_iter=2, check_equilibrium=True))
+            jm.solve(g, np.zeros(1, bool))
+        assert not jm.converged
+        return jm.no_equilibrium, jm.without_equilibrium, jm.unanswered
+
+    assert solve(lambda capped: False) == (True, 1, 0)
+    assert solve(lambda capped: capped) == (True, 1, 1)
+    assert solve(lambda capped: not capped) == (False, 0, 1)
+
+
 def test_a_question_the_dual_simplex_leaves_open_is_answered_by_the_interior_point_or_the_primal(monkeypatch):
     # the dual simplex from the last basis can run without end on these programmes (a laboratory
     # wall's shear test sat in one question for 20 minutes): it gets a number of iterations, then

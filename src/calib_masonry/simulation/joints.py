@@ -1155,7 +1155,6 @@ class JointModel:
                     best = (off, U)
         if not self.converged:
             self.unconverged_solves += 1
-            unanswered = self.unanswered  # a question none of HiGHS's solvers answered is no collapse
             if check and self.has_equilibrium(
                 intact, jc, kc, rhs, free_bodies, self._friction_capacity(jc, kc, P @ best[1])
             ):
@@ -1165,7 +1164,7 @@ class JointModel:
                 self.stalled_in_equilibrium += 1
                 U = best[1]
                 r = self._residual(K0, P, jc, kc, U, rhs)[0]
-            elif check and not self.has_equilibrium(intact, jc, kc, rhs, free_bodies) and unanswered == self.unanswered:
+            elif check and self._definitely_without_equilibrium(intact, jc, kc, rhs, free_bodies):
                 # nor with the cone alone: the load is beyond the most the joints and contacts can
                 # carry, a collapse whatever the flow rule, though the iterate may have moved by
                 # micrometres (a dry stone wall's 400 iterations ended so from 0.129 g, its static
@@ -1174,6 +1173,12 @@ class JointModel:
                 self.without_equilibrium += 1
             self.worst_unconverged = max(self.worst_unconverged, float(np.max(np.abs(r) / limit)))
         return U
+
+    def _definitely_without_equilibrium(self, intact, jc, kc, rhs, free_bodies) -> bool:
+        """Whether :meth:`has_equilibrium`, asked with Coulomb's cone alone, answers no; a question
+        none of HiGHS's solvers answered is no collapse (whatever the capped question before it got)."""
+        unanswered = self.unanswered
+        return not self.has_equilibrium(intact, jc, kc, rhs, free_bodies) and unanswered == self.unanswered
 
     def _friction_capacity(self, jc, kc, gap: np.ndarray) -> np.ndarray:
         """``(C,)`` Coulomb's ``mu N`` of the contact corners ``jc, kc`` at their gaps ``gap`` (3 C,)."""

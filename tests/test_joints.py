@@ -674,16 +674,21 @@ def test_the_static_programme_answers_each_question_as_if_asked_first():
     assert len(models) == 1
 
 
-def test_a_stalled_solve_with_an_equilibrium_ends_at_its_least_out_of_balance_iterate():
-    # a block on a dry footing under a load it can carry, solved with an iteration cut short (two
-    # steps, no convergence): with the check it ends at its best iterate and counts the stall;
-    # without, where it stopped
+def _block_on_a_dry_footing() -> Scene:
+    """A 0.4 x 0.3 x 0.6 m block on a dry footing (friction 0.6), its one joint a rectangle."""
     dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6)
-    sc = Scene(
+    return Scene(
         bodies=(_block("b", (0.4, 0.3, 0.6), (0, 0, 0.3)),),
         bonds=(Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, 0.4, 0.3),),
         material=dry,
     )
+
+
+def test_a_stalled_solve_with_an_equilibrium_ends_at_its_least_out_of_balance_iterate():
+    # a block on a dry footing under a load it can carry, solved with an iteration cut short (two
+    # steps, no convergence): with the check it ends at its best iterate and counts the stall;
+    # without, where it stopped
+    sc = _block_on_a_dry_footing()
     g = np.array([0.3 * G, 0.0, -G])
     for check in (True, False):
         jm = JointModel(sc, settings=ContactSettings(max_iter=2, check_equilibrium=check))
@@ -702,12 +707,7 @@ def test_a_load_without_equilibrium_is_a_mechanism_even_where_the_capped_questio
     # question (friction within mu N of the iterate) and the cone's both say no, a mechanism. Where
     # no solver answered the capped question, the cone's definite no still is one (the count of
     # unanswered questions taken before the first question hid it); an unanswered cone's is not
-    dry = Material(tensile_strength=0.0, shear_strength=0.0, friction=0.6)
-    sc = Scene(
-        bodies=(_block("b", (0.4, 0.3, 0.6), (0, 0, 0.3)),),
-        bonds=(Bond.rectangle(0, -1, (0, 0, 0), DOWN, X, 0.4, 0.3),),
-        material=dry,
-    )
+    sc = _block_on_a_dry_footing()
     g = np.array([0.8 * G, 0.0, -G])
     real = JointModel.has_equilibrium
 

@@ -420,12 +420,11 @@ def _corner_blocks(Lc: np.ndarray, TL: np.ndarray) -> np.ndarray:
     ``Lc`` ``(C, 3, 12)`` and ``TL`` = ``T Lc`` ``(C, 3, 12)``: each corner's 12 x 12 block of the
     tangent, its lower triangle. Summed over the corner's three directions in the order numpy's
     ``einsum("cap,cap->cp")`` took (0, 2, then 1): the same values bit for bit, in 0.7 of its
-    time (the contact iteration's steps and cascades follow the last digits)."""
-    R, Q = _Tangent.ROW, _Tangent.COL
-    blocks = Lc[:, 0, R] * TL[:, 0, Q]
-    blocks += Lc[:, 2, R] * TL[:, 2, Q]
-    blocks += Lc[:, 1, R] * TL[:, 1, Q]
-    return blocks
+    time (the contact iteration's steps and cascades follow the last digits); compiled
+    (:mod:`._joint_kernels`), the same sum in a fifth of numpy's time again."""
+    from ._joint_kernels import corner_blocks
+
+    return corner_blocks(Lc, TL, _Tangent.ROW, _Tangent.COL)
 
 
 class _Tangent:

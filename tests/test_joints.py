@@ -527,6 +527,77 @@ def test_a_let_go_block_does_not_change_how_far_a_step_may_move_the_others(later
     assert U[3, :3] == pytest.approx(g / settings.eps_per_s2, rel=1e-12)
 
 
+def _contact_forces_in_numpy(k, s, gap, mu, d, h, cap=None):
+    """The contact law as numpy wrote it until 2026-12-07 (JointModel._contact_forces), the
+    compiled kernel's oracle."""
+
+    def _smooth_cap(x, h):
+        lo = 1.0 - h
+        xc = np.clip(x, lo, 1.0 + h)
+        f = np.where(x <= lo, x, xc - (xc - lo) ** 2 / (4.0 * h))
+        df = np.where(x <= lo, 1.0, 1.0 - (xc - lo) / (2.0 * h))
+        return f, df
+
+    def _crushed(N, dN, cap, h):
+        f, df = _smooth_cap(N / cap, h)
+        return cap * f, dN * df
+
+    x = -gap[:, 2] / d
+    N = k[:, 2] * d * np.logaddexp(0.0, x)
+    dN = -k[:, 2] * 0.5 * (1.0 + np.tanh(0.5 * x))  # dN / d d_n
+    if cap is not None:
+        N, dN = _crushed(N, dN, cap, h)
+    trial = k[:, :2] * (gap[:, :2] - s)
+    L = mu * N
+    a = np.sqrt((trial**2).sum(axis=1))  # |T*|
+    live = (a > 0.0) | (L > 0.0)  # else the corner is open and unloaded: no force, no stiffness
+    # the shear force's size L f(a / L): f(x) = x (sticking, T = T* exactly) up to 1 - h, 1
+    # (sliding at Coulomb's limit) from 1 + h, a parabola between (continuous slope)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        xr = np.where(L > 0.0, a / np.where(L > 0.0, L, 1.0), np.inf)
+    lo = 1.0 - h
+    f, df = _smooth_cap(xr, h)
+    # f(x) / x: 1 while sticking (and at a = 0)
+    ratio = np.where(xr <= lo, 1.0, L * f / np.where(a > 0.0, a, 1.0))
+    ratio = np.where(live, ratio, 0.0)
+    e = np.where(a[:, None] > 0.0, trial / np.where(a > 0.0, a, 1.0)[:, None], 0.0)  # unit T*
+    F = np.empty_like(gap)
+    F[:, :2] = ratio[:, None] * trial
+    F[:, 2] = -N
+    T = np.zeros((len(gap), 3, 3))
+    ee = e[:, :, None] * e[:, None, :]
+    T[:, :2, :2] = (ratio[:, None, None] * (np.eye(2) - ee) + np.where(live, df, 0.0)[:, None, None] * ee) * k[
+        :, None, :2
+    ]
+    # through L = mu N: d(L f(a / L)) / dL = f - x f' (0 while sticking)
+    dl = np.where(live, f - np.where(df > 0.0, xr, 0.0) * df, 0.0)
+    T[:, :2, 2] = e * (dl * mu * dN)[:, None]
+    T[:, 2, 2] = -dN
+    return F, T
+
+
+def test_the_compiled_contact_law_gives_numpys_values_bit_for_bit():
+    # the contact law runs compiled corner by corner (simulation/_joint_kernels.py) for speed
+    # only: the cascades follow the last digits, so every force and tangent must be numpy's. Open,
+    # touching, sticking, sliding and crushed corners, and corners on the smoothing's kinks
+    from calib_masonry.simulation._joint_kernels import contact_forces
+
+    rng = np.random.default_rng(11)
+    d, h, mu = 1e-10, 0.05, 0.6
+    for C in (1, 5, 300, 4000):
+        k = rng.lognormal(20.0, 1.0, size=(C, 3))
+        gap = rng.normal(scale=1e-5, size=(C, 3)) * rng.choice([0.0, 1e-6, 1.0], size=(C, 3))
+        gap[: C // 3, 2] = rng.normal(scale=3e-10, size=C // 3)  # within the no-tension kink
+        s = rng.normal(scale=1e-5, size=(C, 2)) * rng.choice([0.0, 1.0], size=(C, 1))
+        s[C // 2 :] = gap[C // 2 :, :2]  # no shear displacement: the corner unloaded in shear
+        for cap in (None, rng.lognormal(8.0, 2.0, size=C)):
+            want = _contact_forces_in_numpy(k, s, gap, mu, d, h, cap)
+            th = np.tanh(0.5 * (-gap[:, 2] / d))
+            got = contact_forces(k, s, gap, th, mu, d, h, np.zeros(0) if cap is None else cap)
+            for w, g in zip(want, got):
+                np.testing.assert_array_equal(g, w)
+
+
 def test_the_kept_outline_constants_and_the_corner_blocks_change_no_bit():
     """The joint model keeps each outline's edges and farthest corner instead of computing them at
     every state, and sums the contact corners' blocks itself instead of through ``einsum``: both

@@ -31,3 +31,90 @@ def corner_blocks(Lc: np.ndarray, TL: np.ndarray, row: np.ndarray, col: np.ndarr
             v = v + Lc[c, 2, r] * TL[c, 2, q]
             out[c, p] = v + Lc[c, 1, r] * TL[c, 1, q]
     return out
+
+
+@njit(cache=True, nogil=True)
+def _logaddexp0(x: float) -> float:
+    """numpy's ``logaddexp(0, x)``, its branches and libm calls (numpy 1.26's ``npy_logaddexp``)."""
+    if x == 0.0:
+        return 0.6931471805599453  # 0 + ln 2
+    tmp = 0.0 - x
+    if tmp > 0:
+        return 0.0 + np.log1p(np.exp(-tmp))
+    if tmp <= 0:
+        return x + np.log1p(np.exp(tmp))
+    return tmp
+
+
+@njit(cache=True, nogil=True)
+def _smooth_cap(x: float, h: float) -> tuple[float, float]:
+    """``f(x)`` and ``f'(x)`` of the contacts' smoothed limit: ``x`` up to ``1 - h``, ``1`` from
+    ``1 + h`` and a parabola between (a continuous slope, for Newton's method): Coulomb's friction
+    and the masonry's crushing (perfectly plastic, no memory: a monotonic load's toe; under
+    reversals the crushed corner recovers, which a laboratory's cyclic test does not) both bound a
+    corner's force by it."""
+    lo = 1.0 - h
+    xc = min(max(x, lo), 1.0 + h)
+    if x <= lo:
+        return x, 1.0
+    w = xc - lo
+    return xc - w * w / (4.0 * h), 1.0 - w / (2.0 * h)
+
+
+@njit(cache=True, nogil=True)
+def contact_forces(
+    k: np.ndarray,
+    slip: np.ndarray,
+    gap: np.ndarray,
+    tanh_half_x: np.ndarray,
+    mu: float,
+    d: float,
+    h: float,
+    cap: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`~calib_masonry.simulation.joints.JointModel._contact_forces`' law, corner by corner:
+    the forces ``(C, 3)`` and tangents ``(C, 3, 3)`` of the corners of stiffness ``k`` ``(C, 3)``
+    and slip ``slip`` ``(C, 2)`` at their gaps ``gap`` ``(C, 3)``; ``tanh_half_x`` ``(C,)`` is
+    numpy's ``tanh(-gap_n / (2 d))`` (numpy's vector tanh differs from libm's in the last bit),
+    ``cap`` ``(C,)`` the crushing forces (empty: no crushing)."""
+    C = gap.shape[0]
+    F = np.empty((C, 3))
+    T = np.zeros((C, 3, 3))
+    crush = cap.shape[0] > 0
+    lo = 1.0 - h
+    for c in range(C):
+        x = -gap[c, 2] / d
+        N = k[c, 2] * d * _logaddexp0(x)
+        dN = -k[c, 2] * 0.5 * (1.0 + tanh_half_x[c])
+        if crush:
+            fc, dfc = _smooth_cap(N / cap[c], h)
+            N = cap[c] * fc
+            dN = dN * dfc
+        t0 = k[c, 0] * (gap[c, 0] - slip[c, 0])
+        t1 = k[c, 1] * (gap[c, 1] - slip[c, 1])
+        L = mu * N
+        a = np.sqrt(t0 * t0 + t1 * t1)
+        F[c, 2] = -N
+        T[c, 2, 2] = -dN
+        if not (a > 0.0 or L > 0.0):  # open and unloaded: no force, no stiffness
+            F[c, 0] = 0.0 * t0
+            F[c, 1] = 0.0 * t1
+            continue
+        xr = a / L if L > 0.0 else np.inf
+        f, df = _smooth_cap(xr, h)
+        ratio = 1.0 if xr <= lo else L * f / (a if a > 0.0 else 1.0)
+        e0 = t0 / a if a > 0.0 else 0.0
+        e1 = t1 / a if a > 0.0 else 0.0
+        F[c, 0] = ratio * t0
+        F[c, 1] = ratio * t1
+        e = (e0, e1)
+        for i in range(2):
+            for j in range(2):
+                ee = e[i] * e[j]
+                delta = 1.0 if i == j else 0.0
+                T[c, i, j] = (ratio * (delta - ee) + df * ee) * k[c, j]
+        dl = f - (xr if df > 0.0 else 0.0) * df
+        g = dl * mu * dN
+        T[c, 0, 2] = e0 * g
+        T[c, 1, 2] = e1 * g
+    return F, T

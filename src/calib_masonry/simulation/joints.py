@@ -68,7 +68,7 @@ of an elastic-plastic contact: no tension, and a shear force bounded by Coulomb'
 which the corner slides (UDEC's and 3DEC's contact law; the exact law and its smoothing are in
 :meth:`JointModel._contact_forces`); where the material gives the masonry's compressive strength
 (:attr:`Material.masonry_compressive_strength`), a compression bounded by it over the corner's share
-(:func:`_crushed`: a rocking wall's toe spreads inward, resolved to the joints' corners). A corner keeps the slip it has made from one load to the
+(:func:`._joint_kernels.contact_forces`: a rocking wall's toe spreads inward, resolved to the joints' corners). A corner keeps the slip it has made from one load to the
 next (:meth:`JointModel.commit`), so the model follows the load's history as friction does. The
 equilibrium of every body under these nonlinear contacts is found by a Newton iteration on the
 symmetric part of the tangent (the contacts' stiffness with their friction taken at a fixed normal
@@ -393,26 +393,6 @@ def _inside_outline(
     pos = np.where(real, cross >= -1e-12, True).all(axis=1)
     neg = np.where(real, cross <= 1e-12, True).all(axis=1)
     return pos | neg
-
-
-def _smooth_cap(x: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """``f(x)`` and ``f'(x)`` of the contacts' smoothed limit: ``x`` up to ``1 - h``, ``1`` from
-    ``1 + h`` and a parabola between (a continuous slope, for Newton's method): Coulomb's friction
-    and the masonry's crushing both bound a corner's force by it."""
-    lo = 1.0 - h
-    xc = np.clip(x, lo, 1.0 + h)
-    f = np.where(x <= lo, x, xc - (xc - lo) ** 2 / (4.0 * h))
-    df = np.where(x <= lo, 1.0, 1.0 - (xc - lo) / (2.0 * h))
-    return f, df
-
-
-def _crushed(N: np.ndarray, dN: np.ndarray, cap: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """A contact corner's normal force ``N`` (C,) and its slope ``dN`` (per metre of opening)
-    bounded by its crushing force ``cap`` (C,) N: elastic below ``(1 - h) cap``, ``cap`` from
-    ``(1 + h) cap`` (perfectly plastic, no memory: a monotonic load's toe; under reversals the
-    crushed corner recovers, which a laboratory's cyclic test does not)."""
-    f, df = _smooth_cap(N / cap, h)
-    return cap * f, dN * df
 
 
 def _corner_blocks(Lc: np.ndarray, TL: np.ndarray) -> np.ndarray:
@@ -943,42 +923,16 @@ class JointModel:
 
         Units: m, N, N/m."""
         k = self._corner_k[jc, kc]
-        mu = self.material.friction
         d = self.settings.smooth_m
-        s = self.slip[jc, kc]
-        x = -gap[:, 2] / d
-        N = k[:, 2] * d * np.logaddexp(0.0, x)
-        dN = -k[:, 2] * 0.5 * (1.0 + np.tanh(0.5 * x))  # dN / d d_n
-        if self.material.masonry_compressive_strength > 0:
-            N, dN = _crushed(N, dN, self._corner_cap[jc, kc], self.settings.slip_band)
-        trial = k[:, :2] * (gap[:, :2] - s)
-        L = mu * N
-        a = np.sqrt((trial**2).sum(axis=1))  # |T*|
-        live = (a > 0.0) | (L > 0.0)  # else the corner is open and unloaded: no force, no stiffness
-        # the shear force's size L f(a / L): f(x) = x (sticking, T = T* exactly) up to 1 - h, 1
-        # (sliding at Coulomb's limit) from 1 + h, a parabola between (continuous slope)
-        h = self.settings.slip_band
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            xr = np.where(L > 0.0, a / np.where(L > 0.0, L, 1.0), np.inf)
-        lo = 1.0 - h
-        f, df = _smooth_cap(xr, h)
-        # f(x) / x: 1 while sticking (and at a = 0)
-        ratio = np.where(xr <= lo, 1.0, L * f / np.where(a > 0.0, a, 1.0))
-        ratio = np.where(live, ratio, 0.0)
-        e = np.where(a[:, None] > 0.0, trial / np.where(a > 0.0, a, 1.0)[:, None], 0.0)  # unit T*
-        F = np.empty_like(gap)
-        F[:, :2] = ratio[:, None] * trial
-        F[:, 2] = -N
-        T = np.zeros((len(jc), 3, 3))
-        ee = e[:, :, None] * e[:, None, :]
-        T[:, :2, :2] = (ratio[:, None, None] * (np.eye(2) - ee) + np.where(live, df, 0.0)[:, None, None] * ee) * k[
-            :, None, :2
-        ]
-        # through L = mu N: d(L f(a / L)) / dL = f - x f' (0 while sticking)
-        dl = np.where(live, f - np.where(df > 0.0, xr, 0.0) * df, 0.0)
-        T[:, :2, 2] = e * (dl * mu * dN)[:, None]
-        T[:, 2, 2] = -dN
-        return F, T
+        # compiled corner by corner, the numpy expressions' arithmetic in their order
+        # (:mod:`._joint_kernels`; numpy's vector tanh, which libm's differs from, is taken here)
+        from ._joint_kernels import contact_forces
+
+        th = np.tanh(0.5 * (-gap[:, 2] / d))
+        cap = self._corner_cap[jc, kc] if self.material.masonry_compressive_strength > 0 else np.zeros(0)
+        return contact_forces(
+            k, self.slip[jc, kc], np.ascontiguousarray(gap), th, self.material.friction, d, self.settings.slip_band, cap
+        )
 
     def _corner_relative(self, jc, kc, U: np.ndarray) -> np.ndarray:
         """The relative displacement ``(C, 3)`` (u, v, n in the joint frame; ``d_n > 0`` opens) of

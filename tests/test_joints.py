@@ -738,11 +738,12 @@ def test_the_static_programme_answers_each_question_as_if_asked_first():
         fresh = JointModel(sc).has_equilibrium(intact, jc[pick], kc[pick], load, free, shear_capacity=caps)
         assert got == fresh, (intact, lam, c)
         answers.append(got)
-        models.add(id(kept._programme[1]))
+        models.add(id(kept._programme[2]["cone" if c is None else "capped"]))
     assert answers == [True, False, True, False, True, False, True] + [False, True, True, False] + [True, True]
-    # one HiGHS model answered them all, the change of the intact joints included (its matrix
-    # holds every corner: each question starts from the last one's basis)
-    assert len(models) == 1
+    # two HiGHS models answered them all, one with friction capped and one with the cone alone,
+    # the change of the intact joints included (the matrix holds every corner: each question
+    # starts from the last basis of its kind)
+    assert len(models) == 2
 
 
 def _block_on_a_dry_footing() -> Scene:
@@ -847,7 +848,7 @@ def test_every_question_on_a_kept_programme_gets_its_own_seconds(monkeypatch):
             got.append(jm.has_equilibrium(np.zeros(1, bool), jc, kc, jm._load(np.array([lam * G, 0.0, -G])), free))
     assert jm.unanswered == 0
     assert got == [True, False] * 300
-    assert jm._programme[1].getRunTime() > 2 * joints.SOLVER_SECONDS  # the questions together
+    assert jm._programme[2]["cone"].getRunTime() > 2 * joints.SOLVER_SECONDS  # the questions together
 
 
 def test_the_question_a_dry_walls_shear_test_stuck_in_is_answered(tmp_path):

@@ -654,7 +654,8 @@ class JointModel:
         self._joint_part: tuple | None = None
         self._tangent: _Tangent | None = None  # the contact iteration's matrix and its analysis, made at first use
         self._sub_tangents: dict = {}  # the same over the bodies still held, by their set (_tangent_of)
-        # the equilibrium question's HiGHS model, kept for its matrix (:meth:`has_equilibrium`)
+        # the equilibrium question's matrix and its two HiGHS models, with friction capped and with
+        # Coulomb's cone alone, each kept for its last basis (:meth:`has_equilibrium`)
         self._programme: tuple | None = None
         self.factorisations = 0  # sparse factorisations (LU or Cholesky), over the model's life
         # the crack rounds of the :meth:`crack` under way (or last): its round and the joints it has
@@ -1184,15 +1185,23 @@ class JointModel:
         # corners). Before, each crack round's joints made a new matrix, asked from scratch: on a
         # house of 590 bricks (10,684 rows, 35,720 columns) 15-39 s a question, where the next
         # round's question from the kept basis took 2.5 s (644 iterations). A corner that is
-        # neither intact nor a contact is held at zero, a floating body's rows are free.
+        # neither intact nor a contact is held at zero, a floating body's rows are free. The
+        # questions with friction capped and those with the cone alone each have a model of their
+        # own: a stalled solve asks both in turn, and the cone's question from the capped one's
+        # answer (no) took the dual simplex's 1,000 iterations and then the interior point, 1.8 s
+        # each on SW.100.1's drawing near its sliding load, where from the last cone question's
+        # basis it starts next to its answer.
         if self._programme is None:
             aj, ak = np.nonzero(self.corner_mask)
             index = np.full(self.corner_mask.shape, -1, dtype=np.int64)
             index[aj, ak] = np.arange(aj.size)
-            A = self._programme_matrix(aj, ak)
+            self._programme = (index, self._programme_matrix(aj, ak), {})
+        index, A, models = self._programme
+        kind = "capped" if shear_capacity is not None else "cone"
+        if kind not in models:
             zero, free = np.zeros(A.shape[1]), np.full(A.shape[0], np.inf)
-            self._programme = (index, _feasibility_programme(A, zero, zero, -free, free))
-        index, h = self._programme
+            models[kind] = _feasibility_programme(A, zero, zero, -free, free)
+        h = models[kind]
         C = int(self.corner_mask.sum())
         ci, ii = index[jc, kc], index[ij, ik]
         # the unknowns: each corner's normal force F_n (in its joint's frame, on b; F_n < 0

@@ -598,6 +598,20 @@ def test_the_compiled_contact_law_gives_numpys_values_bit_for_bit():
                 np.testing.assert_array_equal(g, w)
 
 
+def test_the_compiled_sum_of_the_blocks_gives_bincounts_values_bit_for_bit():
+    # the tangent's values are its joints' blocks summed into their places (simulation/_joint_kernels.py,
+    # for speed only): the same bits as numpy's bincount, which adds them in the same order
+    from calib_masonry.simulation._joint_kernels import summed_blocks
+
+    rng = np.random.default_rng(3)
+    for J, nnz, M in ((1, 5, 1), (40, 300, 0), (40, 300, 200), (900, 20000, 5000)):
+        slot = rng.integers(0, nnz, size=(J, 78))
+        joints = rng.integers(0, J, size=M)  # joints may repeat
+        blocks = rng.normal(size=(M, 78)) * rng.lognormal(0.0, 8.0, size=(M, 1))
+        want = np.bincount(slot[joints].ravel(), weights=blocks.ravel(), minlength=nnz).astype(np.float64)
+        np.testing.assert_array_equal(summed_blocks(slot, joints, blocks, nnz), want)
+
+
 def test_the_kept_outline_constants_and_the_corner_blocks_change_no_bit():
     """The joint model keeps each outline's edges and farthest corner instead of computing them at
     every state, and sums the contact corners' blocks itself instead of through ``einsum``: both

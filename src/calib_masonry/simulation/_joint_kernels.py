@@ -118,3 +118,17 @@ def contact_forces(
         T[c, 0, 2] = e0 * g
         T[c, 1, 2] = e1 * g
     return F, T
+
+
+@njit(cache=True, nogil=True)
+def summed_blocks(slot: np.ndarray, joints: np.ndarray, blocks: np.ndarray, nnz: int) -> np.ndarray:
+    """``(nnz,)``: ``np.bincount(slot[joints].ravel(), weights=blocks.ravel(), minlength=nnz)``, each
+    block's entries added in the order bincount adds them (so the same bits), without the gathered
+    ``(M, P)`` copy of ``slot``."""
+    out = np.zeros(nnz)
+    P = blocks.shape[1]
+    for m in range(joints.shape[0]):
+        row = slot[joints[m]]
+        for p in range(P):
+            out[row[p]] += blocks[m, p]
+    return out

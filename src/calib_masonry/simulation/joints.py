@@ -446,8 +446,11 @@ class _Tangent:
         ``joints`` ``(M,)`` (joints may repeat), given by their entries ``blocks`` ``(M, 78)`` at
         ``(ROW, COL)``, and of ``diag`` ``(n,)`` on the diagonal. (A foundation joint's block has its
         b half at a's place, and zero there.)"""
-        out = np.bincount(self.slot[joints].ravel(), weights=blocks.ravel(), minlength=self.nnz)
-        out = out.astype(np.float64, copy=False)
+        from ._joint_kernels import summed_blocks
+
+        out = summed_blocks(
+            self.slot, np.asarray(joints, dtype=np.int64), np.asarray(blocks, dtype=np.float64), self.nnz
+        )
         if diag is not None:
             out[self.diag_slot] += diag
         return out
@@ -654,6 +657,7 @@ class JointModel:
         self._joint_part: tuple | None = None
         self._tangent: _Tangent | None = None  # the contact iteration's matrix and its analysis, made at first use
         self._sub_tangents: dict = {}  # the same over the bodies still held, by their set (_tangent_of)
+        self._transposed: tuple | None = None  # the contact iteration's corner operator and its transpose (_residual)
         # the equilibrium question's matrix and its two HiGHS models, with friction capped and with
         # Coulomb's cone alone, each kept for its last basis (:meth:`has_equilibrium`)
         self._programme: tuple | None = None
@@ -954,7 +958,10 @@ class JointModel:
         """Out-of-balance force ``(6 B,)`` at ``U`` and the contact corners' state there."""
         gap = (P @ U).reshape(-1, 3)
         F, T = self._contact_forces(jc, kc, gap)
-        return K0 @ U - rhs + P.T @ F.ravel(), (gap, T)
+        if self._transposed is None or self._transposed[0] is not P:
+            # P's transpose (a csc view of its arrays) made once a solve, not at every residual
+            self._transposed = (P, P.T)
+        return K0 @ U - rhs + self._transposed[1] @ F.ravel(), (gap, T)
 
     def _tangent_of(self, held: np.ndarray | None) -> tuple[_Tangent, np.ndarray, np.ndarray | None]:
         """The contact iteration's matrix for the bodies ``held`` ``(B,)`` (None: all of them), its

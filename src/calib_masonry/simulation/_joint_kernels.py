@@ -1,11 +1,17 @@
-"""The contact iteration's per-corner arithmetic compiled (numba): :func:`~calib_masonry.simulation.joints._corner_blocks`.
+"""The contact iteration's per-corner arithmetic compiled (numba): the contact law
+(:meth:`~calib_masonry.simulation.joints.JointModel._contact_forces`), the corners' tangent blocks
+(:func:`~calib_masonry.simulation.joints._corner_blocks`) and their sum into the tangent's pattern
+(:meth:`~calib_masonry.simulation.joints._Tangent.values`).
 
-Why: a dry stone wall's every joint is a contact, and its iteration sums a 12 x 12 block for each
-of a few thousand contact corners at every Newton step. In numpy that is six gathers of ``(C, 78)``
-and five array operations, 1.4 ms on SW.100.1's 3,064 corners, 17 % of its dry pushover (py-spy);
-compiled, 0.3 ms. The sum is numpy's, term for term and in the same order (no multiply-add is fused
-without ``fastmath``), so every block is the same bit for bit: the cascades follow the last digits
-(``pytest tests/test_joints.py -k corner_blocks_change_no_bit``).
+Why: a dry stone wall's every joint is a contact, and its iteration evaluates the law and sums a
+12 x 12 block for each of a few thousand contact corners at every residual and Newton step. In
+numpy those are dozens of array operations on ``(C,)`` to ``(C, 78)`` arrays: on SW.100.1's 3,064
+corners the law took 0.69 ms and the blocks 1.34 ms a call, 40 % of its dry pushover (py-spy);
+compiled, 0.25 and 0.34 ms (docs/stone_walls.md, "Where a dry pushover's time goes"). Each is
+numpy's arithmetic term for term and in the same order (no multiply-add is fused without
+``fastmath``; numpy's vector tanh, which differs from libm's in the last bit, is computed by numpy
+and passed in), so every value is the same bit for bit: the crack cascades follow the last digits
+(``pytest tests/test_joints.py -k "compiled or bincount or corner_blocks_change_no_bit"``).
 """
 
 from __future__ import annotations
@@ -13,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["corner_blocks"]
+__all__ = ["contact_forces", "corner_blocks", "summed_blocks"]
 
 
 @njit(cache=True, nogil=True)
